@@ -1,0 +1,15 @@
+#!/bin/sh
+# Installs every Debian 12 package that building, testing and running the vnr demo needs.
+set -eu
+PKGS="build-essential cmake ninja-build ccache pkg-config git \
+  nlohmann-json3-dev libcli11-dev libfmt-dev libpng-dev zlib1g-dev libhwy-dev \
+  libgtest-dev libgmock-dev libbenchmark-dev liburing-dev"
+missing=""
+for p in $PKGS; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing="$missing $p"
+done
+if [ -n "$missing" ]; then
+  SUDO=""; [ "$(id -u)" -ne 0 ] && SUDO="sudo"
+  $SUDO apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq $missing
+fi

@@ -1,0 +1,93 @@
+#include "vnr/core/fileio.h"
+#include <sys/stat.h>
+#include <unistd.h>
+#include <zlib.h>
+#include <cerrno>
+#include <cstring>
+#include "vnr/core/error.h"
+
+namespace vnr {
+
+std::string read_file(const std::string& path) {
+  std::FILE* f = std::fopen(path.c_str(), "rb");
+  if (!f) fail("cannot open '{}': {}", path, std::strerror(errno));
+  std::string out;
+  char buf[1 << 16];
+  size_t n;
+  while ((n = std::fread(buf, 1, sizeof buf, f)) > 0) out.append(buf, n);
+  bool err = std::ferror(f);
+  std::fclose(f);
+  if (err) fail("cannot read '{}'", path);
+  return out;
+}
+
+uint64_t file_size(const std::string& path) {
+  struct stat st;
+  if (::stat(path.c_str(), &st) != 0) fail("cannot open '{}': {}", path, std::strerror(errno));
+  if (S_ISDIR(st.st_mode)) fail("'{}' is a directory, expected a file", path);
+  return uint64_t(st.st_size);
+}
+
+bool file_exists(const std::string& path) {
+  struct stat st;
+  return ::stat(path.c_str(), &st) == 0;
+}
+
+std::string dirname_of(const std::string& path) {
+  auto p = path.find_last_of('/');
+  return p == std::string::npos ? std::string() : path.substr(0, p);
+}
+
+std::string join_path(const std::string& dir, const std::string& name) {
+  if (dir.empty() || (!name.empty() && name[0] == '/')) return name;
+  return dir + "/" + name;
+}
+
+AtomicFile::AtomicFile(const std::string& path) : path_(path) {
+  tmp_ = path + ".tmp-" + std::to_string(::getpid());
+  f_ = std::fopen(tmp_.c_str(), "wb");
+  if (!f_) fail("cannot write '{}': {}", path, std::strerror(errno));
+}
+
+AtomicFile::~AtomicFile() {
+  if (f_) {
+    std::fclose(f_);
+    std::remove(tmp_.c_str());
+  }
+}
+
+void AtomicFile::write(const void* data, size_t bytes) {
+  if (bytes && std::fwrite(data, 1, bytes, f_) != bytes)
+    fail("cannot write '{}': {}", path_, std::strerror(errno));
+}
+
+void AtomicFile::commit() {
+  if (std::fflush(f_) != 0 || ::fsync(fileno(f_)) != 0)
+    fail("cannot write '{}': {}", path_, std::strerror(errno));
+  std::fclose(f_);
+  f_ = nullptr;
+  if (std::rename(tmp_.c_str(), path_.c_str()) != 0) {
+    int e = errno;
+    std::remove(tmp_.c_str());
+    fail("cannot write '{}': {}", path_, std::strerror(e));
+  }
+}
+
+void write_file_atomic(const std::string& path, std::string_view data) {
+  AtomicFile f(path);
+  f.write(data);
+  f.commit();
+}
+
+uint32_t crc32_of(const void* data, size_t bytes, uint32_t crc) {
+  const auto* p = static_cast<const Bytef*>(data);
+  while (bytes > 0) {
+    uInt chunk = bytes > (1u << 30) ? (1u << 30) : uInt(bytes);
+    crc = uint32_t(::crc32(crc, p, chunk));
+    p += chunk;
+    bytes -= chunk;
+  }
+  return crc;
+}
+
+}  // namespace vnr

@@ -1,0 +1,38 @@
+#pragma once
+#include <cstdint>
+#include <cstdio>
+#include <string>
+#include <string_view>
+
+namespace vnr {
+
+std::string read_file(const std::string& path);  // whole file; clear error if unreadable
+uint64_t file_size(const std::string& path);     // clear error if missing
+bool file_exists(const std::string& path);
+std::string dirname_of(const std::string& path);  // "" for a bare file name
+std::string join_path(const std::string& dir, const std::string& name);  // name if absolute
+
+// Writes a file atomically: data goes to "<path>.tmp-<pid>" in the same directory and is renamed
+// over <path> on commit(), so readers never see a half-written file and a crash leaves the old
+// file intact. Destroying an uncommitted AtomicFile removes the temporary.
+class AtomicFile {
+public:
+  explicit AtomicFile(const std::string& path);
+  ~AtomicFile();
+  AtomicFile(const AtomicFile&) = delete;
+  AtomicFile& operator=(const AtomicFile&) = delete;
+  void write(const void* data, size_t bytes);
+  void write(std::string_view s) { write(s.data(), s.size()); }
+  void commit();
+  const std::string& path() const { return path_; }
+
+private:
+  std::string path_, tmp_;
+  std::FILE* f_ = nullptr;
+};
+
+void write_file_atomic(const std::string& path, std::string_view data);
+
+uint32_t crc32_of(const void* data, size_t bytes, uint32_t crc = 0);
+
+}  // namespace vnr

@@ -1,0 +1,42 @@
+#pragma once
+#include <cstdint>
+#include <omp.h>
+
+namespace vnr {
+
+// The CPU backend's parallel_for: OpenMP with a *static* schedule, so that which thread
+// handles which index is a pure function of (n, thread count): results that reduce per-thread
+// partials in thread order are deterministic for a given thread count.
+int num_threads();
+void set_num_threads(int n);  // n <= 0 means "all cores"
+
+template <typename F>
+void parallel_for(int64_t n, F&& f) {
+#pragma omp parallel for schedule(static)
+  for (int64_t i = 0; i < n; ++i) f(i);
+}
+
+// Calls f(begin, end) on contiguous ranges of at most `grain` indices.
+template <typename F>
+void parallel_for_range(int64_t n, int64_t grain, F&& f) {
+  if (grain < 1) grain = 1;
+  int64_t chunks = (n + grain - 1) / grain;
+  if (chunks <= 1) {
+    if (n > 0) f(int64_t(0), n);
+    return;
+  }
+#pragma omp parallel for schedule(static)
+  for (int64_t c = 0; c < chunks; ++c) {
+    int64_t b = c * grain, e = b + grain < n ? b + grain : n;
+    f(b, e);
+  }
+}
+
+// Runs f(thread_index, n_threads) once on every worker thread.
+template <typename F>
+void parallel_threads(F&& f) {
+#pragma omp parallel
+  { f(omp_get_thread_num(), omp_get_num_threads()); }
+}
+
+}  // namespace vnr

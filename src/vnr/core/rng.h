@@ -1,0 +1,53 @@
+#pragma once
+#include <cstdint>
+#include "vnr/core/hd.h"
+
+namespace vnr {
+
+// PCG-XSH-RR 64/32 with tiny-cuda-nn's seeding and next_float (compat.md A.8).
+struct Pcg32 {
+  static constexpr uint64_t kMult = 0x5851F42D4C957F2DULL;
+  uint64_t state = 0x853c49e6748fea9bULL;
+  uint64_t inc = 0xda3e39cb94b95bdbULL;
+
+  VNR_HD Pcg32() = default;
+  VNR_HD explicit Pcg32(uint64_t initstate, uint64_t initseq = 1u) { seed(initstate, initseq); }
+  VNR_HD void seed(uint64_t initstate, uint64_t initseq = 1u) {
+    state = 0u;
+    inc = (initseq << 1u) | 1u;
+    next_uint();
+    state += initstate;
+    next_uint();
+  }
+  VNR_HD uint32_t next_uint() {
+    uint64_t old = state;
+    state = old * kMult + inc;
+    uint32_t xorshifted = uint32_t(((old >> 18u) ^ old) >> 27u);
+    uint32_t rot = uint32_t(old >> 59u);
+    return (xorshifted >> rot) | (xorshifted << ((~rot + 1u) & 31));
+  }
+  VNR_HD float next_float() {
+    union { uint32_t u; float f; } x;
+    x.u = (next_uint() >> 9) | 0x3f800000u;
+    return x.f - 1.0f;
+  }
+  // Jump ahead by delta steps in O(log delta) (Brown, "Random number generation with arbitrary stride").
+  VNR_HD void advance(uint64_t delta) {
+    uint64_t cur_mult = kMult, cur_plus = inc, acc_mult = 1u, acc_plus = 0u;
+    while (delta > 0) {
+      if (delta & 1) {
+        acc_mult *= cur_mult;
+        acc_plus = acc_plus * cur_mult + cur_plus;
+      }
+      cur_plus = (cur_mult + 1) * cur_plus;
+      cur_mult *= cur_mult;
+      delta /= 2;
+    }
+    state = acc_mult * state + acc_plus;
+  }
+};
+
+// tiny-cuda-nn seeds its trainer RNG with std::seed_seq{seed}.generate(2 words)[0].
+uint32_t seed_seq_first_word(uint32_t seed);
+
+}  // namespace vnr

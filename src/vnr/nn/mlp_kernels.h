@@ -1,0 +1,25 @@
+#pragma once
+// Hot MLP kernels (CPU). Layout: activations are feature-major per chunk of n samples:
+// X[c * n + s] is feature c of sample s (n a multiple of 16). Weights are row-major with
+// rows = outputs (tcnn layout): W[r * cols + c].
+// The dispatching versions pick the best SIMD target at run time (Highway); kernels::ref holds
+// the portable scalar reference they are tested against.
+
+namespace vnr::kernels {
+
+// Y[r*n + s] = act(sum_c W[r*cols + c] * X[c*n + s]); act = ReLU when relu, else identity.
+void matmul_fwd(const float* W, int rows, int cols, const float* X, float* Y, int n, bool relu);
+// dX[c*n + s] = (sum_r W[r*cols + c] * dY[r*n + s]) * (mask == nullptr || mask[c*n + s] > 0 ? 1 : 0)
+void matmul_bwd_data(const float* W, int rows, int cols, const float* dY, const float* mask, float* dX, int n);
+// dW[r*cols + c] += sum_s dY[r*n + s] * X[c*n + s]
+void matmul_bwd_weights(const float* dY, int rows, const float* X, int cols, int n, float* dW);
+// Name of the SIMD target chosen at run time (e.g. "AVX3", "AVX2", "SSE4", "EMU128").
+const char* simd_target_name();
+
+namespace ref {
+void matmul_fwd(const float* W, int rows, int cols, const float* X, float* Y, int n, bool relu);
+void matmul_bwd_data(const float* W, int rows, int cols, const float* dY, const float* mask, float* dX, int n);
+void matmul_bwd_weights(const float* dY, int rows, const float* X, int cols, int n, float* dW);
+}  // namespace ref
+
+}  // namespace vnr::kernels

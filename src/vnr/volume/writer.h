@@ -1,0 +1,47 @@
+#pragma once
+#include <memory>
+#include <optional>
+#include <string>
+#include "vnr/core/fileio.h"
+#include "vnr/core/math.h"
+#include "vnr/volume/volume.h"
+
+namespace vnr {
+
+// Streams a volume to disk one z-slab at a time, so outputs larger than memory never need a full
+// copy. The format follows the extension of `path`:
+//   *.nrrd -> NRRD (raw encoding, little endian, "space directions" from spacing);
+//   else   -> raw file at `path` plus a JSON sidecar "<path without extension>.json"
+//             ({"file","dims","dtype","byte_order":"little","spacing","value_range"}), the same
+//             sidecar format vnr reads (and ../shared/data uses).
+// Values are given as float in original units and converted to `dtype` (integers: rounded to
+// nearest and clamped to the type's range). Both files are written atomically on commit().
+class VolumeWriter {
+public:
+  VolumeWriter(const std::string& path, Int3 dims, DType dtype, Vec3f spacing = {1, 1, 1},
+               std::optional<std::pair<double, double>> value_range = std::nullopt);
+  ~VolumeWriter();
+  // Appends `n_slices` complete z-slices (dims.x*dims.y*n_slices values).
+  void write_slices(const float* values, int64_t n_slices);
+  void commit();  // error if fewer than dims.z slices were written
+  std::string sidecar_path() const;  // "" for NRRD
+
+private:
+  std::string path_;
+  Int3 dims_;
+  DType dtype_;
+  Vec3f spacing_;
+  std::optional<std::pair<double, double>> range_;
+  int64_t slices_written_ = 0;
+  std::unique_ptr<AtomicFile> file_;
+};
+
+// Procedural volumes for demos, tests and benchmarks, streamed to disk (raw + sidecar).
+//   marschner-lobb: the Marschner-Lobb test signal (alpha 0.25, f_M 6) on [-1,1]^3, float32;
+//   noise: multi-scale value noise (6 octaves), float32, deterministic for a seed.
+// `out_json` is the sidecar path; the raw file is written beside it with extension .raw.
+void synth_volume(const std::string& kind, Int3 dims, const std::string& out_json, uint64_t seed = 1);
+// The same fields evaluated at one point u in [0,1]^3 (for tests and analytic checks).
+float synth_value(const std::string& kind, float ux, float uy, float uz, uint64_t seed = 1);
+
+}  // namespace vnr
