@@ -1,2 +1,101 @@
+// vnr: command-line front end of libvnr. Each subcommand lives in its own file; errors from the
+// library arrive as vnr::Error and are printed as one line with a non-zero exit status.
 #include <cstdio>
-int main() { std::puts("vnr"); return 0; }
+#include <cstdlib>
+#include "cli.h"
+#include "vnr/core/error.h"
+#include "vnr/core/fileio.h"
+#include "vnr/core/parallel.h"
+#include "vnr/nn/mlp_kernels.h"
+
+namespace vnr::cli {
+
+void VolumeArgs::add(CLI::App* app) {
+  app->add_option("--dims", dims, "voxels per axis X,Y,Z (raw files)");
+  app->add_option("--dtype", dtype, "int8|uint8|int16|uint16|int32|uint32|float32|float64 (raw files)");
+  app->add_option("--endian", endian, "little|big (raw files; default little)")->check(CLI::IsMember({"little", "big"}));
+  app->add_option("--offset", offset, "header bytes to skip (raw files)")->each([this](const std::string&) { offset_set = true; });
+  app->add_option("--timestep", timestep, "which timestep of a 4-D volume");
+  app->add_option("--range", range, "value range LO,HI in original units (default: sidecar, else data min/max)");
+  app->add_option("--nan", nan_policy, "how to treat NaN/Inf: error|zero|clamp")->check(CLI::IsMember({"error", "zero", "clamp"}));
+}
+
+RawOptions VolumeArgs::raw() const {
+  RawOptions o;
+  if (!dims.empty()) o.dims = parse_dims(dims);
+  if (!dtype.empty()) o.dtype = dtype;
+  if (!endian.empty()) o.endian = endian;
+  if (offset_set) o.offset = offset;
+  if (timestep >= 0) o.timestep = timestep;
+  if (!range.empty()) {
+    double lo, hi;
+    char c;
+    if (std::sscanf(range.c_str(), "%lf%c%lf", &lo, &c, &hi) != 3 || c != ',' || !(hi >= lo))
+      fail("--range expects LO,HI with LO <= HI, got '{}'", range);
+    o.range_lo = lo;
+    o.range_hi = hi;
+  }
+  return o;
+}
+
+LoadOptions VolumeArgs::load() const {
+  LoadOptions o;
+  o.non_finite = nan_policy == "zero" ? NonFinitePolicy::Zero
+                 : nan_policy == "clamp" ? NonFinitePolicy::Clamp
+                                         : NonFinitePolicy::Error;
+  return o;
+}
+
+Int3 parse_dims(const std::string& s) {
+  long long v[3];
+  char tail;
+  if (std::sscanf(s.c_str(), "%lld,%lld,%lld%c", &v[0], &v[1], &v[2], &tail) != 3)
+    fail("--dims expects X,Y,Z (three positive integers), got '{}'", s);
+  for (long long d : v)
+    if (d <= 0) fail("--dims must be positive, got '{}'", s);
+  return Int3{v[0], v[1], v[2]};
+}
+
+void write_report(const std::string& path, const Json& report) {
+  if (path.empty()) return;
+  write_file_atomic(path, report.dump(2) + "\n");
+}
+
+std::string human_bytes(double b) {
+  const char* u[] = {"B", "KiB", "MiB", "GiB", "TiB"};
+  int i = 0;
+  while (b >= 1024 && i < 4) b /= 1024, ++i;
+  return fmt::format("{:.2f} {}", b, u[i]);
+}
+
+}  // namespace vnr::cli
+
+int main(int argc, char** argv) {
+  using namespace vnr::cli;
+  CLI::App app{"vnr: volumetric neural representations - compress volumes into neural networks and evaluate them"};
+  app.require_subcommand(1);
+  app.set_version_flag("--version", std::string("vnr ") + VNR_VERSION + " (backends: cpu [" +
+                                        vnr::kernels::simd_target_name() + "]; cuda: not built)");
+  add_train(app);
+  add_eval(app);
+  add_decode(app);
+  add_info(app);
+  add_synth(app);
+  add_convert(app);
+  add_bench(app);
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e);
+  } catch (const vnr::Error& e) {
+    std::fprintf(stderr, "vnr: error: %s\n", e.what());
+    return 1;
+  } catch (const std::bad_alloc&) {
+    std::fprintf(stderr, "vnr: error: out of memory\n");
+    return 1;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "vnr: error: %s\n", e.what());
+    return 1;
+  }
+  return 0;
+}

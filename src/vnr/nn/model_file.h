@@ -21,7 +21,7 @@ struct ModelFile {
   Json training;                  // optional training summary (steps, seconds, psnr...); may be null
 };
 
-// Native .vnr format (docs/FORMATS.md): magic "VNRMODEL", format version, a JSON header (config,
+// Native .vnr format (docs/MODEL_FORMAT.md): magic "VNRMODEL", format version, a JSON header (config,
 // dims, dtype, range, macro-cell dims, param count, training summary), then the fp16 parameter
 // block and the macro-cell block, then a CRC-32 of everything before it. Written atomically.
 // Loading a truncated, corrupted or newer-version file is a clear error.
@@ -30,7 +30,9 @@ ModelFile read_vnr(const std::string& path);
 
 // instantvnr's "params.json" (BSON, compat.md A.5 and instantvnr-formats README section 3).
 // The BSON file does not carry dtype/range or the optimizer: read_instantvnr leaves source_dtype
-// Float32, lo = 0, hi = 1 and takes the paper's default optimizer.
+// Float32, lo = 0, hi = 1 and takes the paper's default optimizer. A file without "volume" (legacy)
+// leaves dims {0,0,0}; one without "macrocell" leaves macro-cells absent. Macro-cell ranges
+// are stored as float (min - 1, max + 1), so a BSON round trip keeps them to about 1.2e-7 absolute.
 void write_instantvnr(const std::string& path, const ModelFile& m);
 ModelFile read_instantvnr(const std::string& path);
 

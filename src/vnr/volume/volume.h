@@ -20,6 +20,8 @@ struct VolumeDesc {
   bool big_endian = false;
   uint64_t offset = 0;       // bytes to skip before the first voxel (after timestep selection)
   std::string encoding = "raw";  // "raw" or "gzip" (NRRD)
+  uint64_t gzip_start = 0;   // gzip: where the compressed stream starts in `path`; `offset` then
+                             // counts decompressed bytes
   int n_timesteps = 1;       // a 4th sidecar dim
   int timestep = 0;          // which one `offset` points at
   std::optional<double> range_lo, range_hi;  // explicit value range in original units (B.1)

@@ -10,10 +10,11 @@ namespace vnr {
 
 // Streams a volume to disk one z-slab at a time, so outputs larger than memory never need a full
 // copy. The format follows the extension of `path`:
-//   *.nrrd -> NRRD (raw encoding, little endian, "space directions" from spacing);
+//   *.nrrd -> NRRD (raw encoding, little endian, "spacings" from spacing);
 //   else   -> raw file at `path` plus a JSON sidecar "<path without extension>.json"
 //             ({"file","dims","dtype","byte_order":"little","spacing","value_range"}), the same
-//             sidecar format vnr reads (and ../shared/data uses).
+//             sidecar format vnr reads (and ../shared/data uses). Without an explicit value_range
+//             the sidecar gets the exact min/max of the stored values.
 // Values are given as float in original units and converted to `dtype` (integers: rounded to
 // nearest and clamped to the type's range). Both files are written atomically on commit().
 class VolumeWriter {
@@ -33,6 +34,7 @@ private:
   Vec3f spacing_;
   std::optional<std::pair<double, double>> range_;
   int64_t slices_written_ = 0;
+  double seen_lo_ = 1e308, seen_hi_ = -1e308;  // finite min/max of the stored values (sidecar range)
   std::unique_ptr<AtomicFile> file_;
 };
 

@@ -1,0 +1,141 @@
+// vnr bench train|infer: throughput on a real volume, median over timed steps, plus the MLP alone
+// (GFLOP/s against the per-sample FLOP count) so it can be compared with the machine's FMA peak.
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include "cli.h"
+#include "vnr/core/error.h"
+#include "vnr/core/parallel.h"
+#include "vnr/core/progress.h"
+#include "vnr/core/rng.h"
+#include "vnr/nn/config.h"
+#include "vnr/nn/mlp_kernels.h"
+#include "vnr/train/trainer.h"
+
+namespace vnr::cli {
+namespace {
+
+struct BenchArgs {
+  std::string what, volume, config = "paper", report;
+  double seconds = 10;
+  int64_t batch = 65536;
+  int threads = 0;
+  VolumeArgs vol;
+};
+
+double median(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  return v.empty() ? 0 : v[v.size() / 2];
+}
+
+// MLP forward (+ backward when training) alone over chunks, all threads: GFLOP/s.
+double mlp_gflops(const Network& net, bool training, double seconds) {
+  const MlpLayout& m = net.mlp();
+  double flops_per_chunk = net.flops_forward_per_sample() * kChunk * (training ? 3.0 : 1.0);
+  std::vector<double> per_thread(num_threads(), 0.0);
+  double el = 0;
+  parallel_threads([&](int t, int nt) {
+    std::vector<float> X0(size_t(m.in_pad) * kChunk, 0.5f), acts(net.acts_floats(kChunk)), out(m.n_out * kChunk),
+        dout(m.n_out * kChunk, 1e-3f), dW(m.n_params), dX(size_t(m.in_pad) * kChunk), scratch(2 * m.width * kChunk);
+    Pcg32 rng(t + 1);
+    for (auto& x : X0) x = rng.next_float();
+    auto t0 = std::chrono::steady_clock::now();
+    int64_t chunks = 0;
+    while (seconds_since(t0) < seconds) {
+      for (int r = 0; r < 16; ++r, ++chunks) {
+        net.mlp_forward(X0.data(), kChunk, acts.data(), out.data(), out.data());
+        if (training) net.mlp_backward(X0.data(), acts.data(), dout.data(), kChunk, dW.data(), dX.data(), scratch.data());
+      }
+    }
+    per_thread[t] = chunks * flops_per_chunk / seconds_since(t0);
+  });
+  for (double g : per_thread) el += g;
+  return el / 1e9;
+}
+
+void run_bench(const BenchArgs& a) {
+  set_num_threads(a.threads);
+  Volume vol = load_volume(describe_volume(a.volume, a.vol.raw()), a.vol.load());
+  Network net(load_config(a.config));
+  net.init_params(1337);
+  const bool training = a.what == "train";
+  std::vector<double> times;
+  double phases[3] = {0, 0, 0};
+  auto t0 = std::chrono::steady_clock::now();
+  Progress bar(std::string("bench ") + a.what, a.seconds, false);
+  if (training) {
+    Trainer tr(net, std::make_shared<InCoreSampler>(view_of(vol)), TrainOptions{a.batch, 1337});
+    for (int w = 0; w < 2; ++w) tr.step();  // warm-up: page-in, caches
+    t0 = std::chrono::steady_clock::now();
+    std::vector<double> ph[3];
+    while (seconds_since(t0) < a.seconds || times.size() < 3) {
+      auto s0 = std::chrono::steady_clock::now();
+      tr.step();
+      times.push_back(seconds_since(s0));
+      for (int p = 0; p < 3; ++p) ph[p].push_back(tr.phase_seconds[p]);
+      bar.update(seconds_since(t0));
+    }
+    for (int p = 0; p < 3; ++p) phases[p] = median(ph[p]);
+  } else {
+    std::vector<float> coords(3 * a.batch), out(a.batch);
+    Pcg32 rng(7);
+    for (auto& c : coords) c = rng.next_float();
+    net.infer(coords.data(), a.batch, out.data());
+    t0 = std::chrono::steady_clock::now();
+    while (seconds_since(t0) < a.seconds || times.size() < 3) {
+      auto s0 = std::chrono::steady_clock::now();
+      net.infer(coords.data(), a.batch, out.data());
+      times.push_back(seconds_since(s0));
+      bar.update(seconds_since(t0));
+    }
+  }
+  bar.finish();
+  const double med = median(times);
+  const double sps = a.batch / med;
+  const double flops = net.flops_forward_per_sample() * (training ? 3.0 : 1.0);
+  const double mlp_only = mlp_gflops(net, training, std::min(3.0, std::max(0.5, a.seconds / 4)));
+  std::printf("%s %s: %.3f M samples/s (median of %zu batches of %lld, %.2f ms each; min %.2f, max %.2f)\n",
+              a.what.c_str(), a.config.c_str(), sps / 1e6, times.size(), (long long)a.batch, med * 1e3,
+              *std::min_element(times.begin(), times.end()) * 1e3, *std::max_element(times.begin(), times.end()) * 1e3);
+  std::printf("MLP FLOPs: %.1f kFLOP/sample -> %.1f GFLOP/s end to end; MLP kernels alone: %.1f GFLOP/s on %d threads (%s)\n",
+              flops / 1e3, flops * sps / 1e9, mlp_only, num_threads(), kernels::simd_target_name());
+  if (training)
+    std::printf("phases (median ms): sample+encode+MLP %.2f, grid backward %.2f, optimizer %.2f\n", phases[0] * 1e3,
+                phases[1] * 1e3, phases[2] * 1e3);
+  Json report = {{"mode", a.what},
+                 {"config", a.config},
+                 {"samples_per_second", sps},
+                 {"batch", a.batch},
+                 {"batches", times.size()},
+                 {"ms_median", med * 1e3},
+                 {"ms_min", *std::min_element(times.begin(), times.end()) * 1e3},
+                 {"ms_max", *std::max_element(times.begin(), times.end()) * 1e3},
+                 {"mlp_flops_per_sample", flops},
+                 {"gflops_end_to_end", flops * sps / 1e9},
+                 {"mlp_gflops", mlp_only},
+                 {"threads", num_threads()},
+                 {"simd", kernels::simd_target_name()},
+                 {"n_params", net.n_params()}};
+  if (training)
+    report["phase_ms"] = {{"sample_encode_mlp", phases[0] * 1e3}, {"grid_backward", phases[1] * 1e3},
+                          {"optimizer", phases[2] * 1e3}};
+  write_report(a.report, report);
+}
+
+}  // namespace
+
+void add_bench(CLI::App& app) {
+  auto a = std::make_shared<BenchArgs>();
+  CLI::App* c = app.add_subcommand("bench", "measure training or inference throughput");
+  c->add_option("what", a->what, "train | infer")->required()->check(CLI::IsMember({"train", "infer"}));
+  c->add_option("volume", a->volume, "volume to sample")->required();
+  c->add_option("--config", a->config, "preset or config file")->capture_default_str();
+  c->add_option("--seconds", a->seconds, "timed duration")->capture_default_str();
+  c->add_option("--batch", a->batch, "samples per batch")->capture_default_str();
+  c->add_option("--threads", a->threads, "CPU threads (default: all cores)");
+  c->add_option("--report", a->report, "write a JSON report");
+  a->vol.add(c);
+  c->callback([a]() { run_bench(*a); });
+}
+
+}  // namespace vnr::cli

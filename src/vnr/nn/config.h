@@ -1,0 +1,74 @@
+#pragma once
+#include <cstdint>
+#include <string>
+#include "vnr/core/json.h"
+
+namespace vnr {
+
+// A model configuration in tiny-cuda-nn's JSON vocabulary (compat.md A.1-A.7), parsed into plain
+// structs. Unknown keys are ignored (as tcnn does); unsupported values are errors that list the
+// accepted ones.
+
+enum class EncodingType { Grid, Frequency, OneBlob, Identity };
+enum class GridType { Hash, Dense, Tiled };
+enum class Interpolation { Nearest, Linear, Smoothstep };
+enum class Activation { None, ReLU, Exponential, Sine, Sigmoid, Squareplus, Softplus };
+enum class LossType { L1, L2, RelativeL2, RelativeL1 };
+
+struct EncodingConfig {
+  EncodingType type = EncodingType::Grid;
+  // Grid
+  GridType grid_type = GridType::Hash;
+  uint32_t n_levels = 16, n_features_per_level = 2, log2_hashmap_size = 19, base_resolution = 16;
+  float per_level_scale = 2.0f;
+  Interpolation interpolation = Interpolation::Linear;
+  // Frequency / OneBlob / Identity
+  uint32_t n_frequencies = 12;
+  uint32_t n_bins = 16;
+  float scale = 1.0f, offset = 0.0f;
+};
+
+struct NetworkConfig {
+  bool fully_fused = true;  // FullyFusedMLP (widths 16/32/64/128, align 16) or CutlassMLP (any, align 8)
+  uint32_t n_neurons = 128, n_hidden_layers = 5;
+  Activation activation = Activation::ReLU, output_activation = Activation::None;
+};
+
+struct AdamConfig {
+  float learning_rate = 1e-3f, beta1 = 0.9f, beta2 = 0.999f, epsilon = 1e-8f, l2_reg = 1e-8f;
+  float relative_decay = 0, absolute_decay = 0;
+  bool adabound = false;
+  float non_matrix_learning_rate_factor = 1.0f;
+  bool optimize_matrix_params = true, optimize_non_matrix_params = true;
+};
+
+struct DecayConfig {
+  bool enabled = false;  // ExponentialDecay wrapper present
+  float decay_base = 0.1f;
+  uint32_t decay_start = 10000, decay_interval = 10000, decay_end = 10000000;
+};
+
+struct ModelConfig {
+  EncodingConfig encoding;
+  NetworkConfig network;
+  LossType loss = LossType::RelativeL2;
+  AdamConfig adam;
+  DecayConfig decay;
+
+  static ModelConfig from_json(const Json& j);  // the four-object tcnn config (or {"params": {...}})
+  Json to_json() const;                         // the same vocabulary back, all keys explicit
+};
+
+// Built-in configurations: "paper" (the paper's fixed config, appendix), "small" (4 levels x 2
+// features, 2^16 table, base 4, 16 x 2 MLP) and "tiny" (for tests).
+Json preset_config(const std::string& name);
+bool is_preset(const std::string& name);
+const char* preset_names();  // "paper, small"
+
+// Loads a config from a preset name or a JSON file path.
+Json load_config(const std::string& preset_or_path);
+
+const char* activation_name(Activation a);
+const char* loss_name(LossType l);
+
+}  // namespace vnr

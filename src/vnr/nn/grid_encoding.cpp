@@ -1,0 +1,36 @@
+#include "vnr/nn/grid_encoding.h"
+#include <algorithm>
+#include "vnr/core/error.h"
+#include "vnr/core/math.h"
+
+namespace vnr {
+
+GridLayout make_grid_layout(const EncodingConfig& cfg) {
+  GridLayout g;
+  g.n_levels = cfg.n_levels;
+  g.n_features = cfg.n_features_per_level;
+  g.interpolation = cfg.interpolation;
+  const float log2s = log2f(cfg.per_level_scale);
+  uint64_t offset = 0;
+  for (uint32_t l = 0; l < cfg.n_levels; ++l) {
+    GridLevel& L = g.levels[l];
+    L.scale = exp2f(float(l) * log2s) * float(cfg.base_resolution) - 1.0f;
+    L.res = uint32_t(ceilf(L.scale)) + 1;
+    double dense_f = double(L.res) * L.res * L.res;
+    uint64_t dense = dense_f > 2147483647.0 ? 2147483647ull : uint64_t(L.res) * L.res * L.res;
+    uint64_t n = next_multiple(dense, 8);
+    if (cfg.grid_type == GridType::Hash) n = std::min<uint64_t>(n, 1ull << cfg.log2_hashmap_size);
+    if (cfg.grid_type == GridType::Tiled)
+      n = std::min<uint64_t>(n, uint64_t(cfg.base_resolution) * cfg.base_resolution * cfg.base_resolution);
+    L.n_entries = uint32_t(n);
+    L.hashed = (cfg.grid_type == GridType::Hash && dense_f > double(n)) ? 1u : 0u;
+    L.pow2_mask = (n & (n - 1)) == 0 ? uint32_t(n - 1) : 0u;
+    if (offset + n > 0xffffffffull) fail("encoding: the grid has more than 2^32 entries; reduce levels or table size");
+    L.offset = uint32_t(offset);
+    offset += n;
+  }
+  g.n_entries = offset;
+  return g;
+}
+
+}  // namespace vnr

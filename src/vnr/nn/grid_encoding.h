@@ -1,0 +1,133 @@
+#pragma once
+// Multi-resolution grid encoding (HashGrid / DenseGrid / TiledGrid) with tiny-cuda-nn's exact
+// level table, position transform, indexing and interpolation weights (compat.md A.2).
+// The per-sample functions are single-source (VNR_HD) over a POD layout.
+#include <cmath>
+#include <cstdint>
+#include "vnr/core/hd.h"
+#include "vnr/nn/config.h"
+
+namespace vnr {
+
+constexpr int kMaxGridLevels = 32;
+
+struct GridLevel {
+  float scale = 0;          // scale_l = exp2f(l * log2f(s)) * base - 1
+  uint32_t res = 0;         // vertices per axis
+  uint32_t n_entries = 0;   // n_l (the modulus)
+  uint32_t offset = 0;      // first entry of the level (entries, not floats)
+  uint32_t hashed = 0;      // 1 when res^3 > n_l and the grid type is Hash
+  uint32_t pow2_mask = 0;   // n_l - 1 when n_l is a power of two, else 0
+};
+
+struct GridLayout {
+  uint32_t n_levels = 0, n_features = 0;  // L, F
+  Interpolation interpolation = Interpolation::Linear;
+  uint64_t n_entries = 0;                 // sum of n_l
+  GridLevel levels[kMaxGridLevels];
+  uint64_t n_params() const { return n_entries * n_features; }
+};
+
+GridLayout make_grid_layout(const EncodingConfig& cfg);
+
+VNR_HD inline uint32_t grid_entry(const GridLevel& L, uint32_t cx, uint32_t cy, uint32_t cz) {
+  uint32_t idx;
+  if (L.hashed) idx = cx ^ (cy * 2654435761u) ^ (cz * 805459861u);
+  else idx = cx + cy * L.res + cz * (L.res * L.res);  // uint32 wrap, as tcnn
+  if (L.pow2_mask) return idx & L.pow2_mask;
+  return idx < L.n_entries ? idx : idx % L.n_entries;
+}
+
+// Lattice cell, fractional position and the 8 corner (entry, weight) pairs of one level.
+struct GridCorners {
+  uint32_t entry[8];
+  float weight[8];
+};
+
+VNR_HD inline float grid_smoothstep(float t) { return t * t * (3.0f - 2.0f * t); }
+
+VNR_HD inline void grid_corners(const GridLevel& L, Interpolation interp, float x, float y, float z,
+                                GridCorners& c) {
+  float p[3] = {fmaf(L.scale, x, 0.5f), fmaf(L.scale, y, 0.5f), fmaf(L.scale, z, 0.5f)};
+  uint32_t i[3];
+  float s[3];
+  for (int d = 0; d < 3; ++d) {
+    float fl = floorf(p[d]);
+    i[d] = uint32_t(int32_t(fl));
+    float t = p[d] - fl;
+    s[d] = interp == Interpolation::Smoothstep ? grid_smoothstep(t) : t;
+  }
+  for (int k = 0; k < 8; ++k) {
+    float w = 1.0f;
+    for (int d = 0; d < 3; ++d) w *= ((k >> d) & 1) ? s[d] : 1.0f - s[d];
+    c.weight[k] = w;
+    c.entry[k] = grid_entry(L, i[0] + (k & 1), i[1] + ((k >> 1) & 1), i[2] + ((k >> 2) & 1));
+  }
+  if (interp == Interpolation::Nearest) {  // tcnn: the lower corner of the cell, weight 1
+    c.weight[0] = 1.0f;
+    for (int k = 1; k < 8; ++k) c.weight[k] = 0.0f;
+  }
+}
+
+// Forward of one level for one sample: out[f * stride] = sum_k w_k * theta[(offset + entry_k) * F + f],
+// accumulated with FMA in corner order (vnr's binary32 reference, compat.md A.2.7).
+template <int F>
+VNR_HD inline void grid_level_forward(const GridLevel& L, Interpolation interp, const float* params, float x,
+                                      float y, float z, float* out, int64_t stride) {
+  GridCorners c;
+  grid_corners(L, interp, x, y, z, c);
+  float acc[F];
+  for (int f = 0; f < F; ++f) acc[f] = 0.0f;
+  const int kn = interp == Interpolation::Nearest ? 1 : 8;
+  for (int k = 0; k < kn; ++k) {
+    const float* th = params + (uint64_t(L.offset) + c.entry[k]) * F;
+    for (int f = 0; f < F; ++f) acc[f] = fmaf(c.weight[k], th[f], acc[f]);
+  }
+  for (int f = 0; f < F; ++f) out[f * stride] = acc[f];
+}
+
+// Backward of one level for one sample: grad[(offset + entry_k) * F + f] += w_k * dy[f * stride].
+// Not thread-safe by itself: the trainer gives each level to exactly one thread.
+template <int F>
+VNR_HD inline void grid_level_backward(const GridLevel& L, Interpolation interp, float* grad, float x, float y,
+                                       float z, const float* dy, int64_t stride) {
+  GridCorners c;
+  grid_corners(L, interp, x, y, z, c);
+  float g[F];
+  for (int f = 0; f < F; ++f) g[f] = dy[f * stride];
+  const int kn = interp == Interpolation::Nearest ? 1 : 8;
+  for (int k = 0; k < kn; ++k) {
+    float* gr = grad + (uint64_t(L.offset) + c.entry[k]) * F;
+    for (int f = 0; f < F; ++f) gr[f] = fmaf(c.weight[k], g[f], gr[f]);
+  }
+}
+
+// d(feature f of level L)/d(x_d) for one sample (compat.md A.2.9), written to dydx[f*3 + d].
+template <int F>
+VNR_HD inline void grid_level_input_grad(const GridLevel& L, Interpolation interp, const float* params, float x,
+                                         float y, float z, float* dydx) {
+  for (int f = 0; f < 3 * F; ++f) dydx[f] = 0.0f;
+  if (interp == Interpolation::Nearest) return;
+  float p[3] = {fmaf(L.scale, x, 0.5f), fmaf(L.scale, y, 0.5f), fmaf(L.scale, z, 0.5f)};
+  uint32_t i[3];
+  float s[3], ds[3];
+  for (int d = 0; d < 3; ++d) {
+    float fl = floorf(p[d]);
+    i[d] = uint32_t(int32_t(fl));
+    float t = p[d] - fl;
+    s[d] = interp == Interpolation::Smoothstep ? grid_smoothstep(t) : t;
+    ds[d] = interp == Interpolation::Smoothstep ? 6.0f * t * (1.0f - t) : 1.0f;
+  }
+  for (int k = 0; k < 8; ++k) {
+    uint32_t e = grid_entry(L, i[0] + (k & 1), i[1] + ((k >> 1) & 1), i[2] + ((k >> 2) & 1));
+    const float* th = params + (uint64_t(L.offset) + e) * F;
+    for (int d = 0; d < 3; ++d) {
+      float w = L.scale * ds[d] * (((k >> d) & 1) ? 1.0f : -1.0f);
+      for (int e2 = 0; e2 < 3; ++e2)
+        if (e2 != d) w *= ((k >> e2) & 1) ? s[e2] : 1.0f - s[e2];
+      for (int f = 0; f < F; ++f) dydx[f * 3 + d] += w * th[f];
+    }
+  }
+}
+
+}  // namespace vnr

@@ -1,0 +1,72 @@
+#pragma once
+#include <cmath>
+#include "vnr/core/hd.h"
+#include "vnr/nn/config.h"
+
+namespace vnr {
+
+// Loss value and gradient for one output element (compat.md A.6), with the mean's 1/N folded in.
+// The loss scale S cancels exactly in binary32 and is 1 on the CPU.
+VNR_HD inline float loss_value_and_grad(LossType t, float pred, float target, float inv_n, float* grad) {
+  float d = pred - target;
+  switch (t) {
+    case LossType::L1:
+      *grad = copysignf(1.0f, d) * inv_n;  // d = +0 gives +1, as tcnn
+      return fabsf(d) * inv_n;
+    case LossType::L2:
+      *grad = 2.0f * d * inv_n;
+      return d * d * inv_n;
+    case LossType::RelativeL2: {
+      float den = pred * pred + 0.01f;  // treated as a constant in the gradient
+      *grad = 2.0f * d / den * inv_n;
+      return d * d / den * inv_n;
+    }
+    case LossType::RelativeL1: {
+      float den = fabsf(pred) + 0.01f;
+      *grad = copysignf(1.0f / den, d) * inv_n;
+      return fabsf(d) / den * inv_n;
+    }
+  }
+  *grad = 0;
+  return 0;
+}
+
+// Output activations (compat.md A.4.1) and their derivative with respect to the pre-activation.
+constexpr float kActivationK = 10.0f;
+
+VNR_HD inline float activate(Activation a, float x) {
+  switch (a) {
+    case Activation::None: return x;
+    case Activation::ReLU: return x > 0 ? x : 0.0f;
+    case Activation::Exponential: return expf(x);
+    case Activation::Sine: return sinf(x);
+    case Activation::Sigmoid: return 1.0f / (1.0f + expf(-x));
+    case Activation::Squareplus: {
+      float kx = kActivationK * x;
+      return 0.5f * (kx + sqrtf(kx * kx + 4.0f)) / kActivationK;
+    }
+    case Activation::Softplus: return logf(1.0f + expf(kActivationK * x)) / kActivationK;
+  }
+  return x;
+}
+
+VNR_HD inline float activate_derivative(Activation a, float x) {
+  switch (a) {
+    case Activation::None: return 1.0f;
+    case Activation::ReLU: return x > 0 ? 1.0f : 0.0f;
+    case Activation::Exponential: return expf(x);
+    case Activation::Sine: return cosf(x);
+    case Activation::Sigmoid: {
+      float y = 1.0f / (1.0f + expf(-x));
+      return y * (1.0f - y);
+    }
+    case Activation::Squareplus: {
+      float kx = kActivationK * x;
+      return 0.5f * (1.0f + kx / sqrtf(kx * kx + 4.0f));
+    }
+    case Activation::Softplus: return 1.0f / (1.0f + expf(-kActivationK * x));
+  }
+  return 1.0f;
+}
+
+}  // namespace vnr

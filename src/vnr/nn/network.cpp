@@ -1,0 +1,378 @@
+#include "vnr/nn/network.h"
+#include <cmath>
+#include <cstring>
+#include <numeric>
+#include "vnr/core/error.h"
+#include "vnr/core/half.h"
+#include "vnr/core/math.h"
+#include "vnr/core/rng.h"
+#include "vnr/nn/loss.h"
+#include "vnr/nn/mlp_kernels.h"
+
+namespace vnr {
+namespace {
+
+constexpr float kPi = 3.14159265358979323846f;
+
+uint32_t encoding_width(const EncodingConfig& e) {
+  switch (e.type) {
+    case EncodingType::Grid: return e.n_levels * e.n_features_per_level;
+    case EncodingType::Frequency: return 3 * 2 * e.n_frequencies;
+    case EncodingType::OneBlob: return 3 * e.n_bins;
+    case EncodingType::Identity: return 3;
+  }
+  return 0;
+}
+
+uint32_t encoding_min_alignment(const EncodingConfig& e) {
+  switch (e.type) {
+    case EncodingType::Grid: return e.n_features_per_level;
+    case EncodingType::OneBlob: return e.n_bins;
+    default: return 1;
+  }
+}
+
+// OneBlob's quartic kernel CDF (compat.md A.3.3) and its derivative in t.
+float oneblob_q(float t, float n) {
+  float u = t * n;
+  float v = (15.0f / 16.0f) * u * (1.0f - (2.0f / 3.0f) * u * u + (1.0f / 5.0f) * u * u * u * u) + 0.5f;
+  return clampf(v, 0.0f, 1.0f);
+}
+float oneblob_dq(float t, float n) {
+  float u = t * n;
+  if (u <= -1.0f || u >= 1.0f) return 0.0f;
+  float a = 1.0f - u * u;
+  return (15.0f / 16.0f) * n * a * a;
+}
+
+template <int F>
+void grid_encode_chunk(const GridLayout& g, const float* table, const float* x, const float* y, const float* z,
+                       int n, float* X0) {
+  for (uint32_t l = 0; l < g.n_levels; ++l) {
+    const GridLevel L = g.levels[l];
+    float* out = X0 + size_t(l) * F * n;
+    for (int s = 0; s < n; ++s) grid_level_forward<F>(L, g.interpolation, table, x[s], y[s], z[s], out + s, n);
+  }
+}
+
+template <int F>
+void grid_backward_chunked(const GridLayout& g, uint32_t l, const float* x, const float* y, const float* z,
+                           int64_t n, const float* dEnc, uint32_t in_pad, float* grad) {
+  const GridLevel L = g.levels[l];
+  for (int64_t c0 = 0; c0 < n; c0 += kChunk) {
+    const float* dy = dEnc + (c0 / kChunk) * int64_t(in_pad) * kChunk + int64_t(l) * F * kChunk;
+    int64_t m = n - c0 < kChunk ? n - c0 : kChunk;
+    for (int64_t s = 0; s < m; ++s)
+      grid_level_backward<F>(L, g.interpolation, grad, x[c0 + s], y[c0 + s], z[c0 + s], dy + s, kChunk);
+  }
+}
+
+}  // namespace
+
+MlpLayout make_mlp_layout(const ModelConfig& cfg, uint32_t n_output_dims) {
+  MlpLayout m;
+  const NetworkConfig& nc = cfg.network;
+  const uint32_t align = nc.fully_fused ? 16u : 8u;
+  m.enc_width = encoding_width(cfg.encoding);
+  m.in_pad = uint32_t(next_multiple(m.enc_width, std::lcm(align, encoding_min_alignment(cfg.encoding))));
+  m.pad_value = cfg.encoding.type == EncodingType::Grid ? 0.0f : 1.0f;
+  m.width = nc.n_neurons;
+  m.n_hidden = nc.n_hidden_layers;
+  m.n_out = n_output_dims;
+  m.out_pad = uint32_t(next_multiple(n_output_dims, align));
+  m.activation = nc.activation;
+  m.output_activation = nc.output_activation;
+  m.n_matrices = m.n_hidden + 1;
+  uint64_t off = 0;
+  for (uint32_t k = 0; k < m.n_matrices; ++k) {
+    m.rows[k] = k == m.n_hidden ? m.out_pad : m.width;
+    m.cols[k] = k == 0 ? m.in_pad : m.width;
+    m.offset[k] = off;
+    off += m.rows[k] * m.cols[k];
+  }
+  m.n_params = off;
+  return m;
+}
+
+uint64_t count_params(const Json& config, uint32_t n_output_dims) {
+  ModelConfig c = ModelConfig::from_json(config);
+  uint64_t grid = c.encoding.type == EncodingType::Grid ? make_grid_layout(c.encoding).n_params() : 0;
+  return make_mlp_layout(c, n_output_dims).n_params + grid;
+}
+
+Network::Network(const Json& config, uint32_t n_output_dims) : cfg_json_(config), cfg_(ModelConfig::from_json(config)) {
+  cfg_json_ = cfg_.to_json();  // canonical, every key explicit
+  if (has_grid()) grid_ = make_grid_layout(cfg_.encoding);
+  mlp_ = make_mlp_layout(cfg_, n_output_dims);
+  params.assign(n_params(), 0.0f);
+}
+
+double Network::flops_forward_per_sample() const {
+  double mac = double(mlp_.width) * mlp_.in_pad + double(mlp_.n_hidden - 1) * mlp_.width * mlp_.width +
+               double(mlp_.n_out) * mlp_.width;
+  return 2.0 * mac;
+}
+
+void Network::init_params(uint32_t seed) {
+  Pcg32 rng(seed_seq_first_word(seed));
+  for (uint32_t k = 0; k < mlp_.n_matrices; ++k) {
+    float fan_in = float(mlp_.cols[k]), fan_out = float(mlp_.rows[k]);
+    float b = std::sqrt(6.0f / (fan_in + fan_out));
+    float* w = params.data() + mlp_.offset[k];
+    for (uint64_t i = 0; i < mlp_.rows[k] * mlp_.cols[k]; ++i) w[i] = rng.next_float() * 2.0f * b - b;
+  }
+  if (!has_grid()) return;
+  tcnn_uniform_fill(rng, grid_table(), grid_params(), -1e-4f, 1e-4f);
+}
+
+void tcnn_uniform_fill(Pcg32& rng, float* out, uint64_t n, float lower, float upper) {
+  // One sequential pass over stream positions q = 0..4T-1 fills element (q / 4) + T * (q % 4).
+  const uint64_t T = (((n + 3) / 4 + 127) / 128) * 128;
+  const Pcg32 entry = rng;
+  const float span = upper - lower;
+  for (uint64_t q = 0; q < 4 * T; ++q) {
+    float u = rng.next_float();
+    uint64_t idx = (q >> 2) + T * (q & 3);
+    if (idx < n) out[idx] = std::fma(u, span, lower);
+  }
+  rng = entry;
+  rng.advance(n);
+}
+
+std::vector<uint16_t> Network::params_half() const {
+  std::vector<uint16_t> h(params.size());
+  floats_to_halves(params.data(), h.data(), h.size());
+  return h;
+}
+
+void Network::set_params_half(const std::vector<uint16_t>& h) {
+  if (h.size() != params.size())
+    fail("model has {} parameters but its configuration needs {}", h.size(), params.size());
+  halves_to_floats(h.data(), params.data(), h.size());
+}
+
+void Network::encode(const float* x, const float* y, const float* z, int n, float* X0) const {
+  const MlpLayout& m = mlp_;
+  const EncodingConfig& e = cfg_.encoding;
+  switch (e.type) {
+    case EncodingType::Grid: {
+      const float* table = grid_table();
+      switch (grid_.n_features) {
+        case 1: grid_encode_chunk<1>(grid_, table, x, y, z, n, X0); break;
+        case 2: grid_encode_chunk<2>(grid_, table, x, y, z, n, X0); break;
+        case 4: grid_encode_chunk<4>(grid_, table, x, y, z, n, X0); break;
+        case 8: grid_encode_chunk<8>(grid_, table, x, y, z, n, X0); break;
+      }
+      break;
+    }
+    default: {
+      float buf[3 * 2 * 32 > 3 * 1024 ? 3 * 2 * 32 : 3 * 1024];
+      for (int s = 0; s < n; ++s) {
+        const float p[3] = {x[s], y[s], z[s]};
+        encode_point(p, buf);
+        for (uint32_t j = 0; j < m.enc_width; ++j) X0[size_t(j) * n + s] = buf[j];
+      }
+    }
+  }
+  for (uint32_t j = m.enc_width; j < m.in_pad; ++j)
+    for (int s = 0; s < n; ++s) X0[size_t(j) * n + s] = m.pad_value;
+}
+
+void Network::encode_point(const float xyz[3], float* out) const {
+  const EncodingConfig& e = cfg_.encoding;
+  switch (e.type) {
+    case EncodingType::Grid: {
+      const int F = int(grid_.n_features);
+      for (uint32_t l = 0; l < grid_.n_levels; ++l) {
+        GridCorners c;
+        grid_corners(grid_.levels[l], grid_.interpolation, xyz[0], xyz[1], xyz[2], c);
+        for (int f = 0; f < F; ++f) {
+          float acc = 0.0f;
+          for (int k = 0; k < 8; ++k)
+            acc = std::fma(c.weight[k], grid_table()[(uint64_t(grid_.levels[l].offset) + c.entry[k]) * F + f], acc);
+          out[l * F + f] = acc;
+        }
+      }
+      break;
+    }
+    case EncodingType::Frequency: {
+      const uint32_t nf = e.n_frequencies;
+      for (uint32_t j = 0; j < 3 * 2 * nf; ++j) {
+        uint32_t d = j / (2 * nf), k = (j / 2) % nf;
+        float arg = std::ldexp(1.0f, int(k)) * kPi * xyz[d];
+        out[j] = (j & 1) ? std::sin(arg + kPi / 2) : std::sin(arg);
+      }
+      break;
+    }
+    case EncodingType::OneBlob: {
+      const uint32_t nb = e.n_bins;
+      const float fn = float(nb);
+      for (uint32_t d = 0; d < 3; ++d) {
+        auto C = [&](uint32_t b) {
+          float t = float(b) / fn - xyz[d];
+          return oneblob_q(t, fn) + oneblob_q(t - 1.0f, fn) + oneblob_q(t + 1.0f, fn);
+        };
+        for (uint32_t b = 0; b < nb; ++b)
+          out[d * nb + b] = b + 1 < nb ? C(b + 1) - C(b) : C(0) + 1.0f - C(nb - 1);
+      }
+      break;
+    }
+    case EncodingType::Identity:
+      for (int d = 0; d < 3; ++d) out[d] = xyz[d] * e.scale + e.offset;
+      break;
+  }
+}
+
+void Network::encode_point_input_grad(const float xyz[3], float* jac) const {
+  const EncodingConfig& e = cfg_.encoding;
+  const uint32_t w = mlp_.enc_width;
+  std::fill(jac, jac + size_t(w) * 3, 0.0f);
+  switch (e.type) {
+    case EncodingType::Grid: {
+      float tmp[8 * 3];
+      for (uint32_t l = 0; l < grid_.n_levels; ++l) {
+        const GridLevel& L = grid_.levels[l];
+        switch (grid_.n_features) {
+          case 1: grid_level_input_grad<1>(L, grid_.interpolation, grid_table(), xyz[0], xyz[1], xyz[2], tmp); break;
+          case 2: grid_level_input_grad<2>(L, grid_.interpolation, grid_table(), xyz[0], xyz[1], xyz[2], tmp); break;
+          case 4: grid_level_input_grad<4>(L, grid_.interpolation, grid_table(), xyz[0], xyz[1], xyz[2], tmp); break;
+          case 8: grid_level_input_grad<8>(L, grid_.interpolation, grid_table(), xyz[0], xyz[1], xyz[2], tmp); break;
+        }
+        for (uint32_t f = 0; f < grid_.n_features; ++f)
+          for (int d = 0; d < 3; ++d) jac[(l * grid_.n_features + f) * 3 + d] = tmp[f * 3 + d];
+      }
+      break;
+    }
+    case EncodingType::Frequency: {
+      const uint32_t nf = e.n_frequencies;
+      for (uint32_t j = 0; j < 3 * 2 * nf; ++j) {
+        uint32_t d = j / (2 * nf), k = (j / 2) % nf;
+        float a = std::ldexp(1.0f, int(k)) * kPi;
+        jac[j * 3 + d] = (j & 1) ? -a * std::sin(a * xyz[d]) : a * std::cos(a * xyz[d]);
+      }
+      break;
+    }
+    case EncodingType::OneBlob: {
+      const uint32_t nb = e.n_bins;
+      const float fn = float(nb);
+      for (uint32_t d = 0; d < 3; ++d) {
+        auto dC = [&](uint32_t b) {  // d C(b) / d x
+          float t = float(b) / fn - xyz[d];
+          return -(oneblob_dq(t, fn) + oneblob_dq(t - 1.0f, fn) + oneblob_dq(t + 1.0f, fn));
+        };
+        for (uint32_t b = 0; b < nb; ++b)
+          jac[(d * nb + b) * 3 + d] = b + 1 < nb ? dC(b + 1) - dC(b) : dC(0) - dC(nb - 1);
+      }
+      break;
+    }
+    case EncodingType::Identity:
+      for (int d = 0; d < 3; ++d) jac[d * 3 + d] = e.scale;
+      break;
+  }
+}
+
+void Network::mlp_forward(const float* X0, int n, float* acts, float* out_pre, float* out) const {
+  const MlpLayout& m = mlp_;
+  const bool relu = m.activation == Activation::ReLU;
+  const float* in = X0;
+  for (uint32_t k = 0; k < m.n_hidden; ++k) {
+    float* h = acts + size_t(k) * m.width * n;
+    kernels::matmul_fwd(params.data() + m.offset[k], int(m.rows[k]), int(m.cols[k]), in, h, n, relu);
+    in = h;
+  }
+  // Output layer: only the n_out real rows are computed; tcnn's padded rows never reach the loss.
+  kernels::matmul_fwd(params.data() + m.offset[m.n_hidden], int(m.n_out), int(m.width), in, out_pre, n, false);
+  if (m.output_activation != Activation::None)
+    for (size_t i = 0; i < size_t(m.n_out) * n; ++i) out[i] = activate(m.output_activation, out_pre[i]);
+  else if (out != out_pre)
+    std::memcpy(out, out_pre, sizeof(float) * m.n_out * n);
+}
+
+void Network::mlp_backward(const float* X0, const float* acts, const float* d_out_pre, int n, float* dW, float* dX0,
+                           float* scratch) const {
+  const MlpLayout& m = mlp_;
+  const bool relu = m.activation == Activation::ReLU;
+  const size_t wn = size_t(m.width) * n;
+  float* g_cur = scratch;        // dL/d(pre-activation) of the current hidden layer
+  float* g_next = scratch + wn;
+  const uint32_t H = m.n_hidden;
+  const float* hH = acts + size_t(H - 1) * wn;
+  kernels::matmul_bwd_weights(d_out_pre, int(m.n_out), hH, int(m.width), n, dW + m.offset[H]);
+  kernels::matmul_bwd_data(params.data() + m.offset[H], int(m.n_out), int(m.width), d_out_pre, relu ? hH : nullptr,
+                           g_cur, n);
+  for (uint32_t k = H - 1; k >= 1; --k) {
+    const float* hk = acts + size_t(k - 1) * wn;  // input of matrix k
+    kernels::matmul_bwd_weights(g_cur, int(m.width), hk, int(m.width), n, dW + m.offset[k]);
+    kernels::matmul_bwd_data(params.data() + m.offset[k], int(m.width), int(m.width), g_cur, relu ? hk : nullptr,
+                             g_next, n);
+    std::swap(g_cur, g_next);
+  }
+  kernels::matmul_bwd_weights(g_cur, int(m.width), X0, int(m.in_pad), n, dW + m.offset[0]);
+  if (dX0) kernels::matmul_bwd_data(params.data() + m.offset[0], int(m.width), int(m.in_pad), g_cur, nullptr, dX0, n);
+}
+
+void Network::grid_backward_level(uint32_t level, const float* x, const float* y, const float* z, int64_t n,
+                                  const float* dEnc, float* grad) const {
+  switch (grid_.n_features) {
+    case 1: grid_backward_chunked<1>(grid_, level, x, y, z, n, dEnc, mlp_.in_pad, grad); break;
+    case 2: grid_backward_chunked<2>(grid_, level, x, y, z, n, dEnc, mlp_.in_pad, grad); break;
+    case 4: grid_backward_chunked<4>(grid_, level, x, y, z, n, dEnc, mlp_.in_pad, grad); break;
+    case 8: grid_backward_chunked<8>(grid_, level, x, y, z, n, dEnc, mlp_.in_pad, grad); break;
+  }
+}
+
+size_t Network::infer_workspace_floats() const {
+  // X0 + two ping-pong hidden buffers + output rows
+  return size_t(mlp_.in_pad) * kChunk + 2 * size_t(mlp_.width) * kChunk + size_t(mlp_.n_out) * kChunk;
+}
+
+void Network::infer_chunk(const float* x, const float* y, const float* z, int n, float* out, float* ws) const {
+  const MlpLayout& m = mlp_;
+  float* X0 = ws;
+  float* h0 = X0 + size_t(m.in_pad) * n;
+  float* h1 = h0 + size_t(m.width) * n;
+  float* o = h1 + size_t(m.width) * n;
+  encode(x, y, z, n, X0);
+  const bool relu = m.activation == Activation::ReLU;
+  const float* in = X0;
+  for (uint32_t k = 0; k < m.n_hidden; ++k) {
+    float* h = (k & 1) ? h1 : h0;
+    kernels::matmul_fwd(params.data() + m.offset[k], int(m.rows[k]), int(m.cols[k]), in, h, n, relu);
+    in = h;
+  }
+  kernels::matmul_fwd(params.data() + m.offset[m.n_hidden], int(m.n_out), int(m.width), in, o, n, false);
+  for (int s = 0; s < n; ++s) out[s] = activate(m.output_activation, o[s]);
+}
+
+void Network::infer(const float* coords, int64_t n, float* out) const {
+  infer_fn(
+      n,
+      [&](int64_t i, float* x, float* y, float* z) {
+        *x = coords[3 * i];
+        *y = coords[3 * i + 1];
+        *z = coords[3 * i + 2];
+      },
+      out);
+}
+
+float Network::eval_reference(float x, float y, float z) const {
+  const MlpLayout& m = mlp_;
+  std::vector<float> in(m.in_pad, m.pad_value), h;
+  const float p[3] = {x, y, z};
+  encode_point(p, in.data());
+  for (uint32_t k = 0; k <= m.n_hidden; ++k) {
+    uint64_t rows = k == m.n_hidden ? m.n_out : m.rows[k];
+    h.assign(rows, 0.0f);
+    const float* W = params.data() + m.offset[k];
+    for (uint64_t r = 0; r < rows; ++r) {
+      double acc = 0;
+      for (uint64_t c = 0; c < m.cols[k]; ++c) acc += double(W[r * m.cols[k] + c]) * in[c];
+      h[r] = k == m.n_hidden ? activate(m.output_activation, float(acc))
+                             : (m.activation == Activation::ReLU ? std::max(0.0f, float(acc)) : float(acc));
+    }
+    in = h;
+  }
+  return in[0];
+}
+
+}  // namespace vnr

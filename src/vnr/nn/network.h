@@ -1,0 +1,119 @@
+#pragma once
+// The composite model "network with input encoding" (compat.md A.5): an encoding (grid or
+// parameter-free) followed by a bias-free MLP; flat fp32 master parameters in tcnn order
+// (MLP matrices W_0..W_H first, then the grid table).
+#include <cstdint>
+#include <vector>
+#include "vnr/core/json.h"
+#include "vnr/core/parallel.h"
+#include "vnr/core/rng.h"
+#include "vnr/nn/config.h"
+#include "vnr/nn/grid_encoding.h"
+
+namespace vnr {
+
+// tiny-cuda-nn's GPU uniform fill (compat.md A.2.10): element idx = i + T*j takes stream number
+// 4*i + j counted from rng's state, T = 128 * ceil(ceil(n/4)/128); afterwards rng is advanced by n.
+void tcnn_uniform_fill(Pcg32& rng, float* out, uint64_t n, float lower, float upper);
+
+struct MlpLayout {
+  uint32_t enc_width = 0;  // encoding output width before padding
+  uint32_t in_pad = 0;     // padded MLP input width
+  float pad_value = 0;     // 0 for grids, 1 for parameter-free encodings (acts as a bias input)
+  uint32_t width = 0, n_hidden = 0;
+  uint32_t n_out = 1, out_pad = 16;
+  uint32_t n_matrices = 0;           // n_hidden + 1
+  uint64_t offset[34], rows[34], cols[34];
+  uint64_t n_params = 0;
+  Activation activation = Activation::ReLU, output_activation = Activation::None;
+};
+
+MlpLayout make_mlp_layout(const ModelConfig& cfg, uint32_t n_output_dims = 1);
+// Total parameter count of a config, without allocating anything.
+uint64_t count_params(const Json& config, uint32_t n_output_dims = 1);
+
+// Samples are processed in chunks of kChunk (activations of a chunk stay in L2).
+constexpr int kChunk = 256;
+
+class Network {
+public:
+  explicit Network(const Json& config, uint32_t n_output_dims = 1);
+
+  const ModelConfig& config() const { return cfg_; }
+  const Json& config_json() const { return cfg_json_; }
+  bool has_grid() const { return cfg_.encoding.type == EncodingType::Grid; }
+  const GridLayout& grid() const { return grid_; }
+  const MlpLayout& mlp() const { return mlp_; }
+  uint64_t n_params() const { return mlp_.n_params + grid_params(); }
+  uint64_t grid_params() const { return has_grid() ? grid_.n_params() : 0; }
+  double flops_forward_per_sample() const;  // 2 * MACs of the unpadded-output MLP
+
+  std::vector<float> params;  // fp32 master copy, size n_params()
+  float* grid_table() { return params.data() + mlp_.n_params; }
+  const float* grid_table() const { return params.data() + mlp_.n_params; }
+
+  // tiny-cuda-nn initialisation (compat.md A.4.1, A.2.10, A.8): Xavier-uniform MLP matrices then the
+  // grid fill U[-1e-4, 1e-4), all from pcg32 seeded with seed_seq{seed}.
+  void init_params(uint32_t seed);
+  std::vector<uint16_t> params_half() const;
+  void set_params_half(const std::vector<uint16_t>& h);
+
+  // ---- chunk kernels (single-threaded; callers parallelise over chunks) ----
+  // X0 (in_pad x n, feature-major) = padded encoding of the n points (x[i], y[i], z[i]).
+  void encode(const float* x, const float* y, const float* z, int n, float* X0) const;
+  // acts: n_hidden blocks of width x n (post-activation); out: n_out x n (post-activation),
+  // out_pre: pre-activation of the output layer (may alias out when the output activation is None).
+  void mlp_forward(const float* X0, int n, float* acts, float* out_pre, float* out) const;
+  // Given dL/d(out_pre) (n_out x n): accumulates dW (n_mlp params) and writes dL/dX0 (in_pad x n)
+  // when dX0 != nullptr. scratch: 2 * width * n floats.
+  void mlp_backward(const float* X0, const float* acts, const float* d_out_pre, int n, float* dW, float* dX0,
+                    float* scratch) const;
+  // Grid parameter gradient of one level for samples [0, n): grad += dL/dtheta, reading the
+  // encoding gradient from dEnc in the chunked layout (chunk c at c * in_pad * kChunk).
+  void grid_backward_level(uint32_t level, const float* x, const float* y, const float* z, int64_t n,
+                           const float* dEnc, float* grad) const;
+  size_t acts_floats(int n) const { return size_t(mlp_.n_hidden) * mlp_.width * n; }
+
+  // ---- batched queries (parallel inside) ----
+  // out[i] = first network output at point i; coords interleaved xyz.
+  void infer(const float* coords, int64_t n, float* out) const;
+  // Same, with points produced on the fly: coord(i, &x, &y, &z).
+  template <typename CoordFn>
+  void infer_fn(int64_t n, CoordFn&& coord, float* out) const;
+
+  // Reference evaluation of one point, plain loops, for tests.
+  float eval_reference(float x, float y, float z) const;
+  // Encoding of one point (enc_width values, unpadded) and its Jacobian d enc_j / d x_d (enc_width x 3).
+  void encode_point(const float xyz[3], float* out) const;
+  void encode_point_input_grad(const float xyz[3], float* jac) const;
+
+private:
+  void infer_chunk(const float* x, const float* y, const float* z, int n, float* out, float* ws) const;
+  size_t infer_workspace_floats() const;
+
+  Json cfg_json_;
+  ModelConfig cfg_;
+  GridLayout grid_;
+  MlpLayout mlp_;
+};
+
+template <typename CoordFn>
+void Network::infer_fn(int64_t n, CoordFn&& coord, float* out) const {
+  const int64_t n_chunks = (n + kChunk - 1) / kChunk;
+  parallel_threads([&](int t, int nt) {
+    std::vector<float> ws(infer_workspace_floats() + 4 * kChunk);
+    float* xs = ws.data() + infer_workspace_floats();
+    float *ys = xs + kChunk, *zs = ys + kChunk, *o = zs + kChunk;
+    for (int64_t c = t; c < n_chunks; c += nt) {
+      int64_t b = c * kChunk, m = n - b < kChunk ? n - b : kChunk;
+      for (int64_t i = 0; i < kChunk; ++i) {  // pad the tail with the last point
+        int64_t k = b + (i < m ? i : m - 1);
+        coord(k, &xs[i], &ys[i], &zs[i]);
+      }
+      infer_chunk(xs, ys, zs, kChunk, o, ws.data());
+      for (int64_t i = 0; i < m; ++i) out[b + i] = o[i];
+    }
+  });
+}
+
+}  // namespace vnr

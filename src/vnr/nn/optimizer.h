@@ -1,0 +1,34 @@
+#pragma once
+#include <cstdint>
+#include <vector>
+#include "vnr/nn/config.h"
+
+namespace vnr {
+
+// tiny-cuda-nn's Adam (compat.md A.7.1) wrapped in ExponentialDecay (A.7.2), binary32 master
+// weights, loss scale 1. Parameters [0, n_matrix) are "matrix" params (MLP weights, l2_reg applies);
+// the rest are "non-matrix" (grid) params, skipped when their gradient is exactly zero (lazy Adam:
+// moments, per-parameter step counter and weight stay as they are).
+class Adam {
+public:
+  Adam(const AdamConfig& adam, const DecayConfig& decay, uint64_t n_params, uint64_t n_matrix);
+  // One optimizer step. Reads grads and sets them back to zero (the next step accumulates from 0).
+  void step(float* params, float* grads);
+  uint64_t steps_done() const { return step_; }
+  float current_learning_rate() const { return base_lr_ * factor_; }
+  // Learning rate used by step t (t = steps completed before it), closed form for reports.
+  static float learning_rate_at(const AdamConfig& a, const DecayConfig& d, uint64_t t);
+
+  std::vector<float> m, v;
+  std::vector<uint32_t> c;  // per-parameter step counts
+
+private:
+  AdamConfig cfg_;
+  DecayConfig decay_;
+  uint64_t n_params_, n_matrix_;
+  uint64_t step_ = 0;
+  float base_lr_, factor_ = 1.0f;
+  std::vector<float> bias_sqrt_, bias_den_;  // sqrtf(1 - b2^c) and (1 - b1^c), indexed by c
+};
+
+}  // namespace vnr

@@ -1,0 +1,101 @@
+#include "vnr/train/trainer.h"
+#include <chrono>
+#include <cstring>
+#include "vnr/core/error.h"
+#include "vnr/core/parallel.h"
+#include "vnr/core/progress.h"
+#include "vnr/nn/loss.h"
+
+namespace vnr {
+
+Trainer::Trainer(Network& net, std::shared_ptr<Sampler> sampler, TrainOptions opts)
+    : net_(net), sampler_(std::move(sampler)), opts_(opts),
+      adam_(net.config().adam, net.config().decay, net.n_params(), net.mlp().n_params) {
+  if (opts_.batch <= 0 || opts_.batch % kChunk != 0)
+    fail("batch size must be a positive multiple of {}, got {}", kChunk, opts_.batch);
+  n_threads_ = num_threads();
+  const MlpLayout& m = net.mlp();
+  grads_.assign(net.n_params(), 0.0f);
+  dW_.assign(n_threads_, std::vector<float>(m.n_params, 0.0f));
+  // workspace per thread: target, X0, acts, out_pre, out, dout, scratch
+  size_t ws = kChunk + size_t(m.in_pad) * kChunk + net.acts_floats(kChunk) + 3 * size_t(m.n_out) * kChunk +
+              2 * size_t(m.width) * kChunk;
+  ws_.assign(n_threads_, std::vector<float>(ws, 0.0f));
+  xs_.resize(opts_.batch);
+  ys_.resize(opts_.batch);
+  zs_.resize(opts_.batch);
+  if (net.has_grid()) dEnc_.resize(size_t(opts_.batch) * m.in_pad);
+  chunk_loss_.resize(opts_.batch / kChunk);
+}
+
+float Trainer::step() {
+  const MlpLayout& m = net_.mlp();
+  const int64_t n_chunks = opts_.batch / kChunk;
+  const uint64_t step = adam_.steps_done();
+  const float inv_n = 1.0f / float(opts_.batch * m.n_out);
+  const bool grid = net_.has_grid();
+  sampler_->begin_step(step);
+  auto t0 = std::chrono::steady_clock::now();
+
+  parallel_threads([&](int t, int nt) {
+    std::vector<float>& w = ws_[t];
+    float* target = w.data();
+    float* X0 = target + kChunk;
+    float* acts = X0 + size_t(m.in_pad) * kChunk;
+    float* out_pre = acts + net_.acts_floats(kChunk);
+    float* out = out_pre + size_t(m.n_out) * kChunk;
+    float* dout = out + size_t(m.n_out) * kChunk;
+    float* scratch = dout + size_t(m.n_out) * kChunk;
+    float* dW = dW_[t].data();
+    std::memset(dW, 0, sizeof(float) * m.n_params);
+    for (int64_t c = t; c < n_chunks; c += nt) {
+      float* x = xs_.data() + c * kChunk;
+      float* y = ys_.data() + c * kChunk;
+      float* z = zs_.data() + c * kChunk;
+      sampler_->sample(opts_.seed, step, uint64_t(c), kChunk, x, y, z, target);
+      net_.encode(x, y, z, kChunk, X0);
+      net_.mlp_forward(X0, kChunk, acts, out_pre, out);
+      double loss = 0;
+      for (uint32_t o = 0; o < m.n_out; ++o)
+        for (int s = 0; s < kChunk; ++s) {
+          float g;
+          // n_out targets per sample; vnr volumes are scalar (n_out = 1).
+          loss += loss_value_and_grad(net_.config().loss, out[o * kChunk + s], target[s], inv_n, &g);
+          dout[o * kChunk + s] = g * activate_derivative(m.output_activation, out_pre[o * kChunk + s]);
+        }
+      chunk_loss_[c] = loss;
+      net_.mlp_backward(X0, acts, dout, kChunk, dW, grid ? dEnc_.data() + c * int64_t(m.in_pad) * kChunk : nullptr,
+                        scratch);
+    }
+  });
+  auto t1 = std::chrono::steady_clock::now();
+
+  if (grid) {
+    float* ggrid = grads_.data() + m.n_params;
+    const uint32_t L = net_.grid().n_levels;
+    // Levels dealt round-robin: thread t owns levels t, t + nt, ... (its writes never overlap another's).
+    parallel_threads([&](int t, int nt) {
+      for (uint32_t l = uint32_t(t); l < L; l += uint32_t(nt))
+        net_.grid_backward_level(l, xs_.data(), ys_.data(), zs_.data(), opts_.batch, dEnc_.data(), ggrid);
+    });
+  }
+  auto t2 = std::chrono::steady_clock::now();
+
+  // Sum per-thread MLP gradients in thread order (deterministic for a thread count).
+  float* gm = grads_.data();
+  std::memcpy(gm, dW_[0].data(), sizeof(float) * m.n_params);
+  for (int t = 1; t < n_threads_; ++t)
+    for (uint64_t i = 0; i < m.n_params; ++i) gm[i] += dW_[t][i];
+  adam_.step(net_.params.data(), grads_.data());
+  auto t3 = std::chrono::steady_clock::now();
+  phase_seconds[0] = std::chrono::duration<double>(t1 - t0).count();
+  phase_seconds[1] = std::chrono::duration<double>(t2 - t1).count();
+  phase_seconds[2] = std::chrono::duration<double>(t3 - t2).count();
+
+  double loss = 0;
+  for (double l : chunk_loss_) loss += l;
+  loss_history_.push_back(float(loss));
+  return float(loss);
+}
+
+}  // namespace vnr

@@ -1,0 +1,51 @@
+#pragma once
+#include <cstdint>
+#include <memory>
+#include <vector>
+#include "vnr/nn/network.h"
+#include "vnr/nn/optimizer.h"
+#include "vnr/train/sampler.h"
+
+namespace vnr {
+
+struct TrainOptions {
+  int64_t batch = 65536;  // samples per step, a multiple of kChunk (256)
+  uint32_t seed = 1337;   // initialisation and sampling
+};
+
+// Runs training steps on a Network: sample -> encode -> MLP forward -> loss -> MLP backward ->
+// grid backward -> Adam. Deterministic for a given seed and thread count.
+//
+// Parallel structure of a step (2 threads shown; see docs/ARCHITECTURE.md):
+//  1. chunks of 256 samples are dealt round-robin to threads; each thread samples, encodes, runs the
+//     MLP forward/backward with activations in L2, accumulates its own dW, and stores dL/d(encoding);
+//  2. grid levels are dealt round-robin to threads; each thread scatters the gradient of its levels
+//     for every sample, so no two threads write the same entry (no atomics, no reduction buffers);
+//  3. the per-thread dW are summed in thread order, then one fused Adam pass updates all parameters.
+class Trainer {
+public:
+  Trainer(Network& net, std::shared_ptr<Sampler> sampler, TrainOptions opts);
+  float step();  // one training step; returns the mean loss of its batch
+  uint64_t steps_done() const { return adam_.steps_done(); }
+  float current_learning_rate() const { return adam_.current_learning_rate(); }
+  const std::vector<float>& loss_history() const { return loss_history_; }
+  Network& network() { return net_; }
+  const TrainOptions& options() const { return opts_; }
+  // Seconds spent in each phase of the last step (sample+MLP, grid backward, optimizer).
+  double phase_seconds[3] = {0, 0, 0};
+
+private:
+  Network& net_;
+  std::shared_ptr<Sampler> sampler_;
+  TrainOptions opts_;
+  Adam adam_;
+  int n_threads_;
+  std::vector<float> grads_;              // full gradient (MLP part overwritten each step)
+  std::vector<std::vector<float>> dW_;    // per-thread MLP gradient
+  std::vector<std::vector<float>> ws_;    // per-thread chunk workspace
+  std::vector<float> xs_, ys_, zs_, dEnc_;
+  std::vector<double> chunk_loss_;
+  std::vector<float> loss_history_;
+};
+
+}  // namespace vnr
