@@ -6,6 +6,7 @@
 #include "vnr/core/half.h"
 #include "vnr/core/math.h"
 #include "vnr/core/rng.h"
+#include "vnr/nn/cpu_kernels.h"
 #include "vnr/nn/loss.h"
 #include "vnr/nn/mlp_kernels.h"
 
@@ -43,28 +44,6 @@ float oneblob_dq(float t, float n) {
   if (u <= -1.0f || u >= 1.0f) return 0.0f;
   float a = 1.0f - u * u;
   return (15.0f / 16.0f) * n * a * a;
-}
-
-template <int F>
-void grid_encode_chunk(const GridLayout& g, const float* table, const float* x, const float* y, const float* z,
-                       int n, float* X0) {
-  for (uint32_t l = 0; l < g.n_levels; ++l) {
-    const GridLevel L = g.levels[l];
-    float* out = X0 + size_t(l) * F * n;
-    for (int s = 0; s < n; ++s) grid_level_forward<F>(L, g.interpolation, table, x[s], y[s], z[s], out + s, n);
-  }
-}
-
-template <int F>
-void grid_backward_chunked(const GridLayout& g, uint32_t l, const float* x, const float* y, const float* z,
-                           int64_t n, const float* dEnc, uint32_t in_pad, float* grad) {
-  const GridLevel L = g.levels[l];
-  for (int64_t c0 = 0; c0 < n; c0 += kChunk) {
-    const float* dy = dEnc + (c0 / kChunk) * int64_t(in_pad) * kChunk + int64_t(l) * F * kChunk;
-    int64_t m = n - c0 < kChunk ? n - c0 : kChunk;
-    for (int64_t s = 0; s < m; ++s)
-      grid_level_backward<F>(L, g.interpolation, grad, x[c0 + s], y[c0 + s], z[c0 + s], dy + s, kChunk);
-  }
 }
 
 }  // namespace
@@ -156,13 +135,7 @@ void Network::encode(const float* x, const float* y, const float* z, int n, floa
   const EncodingConfig& e = cfg_.encoding;
   switch (e.type) {
     case EncodingType::Grid: {
-      const float* table = grid_table();
-      switch (grid_.n_features) {
-        case 1: grid_encode_chunk<1>(grid_, table, x, y, z, n, X0); break;
-        case 2: grid_encode_chunk<2>(grid_, table, x, y, z, n, X0); break;
-        case 4: grid_encode_chunk<4>(grid_, table, x, y, z, n, X0); break;
-        case 8: grid_encode_chunk<8>(grid_, table, x, y, z, n, X0); break;
-      }
+      kernels::grid_encode(grid_, grid_table(), x, y, z, n, X0);
       break;
     }
     default: {
@@ -313,12 +286,7 @@ void Network::mlp_backward(const float* X0, const float* acts, const float* d_ou
 
 void Network::grid_backward_level(uint32_t level, const float* x, const float* y, const float* z, int64_t n,
                                   const float* dEnc, float* grad) const {
-  switch (grid_.n_features) {
-    case 1: grid_backward_chunked<1>(grid_, level, x, y, z, n, dEnc, mlp_.in_pad, grad); break;
-    case 2: grid_backward_chunked<2>(grid_, level, x, y, z, n, dEnc, mlp_.in_pad, grad); break;
-    case 4: grid_backward_chunked<4>(grid_, level, x, y, z, n, dEnc, mlp_.in_pad, grad); break;
-    case 8: grid_backward_chunked<8>(grid_, level, x, y, z, n, dEnc, mlp_.in_pad, grad); break;
-  }
+  kernels::grid_backward_level(grid_, level, x, y, z, n, dEnc, mlp_.in_pad, kChunk, grad);
 }
 
 size_t Network::infer_workspace_floats() const {

@@ -1,7 +1,9 @@
 #include "vnr/nn/optimizer.h"
 #include <cfloat>
 #include <cmath>
+#include <algorithm>
 #include "vnr/core/parallel.h"
+#include "vnr/nn/cpu_kernels.h"
 
 namespace vnr {
 
@@ -20,24 +22,9 @@ float Adam::learning_rate_at(const AdamConfig& a, const DecayConfig& d, uint64_t
 }
 
 namespace {
-
 struct AdamConsts {
   float lr, lr_nm, beta1, beta2, eps, l2, rel, abs_, lo, hi;
 };
-
-// The per-element update, shared by the matrix and grid loops. Returns false to skip.
-inline void adam_update(const AdamConsts& k, float lr, float g, float& w, float& m, float& v, uint32_t& c,
-                        const float* bsq, const float* bden) {
-  m = k.beta1 * m + (1.0f - k.beta1) * g;
-  v = k.beta2 * v + (1.0f - k.beta2) * g * g;
-  c += 1;
-  float lr_t = lr * bsq[c] / bden[c];
-  float eff = lr_t / (std::sqrt(v) + k.eps);
-  eff = eff < k.lo ? k.lo : (eff > k.hi ? k.hi : eff);
-  float wd = (1.0f - k.rel * lr_t) * w - std::copysign(k.abs_ * lr_t, w);
-  w = wd - eff * m;
-}
-
 }  // namespace
 
 void Adam::step(float* params, float* grads) {
@@ -71,26 +58,27 @@ void Adam::step(float* params, float* grads) {
     k.lo = 0.1f - 0.1f / ((1.0f - cfg_.beta2) * s + 1.0f);
     k.hi = 0.1f + 0.1f / ((1.0f - cfg_.beta2) * s);
   }
-  const float* bsq = bias_sqrt_.data();
-  const float* bden = bias_den_.data();
-  float* mm = m.data();
-  float* vv = v.data();
-  uint32_t* cc = c.data();
-  const uint64_t n_mat = n_matrix_;
-  const bool opt_mat = cfg_.optimize_matrix_params, opt_nm = cfg_.optimize_non_matrix_params;
-  parallel_for_range(int64_t(n_params_), 1 << 15, [&](int64_t b, int64_t e) {
-    for (int64_t i = b; i < e; ++i) {
-      float g = grads[i];
-      grads[i] = 0.0f;
-      if (uint64_t(i) < n_mat) {
-        if (!opt_mat) continue;
-        g += k.l2 * params[i];
-        adam_update(k, k.lr, g, params[i], mm[i], vv[i], cc[i], bsq, bden);
-      } else {
-        if (!opt_nm || g == 0.0f) continue;
-        adam_update(k, k.lr_nm, g, params[i], mm[i], vv[i], cc[i], bsq, bden);
-      }
-    }
+  // Matrix (MLP) and non-matrix (grid) parameters differ in l2 and zero-gradient skipping.
+  kernels::AdamStep ks{k.lr, k.beta1, k.beta2, k.eps, k.l2, k.rel, k.abs_, k.lo, k.hi, true,
+                       bias_sqrt_.data(), bias_den_.data()};
+  if (cfg_.optimize_matrix_params)
+    kernels::adam_range(ks, params, grads, m.data(), v.data(), c.data(), int64_t(n_matrix_));
+  else
+    std::fill(grads, grads + n_matrix_, 0.0f);
+  ks.matrix = false;
+  ks.lr = k.lr_nm;
+  const int64_t n_nm = int64_t(n_params_ - n_matrix_);
+  float* p = params + n_matrix_;
+  float* g = grads + n_matrix_;
+  float* mm = m.data() + n_matrix_;
+  float* vv = v.data() + n_matrix_;
+  uint32_t* cc = c.data() + n_matrix_;
+  if (!cfg_.optimize_non_matrix_params) {
+    std::fill(g, g + n_nm, 0.0f);
+    return;
+  }
+  parallel_for_range(n_nm, 1 << 16, [&](int64_t b, int64_t e) {
+    kernels::adam_range(ks, p + b, g + b, mm + b, vv + b, cc + b, e - b);
   });
 }
 

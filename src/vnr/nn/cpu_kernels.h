@@ -1,0 +1,26 @@
+#pragma once
+// Grid-encoding and optimizer loops of the CPU backend, compiled once per SIMD target (Highway's
+// foreach_target) and chosen at run time. The loop bodies are the single-source VNR_HD functions of
+// grid_encoding.h; per-target compilation lets the compiler use AVX-512/AVX2 for the feature loops.
+#include <cstdint>
+#include "vnr/nn/grid_encoding.h"
+
+namespace vnr::kernels {
+
+// X0 rows [0, L*F) for n samples (feature-major, stride n).
+void grid_encode(const GridLayout& g, const float* table, const float* x, const float* y, const float* z, int n,
+                 float* X0);
+// grad += dL/dtheta of one level for n samples; dEnc chunked (chunk c at c * in_pad * chunk).
+void grid_backward_level(const GridLayout& g, uint32_t level, const float* x, const float* y, const float* z,
+                         int64_t n, const float* dEnc, uint32_t in_pad, int chunk, float* grad);
+
+struct AdamStep {
+  float lr, beta1, beta2, eps, l2, rel, abs_decay, lo, hi;
+  bool matrix;     // true: l2 applies, never skipped; false: skipped where the gradient is 0
+  const float* bias_sqrt;  // sqrtf(1 - beta2^c), by c
+  const float* bias_den;   // 1 - beta1^c, by c
+};
+// Updates params/m/v/c in [0, n) and zeroes grads.
+void adam_range(const AdamStep& k, float* params, float* grads, float* m, float* v, uint32_t* c, int64_t n);
+
+}  // namespace vnr::kernels
