@@ -1,0 +1,25 @@
+#pragma once
+// Internal to the volume layer: the per-format descriptor readers behind describe_volume().
+#include <string>
+#include <vector>
+#include "vnr/core/json.h"
+#include "vnr/volume/volume.h"
+
+namespace vnr::detail {
+
+// What a descriptor says before command-line overrides and timestep selection are applied.
+struct Source {
+  VolumeDesc desc;                 // offset = the first timestep's offset; n_timesteps filled in
+  std::vector<std::string> files;  // one data file per timestep (scene/DIVA lists); empty = all in desc.path
+  bool data_at_end = false;        // NRRD "byte skip: -1": offset = file size - data size
+  std::string origin;              // the descriptor named in messages ("" for a plain raw file)
+};
+
+Source describe_sidecar(const std::string& json_path, const Json& j);
+Source describe_scene(const std::string& json_path, const Json& j);  // instantvnr VIDI3D or DIVA
+Source describe_nrrd(const std::string& path);
+
+// "16x8x8" / "16x8x8x3"
+std::string dims_string(const Int3& d, int n_timesteps = 1);
+
+}  // namespace vnr::detail

@@ -1,0 +1,152 @@
+#include "vnr/volume/writer.h"
+#include <algorithm>
+#include <bit>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <vector>
+#include "vnr/core/error.h"
+#include "vnr/core/json.h"
+
+namespace vnr {
+namespace {
+
+bool is_nrrd_path(const std::string& p) {
+  return p.size() >= 5 && to_lower(p.substr(p.size() - 5)) == ".nrrd";
+}
+
+std::string strip_extension(const std::string& p) {
+  size_t slash = p.find_last_of('/');
+  size_t dot = p.find_last_of('.');
+  if (dot == std::string::npos || (slash != std::string::npos && dot < slash)) return p;
+  return p.substr(0, dot);
+}
+
+std::string basename_of(const std::string& p) {
+  size_t slash = p.find_last_of('/');
+  return slash == std::string::npos ? p : p.substr(slash + 1);
+}
+
+const char* nrrd_type(DType t) {
+  switch (t) {
+    case DType::Int8: return "int8";
+    case DType::UInt8: return "uint8";
+    case DType::Int16: return "int16";
+    case DType::UInt16: return "uint16";
+    case DType::Int32: return "int32";
+    case DType::UInt32: return "uint32";
+    case DType::Float32: return "float";
+    case DType::Float64: return "double";
+  }
+  return "?";
+}
+
+// Little-endian bytes of one value of type T.
+template <typename T>
+void put(unsigned char* dst, T v) {
+  std::memcpy(dst, &v, sizeof(T));
+  if constexpr (std::endian::native == std::endian::big) std::reverse(dst, dst + sizeof(T));
+}
+
+// Integers: round to nearest, clamp to the type (NaN -> 0). Returns the stored value.
+template <typename T>
+double store(unsigned char* dst, float v) {
+  if constexpr (std::is_integral_v<T>) {
+    double r = std::isnan(v) ? 0.0 : std::nearbyint(double(v));
+    r = std::clamp(r, double(std::numeric_limits<T>::min()), double(std::numeric_limits<T>::max()));
+    put<T>(dst, T(r));
+    return r;
+  } else {
+    put<T>(dst, T(v));
+    return double(T(v));
+  }
+}
+
+// Shortest text that reads back as the same double (fmt), which is also valid JSON for finite values.
+std::string json_number(double v) {
+  if (!std::isfinite(v)) fail("cannot write a non-finite number ({}) to a JSON sidecar", v);
+  return fmt::format("{}", v);
+}
+
+}  // namespace
+
+VolumeWriter::VolumeWriter(const std::string& path, Int3 dims, DType dtype, Vec3f spacing,
+                           std::optional<std::pair<double, double>> value_range)
+    : path_(path), dims_(dims), dtype_(dtype), spacing_(spacing), range_(value_range) {
+  if (dims.x <= 0 || dims.y <= 0 || dims.z <= 0)
+    fail("cannot write '{}': dims {}x{}x{} must all be positive", path, dims.x, dims.y, dims.z);
+  if (!is_nrrd_path(path) && sidecar_path() == path)
+    fail("cannot write '{}': a raw volume needs a data file name other than its .json sidecar", path);
+  file_ = std::make_unique<AtomicFile>(path);
+  if (is_nrrd_path(path)) {
+    // Nothing in the header depends on the data, so it goes first and the slices follow it.
+    std::string h = "NRRD0004\n# written by vnr\n";
+    h += fmt::format("type: {}\ndimension: 3\nsizes: {} {} {}\nendian: little\nencoding: raw\n", nrrd_type(dtype),
+                     dims.x, dims.y, dims.z);
+    h += fmt::format("spacings: {} {} {}\n\n", spacing.x, spacing.y, spacing.z);
+    file_->write(h);
+  }
+}
+
+VolumeWriter::~VolumeWriter() = default;  // an uncommitted AtomicFile removes its temporary
+
+std::string VolumeWriter::sidecar_path() const {
+  return is_nrrd_path(path_) ? std::string() : strip_extension(path_) + ".json";
+}
+
+void VolumeWriter::write_slices(const float* values, int64_t n_slices) {
+  if (!file_) fail("cannot write '{}': already committed", path_);
+  if (n_slices < 0 || slices_written_ + n_slices > dims_.z)
+    fail("cannot write '{}': {} more slices would exceed dims.z = {}", path_, n_slices, dims_.z);
+  const size_t esize = dtype_size(dtype_);
+  const int64_t n = dims_.x * dims_.y * n_slices;
+  constexpr int64_t block = 1 << 16;
+  std::vector<unsigned char> buf(size_t(std::min(n, block)) * esize);
+  for (int64_t i0 = 0; i0 < n; i0 += block) {
+    int64_t m = std::min(block, n - i0);
+    for (int64_t i = 0; i < m; ++i) {
+      unsigned char* dst = buf.data() + i * esize;
+      float v = values[i0 + i];
+      double s = 0;
+      switch (dtype_) {
+        case DType::Int8: s = store<int8_t>(dst, v); break;
+        case DType::UInt8: s = store<uint8_t>(dst, v); break;
+        case DType::Int16: s = store<int16_t>(dst, v); break;
+        case DType::UInt16: s = store<uint16_t>(dst, v); break;
+        case DType::Int32: s = store<int32_t>(dst, v); break;
+        case DType::UInt32: s = store<uint32_t>(dst, v); break;
+        case DType::Float32: s = store<float>(dst, v); break;
+        case DType::Float64: s = store<double>(dst, v); break;
+      }
+      if (std::isfinite(s)) {
+        seen_lo_ = std::min(seen_lo_, s);
+        seen_hi_ = std::max(seen_hi_, s);
+      }
+    }
+    file_->write(buf.data(), size_t(m) * esize);
+  }
+  slices_written_ += n_slices;
+}
+
+void VolumeWriter::commit() {
+  if (!file_) fail("cannot write '{}': already committed", path_);
+  if (slices_written_ != dims_.z)
+    fail("cannot write '{}': {} of {} z-slices were written", path_, slices_written_, dims_.z);
+  // Data first, then the sidecar that points at it: a reader never finds a dangling sidecar.
+  file_->commit();
+  file_.reset();
+  if (is_nrrd_path(path_)) return;
+  std::string j = "{\n";
+  j += fmt::format("  \"file\": {},\n", Json(basename_of(path_)).dump());
+  j += fmt::format("  \"dims\": [{}, {}, {}],\n", dims_.x, dims_.y, dims_.z);
+  j += fmt::format("  \"dtype\": \"{}\",\n  \"byte_order\": \"little\",\n", dtype_name(dtype_));
+  // Spacing is float: printing the float (not its double widening) keeps 0.88 as "0.88".
+  j += fmt::format("  \"spacing\": [{}, {}, {}]", spacing_.x, spacing_.y, spacing_.z);
+  std::optional<std::pair<double, double>> r = range_;
+  if (!r && seen_lo_ <= seen_hi_) r = std::make_pair(seen_lo_, seen_hi_);
+  if (r) j += fmt::format(",\n  \"value_range\": [{}, {}]", json_number(r->first), json_number(r->second));
+  j += "\n}\n";
+  write_file_atomic(sidecar_path(), j);
+}
+
+}  // namespace vnr
