@@ -3,6 +3,11 @@
 // (pbrt-v4 style): plain inline code over POD views, no allocation, exceptions or virtuals.
 #if defined(__CUDACC__)
 #define VNR_HD __host__ __device__
+#define VNR_INLINE __forceinline__
 #else
 #define VNR_HD
+// Forced inlining matters on the CPU: the per-sample functions are compiled into per-SIMD-target
+// kernels (Highway foreach_target) and only inlined copies get that target's instructions (FMA,
+// AVX-512); an out-of-line call would run baseline code and call libm for fmaf.
+#define VNR_INLINE inline __attribute__((always_inline))
 #endif

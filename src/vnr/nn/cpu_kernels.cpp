@@ -11,13 +11,123 @@ HWY_BEFORE_NAMESPACE();
 namespace vnr::kernels {
 namespace HWY_NAMESPACE {
 
+namespace hn = hwy::HWY_NAMESPACE;
+using DF = hn::ScalableTag<float>;
+using DU = hn::RebindToUnsigned<DF>;
+using DI = hn::RebindToSigned<DF>;
+constexpr size_t kMaxLanes = 64 / sizeof(float);  // 512-bit vectors at most
+
+// Vectorised corner computation for one level and Lanes(DF) samples: entries and weights of the 8
+// corners, with exactly the operation order of grid_corners() (so results are bit-identical).
+// Valid for Linear/Smoothstep interpolation, Hash or Dense levels, and inputs in [0, 1] (then every
+// dense index is below 2 n_l and one conditional subtraction replaces the modulo).
+struct CornerBlock {
+  alignas(64) uint32_t entry[8][kMaxLanes];
+  alignas(64) float weight[8][kMaxLanes];
+};
+
+HWY_INLINE void CornersVec(const GridLevel& L, bool smooth, const float* x, const float* y, const float* z,
+                           CornerBlock& cb) {
+  const DF df;
+  const DU du;
+  const DI di;
+  const auto scale = hn::Set(df, L.scale), half = hn::Set(df, 0.5f), one = hn::Set(df, 1.0f);
+  const float* in[3] = {x, y, z};
+  hn::Vec<DU> i[3];
+  hn::Vec<DF> sv[3], sm[3];
+  for (int d = 0; d < 3; ++d) {
+    const auto p = hn::MulAdd(scale, hn::LoadU(df, in[d]), half);
+    const auto fl = hn::Floor(p);
+    i[d] = hn::BitCast(du, hn::ConvertTo(di, fl));
+    auto t = hn::Sub(p, fl);
+    if (smooth) t = hn::Mul(hn::Mul(t, t), hn::Sub(hn::Set(df, 3.0f), hn::Mul(hn::Set(df, 2.0f), t)));
+    sv[d] = t;
+    sm[d] = hn::Sub(one, t);
+  }
+  const auto res = hn::Set(du, L.res), res2 = hn::Set(du, L.res * L.res);
+  const auto n = hn::Set(du, L.n_entries), mask = hn::Set(du, L.pow2_mask);
+  const auto p1 = hn::Set(du, 2654435761u), p2 = hn::Set(du, 805459861u), c1 = hn::Set(du, 1u);
+  for (int k = 0; k < 8; ++k) {
+    const auto cx = (k & 1) ? hn::Add(i[0], c1) : i[0];
+    const auto cy = (k & 2) ? hn::Add(i[1], c1) : i[1];
+    const auto cz = (k & 4) ? hn::Add(i[2], c1) : i[2];
+    hn::Vec<DU> idx;
+    if (L.hashed) idx = hn::Xor(hn::Xor(cx, hn::Mul(cy, p1)), hn::Mul(cz, p2));
+    else idx = hn::Add(hn::Add(cx, hn::Mul(cy, res)), hn::Mul(cz, res2));
+    if (L.pow2_mask) idx = hn::And(idx, mask);
+    else idx = hn::Min(idx, hn::Sub(idx, n));  // unsigned: idx - n wraps above idx when idx < n
+    hn::Store(idx, du, cb.entry[k]);
+    const auto w = hn::Mul(hn::Mul((k & 1) ? sv[0] : sm[0], (k & 2) ? sv[1] : sm[1]), (k & 4) ? sv[2] : sm[2]);
+    hn::Store(w, df, cb.weight[k]);
+  }
+}
+
+template <int F>
+HWY_INLINE void PrefetchCorners(const float* lt, const CornerBlock& cb, size_t N) {
+  for (int k = 0; k < 8; ++k)
+    for (size_t s = 0; s < N; ++s) __builtin_prefetch(lt + uint64_t(cb.entry[k][s]) * F);
+}
+
+// The vector path applies when every input of the block is in [0, 1] (no negative or far lattice
+// coordinates) and the level is not tiled; otherwise the scalar single-source path runs.
+HWY_INLINE bool BlockInUnitCube(const float* x, const float* y, const float* z, size_t N) {
+  const DF df;
+  const auto zero = hn::Zero(df), one = hn::Set(df, 1.0f);
+  auto ok = hn::And(hn::Ge(hn::LoadU(df, x), zero), hn::Le(hn::LoadU(df, x), one));
+  ok = hn::And(ok, hn::And(hn::Ge(hn::LoadU(df, y), zero), hn::Le(hn::LoadU(df, y), one)));
+  ok = hn::And(ok, hn::And(hn::Ge(hn::LoadU(df, z), zero), hn::Le(hn::LoadU(df, z), one)));
+  (void)N;
+  return hn::AllTrue(df, ok);
+}
+
+HWY_INLINE bool VectorPathOk(const GridLevel& L, const GridLayout& g) {
+  if (g.interpolation == Interpolation::Nearest) return false;
+  // Dense levels need idx < 2 n_l for the single subtraction: true when n_l >= res^3 (not tiled).
+  if (!L.hashed && !L.pow2_mask && uint64_t(L.n_entries) < uint64_t(L.res) * L.res * L.res) return false;
+  return true;
+}
+
 template <int F>
 void EncodeF(const GridLayout& g, const float* table, const float* x, const float* y, const float* z, int n,
              float* X0) {
+  const DF df;
+  const size_t N = hn::Lanes(df);
+  CornerBlock cb;
   for (uint32_t l = 0; l < g.n_levels; ++l) {
     const GridLevel L = g.levels[l];
     float* out = X0 + size_t(l) * F * n;
-    for (int s = 0; s < n; ++s) grid_level_forward<F>(L, g.interpolation, table, x[s], y[s], z[s], out + s, n);
+    const bool vec_ok = VectorPathOk(L, g);
+    const float* lt = table + uint64_t(L.offset) * F;
+    int s0 = 0;
+    // Software pipeline: the corners of block b+1 are computed and prefetched while block b is
+    // gathered, so the random reads of the large levels overlap instead of waiting one by one.
+    CornerBlock cbs[2];
+    bool have = vec_ok && int(N) <= n && BlockInUnitCube(x, y, z, N);
+    if (have) {
+      CornersVec(L, g.interpolation == Interpolation::Smoothstep, x, y, z, cbs[0]);
+      PrefetchCorners<F>(lt, cbs[0], N);
+    }
+    for (int b = 0; have; ++b, s0 += int(N)) {
+      const CornerBlock& cur = cbs[b & 1];
+      const int s1 = s0 + int(N);
+      const bool next = s1 + int(N) <= n && BlockInUnitCube(x + s1, y + s1, z + s1, N);
+      if (next) {
+        CornersVec(L, g.interpolation == Interpolation::Smoothstep, x + s1, y + s1, z + s1, cbs[(b + 1) & 1]);
+        PrefetchCorners<F>(lt, cbs[(b + 1) & 1], N);
+      }
+      for (size_t s = 0; s < N; ++s) {
+        float acc[F];
+        for (int f = 0; f < F; ++f) acc[f] = 0.0f;
+        for (int k = 0; k < 8; ++k) {
+          const float* th = lt + uint64_t(cur.entry[k][s]) * F;
+          const float w = cur.weight[k][s];
+          for (int f = 0; f < F; ++f) acc[f] = fmaf(w, th[f], acc[f]);
+        }
+        for (int f = 0; f < F; ++f) out[f * n + s0 + s] = acc[f];
+      }
+      have = next;
+    }
+    for (int s = s0; s < n; ++s) grid_level_forward<F>(L, g.interpolation, table, x[s], y[s], z[s], out + s, n);
   }
 }
 
@@ -34,11 +144,44 @@ void GridEncode(const GridLayout& g, const float* table, const float* x, const f
 template <int F>
 void BackwardF(const GridLayout& g, uint32_t l, const float* x, const float* y, const float* z, int64_t n,
                const float* dEnc, uint32_t in_pad, int chunk, float* grad) {
+  const DF df;
+  const int64_t N = int64_t(hn::Lanes(df));
   const GridLevel L = g.levels[l];
+  const bool vec_ok = VectorPathOk(L, g) && chunk % N == 0;
+  float* lg = grad + uint64_t(L.offset) * F;
+  const bool smooth = g.interpolation == Interpolation::Smoothstep;
   for (int64_t c0 = 0; c0 < n; c0 += chunk) {
     const float* dy = dEnc + (c0 / chunk) * int64_t(in_pad) * chunk + int64_t(l) * F * chunk;
     const int64_t m = n - c0 < chunk ? n - c0 : chunk;
-    for (int64_t s = 0; s < m; ++s)
+    int64_t s0 = 0;
+    // Same software pipeline as the forward: block b+1's gradient lines are prefetched (for
+    // writing) while block b is scattered.
+    CornerBlock cbs[2];
+    bool have = vec_ok && N <= m && BlockInUnitCube(x + c0, y + c0, z + c0, size_t(N));
+    if (have) {
+      CornersVec(L, smooth, x + c0, y + c0, z + c0, cbs[0]);
+      PrefetchCorners<F>(lg, cbs[0], size_t(N));
+    }
+    for (int64_t b = 0; have; ++b, s0 += N) {
+      const CornerBlock& cur = cbs[b & 1];
+      const int64_t s1 = s0 + N;
+      const bool next = s1 + N <= m && BlockInUnitCube(x + c0 + s1, y + c0 + s1, z + c0 + s1, size_t(N));
+      if (next) {
+        CornersVec(L, smooth, x + c0 + s1, y + c0 + s1, z + c0 + s1, cbs[(b + 1) & 1]);
+        PrefetchCorners<F>(lg, cbs[(b + 1) & 1], size_t(N));
+      }
+      for (int64_t s = 0; s < N; ++s) {
+        float gv[F];
+        for (int f = 0; f < F; ++f) gv[f] = dy[f * chunk + s0 + s];
+        for (int k = 0; k < 8; ++k) {
+          float* gr = lg + uint64_t(cur.entry[k][s]) * F;
+          const float w = cur.weight[k][s];
+          for (int f = 0; f < F; ++f) gr[f] = fmaf(w, gv[f], gr[f]);
+        }
+      }
+      have = next;
+    }
+    for (int64_t s = s0; s < m; ++s)
       grid_level_backward<F>(L, g.interpolation, grad, x[c0 + s], y[c0 + s], z[c0 + s], dy + s, chunk);
   }
 }
@@ -53,28 +196,60 @@ void GridBackwardLevel(const GridLayout& g, uint32_t level, const float* x, cons
   }
 }
 
-// tcnn's Adam element update (compat.md A.7.1), written branch-light so the compiler can vectorise
-// it: the skip is a select, not a jump.
+// tcnn's Adam element update (compat.md A.7.1), vectorised: the zero-gradient skip of grid
+// parameters is a per-lane select, bias corrections are gathered from tables indexed by the
+// per-parameter step count. Every lane computes exactly the scalar formula (no fused operations).
 void AdamRange(const AdamStep& k, float* HWY_RESTRICT w, float* HWY_RESTRICT grads, float* HWY_RESTRICT m,
                float* HWY_RESTRICT v, uint32_t* HWY_RESTRICT c, int64_t n) {
-  for (int64_t i = 0; i < n; ++i) {
+  const DF df;
+  const DI di;
+  const int64_t N = int64_t(hn::Lanes(df));
+  const auto zero = hn::Zero(df), one = hn::Set(df, 1.0f);
+  const auto b1 = hn::Set(df, k.beta1), b2 = hn::Set(df, k.beta2);
+  const auto nb1 = hn::Set(df, 1.0f - k.beta1), nb2 = hn::Set(df, 1.0f - k.beta2);
+  const auto l2 = hn::Set(df, k.l2), lr = hn::Set(df, k.lr), eps = hn::Set(df, k.eps);
+  const auto rel = hn::Set(df, k.rel), absd = hn::Set(df, k.abs_decay);
+  const auto lo = hn::Set(df, k.lo), hi = hn::Set(df, k.hi);
+  const auto ione = hn::Set(di, 1);
+  int64_t i = 0;
+  for (; i + N <= n; i += N) {
+    auto g = hn::LoadU(df, grads + i);
+    hn::StoreU(zero, df, grads + i);
+    const auto wi = hn::LoadU(df, w + i);
+    const auto active = k.matrix ? hn::Eq(zero, zero) : hn::Ne(g, zero);
+    if (!k.matrix && hn::AllFalse(df, active)) continue;
+    if (k.matrix) g = hn::Add(g, hn::Mul(l2, wi));
+    const auto m0 = hn::LoadU(df, m + i), v0 = hn::LoadU(df, v + i);
+    const auto c0 = hn::LoadU(di, reinterpret_cast<const int32_t*>(c + i));
+    const auto mi = hn::Add(hn::Mul(b1, m0), hn::Mul(nb1, g));
+    const auto vi = hn::Add(hn::Mul(b2, v0), hn::Mul(hn::Mul(nb2, g), g));
+    const auto ci = hn::Add(c0, ione);
+    const auto bs = hn::GatherIndex(df, k.bias_sqrt, ci);
+    const auto bd = hn::GatherIndex(df, k.bias_den, ci);
+    const auto lr_t = hn::Div(hn::Mul(lr, bs), bd);
+    auto eff = hn::Div(lr_t, hn::Add(hn::Sqrt(vi), eps));
+    eff = hn::Min(hn::Max(eff, lo), hi);
+    const auto wd = hn::Sub(hn::Mul(hn::Sub(one, hn::Mul(rel, lr_t)), wi), hn::CopySign(hn::Mul(absd, lr_t), wi));
+    const auto wn = hn::Sub(wd, hn::Mul(eff, mi));
+    hn::StoreU(hn::IfThenElse(active, wn, wi), df, w + i);
+    hn::StoreU(hn::IfThenElse(active, mi, m0), df, m + i);
+    hn::StoreU(hn::IfThenElse(active, vi, v0), df, v + i);
+    hn::StoreU(hn::IfThenElse(hn::RebindMask(di, active), ci, c0), di, reinterpret_cast<int32_t*>(c + i));
+  }
+  for (; i < n; ++i) {  // tail: the same formula, one element at a time
     float g = grads[i];
     grads[i] = 0.0f;
-    const bool active = k.matrix || g != 0.0f;
-    float wi = w[i];
+    if (!k.matrix && g == 0.0f) continue;
+    const float wi = w[i];
     if (k.matrix) g += k.l2 * wi;
-    const float mi = k.beta1 * m[i] + (1.0f - k.beta1) * g;
-    const float vi = k.beta2 * v[i] + (1.0f - k.beta2) * g * g;
-    const uint32_t ci = c[i] + 1;
-    const float lr_t = k.lr * k.bias_sqrt[active ? ci : 0] / k.bias_den[active ? ci : 1];
-    float eff = lr_t / (std::sqrt(vi) + k.eps);
+    m[i] = k.beta1 * m[i] + (1.0f - k.beta1) * g;
+    v[i] = k.beta2 * v[i] + (1.0f - k.beta2) * g * g;
+    const uint32_t ci = ++c[i];
+    const float lr_t = k.lr * k.bias_sqrt[ci] / k.bias_den[ci];
+    float eff = lr_t / (std::sqrt(v[i]) + k.eps);
     eff = eff < k.lo ? k.lo : (eff > k.hi ? k.hi : eff);
     const float wd = (1.0f - k.rel * lr_t) * wi - std::copysign(k.abs_decay * lr_t, wi);
-    const float wn = wd - eff * mi;
-    w[i] = active ? wn : wi;
-    m[i] = active ? mi : m[i];
-    v[i] = active ? vi : v[i];
-    c[i] = active ? ci : c[i];
+    w[i] = wd - eff * m[i];
   }
 }
 

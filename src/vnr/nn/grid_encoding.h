@@ -30,7 +30,7 @@ struct GridLayout {
 
 GridLayout make_grid_layout(const EncodingConfig& cfg);
 
-VNR_HD inline uint32_t grid_entry(const GridLevel& L, uint32_t cx, uint32_t cy, uint32_t cz) {
+VNR_HD VNR_INLINE uint32_t grid_entry(const GridLevel& L, uint32_t cx, uint32_t cy, uint32_t cz) {
   uint32_t idx;
   if (L.hashed) idx = cx ^ (cy * 2654435761u) ^ (cz * 805459861u);
   else idx = cx + cy * L.res + cz * (L.res * L.res);  // uint32 wrap, as tcnn
@@ -44,9 +44,9 @@ struct GridCorners {
   float weight[8];
 };
 
-VNR_HD inline float grid_smoothstep(float t) { return t * t * (3.0f - 2.0f * t); }
+VNR_HD VNR_INLINE float grid_smoothstep(float t) { return t * t * (3.0f - 2.0f * t); }
 
-VNR_HD inline void grid_corners(const GridLevel& L, Interpolation interp, float x, float y, float z,
+VNR_HD VNR_INLINE void grid_corners(const GridLevel& L, Interpolation interp, float x, float y, float z,
                                 GridCorners& c) {
   float p[3] = {fmaf(L.scale, x, 0.5f), fmaf(L.scale, y, 0.5f), fmaf(L.scale, z, 0.5f)};
   uint32_t i[3];
@@ -72,7 +72,7 @@ VNR_HD inline void grid_corners(const GridLevel& L, Interpolation interp, float 
 // Forward of one level for one sample: out[f * stride] = sum_k w_k * theta[(offset + entry_k) * F + f],
 // accumulated with FMA in corner order (vnr's binary32 reference, compat.md A.2.7).
 template <int F>
-VNR_HD inline void grid_level_forward(const GridLevel& L, Interpolation interp, const float* params, float x,
+VNR_HD VNR_INLINE void grid_level_forward(const GridLevel& L, Interpolation interp, const float* params, float x,
                                       float y, float z, float* out, int64_t stride) {
   GridCorners c;
   grid_corners(L, interp, x, y, z, c);
@@ -89,7 +89,7 @@ VNR_HD inline void grid_level_forward(const GridLevel& L, Interpolation interp, 
 // Backward of one level for one sample: grad[(offset + entry_k) * F + f] += w_k * dy[f * stride].
 // Not thread-safe by itself: the trainer gives each level to exactly one thread.
 template <int F>
-VNR_HD inline void grid_level_backward(const GridLevel& L, Interpolation interp, float* grad, float x, float y,
+VNR_HD VNR_INLINE void grid_level_backward(const GridLevel& L, Interpolation interp, float* grad, float x, float y,
                                        float z, const float* dy, int64_t stride) {
   GridCorners c;
   grid_corners(L, interp, x, y, z, c);
@@ -104,7 +104,7 @@ VNR_HD inline void grid_level_backward(const GridLevel& L, Interpolation interp,
 
 // d(feature f of level L)/d(x_d) for one sample (compat.md A.2.9), written to dydx[f*3 + d].
 template <int F>
-VNR_HD inline void grid_level_input_grad(const GridLevel& L, Interpolation interp, const float* params, float x,
+VNR_HD VNR_INLINE void grid_level_input_grad(const GridLevel& L, Interpolation interp, const float* params, float x,
                                          float y, float z, float* dydx) {
   for (int f = 0; f < 3 * F; ++f) dydx[f] = 0.0f;
   if (interp == Interpolation::Nearest) return;

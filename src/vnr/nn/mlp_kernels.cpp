@@ -45,50 +45,53 @@ enum class Epi { kNone, kRelu, kMask };
 
 // One R x V tile. a points at A(i0, 0); b at B[s0]; out / mask at row i0, sample s0.
 // kAT: A is stored transposed (A(i, k) = a[k*lda + i]), else A(i, k) = a[i*lda + k].
-template <int R, int V, bool kAT>
+// The epilogue is a template parameter so that the accumulators stay in registers through it.
+template <int R, int V, bool kAT, Epi E>
 HWY_INLINE void Tile(const float* HWY_RESTRICT a, size_t lda, const float* HWY_RESTRICT b, size_t n,
-                     int K, float* HWY_RESTRICT out, Epi epi, const float* HWY_RESTRICT mask) {
+                     int K, float* HWY_RESTRICT out, const float* HWY_RESTRICT mask) {
   const DF d;
   const size_t N = hn::Lanes(d);
   using V_t = hn::Vec<DF>;
-  V_t acc[R][V];
-  for (int r = 0; r < R; ++r)
-    for (int v = 0; v < V; ++v) acc[r][v] = hn::Zero(d);
+  // Few accumulators cannot hide the FMA latency (4 cycles x 2 pipes): then keep a second set
+  // for odd k and add the two at the end.
+  constexpr int kSets = R * V < 8 ? 2 : 1;
+  V_t acc[kSets][R][V];
+  for (int t = 0; t < kSets; ++t)
+    for (int r = 0; r < R; ++r)
+      for (int v = 0; v < V; ++v) acc[t][r][v] = hn::Zero(d);
 
-  if constexpr (kAT) {
-    // Broadcasts at constant offsets from one pointer that steps by lda.
-    for (int k = 0; k < K; ++k) {
-      V_t bv[V];
-      for (int v = 0; v < V; ++v) bv[v] = hn::LoadU(d, b + v * N);
-      for (int r = 0; r < R; ++r) {
-        const V_t w = hn::Set(d, a[r]);
-        for (int v = 0; v < V; ++v) acc[r][v] = hn::MulAdd(w, bv[v], acc[r][v]);
-      }
-      a += lda;
-      b += n;
+  // A(r, k): constant offsets from one pointer stepping by lda (kAT), or one row pointer per r
+  // stepping by one float (the compiler keeps them in GPRs).
+  const float* HWY_RESTRICT ar[R];
+  for (int r = 0; r < R; ++r) ar[r] = kAT ? a + r : a + r * lda;
+  const size_t astep = kAT ? lda : 1;
+  auto step = [&](int t) {
+    V_t bv[V];
+    for (int v = 0; v < V; ++v) bv[v] = hn::LoadU(d, b + v * N);
+    for (int r = 0; r < R; ++r) {
+      const V_t w = hn::Set(d, *ar[r]);
+      for (int v = 0; v < V; ++v) acc[t][r][v] = hn::MulAdd(w, bv[v], acc[t][r][v]);
+      ar[r] += astep;
     }
-  } else {
-    // Row pointers stepping by one float; the compiler keeps them in GPRs.
-    const float* HWY_RESTRICT ar[R];
-    for (int r = 0; r < R; ++r) ar[r] = a + r * lda;
-    for (int k = 0; k < K; ++k) {
-      V_t bv[V];
-      for (int v = 0; v < V; ++v) bv[v] = hn::LoadU(d, b + v * N);
-      for (int r = 0; r < R; ++r) {
-        const V_t w = hn::Set(d, ar[r][k]);
-        for (int v = 0; v < V; ++v) acc[r][v] = hn::MulAdd(w, bv[v], acc[r][v]);
-      }
-      b += n;
+    b += n;
+  };
+  int k = 0;
+  if constexpr (kSets == 2) {
+    for (; k + 2 <= K; k += 2) {
+      step(0);
+      step(1);
     }
   }
+  for (; k < K; ++k) step(0);
 
   const V_t zero = hn::Zero(d);
   for (int r = 0; r < R; ++r) {
     for (int v = 0; v < V; ++v) {
-      V_t y = acc[r][v];
-      if (epi == Epi::kRelu) {
+      V_t y = acc[0][r][v];
+      if constexpr (kSets == 2) y = hn::Add(y, acc[kSets - 1][r][v]);
+      if constexpr (E == Epi::kRelu) {
         y = hn::Max(y, zero);  // also maps NaN to 0, like the reference's (y > 0 ? y : 0)
-      } else if (epi == Epi::kMask) {
+      } else if constexpr (E == Epi::kMask) {
         y = hn::IfThenElseZero(hn::Gt(hn::LoadU(d, mask + r * n + v * N), zero), y);
       }
       hn::StoreU(y, d, out + r * n + v * N);
@@ -97,26 +100,26 @@ HWY_INLINE void Tile(const float* HWY_RESTRICT a, size_t lda, const float* HWY_R
 }
 
 // Rows i0 .. i0+rem-1 (rem < kTileR) with V vectors.
-template <int V, bool kAT>
+template <int V, bool kAT, Epi E>
 HWY_INLINE void TileRem(int rem, const float* a, size_t lda, const float* b, size_t n, int K,
-                        float* out, Epi epi, const float* mask) {
+                        float* out, const float* mask) {
   static_assert(kTileR <= 8, "extend the switch");
   switch (rem) {
-    case 1: Tile<1, V, kAT>(a, lda, b, n, K, out, epi, mask); break;
-    case 2: if constexpr (kTileR > 2) Tile<2, V, kAT>(a, lda, b, n, K, out, epi, mask); break;
-    case 3: if constexpr (kTileR > 3) Tile<3, V, kAT>(a, lda, b, n, K, out, epi, mask); break;
-    case 4: if constexpr (kTileR > 4) Tile<4, V, kAT>(a, lda, b, n, K, out, epi, mask); break;
-    case 5: if constexpr (kTileR > 5) Tile<5, V, kAT>(a, lda, b, n, K, out, epi, mask); break;
-    case 6: if constexpr (kTileR > 6) Tile<6, V, kAT>(a, lda, b, n, K, out, epi, mask); break;
-    case 7: if constexpr (kTileR > 7) Tile<7, V, kAT>(a, lda, b, n, K, out, epi, mask); break;
+    case 1: Tile<1, V, kAT, E>(a, lda, b, n, K, out, mask); break;
+    case 2: if constexpr (kTileR > 2) Tile<2, V, kAT, E>(a, lda, b, n, K, out, mask); break;
+    case 3: if constexpr (kTileR > 3) Tile<3, V, kAT, E>(a, lda, b, n, K, out, mask); break;
+    case 4: if constexpr (kTileR > 4) Tile<4, V, kAT, E>(a, lda, b, n, K, out, mask); break;
+    case 5: if constexpr (kTileR > 5) Tile<5, V, kAT, E>(a, lda, b, n, K, out, mask); break;
+    case 6: if constexpr (kTileR > 6) Tile<6, V, kAT, E>(a, lda, b, n, K, out, mask); break;
+    case 7: if constexpr (kTileR > 7) Tile<7, V, kAT, E>(a, lda, b, n, K, out, mask); break;
     default: break;
   }
 }
 
 // Out (M x n) = epi(A (M x K) * B (K x n)). A(i, k) at a[i*sai + k] (kAT false) or a[k*lda + i].
-template <bool kAT>
-HWY_INLINE void Gemm(const float* a, size_t lda, int M, int K, const float* b, float* out, int n,
-                     Epi epi, const float* mask) {
+template <bool kAT, Epi E>
+HWY_NOINLINE void Gemm(const float* a, size_t lda, int M, int K, const float* b, float* out, int n,
+                       const float* mask) {
   const DF d;
   const size_t N = hn::Lanes(d);
   const size_t nn = static_cast<size_t>(n);
@@ -130,19 +133,18 @@ HWY_INLINE void Gemm(const float* a, size_t lda, int M, int K, const float* b, f
   for (; s0 + sv <= nn; s0 += sv) {
     int i0 = 0;
     for (; i0 + kTileR <= M; i0 += kTileR)
-      Tile<kTileR, kTileV, kAT>(a_at(i0), lda, b + s0, nn, K, out + i0 * nn + s0, epi,
-                                mask_at(i0, s0));
+      Tile<kTileR, kTileV, kAT, E>(a_at(i0), lda, b + s0, nn, K, out + i0 * nn + s0,
+                                   mask_at(i0, s0));
     if (i0 < M)
-      TileRem<kTileV, kAT>(M - i0, a_at(i0), lda, b + s0, nn, K, out + i0 * nn + s0, epi,
-                           mask_at(i0, s0));
+      TileRem<kTileV, kAT, E>(M - i0, a_at(i0), lda, b + s0, nn, K, out + i0 * nn + s0,
+                              mask_at(i0, s0));
   }
   for (; s0 + N <= nn; s0 += N) {  // leftover single vectors
     int i0 = 0;
     for (; i0 + kTileR <= M; i0 += kTileR)
-      Tile<kTileR, 1, kAT>(a_at(i0), lda, b + s0, nn, K, out + i0 * nn + s0, epi, mask_at(i0, s0));
+      Tile<kTileR, 1, kAT, E>(a_at(i0), lda, b + s0, nn, K, out + i0 * nn + s0, mask_at(i0, s0));
     if (i0 < M)
-      TileRem<1, kAT>(M - i0, a_at(i0), lda, b + s0, nn, K, out + i0 * nn + s0, epi,
-                      mask_at(i0, s0));
+      TileRem<1, kAT, E>(M - i0, a_at(i0), lda, b + s0, nn, K, out + i0 * nn + s0, mask_at(i0, s0));
   }
   // Scalar tail: only when n is not a multiple of the vector length (the contract says it is).
   for (; s0 < nn; ++s0) {
@@ -152,22 +154,26 @@ HWY_INLINE void Gemm(const float* a, size_t lda, int M, int K, const float* b, f
         const float aik = kAT ? a[static_cast<size_t>(k) * lda + i] : a[static_cast<size_t>(i) * lda + k];
         sum += aik * b[k * nn + s0];
       }
-      if (epi == Epi::kRelu) sum = sum > 0.0f ? sum : 0.0f;
-      if (epi == Epi::kMask && !(mask[i * nn + s0] > 0.0f)) sum = 0.0f;
+      if (E == Epi::kRelu) sum = sum > 0.0f ? sum : 0.0f;
+      if (E == Epi::kMask && !(mask[i * nn + s0] > 0.0f)) sum = 0.0f;
       out[i * nn + s0] = sum;
     }
   }
 }
 
 void MatmulFwd(const float* W, int rows, int cols, const float* X, float* Y, int n, bool relu) {
-  Gemm<false>(W, static_cast<size_t>(cols), rows, cols, X, Y, n, relu ? Epi::kRelu : Epi::kNone,
-              nullptr);
+  if (relu)
+    Gemm<false, Epi::kRelu>(W, static_cast<size_t>(cols), rows, cols, X, Y, n, nullptr);
+  else
+    Gemm<false, Epi::kNone>(W, static_cast<size_t>(cols), rows, cols, X, Y, n, nullptr);
 }
 
 void MatmulBwdData(const float* W, int rows, int cols, const float* dY, const float* mask,
                    float* dX, int n) {
-  Gemm<true>(W, static_cast<size_t>(cols), cols, rows, dY, dX, n,
-             mask ? Epi::kMask : Epi::kNone, mask);
+  if (mask)
+    Gemm<true, Epi::kMask>(W, static_cast<size_t>(cols), cols, rows, dY, dX, n, mask);
+  else
+    Gemm<true, Epi::kNone>(W, static_cast<size_t>(cols), cols, rows, dY, dX, n, nullptr);
 }
 
 // ---- bwd_weights ----

@@ -5,6 +5,7 @@
 #include <cstdint>
 #include <vector>
 #include "vnr/core/json.h"
+#include "vnr/core/memory.h"
 #include "vnr/core/parallel.h"
 #include "vnr/core/rng.h"
 #include "vnr/nn/config.h"
@@ -48,7 +49,7 @@ public:
   uint64_t grid_params() const { return has_grid() ? grid_.n_params() : 0; }
   double flops_forward_per_sample() const;  // 2 * MACs of the unpadded-output MLP
 
-  std::vector<float> params;  // fp32 master copy, size n_params()
+  big_vector<float> params;  // fp32 master copy, size n_params()
   float* grid_table() { return params.data() + mlp_.n_params; }
   const float* grid_table() const { return params.data() + mlp_.n_params; }
 

@@ -1,6 +1,7 @@
 #pragma once
 #include <cstdint>
 #include <vector>
+#include "vnr/core/memory.h"
 #include "vnr/nn/config.h"
 
 namespace vnr {
@@ -19,8 +20,8 @@ public:
   // Learning rate used by step t (t = steps completed before it), closed form for reports.
   static float learning_rate_at(const AdamConfig& a, const DecayConfig& d, uint64_t t);
 
-  std::vector<float> m, v;
-  std::vector<uint32_t> c;  // per-parameter step counts
+  big_vector<float> m, v;
+  big_vector<uint32_t> c;  // per-parameter step counts
 
 private:
   AdamConfig cfg_;

@@ -40,7 +40,7 @@ private:
   TrainOptions opts_;
   Adam adam_;
   int n_threads_;
-  std::vector<float> grads_;              // full gradient (MLP part overwritten each step)
+  big_vector<float> grads_;              // full gradient (MLP part overwritten each step)
   std::vector<std::vector<float>> dW_;    // per-thread MLP gradient
   std::vector<std::vector<float>> ws_;    // per-thread chunk workspace
   std::vector<float> xs_, ys_, zs_, dEnc_;

@@ -74,7 +74,7 @@ inline GridView view_of(const Volume& v) {
 
 // Cell-centred, clamp-to-edge trilinear lookup at u in [0,1)^3 (compat.md B.2):
 // p = u*N - 0.5 clamped to [0, N-1] per axis; trilinear between floor(p) and min(floor(p)+1, N-1).
-VNR_HD inline float grid_lookup(const GridView& g, float ux, float uy, float uz) {
+VNR_HD VNR_INLINE float grid_lookup(const GridView& g, float ux, float uy, float uz) {
   float p[3] = {ux * float(g.nx) - 0.5f, uy * float(g.ny) - 0.5f, uz * float(g.nz) - 0.5f};
   int32_t n[3] = {g.nx, g.ny, g.nz};
   int32_t i0[3], i1[3];

@@ -1,0 +1,248 @@
+// Dispatching MLP kernels vs the scalar reference, on every SIMD target this CPU supports, plus a
+// finite-difference check of the gradients of one tiny layer.
+#include <gtest/gtest.h>
+#include <hwy/targets.h>
+
+#include <cmath>
+#include <cstring>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "vnr/nn/mlp_kernels.h"
+
+namespace k = vnr::kernels;
+
+namespace {
+
+constexpr float kRelTol = 1e-5f;
+
+std::vector<float> random_vec(size_t count, std::mt19937& rng, float lo = -1.0f, float hi = 1.0f) {
+  std::uniform_real_distribution<float> u(lo, hi);
+  std::vector<float> v(count);
+  for (float& x : v) x = u(rng);
+  return v;
+}
+
+std::vector<float> abs_vec(std::vector<float> v) {
+  for (float& x : v) x = std::fabs(x);
+  return v;
+}
+
+// Mask like a ReLU output: ~1/3 exactly 0 (some -0.0f), a few negative, the rest positive.
+std::vector<float> random_mask(size_t count, std::mt19937& rng) {
+  std::vector<float> m = random_vec(count, rng, 0.01f, 1.0f);
+  std::uniform_int_distribution<int> pick(0, 8);
+  for (float& x : m) {
+    const int p = pick(rng);
+    if (p <= 2) x = 0.0f;
+    else if (p == 3) x = -0.0f;
+    else if (p == 4) x = -x;
+  }
+  return m;
+}
+
+// Runs `body` once per SIMD target compiled in and supported here, with dispatch forced to it.
+template <class F>
+void for_each_target(F&& body) {
+  const std::vector<int64_t> targets = hwy::SupportedAndGeneratedTargets();
+  ASSERT_FALSE(targets.empty());
+  for (int64_t t : targets) {
+    hwy::SetSupportedTargetsForTest(t);
+    SCOPED_TRACE(hwy::TargetName(t));
+    ASSERT_STREQ(k::simd_target_name(), hwy::TargetName(t));
+    body();
+  }
+  hwy::SetSupportedTargetsForTest(0);
+}
+
+const int kDims[] = {1, 3, 8, 16, 17, 32, 64, 80, 128};
+const int kNs[] = {16, 32, 128, 256};
+
+void check_fwd(int rows, int cols, int n, bool relu, std::mt19937& rng) {
+  SCOPED_TRACE("fwd rows=" + std::to_string(rows) + " cols=" + std::to_string(cols) +
+               " n=" + std::to_string(n) + " relu=" + std::to_string(relu));
+  const auto W = random_vec(size_t(rows) * cols, rng), X = random_vec(size_t(cols) * n, rng);
+  std::vector<float> Y(size_t(rows) * n, 123.0f), pre(Y.size()), scale(Y.size());
+  k::matmul_fwd(W.data(), rows, cols, X.data(), Y.data(), n, relu);
+  k::ref::matmul_fwd(W.data(), rows, cols, X.data(), pre.data(), n, false);
+  // Summation-order error bound scales with sum |w||x|.
+  k::ref::matmul_fwd(abs_vec(W).data(), rows, cols, abs_vec(X).data(), scale.data(), n, false);
+  int bad = 0;
+  for (size_t i = 0; i < Y.size() && bad < 5; ++i) {
+    const float tol = kRelTol * scale[i] + 1e-30f;
+    const float want = relu ? (pre[i] > 0.0f ? pre[i] : 0.0f) : pre[i];
+    if (!(std::fabs(Y[i] - want) <= tol)) {
+      ADD_FAILURE() << "i=" << i << " got " << Y[i] << " want " << want;
+      ++bad;
+    }
+    if (relu && pre[i] < -tol && Y[i] != 0.0f) {  // clearly negative pre-activation -> exactly 0
+      ADD_FAILURE() << "i=" << i << " relu of " << pre[i] << " gave " << Y[i];
+      ++bad;
+    }
+    if (relu && !(Y[i] >= 0.0f)) ++bad, ADD_FAILURE() << "negative relu output at " << i;
+  }
+}
+
+void check_bwd_data(int rows, int cols, int n, bool masked, std::mt19937& rng) {
+  SCOPED_TRACE("bwd_data rows=" + std::to_string(rows) + " cols=" + std::to_string(cols) +
+               " n=" + std::to_string(n) + " masked=" + std::to_string(masked));
+  const auto W = random_vec(size_t(rows) * cols, rng), dY = random_vec(size_t(rows) * n, rng);
+  const auto mask = random_mask(size_t(cols) * n, rng);
+  const float* m = masked ? mask.data() : nullptr;
+  std::vector<float> dX(size_t(cols) * n, 123.0f), want(dX.size()), scale(dX.size());
+  k::matmul_bwd_data(W.data(), rows, cols, dY.data(), m, dX.data(), n);
+  k::ref::matmul_bwd_data(W.data(), rows, cols, dY.data(), m, want.data(), n);
+  k::ref::matmul_bwd_data(abs_vec(W).data(), rows, cols, abs_vec(dY).data(), nullptr, scale.data(), n);
+  int bad = 0;
+  for (size_t i = 0; i < dX.size() && bad < 5; ++i) {
+    if (masked && !(mask[i] > 0.0f)) {
+      if (dX[i] != 0.0f) ++bad, ADD_FAILURE() << "mask " << mask[i] << " at " << i << " gave " << dX[i];
+      continue;
+    }
+    if (!(std::fabs(dX[i] - want[i]) <= kRelTol * scale[i] + 1e-30f))
+      ++bad, ADD_FAILURE() << "i=" << i << " got " << dX[i] << " want " << want[i];
+  }
+}
+
+void check_bwd_weights(int rows, int cols, int n, std::mt19937& rng) {
+  SCOPED_TRACE("bwd_weights rows=" + std::to_string(rows) + " cols=" + std::to_string(cols) +
+               " n=" + std::to_string(n));
+  const auto dY = random_vec(size_t(rows) * n, rng), X = random_vec(size_t(cols) * n, rng);
+  const auto dW0 = random_vec(size_t(rows) * cols, rng);  // non-zero: the kernel must accumulate
+  std::vector<float> dW = dW0, want(dW0.size(), 0.0f), scale(dW0.size(), 0.0f);
+  k::matmul_bwd_weights(dY.data(), rows, X.data(), cols, n, dW.data());
+  k::ref::matmul_bwd_weights(dY.data(), rows, X.data(), cols, n, want.data());
+  k::ref::matmul_bwd_weights(abs_vec(dY).data(), rows, abs_vec(X).data(), cols, n, scale.data());
+  int bad = 0;
+  for (size_t i = 0; i < dW.size() && bad < 5; ++i) {
+    const float expect = dW0[i] + want[i];
+    const float tol = kRelTol * (scale[i] + std::fabs(dW0[i])) + 1e-30f;
+    if (!(std::fabs(dW[i] - expect) <= tol))
+      ++bad, ADD_FAILURE() << "i=" << i << " got " << dW[i] << " want " << expect;
+  }
+}
+
+}  // namespace
+
+TEST(MlpKernels, ChoosesAvx512WhenAvailable) {
+  const std::string name = k::simd_target_name();
+  std::printf("SIMD target: %s; targets tested:", name.c_str());
+  for (int64_t t : hwy::SupportedAndGeneratedTargets()) std::printf(" %s", hwy::TargetName(t));
+  std::printf("\n");
+  if (hwy::SupportedTargets() & (HWY_AVX3 | HWY_AVX3_DL)) EXPECT_TRUE(name == "AVX3" || name == "AVX3_DL");
+}
+
+TEST(MlpKernels, FwdMatchesReference) {
+  for_each_target([] {
+    std::mt19937 rng(1);
+    for (int rows : kDims)
+      for (int cols : kDims)
+        for (int n : kNs)
+          for (bool relu : {false, true}) check_fwd(rows, cols, n, relu, rng);
+  });
+}
+
+TEST(MlpKernels, BwdDataMatchesReference) {
+  for_each_target([] {
+    std::mt19937 rng(2);
+    for (int rows : kDims)
+      for (int cols : kDims)
+        for (int n : kNs)
+          for (bool masked : {false, true}) check_bwd_data(rows, cols, n, masked, rng);
+  });
+}
+
+TEST(MlpKernels, BwdWeightsAccumulatesAndMatchesReference) {
+  for_each_target([] {
+    std::mt19937 rng(3);
+    for (int rows : kDims)
+      for (int cols : kDims)
+        for (int n : kNs) check_bwd_weights(rows, cols, n, rng);
+  });
+}
+
+// n not a multiple of the vector length is outside the contract but must still be right.
+TEST(MlpKernels, OddSampleCountsStillCorrect) {
+  std::mt19937 rng(4);
+  for (int n : {1, 5, 20, 37}) {
+    check_fwd(17, 9, n, true, rng);
+    check_bwd_data(9, 17, n, true, rng);
+    check_bwd_weights(17, 9, n, rng);
+  }
+}
+
+TEST(MlpKernels, ReluAndMaskEdgeValues) {
+  // W = identity: outputs equal inputs, so the epilogues see hand-picked values.
+  const int d = 16, n = 16;
+  std::vector<float> W(d * d, 0.0f);
+  for (int i = 0; i < d; ++i) W[i * d + i] = 1.0f;
+  std::vector<float> X(d * n), Y(d * n), mask(d * n), dX(d * n);
+  const float vals[] = {-1.0f, -0.0f, 0.0f, 1e-7f, -1e-7f, 3.0f, -3.0f, 0.5f};
+  for (int i = 0; i < d * n; ++i) {
+    X[i] = vals[i % 8];
+    mask[i] = vals[(i / 3) % 8];
+  }
+  for_each_target([&] {
+    k::matmul_fwd(W.data(), d, d, X.data(), Y.data(), n, true);
+    for (int i = 0; i < d * n; ++i) EXPECT_EQ(Y[i], X[i] > 0.0f ? X[i] : 0.0f) << i;
+    k::matmul_fwd(W.data(), d, d, X.data(), Y.data(), n, false);
+    for (int i = 0; i < d * n; ++i) EXPECT_EQ(Y[i], X[i]) << i;
+    k::matmul_bwd_data(W.data(), d, d, X.data(), mask.data(), dX.data(), n);
+    for (int i = 0; i < d * n; ++i) EXPECT_EQ(dX[i], mask[i] > 0.0f ? X[i] : 0.0f) << i;
+  });
+}
+
+// L(W, X0) = sum(G * relu(W relu(X0))). Analytic gradients from the kernels vs central differences
+// of L evaluated in double (L is piecewise linear, so away from kinks the difference is exact up to
+// rounding).
+TEST(MlpKernels, FiniteDifferenceGradients) {
+  const int rows = 5, cols = 7, n = 16;
+  std::mt19937 rng(5);
+  auto W = random_vec(rows * cols, rng);
+  auto X0 = random_vec(cols * n, rng);
+  const auto G = random_vec(rows * n, rng);
+  for (float& x : X0)
+    if (std::fabs(x) < 0.1f) x = x < 0 ? -0.1f : 0.1f;  // keep input ReLU away from its kink
+
+  auto loss = [&](const std::vector<float>& w, const std::vector<float>& x0) {
+    double L = 0.0;
+    for (int r = 0; r < rows; ++r)
+      for (int s = 0; s < n; ++s) {
+        double pre = 0.0;
+        for (int c = 0; c < cols; ++c) pre += double(w[r * cols + c]) * std::max(0.0, double(x0[c * n + s]));
+        L += double(G[r * n + s]) * std::max(0.0, pre);
+      }
+    return L;
+  };
+
+  std::vector<float> X(cols * n);
+  for (int i = 0; i < cols * n; ++i) X[i] = X0[i] > 0.0f ? X0[i] : 0.0f;
+  std::vector<float> Y(rows * n), pre(rows * n);
+  k::matmul_fwd(W.data(), rows, cols, X.data(), Y.data(), n, true);
+  k::matmul_fwd(W.data(), rows, cols, X.data(), pre.data(), n, false);
+  for (float p : pre) ASSERT_GT(std::fabs(p), 1e-3f) << "pre-activation too close to the ReLU kink";
+  std::vector<float> dPre(rows * n);
+  for (int i = 0; i < rows * n; ++i) dPre[i] = Y[i] > 0.0f ? G[i] : 0.0f;
+  std::vector<float> dW(rows * cols, 0.0f), dX0(cols * n);
+  k::matmul_bwd_weights(dPre.data(), rows, X.data(), cols, n, dW.data());
+  k::matmul_bwd_data(W.data(), rows, cols, dPre.data(), X.data(), dX0.data(), n);
+
+  // Perturb by a power of two small enough not to cross a kink; floats hold w +- h exactly.
+  const float h = 1.0f / 4096;
+  for (int i = 0; i < rows * cols; ++i) {
+    auto wp = W, wm = W;
+    wp[i] += h;
+    wm[i] -= h;
+    const double fd = (loss(wp, X0) - loss(wm, X0)) / (double(wp[i]) - double(wm[i]));
+    EXPECT_NEAR(dW[i], fd, 1e-5 * (1.0 + std::fabs(fd))) << "dW " << i;
+  }
+  for (int i = 0; i < cols * n; ++i) {
+    auto xp = X0, xm = X0;
+    xp[i] += h;
+    xm[i] -= h;
+    const double fd = (loss(W, xp) - loss(W, xm)) / (double(xp[i]) - double(xm[i]));
+    EXPECT_NEAR(dX0[i], fd, 1e-5 * (1.0 + std::fabs(fd))) << "dX " << i;
+    if (X0[i] < 0.0f) EXPECT_EQ(dX0[i], 0.0f) << i;
+  }
+}
