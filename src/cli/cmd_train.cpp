@@ -26,6 +26,10 @@ struct TrainArgs {
 
 void run_train(const TrainArgs& a) {
   set_num_threads(a.threads);
+  // Everything that can be checked without the data is checked first, so mistakes fail fast.
+  if (a.batch <= 0 || a.batch % kChunk != 0) fail("--batch must be a positive multiple of {}, got {}", kChunk, a.batch);
+  if (a.steps < -1) fail("--steps must be non-negative, got {}", a.steps);
+  Json config = load_config(a.config);
   VolumeDesc desc = describe_volume(a.volume, a.vol.raw());
   auto t_load = std::chrono::steady_clock::now();
   Volume vol = load_volume(desc, a.vol.load());
@@ -36,7 +40,6 @@ void run_train(const TrainArgs& a) {
   if (vol.hi == vol.lo && !a.quiet)
     std::fprintf(stderr, "note: the volume is constant (%g); it is represented as normalised 0\n", vol.lo);
 
-  Json config = load_config(a.config);
   if (a.target_ratio > 0) {
     std::string note;
     config = size_config_for_ratio(config, vol.source_bytes(), a.target_ratio, &note);

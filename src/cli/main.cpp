@@ -85,8 +85,16 @@ int main(int argc, char** argv) {
   add_bench(app);
   try {
     app.parse(argc, argv);
-  } catch (const CLI::ParseError& e) {
+  } catch (const CLI::CallForHelp& e) {
     return app.exit(e);
+  } catch (const CLI::CallForAllHelp& e) {
+    return app.exit(e);
+  } catch (const CLI::CallForVersion& e) {
+    return app.exit(e);
+  } catch (const CLI::ParseError& e) {
+    // One line, like every other error; --help has the details.
+    std::fprintf(stderr, "vnr: error: %s (see 'vnr --help' or 'vnr COMMAND --help')\n", e.what());
+    return e.get_exit_code() != 0 ? e.get_exit_code() : 2;
   } catch (const vnr::Error& e) {
     std::fprintf(stderr, "vnr: error: %s\n", e.what());
     return 1;

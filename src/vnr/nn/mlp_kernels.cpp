@@ -4,8 +4,9 @@
 //
 // fwd and bwd_data share one register-blocked micro-kernel computing
 //   Out[i*n + s] = epilogue(sum_k A(i, k) * B[k*n + s])
-// with R output rows x V vectors of samples in accumulators. Each k step loads V vectors of B and
-// broadcasts R scalars of A straight from memory into the FMAs (vfmadd231ps zmm, zmm, m32{1to16}).
+// with R output rows x V vectors of samples in accumulators (AVX-512: 6 x 4 = 24 zmm). Each k step
+// loads V vectors of B and broadcasts R scalars of A from memory (vbroadcastss zmm, m32), each
+// broadcast feeding V FMAs, so loads stay well below the FMA rate.
 //   fwd:      A(i, k) = W[i*cols + k]   (row-strided broadcasts), B = X,  epilogue ReLU or identity
 //   bwd_data: A(i, k) = W[k*cols + i]   (W^T without transposing: contiguous broadcasts), B = dY,
 //             epilogue mask > 0.
@@ -60,20 +61,23 @@ HWY_INLINE void Tile(const float* HWY_RESTRICT a, size_t lda, const float* HWY_R
     for (int r = 0; r < R; ++r)
       for (int v = 0; v < V; ++v) acc[t][r][v] = hn::Zero(d);
 
-  // A(r, k): constant offsets from one pointer stepping by lda (kAT), or one row pointer per r
-  // stepping by one float (the compiler keeps them in GPRs).
+  auto load_b = [&](V_t* bv) {
+    for (int v = 0; v < V; ++v) bv[v] = hn::LoadU(d, b + v * N);
+    b += n;
+  };
+  // A(r, k) for kAT: constant offsets from one pointer stepping by lda; otherwise one row pointer
+  // per r stepping by one float (the compiler keeps them in GPRs).
   const float* HWY_RESTRICT ar[R];
-  for (int r = 0; r < R; ++r) ar[r] = kAT ? a + r : a + r * lda;
-  const size_t astep = kAT ? lda : 1;
+  for (int r = 0; r < R; ++r) ar[r] = a + r * lda;
   auto step = [&](int t) {
     V_t bv[V];
-    for (int v = 0; v < V; ++v) bv[v] = hn::LoadU(d, b + v * N);
+    load_b(bv);
     for (int r = 0; r < R; ++r) {
-      const V_t w = hn::Set(d, *ar[r]);
+      const V_t w = hn::Set(d, kAT ? a[r] : *ar[r]);
       for (int v = 0; v < V; ++v) acc[t][r][v] = hn::MulAdd(w, bv[v], acc[t][r][v]);
-      ar[r] += astep;
+      if constexpr (!kAT) ++ar[r];
     }
-    b += n;
+    if constexpr (kAT) a += lda;
   };
   int k = 0;
   if constexpr (kSets == 2) {
@@ -116,7 +120,7 @@ HWY_INLINE void TileRem(int rem, const float* a, size_t lda, const float* b, siz
   }
 }
 
-// Out (M x n) = epi(A (M x K) * B (K x n)). A(i, k) at a[i*sai + k] (kAT false) or a[k*lda + i].
+// Out (M x n) = epi(A (M x K) * B (K x n)). A(i, k) at a[i*lda + k] (kAT false) or a[k*lda + i].
 template <bool kAT, Epi E>
 HWY_NOINLINE void Gemm(const float* a, size_t lda, int M, int K, const float* b, float* out, int n,
                        const float* mask) {
@@ -271,6 +275,9 @@ HWY_INLINE void WRowBlock(const float* dy, const float* X, int cols, size_t n, f
     for (; c0 + 4 <= cols; c0 += 4) WTile4x4(dy, X + c0 * n, n, dw + c0, ldw);
   }
 #endif
+  if constexpr (R == 1) {  // 8 independent accumulators to cover the FMA latency
+    for (; c0 + 8 <= cols; c0 += 8) WTileGeneric<1, 8>(dy, X + c0 * n, n, dw + c0, ldw);
+  }
   for (; c0 + 4 <= cols; c0 += 4) WTileGeneric<R, 4>(dy, X + c0 * n, n, dw + c0, ldw);
   switch (cols - c0) {
     case 1: WTileGeneric<R, 1>(dy, X + c0 * n, n, dw + c0, ldw); break;

@@ -1,0 +1,212 @@
+// End-to-end tests of the `vnr` command line: the full train -> eval -> decode -> info -> convert
+// cycle on generated data, and bad input that must give one clear error line and a non-zero exit.
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+#include <unistd.h>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <string>
+#include <vector>
+#include "vnr/core/fileio.h"
+#include "vnr/core/json.h"
+#include "vnr/train/model_io.h"
+#include "vnr/volume/volume.h"
+
+using namespace vnr;
+
+namespace {
+
+struct Result {
+  int code;
+  std::string out, err;
+};
+
+std::string dir() {
+  static std::string d = [] {
+    std::string p = testing::TempDir() + "vnr_cli_" + std::to_string(::getpid());
+    std::string cmd = "mkdir -p " + p;
+    EXPECT_EQ(std::system(cmd.c_str()), 0);
+    return p;
+  }();
+  return d;
+}
+
+Result run(const std::string& args) {
+  std::string out = dir() + "/stdout.txt", err = dir() + "/stderr.txt";
+  std::string cmd = std::string(VNR_CLI_PATH) + " " + args + " >" + out + " 2>" + err;
+  int st = std::system(cmd.c_str());
+  return Result{WIFEXITED(st) ? WEXITSTATUS(st) : -1, read_file(out), read_file(err)};
+}
+
+int count_lines(const std::string& s) {
+  int n = 0;
+  for (char c : s) n += c == '\n';
+  return n;
+}
+
+void write_bytes(const std::string& path, size_t n, unsigned char fill = 7) {
+  std::ofstream f(path, std::ios::binary);
+  std::vector<unsigned char> b(n, fill);
+  f.write(reinterpret_cast<const char*>(b.data()), std::streamsize(n));
+}
+
+// Asserts a failed run: non-zero exit, exactly one "vnr: error:" line that contains `needle`.
+void expect_error(const std::string& args, const std::string& needle) {
+  Result r = run(args);
+  EXPECT_NE(r.code, 0) << args;
+  EXPECT_EQ(count_lines(r.err), 1) << args << "\n" << r.err;
+  EXPECT_NE(r.err.find("error"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find(needle), std::string::npos) << args << "\n" << r.err;
+}
+
+}  // namespace
+
+TEST(Cli, TrainEvalDecodeInfoConvertRoundTrip) {
+  const std::string d = dir();
+  ASSERT_EQ(run("synth marschner-lobb --dims 24,20,16 -o " + d + "/ml.json").code, 0);
+  Result t = run("train " + d + "/ml.json -o " + d + "/ml.vnr --config small --steps 60 --batch 8192 --seed 3 -q --report " +
+                 d + "/train.json");
+  ASSERT_EQ(t.code, 0) << t.err;
+  EXPECT_NE(t.out.find("PSNR"), std::string::npos);
+  EXPECT_NE(t.out.find("compression ratio"), std::string::npos);
+  Json rep = parse_json_file(d + "/train.json");
+  for (const char* k : {"steps", "seconds", "samples_per_second", "final_loss", "psnr", "ssim", "n_params",
+                        "model_bytes", "volume_bytes", "compression_ratio"})
+    EXPECT_TRUE(rep.contains(k)) << k;
+  EXPECT_EQ(rep["steps"], 60);
+  EXPECT_EQ(rep["volume_bytes"], 24 * 20 * 16 * 4);
+  EXPECT_EQ(rep["model_bytes"].get<uint64_t>(), file_size(d + "/ml.vnr"));
+  EXPECT_NEAR(rep["compression_ratio"].get<double>(), 24.0 * 20 * 16 * 4 / file_size(d + "/ml.vnr"), 1e-9);
+
+  // eval reproduces the training report's PSNR (same model, same volume).
+  Result e = run("eval " + d + "/ml.vnr " + d + "/ml.json --report " + d + "/eval.json");
+  ASSERT_EQ(e.code, 0) << e.err;
+  Json ev = parse_json_file(d + "/eval.json");
+  EXPECT_NEAR(ev["psnr"].get<double>(), rep["psnr"].get<double>(), 0.05);  // fp16 storage of the weights
+  for (const char* k : {"psnr", "ssim", "max_abs_error", "compression_ratio", "decode_seconds"})
+    EXPECT_TRUE(ev.contains(k)) << k;
+
+  // decode to raw + sidecar in original units; re-evaluating the decoded file against the source
+  // gives the PSNR eval reported.
+  Result dc = run("decode " + d + "/ml.vnr -o " + d + "/dec.raw -q");
+  ASSERT_EQ(dc.code, 0) << dc.err;
+  Json side = parse_json_file(d + "/dec.json");
+  EXPECT_EQ(side["dims"], Json({24, 20, 16}));
+  Volume src = load_volume(describe_volume(d + "/ml.json"));
+  RawOptions ro;
+  ro.range_lo = src.lo;
+  ro.range_hi = src.hi;
+  Volume dec = load_volume(describe_volume(d + "/dec.json", ro));
+  Model m = load_model(d + "/ml.vnr");
+  double mse = 0;
+  for (size_t i = 0; i < src.data.size(); ++i) mse += std::pow(double(src.data[i]) - dec.data[i], 2);
+  mse /= src.data.size();
+  EXPECT_NEAR(10 * std::log10(1 / mse), ev["psnr"].get<double>(), 0.05);
+  // Any resolution, NRRD output, source dtype.
+  ASSERT_EQ(run("decode " + d + "/ml.vnr -o " + d + "/up.nrrd --dims 48,40,32 -q").code, 0);
+  Volume up = load_volume(describe_volume(d + "/up.nrrd"));
+  EXPECT_EQ(up.dims, (Int3{48, 40, 32}));
+
+  Result info = run("info " + d + "/ml.vnr --json");
+  ASSERT_EQ(info.code, 0);
+  Json ij = Json::parse(info.out);
+  EXPECT_EQ(ij["n_params"].get<uint64_t>(), m.net->n_params());
+  EXPECT_EQ(ij["dtype"], "float32");
+
+  // .vnr -> instantvnr BSON -> .vnr keeps the parameters bit for bit.
+  ASSERT_EQ(run("convert " + d + "/ml.vnr -o " + d + "/params.json").code, 0);
+  ASSERT_EQ(run("convert " + d + "/params.json -o " + d + "/back.vnr").code, 0);
+  Model back = load_model(d + "/back.vnr");
+  EXPECT_EQ(back.net->params_half(), m.net->params_half());
+}
+
+TEST(Cli, SameSeedSameModel) {
+  const std::string d = dir();
+  ASSERT_EQ(run("synth noise --dims 16,16,16 -o " + d + "/n.json").code, 0);
+  for (const char* out : {"/a.vnr", "/b.vnr"})
+    ASSERT_EQ(run("train " + d + "/n.json -o " + d + out + " --config small --steps 20 --batch 4096 --seed 9 -q --no-ssim").code, 0);
+  EXPECT_EQ(load_model(d + "/a.vnr").net->params_half(), load_model(d + "/b.vnr").net->params_half());
+}
+
+TEST(Cli, ConstantVolumeTrainsAndReports) {
+  const std::string d = dir();
+  write_bytes(d + "/const.raw", 8 * 8 * 8, 42);
+  Result r = run("train " + d + "/const.raw --dims 8,8,8 --dtype uint8 -o " + d + "/c.vnr --config small --steps 30 "
+                 "--batch 2048 -q --report " + d + "/c.json");
+  ASSERT_EQ(r.code, 0) << r.err;
+  Json rep = parse_json_file(d + "/c.json");
+  EXPECT_TRUE(std::isfinite(rep["psnr"].get<double>()));
+  EXPECT_GT(rep["psnr"].get<double>(), 40.0);  // the target is 0 everywhere
+  Model m = load_model(d + "/c.vnr");
+  EXPECT_EQ(m.lo, 42.0);
+  EXPECT_EQ(m.hi, 42.0);
+  // Decoding returns the constant in original units.
+  ASSERT_EQ(run("decode " + d + "/c.vnr -o " + d + "/cd.raw --dtype source -q").code, 0);
+  std::string bytes = read_file(d + "/cd.raw");
+  ASSERT_EQ(bytes.size(), 512u);
+  for (unsigned char b : bytes) ASSERT_EQ(b, 42);
+}
+
+TEST(Cli, BadInputGivesOneClearErrorLine) {
+  const std::string d = dir();
+  write_bytes(d + "/short.raw", 1000);
+  expect_error("train " + d + "/short.raw --dims 16,8,8 --dtype uint8 -o " + d + "/x.vnr", "expected 1024");
+  expect_error("train " + d + "/short.raw --dims 16,8,8 --dtype uint8 -o " + d + "/x.vnr", "1000 bytes");
+  expect_error("train " + d + "/short.raw --dims 0,8,8 --dtype uint8 -o " + d + "/x.vnr", "positive");
+  expect_error("train " + d + "/short.raw --dims 4294967296,4294967296,4294967296 --dtype uint8 -o " + d + "/x.vnr",
+               "dims");
+  expect_error("train " + d + "/short.raw --dims 10,10,10 --dtype complex64 -o " + d + "/x.vnr", "complex64");
+  expect_error("train " + d + "/missing.raw --dims 10,10,10 --dtype uint8 -o " + d + "/x.vnr", "missing.raw");
+  expect_error("train " + d + "/short.raw -o " + d + "/x.vnr", "--dims");
+  // NaN in float data: an error unless --nan says how to treat it.
+  {
+    std::ofstream f(d + "/nan.raw", std::ios::binary);
+    std::vector<float> v(64, 1.0f);
+    v[10] = std::nanf("");
+    v[11] = 3.0f;
+    f.write(reinterpret_cast<const char*>(v.data()), 256);
+  }
+  expect_error("train " + d + "/nan.raw --dims 4,4,4 --dtype float32 -o " + d + "/x.vnr --config small", "NaN");
+  Result ok = run("train " + d + "/nan.raw --dims 4,4,4 --dtype float32 -o " + d + "/nan.vnr --config small --nan zero "
+                  "--steps 5 --batch 1024 -q --no-ssim");
+  EXPECT_EQ(ok.code, 0) << ok.err;
+  // Configs, presets and options.
+  expect_error("train " + d + "/nan.raw --dims 4,4,4 --dtype float32 -o " + d + "/x.vnr --config huge", "paper, small");
+  {
+    std::ofstream f(d + "/bad_cfg.json");
+    f << R"({"encoding": {"otype": "HashGrid", "n_features_per_level": 3}, "network": {"otype": "FullyFusedMLP"}})";
+  }
+  expect_error("train " + d + "/nan.raw --dims 4,4,4 --dtype float32 --nan zero -o " + d + "/x.vnr --config " + d +
+                   "/bad_cfg.json",
+               "1, 2, 4 or 8");
+  expect_error("train " + d + "/nan.raw --dims 4,4,4 --dtype float32 --nan zero -o " + d + "/x.vnr --batch 1000",
+               "multiple of 256");
+  Result unk = run("train " + d + "/nan.raw -o " + d + "/x.vnr --frobnicate");
+  EXPECT_EQ(count_lines(unk.err), 1) << unk.err;
+  EXPECT_NE(unk.code, 0);
+  EXPECT_NE(unk.err.find("frobnicate"), std::string::npos);
+  // Corrupt and truncated model files.
+  std::string model = read_file(d + "/nan.vnr");
+  write_file_atomic(d + "/trunc.vnr", model.substr(0, model.size() / 2));
+  expect_error("info " + d + "/trunc.vnr", "truncated");
+  std::string corrupt = model;
+  corrupt[corrupt.size() - 40] ^= 0x5a;
+  write_file_atomic(d + "/corrupt.vnr", corrupt);
+  expect_error("eval " + d + "/corrupt.vnr " + d + "/nan.raw --dims 4,4,4 --dtype float32 --nan zero", "corrupt");
+  expect_error("info " + d + "/short.raw", "short.raw");
+  // A failed training run never leaves a partial model behind.
+  EXPECT_FALSE(file_exists(d + "/x.vnr"));
+}
+
+TEST(Cli, SharedBonsaiSidecar) {
+  std::string path = std::string(VNR_SHARED_DIR) + "/data/bonsai.json";
+  if (!file_exists(path)) GTEST_SKIP() << "../shared/data absent";
+  const std::string d = dir();
+  Result r = run("train " + path + " -o " + d + "/bonsai.vnr --config small --steps 40 -q --no-ssim --report " + d +
+                 "/b.json");
+  ASSERT_EQ(r.code, 0) << r.err;
+  Json rep = parse_json_file(d + "/b.json");
+  EXPECT_EQ(rep["volume_bytes"], 16777216);
+  EXPECT_GT(rep["psnr"].get<double>(), 24.0);
+}
