@@ -1,4 +1,5 @@
 #include <gtest/gtest.h>
+#include "vnr/core/rng.h"
 #include <unistd.h>
 #include <zlib.h>
 #include <algorithm>
@@ -822,4 +823,22 @@ TEST(RealData, BonsaiLoads) {
   double sum = 0;
   for (float x : v.data) sum += double(x);
   EXPECT_NEAR(sum / double(v.data.size()) * 255.0, 13.711380004882812, 1e-6);
+}
+
+TEST(Lookup, BatchIsBitIdenticalToPointLookup) {
+  // Non-cubic, odd sizes; points inside, on the border and outside [0,1] (clamped).
+  const int nx = 7, ny = 5, nz = 3;
+  std::vector<float> data(nx * ny * nz);
+  for (size_t i = 0; i < data.size(); ++i) data[i] = float((i * 7919) % 101) / 100.0f;
+  vnr::GridView g{data.data(), nx, ny, nz};
+  std::vector<float> x, y, z;
+  vnr::Pcg32 rng(5);
+  for (int i = 0; i < 1000; ++i) {
+    x.push_back(rng.next_float() * 1.2f - 0.1f);
+    y.push_back(rng.next_float());
+    z.push_back(i % 17 == 0 ? 1.0f : rng.next_float());
+  }
+  std::vector<float> out(x.size());
+  vnr::grid_lookup_batch(g, x.data(), y.data(), z.data(), int64_t(x.size()), out.data());
+  for (size_t i = 0; i < x.size(); ++i) ASSERT_EQ(out[i], vnr::grid_lookup(g, x[i], y[i], z[i])) << i;
 }

@@ -92,7 +92,6 @@ void EncodeF(const GridLayout& g, const float* table, const float* x, const floa
              float* X0) {
   const DF df;
   const size_t N = hn::Lanes(df);
-  CornerBlock cb;
   for (uint32_t l = 0; l < g.n_levels; ++l) {
     const GridLevel L = g.levels[l];
     float* out = X0 + size_t(l) * F * n;

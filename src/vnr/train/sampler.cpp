@@ -10,7 +10,7 @@ void InCoreSampler::sample(uint64_t seed, uint64_t step, uint64_t chunk, int n, 
     y[i] = rng.next_float();
     z[i] = rng.next_float();
   }
-  for (int i = 0; i < n; ++i) target[i] = grid_lookup(grid_, x[i], y[i], z[i]);
+  grid_lookup_batch(grid_, x, y, z, n, target);
 }
 
 }  // namespace vnr
