@@ -55,6 +55,7 @@ TEST(GridEncoding, CornersWeightsAndFeaturesBitExact) {
     Network net(model(hashgrid(2, 2, 4, 2, interp == "linear" ? "Linear" : "Smoothstep")));
     float* table = net.grid_table();
     for (uint64_t k = 0; k < net.grid_params(); ++k) table[k] = float((int64_t(k) * 37) % 101 - 50) / 64.0f;
+    net.sync_half_table();  // multiples of 1/64: exact in fp16
     for (auto& pt : v["points"]) {
       float x[3];
       for (int d = 0; d < 3; ++d) x[d] = pt["input"][d].get<float>();
@@ -159,7 +160,9 @@ TEST(GridEncoding, ParameterGradientMatchesFiniteDifferences) {
         net.init_params(7);
         std::mt19937 gen(3);
         std::uniform_real_distribution<float> U(0.f, 1.f);
-        for (uint64_t k = 0; k < net.grid_params(); ++k) net.grid_table()[k] = U(gen) - 0.5f;
+        // Multiples of 2^-10 in [-0.5, 0.5] and steps of 0.25 stay exact in the fp16 working copy.
+        for (uint64_t k = 0; k < net.grid_params(); ++k) net.grid_table()[k] = std::round((U(gen) - 0.5f) * 1024) / 1024;
+        net.sync_half_table();
         const int n = kChunk;
         std::vector<float> x(n), y(n), z(n), dEnc(net.mlp().in_pad * n);
         for (int s = 0; s < n; ++s) x[s] = U(gen), y[s] = U(gen), z[s] = U(gen);
@@ -182,10 +185,13 @@ TEST(GridEncoding, ParameterGradientMatchesFiniteDifferences) {
           float keep = th;
           const float h = 0.25f;
           th = keep + h;
+          net.sync_half_table();
           double fp = objective();
           th = keep - h;
+          net.sync_half_table();
           double fm = objective();
           th = keep;
+          net.sync_half_table();
           double fd = (fp - fm) / (2 * h);
           EXPECT_NEAR(grad[k], fd, 1e-4 + 1e-4 * std::fabs(fd)) << otype << " F=" << F << " " << interp << " k=" << k;
         }
@@ -206,6 +212,7 @@ TEST(Encodings, InputGradientMatchesFiniteDifferences) {
     std::mt19937 gen(11);
     std::uniform_real_distribution<float> U(-1.f, 1.f);
     for (uint64_t k = 0; k < net.grid_params(); ++k) net.grid_table()[k] = U(gen);
+    net.sync_half_table();
     const uint32_t w = net.mlp().enc_width;
     std::vector<float> jac(w * 3), fp(w), fm(w);
     const float pts[3][3] = {{0.31f, 0.47f, 0.59f}, {0.123f, 0.77f, 0.41f}, {0.66f, 0.21f, 0.83f}};

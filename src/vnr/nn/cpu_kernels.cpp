@@ -62,8 +62,8 @@ HWY_INLINE void CornersVec(const GridLevel& L, bool smooth, const float* x, cons
   }
 }
 
-template <int F>
-HWY_INLINE void PrefetchCorners(const float* lt, const CornerBlock& cb, size_t N) {
+template <int F, typename P>
+HWY_INLINE void PrefetchCorners(const P* lt, const CornerBlock& cb, size_t N) {
   for (int k = 0; k < 8; ++k)
     for (size_t s = 0; s < N; ++s) __builtin_prefetch(lt + uint64_t(cb.entry[k][s]) * F);
 }
@@ -88,7 +88,12 @@ HWY_INLINE bool VectorPathOk(const GridLevel& L, const GridLayout& g) {
 }
 
 template <int F>
-void EncodeF(const GridLayout& g, const float* table, const float* x, const float* y, const float* z, int n,
+using DFF = hn::CappedTag<float, F>;  // the F features of one grid entry
+template <int F>
+using DHF = hn::Rebind<hwy::float16_t, DFF<F>>;
+
+template <int F>
+void EncodeF(const GridLayout& g, const uint16_t* table, const float* x, const float* y, const float* z, int n,
              float* X0) {
   const DF df;
   const size_t N = hn::Lanes(df);
@@ -96,7 +101,7 @@ void EncodeF(const GridLayout& g, const float* table, const float* x, const floa
     const GridLevel L = g.levels[l];
     float* out = X0 + size_t(l) * F * n;
     const bool vec_ok = VectorPathOk(L, g);
-    const float* lt = table + uint64_t(L.offset) * F;
+    const uint16_t* lt = table + uint64_t(L.offset) * F;
     int s0 = 0;
     // Software pipeline: the corners of block b+1 are computed and prefetched while block b is
     // gathered, so the random reads of the large levels overlap instead of waiting one by one.
@@ -114,15 +119,22 @@ void EncodeF(const GridLayout& g, const float* table, const float* x, const floa
         CornersVec(L, g.interpolation == Interpolation::Smoothstep, x + s1, y + s1, z + s1, cbs[(b + 1) & 1]);
         PrefetchCorners<F>(lt, cbs[(b + 1) & 1], N);
       }
+      // F features of a corner: one fp16 load, one conversion, one FMA per vector of features.
+      const DFF<F> dff;
+      const DHF<F> dhf;
+      constexpr size_t NV = (F + hn::MaxLanes(DFF<F>()) - 1) / hn::MaxLanes(DFF<F>());
+      const size_t NF = hn::Lanes(dff);
       for (size_t s = 0; s < N; ++s) {
-        float acc[F];
-        for (int f = 0; f < F; ++f) acc[f] = 0.0f;
+        hn::Vec<DFF<F>> acc[NV];
+        for (size_t v = 0; v < NV; ++v) acc[v] = hn::Zero(dff);
         for (int k = 0; k < 8; ++k) {
-          const float* th = lt + uint64_t(cur.entry[k][s]) * F;
-          const float w = cur.weight[k][s];
-          for (int f = 0; f < F; ++f) acc[f] = fmaf(w, th[f], acc[f]);
+          const auto* th = reinterpret_cast<const hwy::float16_t*>(lt + uint64_t(cur.entry[k][s]) * F);
+          const auto w = hn::Set(dff, cur.weight[k][s]);
+          for (size_t v = 0; v < NV; ++v) acc[v] = hn::MulAdd(w, hn::PromoteTo(dff, hn::LoadU(dhf, th + v * NF)), acc[v]);
         }
-        for (int f = 0; f < F; ++f) out[f * n + s0 + s] = acc[f];
+        alignas(64) float tmp[NV * kMaxLanes];
+        for (size_t v = 0; v < NV; ++v) hn::StoreU(acc[v], dff, tmp + v * NF);
+        for (int f = 0; f < F; ++f) out[f * n + s0 + s] = tmp[f];
       }
       have = next;
     }
@@ -130,7 +142,7 @@ void EncodeF(const GridLayout& g, const float* table, const float* x, const floa
   }
 }
 
-void GridEncode(const GridLayout& g, const float* table, const float* x, const float* y, const float* z, int n,
+void GridEncode(const GridLayout& g, const uint16_t* table, const float* x, const float* y, const float* z, int n,
                 float* X0) {
   switch (g.n_features) {
     case 1: EncodeF<1>(g, table, x, y, z, n, X0); break;
@@ -169,13 +181,20 @@ void BackwardF(const GridLayout& g, uint32_t l, const float* x, const float* y, 
         CornersVec(L, smooth, x + c0 + s1, y + c0 + s1, z + c0 + s1, cbs[(b + 1) & 1]);
         PrefetchCorners<F>(lg, cbs[(b + 1) & 1], size_t(N));
       }
+      // Per corner: one vector load of the F gradients, one FMA, one store.
+      const DFF<F> dff;
+      constexpr size_t NV = (F + hn::MaxLanes(DFF<F>()) - 1) / hn::MaxLanes(DFF<F>());
+      const size_t NF = hn::Lanes(dff);
       for (int64_t s = 0; s < N; ++s) {
-        float gv[F];
-        for (int f = 0; f < F; ++f) gv[f] = dy[f * chunk + s0 + s];
+        alignas(64) float gtmp[NV * kMaxLanes];
+        for (int f = 0; f < F; ++f) gtmp[f] = dy[f * chunk + s0 + s];
+        hn::Vec<DFF<F>> gv[NV];
+        for (size_t v = 0; v < NV; ++v) gv[v] = hn::LoadU(dff, gtmp + v * NF);
         for (int k = 0; k < 8; ++k) {
           float* gr = lg + uint64_t(cur.entry[k][s]) * F;
-          const float w = cur.weight[k][s];
-          for (int f = 0; f < F; ++f) gr[f] = fmaf(w, gv[f], gr[f]);
+          const auto w = hn::Set(dff, cur.weight[k][s]);
+          for (size_t v = 0; v < NV; ++v)
+            hn::StoreU(hn::MulAdd(w, gv[v], hn::LoadU(dff, gr + v * NF)), dff, gr + v * NF);
         }
       }
       have = next;
@@ -199,7 +218,8 @@ void GridBackwardLevel(const GridLayout& g, uint32_t level, const float* x, cons
 // parameters is a per-lane select, bias corrections are gathered from tables indexed by the
 // per-parameter step count. Every lane computes exactly the scalar formula (no fused operations).
 void AdamRange(const AdamStep& k, float* HWY_RESTRICT w, float* HWY_RESTRICT grads, float* HWY_RESTRICT m,
-               float* HWY_RESTRICT v, uint32_t* HWY_RESTRICT c, int64_t n) {
+               float* HWY_RESTRICT v, uint32_t* HWY_RESTRICT c, uint16_t* HWY_RESTRICT half, int64_t n) {
+  const hn::Rebind<hwy::float16_t, DF> dh;
   const DF df;
   const DI di;
   const int64_t N = int64_t(hn::Lanes(df));
@@ -230,7 +250,9 @@ void AdamRange(const AdamStep& k, float* HWY_RESTRICT w, float* HWY_RESTRICT gra
     eff = hn::Min(hn::Max(eff, lo), hi);
     const auto wd = hn::Sub(hn::Mul(hn::Sub(one, hn::Mul(rel, lr_t)), wi), hn::CopySign(hn::Mul(absd, lr_t), wi));
     const auto wn = hn::Sub(wd, hn::Mul(eff, mi));
-    hn::StoreU(hn::IfThenElse(active, wn, wi), df, w + i);
+    const auto wnew = hn::IfThenElse(active, wn, wi);
+    hn::StoreU(wnew, df, w + i);
+    if (half) hn::StoreU(hn::DemoteTo(dh, wnew), dh, reinterpret_cast<hwy::float16_t*>(half + i));
     hn::StoreU(hn::IfThenElse(active, mi, m0), df, m + i);
     hn::StoreU(hn::IfThenElse(active, vi, v0), df, v + i);
     hn::StoreU(hn::IfThenElse(hn::RebindMask(di, active), ci, c0), di, reinterpret_cast<int32_t*>(c + i));
@@ -249,6 +271,7 @@ void AdamRange(const AdamStep& k, float* HWY_RESTRICT w, float* HWY_RESTRICT gra
     eff = eff < k.lo ? k.lo : (eff > k.hi ? k.hi : eff);
     const float wd = (1.0f - k.rel * lr_t) * wi - std::copysign(k.abs_decay * lr_t, wi);
     w[i] = wd - eff * m[i];
+    if (half) half[i] = float_to_half(w[i]);
   }
 }
 
@@ -262,7 +285,7 @@ HWY_EXPORT(GridEncode);
 HWY_EXPORT(GridBackwardLevel);
 HWY_EXPORT(AdamRange);
 
-void grid_encode(const GridLayout& g, const float* table, const float* x, const float* y, const float* z, int n,
+void grid_encode(const GridLayout& g, const uint16_t* table, const float* x, const float* y, const float* z, int n,
                  float* X0) {
   HWY_DYNAMIC_DISPATCH(GridEncode)(g, table, x, y, z, n, X0);
 }
@@ -270,8 +293,9 @@ void grid_backward_level(const GridLayout& g, uint32_t level, const float* x, co
                          int64_t n, const float* dEnc, uint32_t in_pad, int chunk, float* grad) {
   HWY_DYNAMIC_DISPATCH(GridBackwardLevel)(g, level, x, y, z, n, dEnc, in_pad, chunk, grad);
 }
-void adam_range(const AdamStep& k, float* params, float* grads, float* m, float* v, uint32_t* c, int64_t n) {
-  HWY_DYNAMIC_DISPATCH(AdamRange)(k, params, grads, m, v, c, n);
+void adam_range(const AdamStep& k, float* params, float* grads, float* m, float* v, uint32_t* c, uint16_t* half,
+                int64_t n) {
+  HWY_DYNAMIC_DISPATCH(AdamRange)(k, params, grads, m, v, c, half, n);
 }
 }  // namespace vnr::kernels
 #endif

@@ -7,8 +7,8 @@
 
 namespace vnr::kernels {
 
-// X0 rows [0, L*F) for n samples (feature-major, stride n).
-void grid_encode(const GridLayout& g, const float* table, const float* x, const float* y, const float* z, int n,
+// X0 rows [0, L*F) for n samples (feature-major, stride n), from the fp16 table.
+void grid_encode(const GridLayout& g, const uint16_t* table, const float* x, const float* y, const float* z, int n,
                  float* X0);
 // grad += dL/dtheta of one level for n samples; dEnc chunked (chunk c at c * in_pad * chunk).
 void grid_backward_level(const GridLayout& g, uint32_t level, const float* x, const float* y, const float* z,
@@ -20,7 +20,8 @@ struct AdamStep {
   const float* bias_sqrt;  // sqrtf(1 - beta2^c), by c
   const float* bias_den;   // 1 - beta1^c, by c
 };
-// Updates params/m/v/c in [0, n) and zeroes grads.
-void adam_range(const AdamStep& k, float* params, float* grads, float* m, float* v, uint32_t* c, int64_t n);
+// Updates params/m/v/c in [0, n), zeroes grads, and writes half[i] = fp16(params[i]) when half != nullptr.
+void adam_range(const AdamStep& k, float* params, float* grads, float* m, float* v, uint32_t* c, uint16_t* half,
+                int64_t n);
 
 }  // namespace vnr::kernels

@@ -4,6 +4,7 @@
 // The per-sample functions are single-source (VNR_HD) over a POD layout.
 #include <cmath>
 #include <cstdint>
+#include "vnr/core/half.h"
 #include "vnr/core/hd.h"
 #include "vnr/nn/config.h"
 
@@ -38,6 +39,11 @@ VNR_HD VNR_INLINE uint32_t grid_entry(const GridLevel& L, uint32_t cx, uint32_t 
   return idx < L.n_entries ? idx : idx % L.n_entries;
 }
 
+// Grid parameters are read from the fp32 master copy or from the fp16 working copy (as tcnn's
+// forward pass does); both go through this overload set.
+VNR_HD VNR_INLINE float grid_param(const float* p) { return *p; }
+VNR_HD VNR_INLINE float grid_param(const uint16_t* p) { return half_to_float(*p); }
+
 // Lattice cell, fractional position and the 8 corner (entry, weight) pairs of one level.
 struct GridCorners {
   uint32_t entry[8];
@@ -71,8 +77,8 @@ VNR_HD VNR_INLINE void grid_corners(const GridLevel& L, Interpolation interp, fl
 
 // Forward of one level for one sample: out[f * stride] = sum_k w_k * theta[(offset + entry_k) * F + f],
 // accumulated with FMA in corner order (vnr's binary32 reference, compat.md A.2.7).
-template <int F>
-VNR_HD VNR_INLINE void grid_level_forward(const GridLevel& L, Interpolation interp, const float* params, float x,
+template <int F, typename P>
+VNR_HD VNR_INLINE void grid_level_forward(const GridLevel& L, Interpolation interp, const P* params, float x,
                                       float y, float z, float* out, int64_t stride) {
   GridCorners c;
   grid_corners(L, interp, x, y, z, c);
@@ -80,8 +86,8 @@ VNR_HD VNR_INLINE void grid_level_forward(const GridLevel& L, Interpolation inte
   for (int f = 0; f < F; ++f) acc[f] = 0.0f;
   const int kn = interp == Interpolation::Nearest ? 1 : 8;
   for (int k = 0; k < kn; ++k) {
-    const float* th = params + (uint64_t(L.offset) + c.entry[k]) * F;
-    for (int f = 0; f < F; ++f) acc[f] = fmaf(c.weight[k], th[f], acc[f]);
+    const P* th = params + (uint64_t(L.offset) + c.entry[k]) * F;
+    for (int f = 0; f < F; ++f) acc[f] = fmaf(c.weight[k], grid_param(th + f), acc[f]);
   }
   for (int f = 0; f < F; ++f) out[f * stride] = acc[f];
 }
@@ -103,8 +109,8 @@ VNR_HD VNR_INLINE void grid_level_backward(const GridLevel& L, Interpolation int
 }
 
 // d(feature f of level L)/d(x_d) for one sample (compat.md A.2.9), written to dydx[f*3 + d].
-template <int F>
-VNR_HD VNR_INLINE void grid_level_input_grad(const GridLevel& L, Interpolation interp, const float* params, float x,
+template <int F, typename P>
+VNR_HD VNR_INLINE void grid_level_input_grad(const GridLevel& L, Interpolation interp, const P* params, float x,
                                          float y, float z, float* dydx) {
   for (int f = 0; f < 3 * F; ++f) dydx[f] = 0.0f;
   if (interp == Interpolation::Nearest) return;
@@ -120,12 +126,12 @@ VNR_HD VNR_INLINE void grid_level_input_grad(const GridLevel& L, Interpolation i
   }
   for (int k = 0; k < 8; ++k) {
     uint32_t e = grid_entry(L, i[0] + (k & 1), i[1] + ((k >> 1) & 1), i[2] + ((k >> 2) & 1));
-    const float* th = params + (uint64_t(L.offset) + e) * F;
+    const P* th = params + (uint64_t(L.offset) + e) * F;
     for (int d = 0; d < 3; ++d) {
       float w = L.scale * ds[d] * (((k >> d) & 1) ? 1.0f : -1.0f);
       for (int e2 = 0; e2 < 3; ++e2)
         if (e2 != d) w *= ((k >> e2) & 1) ? s[e2] : 1.0f - s[e2];
-      for (int f = 0; f < F; ++f) dydx[f * 3 + d] += w * th[f];
+      for (int f = 0; f < F; ++f) dydx[f * 3 + d] += w * grid_param(th + f);
     }
   }
 }

@@ -84,7 +84,10 @@ Network::Network(const Json& config, uint32_t n_output_dims) : cfg_json_(config)
   if (has_grid()) grid_ = make_grid_layout(cfg_.encoding);
   mlp_ = make_mlp_layout(cfg_, n_output_dims);
   params.assign(n_params(), 0.0f);
+  grid_half_.assign(grid_params(), 0);
 }
+
+void Network::sync_half_table() { floats_to_halves(grid_table(), grid_half_.data(), grid_params()); }
 
 double Network::flops_forward_per_sample() const {
   double mac = double(mlp_.width) * mlp_.in_pad + double(mlp_.n_hidden - 1) * mlp_.width * mlp_.width +
@@ -102,6 +105,7 @@ void Network::init_params(uint32_t seed) {
   }
   if (!has_grid()) return;
   tcnn_uniform_fill(rng, grid_table(), grid_params(), -1e-4f, 1e-4f);
+  sync_half_table();
 }
 
 void tcnn_uniform_fill(Pcg32& rng, float* out, uint64_t n, float lower, float upper) {
@@ -128,6 +132,7 @@ void Network::set_params_half(const std::vector<uint16_t>& h) {
   if (h.size() != params.size())
     fail("model has {} parameters but its configuration needs {}", h.size(), params.size());
   halves_to_floats(h.data(), params.data(), h.size());
+  std::copy(h.begin() + int64_t(mlp_.n_params), h.end(), grid_half_.begin());
 }
 
 void Network::encode(const float* x, const float* y, const float* z, int n, float* X0) const {
@@ -135,7 +140,7 @@ void Network::encode(const float* x, const float* y, const float* z, int n, floa
   const EncodingConfig& e = cfg_.encoding;
   switch (e.type) {
     case EncodingType::Grid: {
-      kernels::grid_encode(grid_, grid_table(), x, y, z, n, X0);
+      kernels::grid_encode(grid_, grid_half(), x, y, z, n, X0);
       break;
     }
     default: {
@@ -162,7 +167,7 @@ void Network::encode_point(const float xyz[3], float* out) const {
         for (int f = 0; f < F; ++f) {
           float acc = 0.0f;
           for (int k = 0; k < 8; ++k)
-            acc = std::fma(c.weight[k], grid_table()[(uint64_t(grid_.levels[l].offset) + c.entry[k]) * F + f], acc);
+            acc = std::fma(c.weight[k], half_to_float(grid_half()[(uint64_t(grid_.levels[l].offset) + c.entry[k]) * F + f]), acc);
           out[l * F + f] = acc;
         }
       }
@@ -206,10 +211,10 @@ void Network::encode_point_input_grad(const float xyz[3], float* jac) const {
       for (uint32_t l = 0; l < grid_.n_levels; ++l) {
         const GridLevel& L = grid_.levels[l];
         switch (grid_.n_features) {
-          case 1: grid_level_input_grad<1>(L, grid_.interpolation, grid_table(), xyz[0], xyz[1], xyz[2], tmp); break;
-          case 2: grid_level_input_grad<2>(L, grid_.interpolation, grid_table(), xyz[0], xyz[1], xyz[2], tmp); break;
-          case 4: grid_level_input_grad<4>(L, grid_.interpolation, grid_table(), xyz[0], xyz[1], xyz[2], tmp); break;
-          case 8: grid_level_input_grad<8>(L, grid_.interpolation, grid_table(), xyz[0], xyz[1], xyz[2], tmp); break;
+          case 1: grid_level_input_grad<1>(L, grid_.interpolation, grid_half(), xyz[0], xyz[1], xyz[2], tmp); break;
+          case 2: grid_level_input_grad<2>(L, grid_.interpolation, grid_half(), xyz[0], xyz[1], xyz[2], tmp); break;
+          case 4: grid_level_input_grad<4>(L, grid_.interpolation, grid_half(), xyz[0], xyz[1], xyz[2], tmp); break;
+          case 8: grid_level_input_grad<8>(L, grid_.interpolation, grid_half(), xyz[0], xyz[1], xyz[2], tmp); break;
         }
         for (uint32_t f = 0; f < grid_.n_features; ++f)
           for (int d = 0; d < 3; ++d) jac[(l * grid_.n_features + f) * 3 + d] = tmp[f * 3 + d];

@@ -52,6 +52,12 @@ public:
   big_vector<float> params;  // fp32 master copy, size n_params()
   float* grid_table() { return params.data() + mlp_.n_params; }
   const float* grid_table() const { return params.data() + mlp_.n_params; }
+  // fp16 working copy of the grid that every forward pass reads (tcnn's model: fp32 master for the
+  // optimizer, half for forward/backward/inference). Adam keeps it in sync; code that writes
+  // grid_table() directly must call sync_half_table() afterwards.
+  const uint16_t* grid_half() const { return grid_half_.data(); }
+  uint16_t* grid_half_mut() { return grid_half_.data(); }
+  void sync_half_table();
 
   // tiny-cuda-nn initialisation (compat.md A.4.1, A.2.10, A.8): Xavier-uniform MLP matrices then the
   // grid fill U[-1e-4, 1e-4), all from pcg32 seeded with seed_seq{seed}.
@@ -94,6 +100,7 @@ private:
 
   Json cfg_json_;
   ModelConfig cfg_;
+  big_vector<uint16_t> grid_half_;
   GridLayout grid_;
   MlpLayout mlp_;
 };

@@ -27,7 +27,7 @@ struct AdamConsts {
 };
 }  // namespace
 
-void Adam::step(float* params, float* grads) {
+void Adam::step(float* params, float* grads, uint16_t* non_matrix_half) {
   // ExponentialDecay: t = steps completed so far.
   const uint64_t t = step_;
   if (decay_.enabled) {
@@ -62,7 +62,7 @@ void Adam::step(float* params, float* grads) {
   kernels::AdamStep ks{k.lr, k.beta1, k.beta2, k.eps, k.l2, k.rel, k.abs_, k.lo, k.hi, true,
                        bias_sqrt_.data(), bias_den_.data()};
   if (cfg_.optimize_matrix_params)
-    kernels::adam_range(ks, params, grads, m.data(), v.data(), c.data(), int64_t(n_matrix_));
+    kernels::adam_range(ks, params, grads, m.data(), v.data(), c.data(), nullptr, int64_t(n_matrix_));
   else
     std::fill(grads, grads + n_matrix_, 0.0f);
   ks.matrix = false;
@@ -78,7 +78,7 @@ void Adam::step(float* params, float* grads) {
     return;
   }
   parallel_for_range(n_nm, 1 << 16, [&](int64_t b, int64_t e) {
-    kernels::adam_range(ks, p + b, g + b, mm + b, vv + b, cc + b, e - b);
+    kernels::adam_range(ks, p + b, g + b, mm + b, vv + b, cc + b, non_matrix_half ? non_matrix_half + b : nullptr, e - b);
   });
 }
 

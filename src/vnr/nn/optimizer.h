@@ -14,7 +14,8 @@ class Adam {
 public:
   Adam(const AdamConfig& adam, const DecayConfig& decay, uint64_t n_params, uint64_t n_matrix);
   // One optimizer step. Reads grads and sets them back to zero (the next step accumulates from 0).
-  void step(float* params, float* grads);
+  // When non_matrix_half is given it receives fp16(params) of the non-matrix (grid) parameters.
+  void step(float* params, float* grads, uint16_t* non_matrix_half = nullptr);
   uint64_t steps_done() const { return step_; }
   float current_learning_rate() const { return base_lr_ * factor_; }
   // Learning rate used by step t (t = steps completed before it), closed form for reports.

@@ -86,7 +86,7 @@ float Trainer::step() {
   std::memcpy(gm, dW_[0].data(), sizeof(float) * m.n_params);
   for (int t = 1; t < n_threads_; ++t)
     for (uint64_t i = 0; i < m.n_params; ++i) gm[i] += dW_[t][i];
-  adam_.step(net_.params.data(), grads_.data());
+  adam_.step(net_.params.data(), grads_.data(), net_.has_grid() ? net_.grid_half_mut() : nullptr);
   auto t3 = std::chrono::steady_clock::now();
   phase_seconds[0] = std::chrono::duration<double>(t1 - t0).count();
   phase_seconds[1] = std::chrono::duration<double>(t2 - t1).count();
