@@ -1,10 +1,12 @@
 // Single-thread cost of the grid encoding per level (forward gather and backward scatter) for the
 // paper config on random points — where each level sits between cache-resident and DRAM-bound.
 #include <benchmark/benchmark.h>
+#include <cstdlib>
 #include <vector>
 #include "vnr/core/rng.h"
 #include "vnr/nn/cpu_kernels.h"
 #include "vnr/nn/network.h"
+#include "vnr/volume/volume.h"
 
 namespace {
 
@@ -54,4 +56,35 @@ void BM_GridBackwardLevel(benchmark::State& state) {
 BENCHMARK(BM_GridEncodeLevel)->DenseRange(0, 7)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_GridBackwardLevel)->DenseRange(0, 7)->Unit(benchmark::kMillisecond);
 
+}  // namespace
+
+namespace {
+// Ground-truth lookups of 65,536 random points in a 256^3 volume: float storage vs the compact
+// uint8 + table storage the in-core sampler uses for 8-bit data.
+void BM_GridLookup(benchmark::State& state) {
+  static vnr::Volume vol = [] {
+    vnr::Volume v;
+    const char* e = getenv("VNR_BENCH_DIM");
+    int64_t d = e ? atoi(e) : 256;
+    v.dims = {d, d, d};
+    v.source_dtype = vnr::DType::UInt8;
+    v.lo = 0;
+    v.hi = 255;
+    vnr::Pcg32 r(1);
+    v.data.resize(v.dims.count());
+    for (auto& d : v.data) d = float(r.next_uint() & 255) / 255.0f;
+    return v;
+  }();
+  static vnr::CompactGrid cg;
+  if (state.range(0) && !cg.view.lut) vnr::make_compact_grid(vol, cg);
+  vnr::GridView g = state.range(0) ? cg.view : vnr::view_of(vol);
+  Fixture& f = fixture();
+  std::vector<float> out(vnr::kChunk);
+  for (auto _ : state)
+    for (int c = 0; c < (1 << 16); c += vnr::kChunk)
+      vnr::grid_lookup_batch(g, f.x.data() + c, f.y.data() + c, f.z.data() + c, vnr::kChunk, out.data());
+  state.counters["ns/sample"] = benchmark::Counter(double(state.iterations()) * (1 << 16),
+                                                   benchmark::Counter::kIsRate | benchmark::Counter::kInvert);
+}
+BENCHMARK(BM_GridLookup)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond);
 }  // namespace

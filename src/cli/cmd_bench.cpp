@@ -64,7 +64,7 @@ void run_bench(const BenchArgs& a) {
   auto t0 = std::chrono::steady_clock::now();
   Progress bar(std::string("bench ") + a.what, a.seconds, false);
   if (training) {
-    Trainer tr(net, std::make_shared<InCoreSampler>(view_of(vol)), TrainOptions{a.batch, 1337});
+    Trainer tr(net, std::make_shared<InCoreSampler>(vol), TrainOptions{a.batch, 1337});
     for (int w = 0; w < 2; ++w) tr.step();  // warm-up: page-in, caches
     t0 = std::chrono::steady_clock::now();
     std::vector<double> ph[3];

@@ -59,7 +59,7 @@ void run_train(const TrainArgs& a) {
   net.init_params(a.seed);
 
   const int64_t steps = a.steps >= 0 ? a.steps : (a.seconds > 0 ? INT64_MAX : 1000);
-  Trainer trainer(net, std::make_shared<InCoreSampler>(view_of(vol)), TrainOptions{a.batch, a.seed});
+  Trainer trainer(net, std::make_shared<InCoreSampler>(vol), TrainOptions{a.batch, a.seed});
   const bool by_time = a.seconds > 0 && a.steps < 0;
   Progress bar("train", by_time ? a.seconds : double(steps), a.quiet);
   auto t0 = std::chrono::steady_clock::now();

@@ -13,7 +13,9 @@ namespace vnr {
 namespace HWY_NAMESPACE {
 namespace hn = hwy::HWY_NAMESPACE;
 
-void LookupBatch(const GridView& g, const float* x, const float* y, const float* z, int64_t n, float* out) {
+// Storage kinds of a GridView: 0 float, 1 uint8 + lut, 2 uint16 + lut.
+template <int kKind>
+HWY_INLINE void LookupKind(const GridView& g, const float* x, const float* y, const float* z, int64_t n, float* out) {
   const hn::ScalableTag<float> df;
   const hn::RebindToSigned<decltype(df)> di;
   const int64_t N = int64_t(hn::Lanes(df));
@@ -24,7 +26,34 @@ void LookupBatch(const GridView& g, const float* x, const float* y, const float*
     const int32_t dims[3] = {g.nx, g.ny, g.nz};
     const auto half = hn::Set(df, 0.5f), zero = hn::Zero(df), one = hn::Set(df, 1.0f);
     const auto sy = hn::Set(di, g.nx), sz = hn::Set(di, g.nx * g.ny), ione = hn::Set(di, 1);
+    // Prefetch the four x-rows of the next block's cells while this block gathers: the gathers are
+    // latency-bound random reads, and Zen's gathers stall until all lanes arrive.
+    auto prefetch_block = [&](int64_t b) {
+      alignas(64) int32_t base[16];
+      hn::Vec<decltype(di)> c[3];
+      for (int d = 0; d < 3; ++d) {
+        const auto nd = hn::Set(df, float(dims[d]));
+        const auto p = hn::Sub(hn::Mul(hn::LoadU(df, in[d] + b), nd), half);
+        c[d] = hn::ConvertTo(di, hn::Floor(hn::Min(hn::Max(p, zero), hn::Set(df, float(dims[d] - 1)))));
+      }
+      hn::StoreU(hn::Add(c[0], hn::Add(hn::Mul(c[1], sy), hn::Mul(c[2], sz))), di, base);
+      const int64_t ry = g.nx, rz = int64_t(g.nx) * g.ny;
+      for (int64_t l = 0; l < N; ++l) {
+        const int64_t e = base[l];
+        const char* p0 = kKind == 0 ? (const char*)(g.data + e) : (kKind == 1 ? (const char*)(g.u8 + e) : (const char*)(g.u16 + e));
+        const int64_t es = kKind == 0 ? 4 : (kKind == 1 ? 1 : 2);
+        __builtin_prefetch(p0);
+        __builtin_prefetch(p0 + ry * es);
+        __builtin_prefetch(p0 + rz * es);
+        __builtin_prefetch(p0 + (ry + rz) * es);
+      }
+    };
+    // Prefetch kAhead blocks ahead: one block's gathers take about one memory latency.
+    constexpr int64_t kAhead = 4;
+    if (N <= 16)
+      for (int64_t b = 0; b < kAhead && (b + 1) * N <= n; ++b) prefetch_block(b * N);
     for (; i + N <= n; i += N) {
+      if (N <= 16 && i + (kAhead + 1) * N <= n) prefetch_block(i + kAhead * N);
       hn::Vec<decltype(di)> i0[3], i1[3];
       hn::Vec<decltype(df)> t[3];
       for (int d = 0; d < 3; ++d) {
@@ -37,7 +66,16 @@ void LookupBatch(const GridView& g, const float* x, const float* y, const float*
         t[d] = hn::Sub(q, fl);
       }
       auto at = [&](const hn::Vec<decltype(di)>& cx, const hn::Vec<decltype(di)>& cy, const hn::Vec<decltype(di)>& cz) {
-        return hn::GatherIndex(df, g.data, hn::Add(cx, hn::Add(hn::Mul(cy, sy), hn::Mul(cz, sz))));
+        const auto idx = hn::Add(cx, hn::Add(hn::Mul(cy, sy), hn::Mul(cz, sz)));
+        if constexpr (kKind == 0) {
+          return hn::GatherIndex(df, g.data, idx);
+        } else {
+          // Read 4 bytes at the element's byte offset (the arrays are padded) and keep the low bits.
+          const auto off = kKind == 1 ? idx : hn::Add(idx, idx);
+          const auto raw = hn::GatherOffset(di, reinterpret_cast<const int32_t*>(kKind == 1 ? (const void*)g.u8 : (const void*)g.u16), off);
+          const auto v = hn::And(raw, hn::Set(di, kKind == 1 ? 0xff : 0xffff));
+          return hn::GatherIndex(df, g.lut, v);
+        }
       };
       const auto u0 = hn::Sub(one, t[0]), u1 = hn::Sub(one, t[1]), u2 = hn::Sub(one, t[2]);
       const auto c00 = hn::Add(hn::Mul(at(i0[0], i0[1], i0[2]), u0), hn::Mul(at(i1[0], i0[1], i0[2]), t[0]));
@@ -50,6 +88,12 @@ void LookupBatch(const GridView& g, const float* x, const float* y, const float*
     }
   }
   for (; i < n; ++i) out[i] = grid_lookup(g, x[i], y[i], z[i]);
+}
+
+void LookupBatch(const GridView& g, const float* x, const float* y, const float* z, int64_t n, float* out) {
+  if (g.u8) LookupKind<1>(g, x, y, z, n, out);
+  else if (g.u16) LookupKind<2>(g, x, y, z, n, out);
+  else LookupKind<0>(g, x, y, z, n, out);
 }
 
 }  // namespace HWY_NAMESPACE
