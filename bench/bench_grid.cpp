@@ -11,9 +11,10 @@
 namespace {
 
 struct Fixture {
-  vnr::Network net{vnr::preset_config("paper")};
+  explicit Fixture(const char* preset = "paper") : net(vnr::preset_config(preset)) { init(); }
+  vnr::Network net;
   std::vector<float> x, y, z, X0, dEnc;
-  Fixture() {
+  void init() {
     net.init_params(1);
     vnr::Pcg32 rng(3);
     const int n = 1 << 16;
@@ -27,6 +28,19 @@ Fixture& fixture() {
   static Fixture f;
   return f;
 }
+
+// Whole encodings (all levels) of 65,536 random points, paper (arg 0) and small (arg 1) configs.
+void BM_GridEncode(benchmark::State& state) {
+  static Fixture small("small");
+  Fixture& f = state.range(0) ? small : fixture();
+  for (auto _ : state)
+    for (int c = 0; c < (1 << 16); c += vnr::kChunk)
+      vnr::kernels::grid_encode(f.net.grid(), f.net.grid_half(), f.x.data() + c, f.y.data() + c, f.z.data() + c,
+                                vnr::kChunk, f.X0.data());
+  state.counters["ns/sample"] = benchmark::Counter(double(state.iterations()) * (1 << 16),
+                                                   benchmark::Counter::kIsRate | benchmark::Counter::kInvert);
+}
+BENCHMARK(BM_GridEncode)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond);
 
 // Encodes 65,536 random points in chunks of 256 with a layout holding only level `l`.
 void BM_GridEncodeLevel(benchmark::State& state) {

@@ -63,7 +63,8 @@ HWY_INLINE void CornersVec(const GridLevel& L, bool smooth, const float* x, cons
 }
 
 template <int F, typename P>
-HWY_INLINE void PrefetchCorners(const P* lt, const CornerBlock& cb, size_t N) {
+HWY_INLINE void PrefetchCorners(const P* lt, const CornerBlock& cb, size_t N, bool enabled = true) {
+  if (!enabled) return;
   for (int k = 0; k < 8; ++k)
     for (size_t s = 0; s < N; ++s) __builtin_prefetch(lt + uint64_t(cb.entry[k][s]) * F);
 }
@@ -102,6 +103,8 @@ void EncodeF(const GridLayout& g, const uint16_t* table, const float* x, const f
     float* out = X0 + size_t(l) * F * n;
     const bool vec_ok = VectorPathOk(L, g);
     const uint16_t* lt = table + uint64_t(L.offset) * F;
+    // Levels whose table fits in L2 gain nothing from prefetching; bigger ones are latency-bound.
+    const bool pf = uint64_t(L.n_entries) * F * sizeof(uint16_t) > (uint64_t(1) << 18);
     int s0 = 0;
     // Software pipeline: the corners of block b+1 are computed and prefetched while block b is
     // gathered, so the random reads of the large levels overlap instead of waiting one by one.
@@ -109,7 +112,7 @@ void EncodeF(const GridLayout& g, const uint16_t* table, const float* x, const f
     bool have = vec_ok && int(N) <= n && BlockInUnitCube(x, y, z, N);
     if (have) {
       CornersVec(L, g.interpolation == Interpolation::Smoothstep, x, y, z, cbs[0]);
-      PrefetchCorners<F>(lt, cbs[0], N);
+      PrefetchCorners<F>(lt, cbs[0], N, pf);
     }
     for (int b = 0; have; ++b, s0 += int(N)) {
       const CornerBlock& cur = cbs[b & 1];
@@ -117,7 +120,7 @@ void EncodeF(const GridLayout& g, const uint16_t* table, const float* x, const f
       const bool next = s1 + int(N) <= n && BlockInUnitCube(x + s1, y + s1, z + s1, N);
       if (next) {
         CornersVec(L, g.interpolation == Interpolation::Smoothstep, x + s1, y + s1, z + s1, cbs[(b + 1) & 1]);
-        PrefetchCorners<F>(lt, cbs[(b + 1) & 1], N);
+        PrefetchCorners<F>(lt, cbs[(b + 1) & 1], N, pf);
       }
       // F features of a corner: one fp16 load, one conversion, one FMA per vector of features.
       const DFF<F> dff;
@@ -160,6 +163,7 @@ void BackwardF(const GridLayout& g, uint32_t l, const float* x, const float* y, 
   const GridLevel L = g.levels[l];
   const bool vec_ok = VectorPathOk(L, g) && chunk % N == 0;
   float* lg = grad + uint64_t(L.offset) * F;
+  const bool pf = uint64_t(L.n_entries) * F * sizeof(float) > (uint64_t(1) << 18);
   const bool smooth = g.interpolation == Interpolation::Smoothstep;
   for (int64_t c0 = 0; c0 < n; c0 += chunk) {
     const float* dy = dEnc + (c0 / chunk) * int64_t(in_pad) * chunk + int64_t(l) * F * chunk;
@@ -171,7 +175,7 @@ void BackwardF(const GridLayout& g, uint32_t l, const float* x, const float* y, 
     bool have = vec_ok && N <= m && BlockInUnitCube(x + c0, y + c0, z + c0, size_t(N));
     if (have) {
       CornersVec(L, smooth, x + c0, y + c0, z + c0, cbs[0]);
-      PrefetchCorners<F>(lg, cbs[0], size_t(N));
+      PrefetchCorners<F>(lg, cbs[0], size_t(N), pf);
     }
     for (int64_t b = 0; have; ++b, s0 += N) {
       const CornerBlock& cur = cbs[b & 1];
@@ -179,7 +183,7 @@ void BackwardF(const GridLayout& g, uint32_t l, const float* x, const float* y, 
       const bool next = s1 + N <= m && BlockInUnitCube(x + c0 + s1, y + c0 + s1, z + c0 + s1, size_t(N));
       if (next) {
         CornersVec(L, smooth, x + c0 + s1, y + c0 + s1, z + c0 + s1, cbs[(b + 1) & 1]);
-        PrefetchCorners<F>(lg, cbs[(b + 1) & 1], size_t(N));
+        PrefetchCorners<F>(lg, cbs[(b + 1) & 1], size_t(N), pf);
       }
       // Per corner: one vector load of the F gradients, one FMA, one store.
       const DFF<F> dff;

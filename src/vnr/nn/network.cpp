@@ -84,7 +84,8 @@ Network::Network(const Json& config, uint32_t n_output_dims) : cfg_json_(config)
   if (has_grid()) grid_ = make_grid_layout(cfg_.encoding);
   mlp_ = make_mlp_layout(cfg_, n_output_dims);
   params.assign(n_params(), 0.0f);
-  grid_half_.assign(grid_params(), 0);
+  // +2 halves of padding: the F = 1 encoder reads 4 bytes at a 2-byte offset.
+  grid_half_.assign(grid_params() + 2, 0);
 }
 
 void Network::sync_half_table() { floats_to_halves(grid_table(), grid_half_.data(), grid_params()); }
