@@ -6,6 +6,7 @@
 #include "vnr/nn/loss.h"
 #include "vnr/nn/network.h"
 #include "vnr/nn/optimizer.h"
+#include "vnr/train/model_io.h"
 #include "vnr/train/trainer.h"
 
 using namespace vnr;
@@ -252,4 +253,20 @@ TEST(Trainer, RejectsBadBatch) {
   std::vector<float> vol(8, 0.f);
   GridView g{vol.data(), 2, 2, 2};
   EXPECT_THROW(Trainer(net, std::make_shared<InCoreSampler>(g), TrainOptions{1000, 1}), std::exception);
+}
+
+TEST(TargetRatio, SizesTheModelNearTheRequestedRatio) {
+  const uint64_t volume_bytes = 16u << 20;  // bonsai: 256^3 uint8
+  for (double ratio : {4.0, 16.0, 50.0, 200.0}) {
+    std::string note;
+    Json c = size_config_for_ratio(preset_config("paper"), volume_bytes, ratio, &note);
+    const double bytes = double(count_params(c)) * 2;
+    const double achieved = double(volume_bytes) / bytes;
+    EXPECT_GT(achieved, ratio / 2) << note;
+    EXPECT_LT(achieved, ratio * 2) << note;
+    EXPECT_NE(note.find("levels"), std::string::npos);
+    // The MLP and everything but the grid size is kept.
+    EXPECT_EQ(c["network"], Network(preset_config("paper")).config_json()["network"]);
+  }
+  EXPECT_THROW(size_config_for_ratio(preset_config("paper"), volume_bytes, -1, nullptr), std::exception);
 }

@@ -27,18 +27,11 @@ std::string basename_of(const std::string& p) {
   return slash == std::string::npos ? p : p.substr(slash + 1);
 }
 
+// NRRD spells the floating types "float"/"double"; the integer names are vnr's own.
 const char* nrrd_type(DType t) {
-  switch (t) {
-    case DType::Int8: return "int8";
-    case DType::UInt8: return "uint8";
-    case DType::Int16: return "int16";
-    case DType::UInt16: return "uint16";
-    case DType::Int32: return "int32";
-    case DType::UInt32: return "uint32";
-    case DType::Float32: return "float";
-    case DType::Float64: return "double";
-  }
-  return "?";
+  if (t == DType::Float32) return "float";
+  if (t == DType::Float64) return "double";
+  return dtype_name(t);
 }
 
 // Little-endian bytes of one value of type T.
