@@ -169,7 +169,7 @@ TEST(GridEncoding, ParameterGradientMatchesFiniteDifferences) {
         for (auto& g : dEnc) g = U(gen) - 0.5f;
         std::vector<float> grad(net.grid_params(), 0.0f);
         for (uint32_t l = 0; l < net.grid().n_levels; ++l)
-          net.grid_backward_level(l, x.data(), y.data(), z.data(), n, dEnc.data(), grad.data());
+          net.grid_backward_level(l, x.data(), y.data(), z.data(), n, dEnc.data(), n, grad.data());
         auto objective = [&]() {
           std::vector<float> X0(net.mlp().in_pad * n);
           net.encode(x.data(), y.data(), z.data(), n, X0.data());

@@ -31,6 +31,7 @@ double median(std::vector<double> v) {
 // MLP forward (+ backward when training) alone over chunks, all threads: GFLOP/s.
 double mlp_gflops(const Network& net, bool training, double seconds) {
   const MlpLayout& m = net.mlp();
+  const int kChunk = net.chunk();
   double flops_per_chunk = net.flops_forward_per_sample() * kChunk * (training ? 3.0 : 1.0);
   std::vector<double> per_thread(num_threads(), 0.0);
   double el = 0;

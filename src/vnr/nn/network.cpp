@@ -84,8 +84,8 @@ Network::Network(const Json& config, uint32_t n_output_dims) : cfg_json_(config)
   if (has_grid()) grid_ = make_grid_layout(cfg_.encoding);
   mlp_ = make_mlp_layout(cfg_, n_output_dims);
   params.assign(n_params(), 0.0f);
-  // +2 halves of padding: the F = 1 encoder reads 4 bytes at a 2-byte offset.
-  grid_half_.assign(grid_params() + 2, 0);
+  grid_half_.assign(grid_params(), 0);
+  chunk_ = mlp_.width <= 32 ? 4 * kChunk : kChunk;
 }
 
 void Network::sync_half_table() { floats_to_halves(grid_table(), grid_half_.data(), grid_params()); }
@@ -291,13 +291,13 @@ void Network::mlp_backward(const float* X0, const float* acts, const float* d_ou
 }
 
 void Network::grid_backward_level(uint32_t level, const float* x, const float* y, const float* z, int64_t n,
-                                  const float* dEnc, float* grad) const {
-  kernels::grid_backward_level(grid_, level, x, y, z, n, dEnc, mlp_.in_pad, kChunk, grad);
+                                  const float* dEnc, int chunk, float* grad) const {
+  kernels::grid_backward_level(grid_, level, x, y, z, n, dEnc, mlp_.in_pad, chunk, grad);
 }
 
 size_t Network::infer_workspace_floats() const {
   // X0 + two ping-pong hidden buffers + output rows
-  return size_t(mlp_.in_pad) * kChunk + 2 * size_t(mlp_.width) * kChunk + size_t(mlp_.n_out) * kChunk;
+  return (size_t(mlp_.in_pad) + 2 * size_t(mlp_.width) + mlp_.n_out) * chunk_;
 }
 
 void Network::infer_chunk(const float* x, const float* y, const float* z, int n, float* out, float* ws) const {

@@ -33,7 +33,9 @@ MlpLayout make_mlp_layout(const ModelConfig& cfg, uint32_t n_output_dims = 1);
 // Total parameter count of a config, without allocating anything.
 uint64_t count_params(const Json& config, uint32_t n_output_dims = 1);
 
-// Samples are processed in chunks of kChunk (activations of a chunk stay in L2).
+// Samples are processed in chunks whose MLP activations stay in L2: Network::chunk() samples,
+// 256 for wide MLPs and 1024 for narrow ones (<= 32 neurons), where per-chunk overheads would
+// otherwise dominate. Training batches are multiples of kChunk.
 constexpr int kChunk = 256;
 
 class Network {
@@ -76,10 +78,11 @@ public:
   void mlp_backward(const float* X0, const float* acts, const float* d_out_pre, int n, float* dW, float* dX0,
                     float* scratch) const;
   // Grid parameter gradient of one level for samples [0, n): grad += dL/dtheta, reading the
-  // encoding gradient from dEnc in the chunked layout (chunk c at c * in_pad * kChunk).
+  // encoding gradient from dEnc in the chunked layout (chunk c at c * in_pad * chunk, row stride chunk).
   void grid_backward_level(uint32_t level, const float* x, const float* y, const float* z, int64_t n,
-                           const float* dEnc, float* grad) const;
+                           const float* dEnc, int chunk, float* grad) const;
   size_t acts_floats(int n) const { return size_t(mlp_.n_hidden) * mlp_.width * n; }
+  int chunk() const { return chunk_; }
 
   // ---- batched queries (parallel inside) ----
   // out[i] = first network output at point i; coords interleaved xyz.
@@ -101,24 +104,27 @@ private:
   Json cfg_json_;
   ModelConfig cfg_;
   big_vector<uint16_t> grid_half_;
+  int chunk_ = kChunk;
   GridLayout grid_;
   MlpLayout mlp_;
 };
 
 template <typename CoordFn>
 void Network::infer_fn(int64_t n, CoordFn&& coord, float* out) const {
-  const int64_t n_chunks = (n + kChunk - 1) / kChunk;
+  const int64_t C = chunk_;
+  const int64_t n_chunks = (n + C - 1) / C;
   parallel_threads([&](int t, int nt) {
-    std::vector<float> ws(infer_workspace_floats() + 4 * kChunk);
+    std::vector<float> ws(infer_workspace_floats() + 4 * C);
     float* xs = ws.data() + infer_workspace_floats();
-    float *ys = xs + kChunk, *zs = ys + kChunk, *o = zs + kChunk;
+    float *ys = xs + C, *zs = ys + C, *o = zs + C;
     for (int64_t c = t; c < n_chunks; c += nt) {
-      int64_t b = c * kChunk, m = n - b < kChunk ? n - b : kChunk;
-      for (int64_t i = 0; i < kChunk; ++i) {  // pad the tail with the last point
+      int64_t b = c * C, m = n - b < C ? n - b : C;
+      int64_t mp = (m + 15) / 16 * 16;  // kernels work on multiples of 16 samples
+      for (int64_t i = 0; i < mp; ++i) {  // pad the tail with the last point
         int64_t k = b + (i < m ? i : m - 1);
         coord(k, &xs[i], &ys[i], &zs[i]);
       }
-      infer_chunk(xs, ys, zs, kChunk, o, ws.data());
+      infer_chunk(xs, ys, zs, int(mp), o, ws.data());
       for (int64_t i = 0; i < m; ++i) out[b + i] = o[i];
     }
   });

@@ -1,5 +1,6 @@
 #include "vnr/train/trainer.h"
 #include <chrono>
+#include <algorithm>
 #include <cstring>
 #include "vnr/core/error.h"
 #include "vnr/core/parallel.h"
@@ -18,19 +19,25 @@ Trainer::Trainer(Network& net, std::shared_ptr<Sampler> sampler, TrainOptions op
   grads_.assign(net.n_params(), 0.0f);
   dW_.assign(n_threads_, std::vector<float>(m.n_params, 0.0f));
   // workspace per thread: target, X0, acts, out_pre, out, dout, scratch
-  size_t ws = kChunk + size_t(m.in_pad) * kChunk + net.acts_floats(kChunk) + 3 * size_t(m.n_out) * kChunk +
-              2 * size_t(m.width) * kChunk;
+  // Chunks of the network's preferred size, halved until they divide the batch (so every chunk
+  // is full and the encoding-gradient rows all have the same stride).
+  int C = net.chunk();
+  while (opts_.batch % C) C /= 2;
+  chunk_ = C;
+  size_t ws = C + size_t(m.in_pad) * C + net.acts_floats(C) + 3 * size_t(m.n_out) * C + 2 * size_t(m.width) * C;
   ws_.assign(n_threads_, std::vector<float>(ws, 0.0f));
   xs_.resize(opts_.batch);
   ys_.resize(opts_.batch);
   zs_.resize(opts_.batch);
-  if (net.has_grid()) dEnc_.resize(size_t(opts_.batch) * m.in_pad);
-  chunk_loss_.resize(opts_.batch / kChunk);
+  const int64_t n_chunks = (opts_.batch + C - 1) / C;
+  if (net.has_grid()) dEnc_.resize(size_t(n_chunks) * C * m.in_pad);
+  chunk_loss_.resize(n_chunks);
 }
 
 float Trainer::step() {
   const MlpLayout& m = net_.mlp();
-  const int64_t n_chunks = opts_.batch / kChunk;
+  const int64_t C = chunk_;
+  const int64_t n_chunks = opts_.batch / C;
   const uint64_t step = adam_.steps_done();
   const float inv_n = 1.0f / float(opts_.batch * m.n_out);
   const bool grid = net_.has_grid();
@@ -40,31 +47,32 @@ float Trainer::step() {
   parallel_threads([&](int t, int nt) {
     std::vector<float>& w = ws_[t];
     float* target = w.data();
-    float* X0 = target + kChunk;
-    float* acts = X0 + size_t(m.in_pad) * kChunk;
-    float* out_pre = acts + net_.acts_floats(kChunk);
-    float* out = out_pre + size_t(m.n_out) * kChunk;
-    float* dout = out + size_t(m.n_out) * kChunk;
-    float* scratch = dout + size_t(m.n_out) * kChunk;
+    float* X0 = target + C;
+    float* acts = X0 + size_t(m.in_pad) * C;
+    float* out_pre = acts + net_.acts_floats(int(C));
+    float* out = out_pre + size_t(m.n_out) * C;
+    float* dout = out + size_t(m.n_out) * C;
+    float* scratch = dout + size_t(m.n_out) * C;
     float* dW = dW_[t].data();
     std::memset(dW, 0, sizeof(float) * m.n_params);
     for (int64_t c = t; c < n_chunks; c += nt) {
-      float* x = xs_.data() + c * kChunk;
-      float* y = ys_.data() + c * kChunk;
-      float* z = zs_.data() + c * kChunk;
-      sampler_->sample(opts_.seed, step, uint64_t(c), kChunk, x, y, z, target);
-      net_.encode(x, y, z, kChunk, X0);
-      net_.mlp_forward(X0, kChunk, acts, out_pre, out);
+      float* x = xs_.data() + c * C;
+      float* y = ys_.data() + c * C;
+      float* z = zs_.data() + c * C;
+      const int n = int(C);
+      sampler_->sample(opts_.seed, step, uint64_t(c), n, x, y, z, target);
+      net_.encode(x, y, z, n, X0);
+      net_.mlp_forward(X0, n, acts, out_pre, out);
       double loss = 0;
       for (uint32_t o = 0; o < m.n_out; ++o)
-        for (int s = 0; s < kChunk; ++s) {
+        for (int s = 0; s < n; ++s) {
           float g;
           // n_out targets per sample; vnr volumes are scalar (n_out = 1).
-          loss += loss_value_and_grad(net_.config().loss, out[o * kChunk + s], target[s], inv_n, &g);
-          dout[o * kChunk + s] = g * activate_derivative(m.output_activation, out_pre[o * kChunk + s]);
+          loss += loss_value_and_grad(net_.config().loss, out[o * n + s], target[s], inv_n, &g);
+          dout[o * n + s] = g * activate_derivative(m.output_activation, out_pre[o * n + s]);
         }
       chunk_loss_[c] = loss;
-      net_.mlp_backward(X0, acts, dout, kChunk, dW, grid ? dEnc_.data() + c * int64_t(m.in_pad) * kChunk : nullptr,
+      net_.mlp_backward(X0, acts, dout, n, dW, grid ? dEnc_.data() + c * int64_t(m.in_pad) * C : nullptr,
                         scratch);
     }
   });
@@ -76,7 +84,7 @@ float Trainer::step() {
     // Levels dealt round-robin: thread t owns levels t, t + nt, ... (its writes never overlap another's).
     parallel_threads([&](int t, int nt) {
       for (uint32_t l = uint32_t(t); l < L; l += uint32_t(nt))
-        net_.grid_backward_level(l, xs_.data(), ys_.data(), zs_.data(), opts_.batch, dEnc_.data(), ggrid);
+        net_.grid_backward_level(l, xs_.data(), ys_.data(), zs_.data(), opts_.batch, dEnc_.data(), int(C), ggrid);
     });
   }
   auto t2 = std::chrono::steady_clock::now();

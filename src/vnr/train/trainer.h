@@ -40,6 +40,7 @@ private:
   TrainOptions opts_;
   Adam adam_;
   int n_threads_;
+  int chunk_;  // samples per chunk in this trainer
   big_vector<float> grads_;              // full gradient (MLP part overwritten each step)
   std::vector<std::vector<float>> dW_;    // per-thread MLP gradient
   std::vector<std::vector<float>> ws_;    // per-thread chunk workspace
