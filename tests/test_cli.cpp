@@ -210,3 +210,20 @@ TEST(Cli, SharedBonsaiSidecar) {
   EXPECT_EQ(rep["volume_bytes"], 16777216);
   EXPECT_GT(rep["psnr"].get<double>(), 24.0);
 }
+
+// Ctrl-C (SIGINT) during training still evaluates and saves the model trained so far.
+TEST(Cli, InterruptedTrainingSavesTheModel) {
+  const std::string d = dir();
+  ASSERT_EQ(run("synth noise --dims 32,32,32 -o " + d + "/int.json").code, 0);
+  const std::string cmd = std::string(VNR_CLI_PATH) + " train " + d + "/int.json -o " + d +
+                          "/int.vnr --config small --steps 100000000 --batch 4096 --no-ssim -q --report " + d +
+                          "/int_report.json >/dev/null 2>" + d + "/int_err.txt & pid=$!; sleep 2; kill -INT $pid; wait $pid";
+  ASSERT_EQ(std::system(("bash -c '" + cmd + "'").c_str()), 0);
+  ASSERT_TRUE(file_exists(d + "/int.vnr")) << read_file(d + "/int_err.txt");
+  Json rep = parse_json_file(d + "/int_report.json");
+  EXPECT_GT(rep["steps"].get<int64_t>(), 0);
+  EXPECT_LT(rep["steps"].get<int64_t>(), 100000000);
+  EXPECT_NE(read_file(d + "/int_err.txt").find("interrupted after"), std::string::npos);
+  Model m = load_model(d + "/int.vnr");
+  EXPECT_TRUE(m.training["interrupted"].get<bool>());
+}

@@ -1,4 +1,5 @@
 #include <chrono>
+#include <csignal>
 #include <cmath>
 #include <cstdio>
 #include "cli.h"
@@ -13,6 +14,14 @@
 namespace vnr::cli {
 
 namespace {
+
+// Ctrl-C during training stops after the current step and still evaluates and saves the model
+// (minutes of training are not thrown away); a second Ctrl-C exits at once.
+volatile std::sig_atomic_t g_interrupted = 0;
+extern "C" void on_sigint(int) {
+  g_interrupted = 1;
+  std::signal(SIGINT, SIG_DFL);
+}
 
 struct TrainArgs {
   std::string volume, output, config = "paper", report;
@@ -65,7 +74,9 @@ void run_train(const TrainArgs& a) {
   auto t0 = std::chrono::steady_clock::now();
   float loss = 0;
   int64_t done = 0;
-  while (done < steps) {
+  g_interrupted = 0;
+  auto previous = std::signal(SIGINT, on_sigint);
+  while (done < steps && !g_interrupted) {
     loss = trainer.step();
     ++done;
     double el = seconds_since(t0);
@@ -75,10 +86,14 @@ void run_train(const TrainArgs& a) {
     if (a.seconds > 0 && el >= a.seconds) break;
   }
   const double train_seconds = seconds_since(t0);
+  std::signal(SIGINT, previous == SIG_ERR ? SIG_DFL : previous);
   bar.finish(fmt::format("({} steps, loss {:.5f})", done, loss));
+  if (g_interrupted)
+    std::fprintf(stderr, "interrupted after %lld steps: evaluating and saving the model (Ctrl-C again to abort)\n",
+                 (long long)done);
 
   EvalResult ev = evaluate(net, vol, !a.no_ssim);
-  model.training = {{"steps", done}, {"seconds", train_seconds}, {"batch", a.batch}, {"seed", a.seed},
+  model.training = {{"steps", done}, {"seconds", train_seconds}, {"interrupted", bool(g_interrupted)}, {"batch", a.batch}, {"seed", a.seed},
                     {"final_loss", loss}, {"psnr", ev.psnr}, {"threads", num_threads()}};
   if (!a.no_ssim) model.training["ssim"] = ev.ssim;
   save_model(a.output, model);
