@@ -246,3 +246,31 @@ TEST(MlpKernels, FiniteDifferenceGradients) {
     if (X0[i] < 0.0f) EXPECT_EQ(dX0[i], 0.0f) << i;
   }
 }
+
+// A leading dimension larger than cols: only the first cols columns of each W row take part.
+TEST(MlpKernels, LeadingDimensionSkipsTrailingColumns) {
+  const int rows = 16, cols = 8, ldw = 16, n = 32;
+  std::vector<float> W(rows * ldw), X(ldw * n), dY(rows * n);
+  std::mt19937 gen(4);
+  std::uniform_real_distribution<float> U(-1.f, 1.f);
+  for (auto& v : W) v = U(gen);
+  for (auto& v : X) v = U(gen);
+  for (auto& v : dY) v = U(gen);
+  std::vector<float> Wc(rows * cols);  // the same weights, compacted
+  for (int r = 0; r < rows; ++r)
+    for (int c = 0; c < cols; ++c) Wc[r * cols + c] = W[r * ldw + c];
+  std::vector<float> y1(rows * n), y2(rows * n);
+  vnr::kernels::matmul_fwd(W.data(), rows, cols, X.data(), y1.data(), n, true, ldw);
+  vnr::kernels::ref::matmul_fwd(Wc.data(), rows, cols, X.data(), y2.data(), n, true);
+  for (size_t i = 0; i < y1.size(); ++i) EXPECT_NEAR(y1[i], y2[i], 1e-5f);
+  std::vector<float> d1(cols * n), d2(cols * n);
+  vnr::kernels::matmul_bwd_data(W.data(), rows, cols, dY.data(), nullptr, d1.data(), n, ldw);
+  vnr::kernels::ref::matmul_bwd_data(Wc.data(), rows, cols, dY.data(), nullptr, d2.data(), n);
+  for (size_t i = 0; i < d1.size(); ++i) EXPECT_NEAR(d1[i], d2[i], 1e-5f);
+  std::vector<float> g1(rows * ldw, 7.0f), g2(rows * cols, 7.0f);
+  vnr::kernels::matmul_bwd_weights(dY.data(), rows, X.data(), cols, n, g1.data(), ldw);
+  vnr::kernels::ref::matmul_bwd_weights(dY.data(), rows, X.data(), cols, n, g2.data());
+  for (int r = 0; r < rows; ++r)
+    for (int c = 0; c < ldw; ++c)
+      EXPECT_NEAR(g1[r * ldw + c], c < cols ? g2[r * cols + c] : 7.0f, 1e-4f) << r << "," << c;  // untouched past cols
+}

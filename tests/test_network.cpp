@@ -100,7 +100,8 @@ TEST(Mlp, BackwardMatchesFiniteDifferences) {
 }
 
 TEST(Mlp, ChunkForwardMatchesReferenceEvaluation) {
-  Network net(preset_config("paper"));
+ for (const char* preset : {"paper", "small"}) {  // small: 8 encoding outputs zero-padded to 16
+  Network net(preset_config(preset));
   net.init_params(1337);
   std::mt19937 gen(1);
   std::uniform_real_distribution<float> U(0.f, 1.f);
@@ -111,8 +112,9 @@ TEST(Mlp, ChunkForwardMatchesReferenceEvaluation) {
   net.infer(coords.data(), 300, out.data());
   for (int i = 0; i < 300; i += 7) {
     float ref = net.eval_reference(coords[3 * i], coords[3 * i + 1], coords[3 * i + 2]);
-    EXPECT_NEAR(out[i], ref, 1e-5 + 1e-4 * std::fabs(ref)) << i;
+    EXPECT_NEAR(out[i], ref, 1e-5 + 1e-4 * std::fabs(ref)) << preset << " " << i;
   }
+ }
 }
 
 TEST(Loss, ValuesAndGradientsMatchDefinitionAndFiniteDifferences) {

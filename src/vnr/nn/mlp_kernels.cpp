@@ -165,19 +165,19 @@ HWY_NOINLINE void Gemm(const float* a, size_t lda, int M, int K, const float* b,
   }
 }
 
-void MatmulFwd(const float* W, int rows, int cols, const float* X, float* Y, int n, bool relu) {
+void MatmulFwd(const float* W, int rows, int cols, const float* X, float* Y, int n, bool relu, int ldw) {
   if (relu)
-    Gemm<false, Epi::kRelu>(W, static_cast<size_t>(cols), rows, cols, X, Y, n, nullptr);
+    Gemm<false, Epi::kRelu>(W, static_cast<size_t>(ldw), rows, cols, X, Y, n, nullptr);
   else
-    Gemm<false, Epi::kNone>(W, static_cast<size_t>(cols), rows, cols, X, Y, n, nullptr);
+    Gemm<false, Epi::kNone>(W, static_cast<size_t>(ldw), rows, cols, X, Y, n, nullptr);
 }
 
 void MatmulBwdData(const float* W, int rows, int cols, const float* dY, const float* mask,
-                   float* dX, int n) {
+                   float* dX, int n, int ldw) {
   if (mask)
-    Gemm<true, Epi::kMask>(W, static_cast<size_t>(cols), cols, rows, dY, dX, n, mask);
+    Gemm<true, Epi::kMask>(W, static_cast<size_t>(ldw), cols, rows, dY, dX, n, mask);
   else
-    Gemm<true, Epi::kNone>(W, static_cast<size_t>(cols), cols, rows, dY, dX, n, nullptr);
+    Gemm<true, Epi::kNone>(W, static_cast<size_t>(ldw), cols, rows, dY, dX, n, nullptr);
 }
 
 // ---- bwd_weights ----
@@ -287,8 +287,8 @@ HWY_INLINE void WRowBlock(const float* dy, const float* X, int cols, size_t n, f
   }
 }
 
-void MatmulBwdWeights(const float* dY, int rows, const float* X, int cols, int n, float* dW) {
-  const size_t nn = static_cast<size_t>(n), ldw = static_cast<size_t>(cols);
+void MatmulBwdWeights(const float* dY, int rows, const float* X, int cols, int n, float* dW, int ldw_) {
+  const size_t nn = static_cast<size_t>(n), ldw = static_cast<size_t>(ldw_);
   int r0 = 0;
   for (; r0 + 4 <= rows; r0 += 4) WRowBlock<4>(dY + r0 * nn, X, cols, nn, dW + r0 * ldw, ldw);
   switch (rows - r0) {
@@ -314,44 +314,47 @@ HWY_EXPORT(MatmulBwdData);
 HWY_EXPORT(MatmulBwdWeights);
 HWY_EXPORT(TargetNameImpl);
 
-void matmul_fwd(const float* W, int rows, int cols, const float* X, float* Y, int n, bool relu) {
-  HWY_DYNAMIC_DISPATCH(MatmulFwd)(W, rows, cols, X, Y, n, relu);
+void matmul_fwd(const float* W, int rows, int cols, const float* X, float* Y, int n, bool relu, int ldw) {
+  HWY_DYNAMIC_DISPATCH(MatmulFwd)(W, rows, cols, X, Y, n, relu, ldw > 0 ? ldw : cols);
 }
 void matmul_bwd_data(const float* W, int rows, int cols, const float* dY, const float* mask,
-                     float* dX, int n) {
-  HWY_DYNAMIC_DISPATCH(MatmulBwdData)(W, rows, cols, dY, mask, dX, n);
+                     float* dX, int n, int ldw) {
+  HWY_DYNAMIC_DISPATCH(MatmulBwdData)(W, rows, cols, dY, mask, dX, n, ldw > 0 ? ldw : cols);
 }
-void matmul_bwd_weights(const float* dY, int rows, const float* X, int cols, int n, float* dW) {
-  HWY_DYNAMIC_DISPATCH(MatmulBwdWeights)(dY, rows, X, cols, n, dW);
+void matmul_bwd_weights(const float* dY, int rows, const float* X, int cols, int n, float* dW, int ldw) {
+  HWY_DYNAMIC_DISPATCH(MatmulBwdWeights)(dY, rows, X, cols, n, dW, ldw > 0 ? ldw : cols);
 }
 const char* simd_target_name() { return HWY_DYNAMIC_DISPATCH(TargetNameImpl)(); }
 
 // Portable scalar reference (compiled once): plain loops in the order the formulas read.
 namespace ref {
-void matmul_fwd(const float* W, int rows, int cols, const float* X, float* Y, int n, bool relu) {
+void matmul_fwd(const float* W, int rows, int cols, const float* X, float* Y, int n, bool relu, int ldw) {
+  const size_t ld = size_t(ldw > 0 ? ldw : cols);
   for (int r = 0; r < rows; ++r)
     for (int s = 0; s < n; ++s) {
       float sum = 0.0f;
-      for (int c = 0; c < cols; ++c) sum += W[size_t(r) * cols + c] * X[size_t(c) * n + s];
+      for (int c = 0; c < cols; ++c) sum += W[size_t(r) * ld + c] * X[size_t(c) * n + s];
       Y[size_t(r) * n + s] = relu ? (sum > 0.0f ? sum : 0.0f) : sum;
     }
 }
 void matmul_bwd_data(const float* W, int rows, int cols, const float* dY, const float* mask,
-                     float* dX, int n) {
+                     float* dX, int n, int ldw) {
+  const size_t ld = size_t(ldw > 0 ? ldw : cols);
   for (int c = 0; c < cols; ++c)
     for (int s = 0; s < n; ++s) {
       float sum = 0.0f;
-      for (int r = 0; r < rows; ++r) sum += W[size_t(r) * cols + c] * dY[size_t(r) * n + s];
+      for (int r = 0; r < rows; ++r) sum += W[size_t(r) * ld + c] * dY[size_t(r) * n + s];
       // Select rather than multiply by 0/1, so a masked-out gradient is exactly 0 even if inf.
       dX[size_t(c) * n + s] = (mask == nullptr || mask[size_t(c) * n + s] > 0.0f) ? sum : 0.0f;
     }
 }
-void matmul_bwd_weights(const float* dY, int rows, const float* X, int cols, int n, float* dW) {
+void matmul_bwd_weights(const float* dY, int rows, const float* X, int cols, int n, float* dW, int ldw) {
+  const size_t ld = size_t(ldw > 0 ? ldw : cols);
   for (int r = 0; r < rows; ++r)
     for (int c = 0; c < cols; ++c) {
       float sum = 0.0f;
       for (int s = 0; s < n; ++s) sum += dY[size_t(r) * n + s] * X[size_t(c) * n + s];
-      dW[size_t(r) * cols + c] += sum;
+      dW[size_t(r) * ld + c] += sum;
     }
 }
 }  // namespace ref

@@ -7,19 +7,23 @@
 
 namespace vnr::kernels {
 
-// Y[r*n + s] = act(sum_c W[r*cols + c] * X[c*n + s]); act = ReLU when relu, else identity.
-void matmul_fwd(const float* W, int rows, int cols, const float* X, float* Y, int n, bool relu);
-// dX[c*n + s] = (sum_r W[r*cols + c] * dY[r*n + s]) * (mask == nullptr || mask[c*n + s] > 0 ? 1 : 0)
-void matmul_bwd_data(const float* W, int rows, int cols, const float* dY, const float* mask, float* dX, int n);
-// dW[r*cols + c] += sum_s dY[r*n + s] * X[c*n + s]
-void matmul_bwd_weights(const float* dY, int rows, const float* X, int cols, int n, float* dW);
+// ldw is W's row stride (0 = cols): a layer can use only the first `cols` columns of a wider matrix
+// (the zero-padded encoding inputs of tcnn's layout contribute nothing and are skipped).
+// Y[r*n + s] = act(sum_c W[r*ldw + c] * X[c*n + s]); act = ReLU when relu, else identity.
+void matmul_fwd(const float* W, int rows, int cols, const float* X, float* Y, int n, bool relu, int ldw = 0);
+// dX[c*n + s] = (sum_r W[r*ldw + c] * dY[r*n + s]) * (mask == nullptr || mask[c*n + s] > 0 ? 1 : 0)
+void matmul_bwd_data(const float* W, int rows, int cols, const float* dY, const float* mask, float* dX, int n,
+                     int ldw = 0);
+// dW[r*ldw + c] += sum_s dY[r*n + s] * X[c*n + s]
+void matmul_bwd_weights(const float* dY, int rows, const float* X, int cols, int n, float* dW, int ldw = 0);
 // Name of the SIMD target chosen at run time (e.g. "AVX3", "AVX2", "SSE4", "EMU128").
 const char* simd_target_name();
 
 namespace ref {
-void matmul_fwd(const float* W, int rows, int cols, const float* X, float* Y, int n, bool relu);
-void matmul_bwd_data(const float* W, int rows, int cols, const float* dY, const float* mask, float* dX, int n);
-void matmul_bwd_weights(const float* dY, int rows, const float* X, int cols, int n, float* dW);
+void matmul_fwd(const float* W, int rows, int cols, const float* X, float* Y, int n, bool relu, int ldw = 0);
+void matmul_bwd_data(const float* W, int rows, int cols, const float* dY, const float* mask, float* dX, int n,
+                     int ldw = 0);
+void matmul_bwd_weights(const float* dY, int rows, const float* X, int cols, int n, float* dW, int ldw = 0);
 }  // namespace ref
 
 }  // namespace vnr::kernels

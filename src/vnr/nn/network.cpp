@@ -250,13 +250,18 @@ void Network::encode_point_input_grad(const float xyz[3], float* jac) const {
   }
 }
 
+// Columns of W_0 that see real inputs: tcnn pads grid encodings with zeros (those columns contribute
+// nothing and are skipped); parameter-free encodings pad with 1.0, which acts as a bias.
+static int first_layer_cols(const MlpLayout& m) { return int(m.pad_value == 0.0f ? m.enc_width : m.in_pad); }
+
 void Network::mlp_forward(const float* X0, int n, float* acts, float* out_pre, float* out) const {
   const MlpLayout& m = mlp_;
   const bool relu = m.activation == Activation::ReLU;
   const float* in = X0;
   for (uint32_t k = 0; k < m.n_hidden; ++k) {
     float* h = acts + size_t(k) * m.width * n;
-    kernels::matmul_fwd(params.data() + m.offset[k], int(m.rows[k]), int(m.cols[k]), in, h, n, relu);
+    const int cols = k == 0 ? first_layer_cols(m) : int(m.cols[k]);
+    kernels::matmul_fwd(params.data() + m.offset[k], int(m.rows[k]), cols, in, h, n, relu, int(m.cols[k]));
     in = h;
   }
   // Output layer: only the n_out real rows are computed; tcnn's padded rows never reach the loss.
@@ -286,8 +291,12 @@ void Network::mlp_backward(const float* X0, const float* acts, const float* d_ou
                              g_next, n);
     std::swap(g_cur, g_next);
   }
-  kernels::matmul_bwd_weights(g_cur, int(m.width), X0, int(m.in_pad), n, dW + m.offset[0]);
-  if (dX0) kernels::matmul_bwd_data(params.data() + m.offset[0], int(m.width), int(m.in_pad), g_cur, nullptr, dX0, n);
+  // Gradients of the zero-padded input columns are exactly 0 and not computed; dX0 rows past the
+  // encoding width are not written (nothing reads them).
+  const int k0 = first_layer_cols(m);
+  kernels::matmul_bwd_weights(g_cur, int(m.width), X0, k0, n, dW + m.offset[0], int(m.in_pad));
+  if (dX0)
+    kernels::matmul_bwd_data(params.data() + m.offset[0], int(m.width), k0, g_cur, nullptr, dX0, n, int(m.in_pad));
 }
 
 void Network::grid_backward_level(uint32_t level, const float* x, const float* y, const float* z, int64_t n,
@@ -311,7 +320,8 @@ void Network::infer_chunk(const float* x, const float* y, const float* z, int n,
   const float* in = X0;
   for (uint32_t k = 0; k < m.n_hidden; ++k) {
     float* h = (k & 1) ? h1 : h0;
-    kernels::matmul_fwd(params.data() + m.offset[k], int(m.rows[k]), int(m.cols[k]), in, h, n, relu);
+    const int cols = k == 0 ? first_layer_cols(m) : int(m.cols[k]);
+    kernels::matmul_fwd(params.data() + m.offset[k], int(m.rows[k]), cols, in, h, n, relu, int(m.cols[k]));
     in = h;
   }
   kernels::matmul_fwd(params.data() + m.offset[m.n_hidden], int(m.n_out), int(m.width), in, o, n, false);
