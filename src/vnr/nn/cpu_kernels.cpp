@@ -81,6 +81,21 @@ HWY_INLINE bool BlockInUnitCube(const float* x, const float* y, const float* z, 
   return hn::AllTrue(df, ok);
 }
 
+// Number of leading full blocks of N samples that take the vector path.
+HWY_INLINE int ValidBlocks(bool vec_ok, const float* x, const float* y, const float* z, int64_t n, size_t N) {
+  if (!vec_ok) return 0;
+  int nb = 0;
+  while (int64_t(nb + 1) * int64_t(N) <= n && BlockInUnitCube(x + nb * N, y + nb * N, z + nb * N, N)) ++nb;
+  return nb;
+}
+
+// Prefetch distance in blocks of samples (one block of the large levels takes about one memory
+// latency to gather).
+#ifndef VNR_PREFETCH_BLOCKS
+#define VNR_PREFETCH_BLOCKS 2
+#endif
+constexpr int kAhead = VNR_PREFETCH_BLOCKS;
+
 HWY_INLINE bool VectorPathOk(const GridLevel& L, const GridLayout& g) {
   if (g.interpolation == Interpolation::Nearest) return false;
   // Dense levels need idx < 2 n_l for the single subtraction: true when n_l >= res^3 (not tiled).
@@ -105,23 +120,24 @@ void EncodeF(const GridLayout& g, const uint16_t* table, const float* x, const f
     const uint16_t* lt = table + uint64_t(L.offset) * F;
     // Levels whose table fits in L2 gain nothing from prefetching; bigger ones are latency-bound.
     const bool pf = uint64_t(L.n_entries) * F * sizeof(uint16_t) > (uint64_t(1) << 18);
-    int s0 = 0;
-    // Software pipeline: the corners of block b+1 are computed and prefetched while block b is
-    // gathered, so the random reads of the large levels overlap instead of waiting one by one.
-    CornerBlock cbs[2];
-    bool have = vec_ok && int(N) <= n && BlockInUnitCube(x, y, z, N);
-    if (have) {
-      CornersVec(L, g.interpolation == Interpolation::Smoothstep, x, y, z, cbs[0]);
-      PrefetchCorners<F>(lt, cbs[0], N, pf);
+    // Software pipeline: the corners of block b + kAhead are computed and prefetched while block b
+    // is gathered, so the random reads of the large levels overlap instead of waiting one by one.
+    const int nb = ValidBlocks(vec_ok, x, y, z, n, N);
+    CornerBlock cbs[kAhead + 1];
+    const bool smooth = g.interpolation == Interpolation::Smoothstep;
+    for (int b = 0; b < nb && b < kAhead; ++b) {
+      CornersVec(L, smooth, x + b * N, y + b * N, z + b * N, cbs[b]);
+      PrefetchCorners<F>(lt, cbs[b], N, pf);
     }
-    for (int b = 0; have; ++b, s0 += int(N)) {
-      const CornerBlock& cur = cbs[b & 1];
-      const int s1 = s0 + int(N);
-      const bool next = s1 + int(N) <= n && BlockInUnitCube(x + s1, y + s1, z + s1, N);
-      if (next) {
-        CornersVec(L, g.interpolation == Interpolation::Smoothstep, x + s1, y + s1, z + s1, cbs[(b + 1) & 1]);
-        PrefetchCorners<F>(lt, cbs[(b + 1) & 1], N, pf);
+    for (int b = 0; b < nb; ++b) {
+      const int s0 = b * int(N);
+      if (b + kAhead < nb) {
+        const int sa = (b + kAhead) * int(N);
+        CornerBlock& ahead = cbs[(b + kAhead) % (kAhead + 1)];
+        CornersVec(L, smooth, x + sa, y + sa, z + sa, ahead);
+        PrefetchCorners<F>(lt, ahead, N, pf);
       }
+      const CornerBlock& cur = cbs[b % (kAhead + 1)];
       // F features of a corner: one fp16 load, one conversion, one FMA per vector of features.
       const DFF<F> dff;
       const DHF<F> dhf;
@@ -139,9 +155,8 @@ void EncodeF(const GridLayout& g, const uint16_t* table, const float* x, const f
         for (size_t v = 0; v < NV; ++v) hn::StoreU(acc[v], dff, tmp + v * NF);
         for (int f = 0; f < F; ++f) out[f * n + s0 + s] = tmp[f];
       }
-      have = next;
     }
-    for (int s = s0; s < n; ++s) grid_level_forward<F>(L, g.interpolation, table, x[s], y[s], z[s], out + s, n);
+    for (int s = nb * int(N); s < n; ++s) grid_level_forward<F>(L, g.interpolation, table, x[s], y[s], z[s], out + s, n);
   }
 }
 
@@ -168,23 +183,23 @@ void BackwardF(const GridLayout& g, uint32_t l, const float* x, const float* y, 
   for (int64_t c0 = 0; c0 < n; c0 += chunk) {
     const float* dy = dEnc + (c0 / chunk) * int64_t(in_pad) * chunk + int64_t(l) * F * chunk;
     const int64_t m = n - c0 < chunk ? n - c0 : chunk;
-    int64_t s0 = 0;
-    // Same software pipeline as the forward: block b+1's gradient lines are prefetched (for
-    // writing) while block b is scattered.
-    CornerBlock cbs[2];
-    bool have = vec_ok && N <= m && BlockInUnitCube(x + c0, y + c0, z + c0, size_t(N));
-    if (have) {
-      CornersVec(L, smooth, x + c0, y + c0, z + c0, cbs[0]);
-      PrefetchCorners<F>(lg, cbs[0], size_t(N), pf);
+    // Same software pipeline as the forward: gradient lines of block b + kAhead are prefetched
+    // (for writing) while block b is scattered.
+    const int nb = ValidBlocks(vec_ok, x + c0, y + c0, z + c0, m, size_t(N));
+    CornerBlock cbs[kAhead + 1];
+    for (int b = 0; b < nb && b < kAhead; ++b) {
+      CornersVec(L, smooth, x + c0 + b * N, y + c0 + b * N, z + c0 + b * N, cbs[b]);
+      PrefetchCorners<F>(lg, cbs[b], size_t(N), pf);
     }
-    for (int64_t b = 0; have; ++b, s0 += N) {
-      const CornerBlock& cur = cbs[b & 1];
-      const int64_t s1 = s0 + N;
-      const bool next = s1 + N <= m && BlockInUnitCube(x + c0 + s1, y + c0 + s1, z + c0 + s1, size_t(N));
-      if (next) {
-        CornersVec(L, smooth, x + c0 + s1, y + c0 + s1, z + c0 + s1, cbs[(b + 1) & 1]);
-        PrefetchCorners<F>(lg, cbs[(b + 1) & 1], size_t(N), pf);
+    for (int b = 0; b < nb; ++b) {
+      const int64_t s0 = b * N;
+      if (b + kAhead < nb) {
+        const int64_t sa = c0 + (b + kAhead) * N;
+        CornerBlock& ahead = cbs[(b + kAhead) % (kAhead + 1)];
+        CornersVec(L, smooth, x + sa, y + sa, z + sa, ahead);
+        PrefetchCorners<F>(lg, ahead, size_t(N), pf);
       }
+      const CornerBlock& cur = cbs[b % (kAhead + 1)];
       // Per corner: one vector load of the F gradients, one FMA, one store.
       const DFF<F> dff;
       constexpr size_t NV = (F + hn::MaxLanes(DFF<F>()) - 1) / hn::MaxLanes(DFF<F>());
@@ -201,9 +216,8 @@ void BackwardF(const GridLayout& g, uint32_t l, const float* x, const float* y, 
             hn::StoreU(hn::MulAdd(w, gv[v], hn::LoadU(dff, gr + v * NF)), dff, gr + v * NF);
         }
       }
-      have = next;
     }
-    for (int64_t s = s0; s < m; ++s)
+    for (int64_t s = int64_t(nb) * N; s < m; ++s)
       grid_level_backward<F>(L, g.interpolation, grad, x[c0 + s], y[c0 + s], z[c0 + s], dy + s, chunk);
   }
 }
