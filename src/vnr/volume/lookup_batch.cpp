@@ -13,9 +13,7 @@ namespace vnr {
 namespace HWY_NAMESPACE {
 namespace hn = hwy::HWY_NAMESPACE;
 
-// Storage kinds of a GridView: 0 float, 1 uint8 + lut, 2 uint16 + lut.
-template <int kKind>
-HWY_INLINE void LookupKind(const GridView& g, const float* x, const float* y, const float* z, int64_t n, float* out) {
+void LookupBatch(const GridView& g, const float* x, const float* y, const float* z, int64_t n, float* out) {
   const hn::ScalableTag<float> df;
   const hn::RebindToSigned<decltype(df)> di;
   const int64_t N = int64_t(hn::Lanes(df));
@@ -39,13 +37,11 @@ HWY_INLINE void LookupKind(const GridView& g, const float* x, const float* y, co
       hn::StoreU(hn::Add(c[0], hn::Add(hn::Mul(c[1], sy), hn::Mul(c[2], sz))), di, base);
       const int64_t ry = g.nx, rz = int64_t(g.nx) * g.ny;
       for (int64_t l = 0; l < N; ++l) {
-        const int64_t e = base[l];
-        const char* p0 = kKind == 0 ? (const char*)(g.data + e) : (kKind == 1 ? (const char*)(g.u8 + e) : (const char*)(g.u16 + e));
-        const int64_t es = kKind == 0 ? 4 : (kKind == 1 ? 1 : 2);
-        __builtin_prefetch(p0);
-        __builtin_prefetch(p0 + ry * es);
-        __builtin_prefetch(p0 + rz * es);
-        __builtin_prefetch(p0 + (ry + rz) * es);
+        const float* p0 = g.data + base[l];  // into L2 (prefetcht1), as the grid kernels do
+        __builtin_prefetch(p0, 0, 2);
+        __builtin_prefetch(p0 + ry, 0, 2);
+        __builtin_prefetch(p0 + rz, 0, 2);
+        __builtin_prefetch(p0 + ry + rz, 0, 2);
       }
     };
     // Prefetch kAhead blocks ahead: one block's gathers take about one memory latency.
@@ -66,16 +62,7 @@ HWY_INLINE void LookupKind(const GridView& g, const float* x, const float* y, co
         t[d] = hn::Sub(q, fl);
       }
       auto at = [&](const hn::Vec<decltype(di)>& cx, const hn::Vec<decltype(di)>& cy, const hn::Vec<decltype(di)>& cz) {
-        const auto idx = hn::Add(cx, hn::Add(hn::Mul(cy, sy), hn::Mul(cz, sz)));
-        if constexpr (kKind == 0) {
-          return hn::GatherIndex(df, g.data, idx);
-        } else {
-          // Read 4 bytes at the element's byte offset (the arrays are padded) and keep the low bits.
-          const auto off = kKind == 1 ? idx : hn::Add(idx, idx);
-          const auto raw = hn::GatherOffset(di, reinterpret_cast<const int32_t*>(kKind == 1 ? (const void*)g.u8 : (const void*)g.u16), off);
-          const auto v = hn::And(raw, hn::Set(di, kKind == 1 ? 0xff : 0xffff));
-          return hn::GatherIndex(df, g.lut, v);
-        }
+        return hn::GatherIndex(df, g.data, hn::Add(cx, hn::Add(hn::Mul(cy, sy), hn::Mul(cz, sz))));
       };
       const auto u0 = hn::Sub(one, t[0]), u1 = hn::Sub(one, t[1]), u2 = hn::Sub(one, t[2]);
       const auto c00 = hn::Add(hn::Mul(at(i0[0], i0[1], i0[2]), u0), hn::Mul(at(i1[0], i0[1], i0[2]), t[0]));
@@ -88,12 +75,6 @@ HWY_INLINE void LookupKind(const GridView& g, const float* x, const float* y, co
     }
   }
   for (; i < n; ++i) out[i] = grid_lookup(g, x[i], y[i], z[i]);
-}
-
-void LookupBatch(const GridView& g, const float* x, const float* y, const float* z, int64_t n, float* out) {
-  if (g.u8) LookupKind<1>(g, x, y, z, n, out);
-  else if (g.u16) LookupKind<2>(g, x, y, z, n, out);
-  else LookupKind<0>(g, x, y, z, n, out);
 }
 
 }  // namespace HWY_NAMESPACE

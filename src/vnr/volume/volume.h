@@ -65,35 +65,13 @@ struct LoadOptions {
 Volume load_volume(const VolumeDesc& desc, const LoadOptions& opts = {});
 
 // POD view of a normalised grid; what per-sample code (training targets, ground-truth rendering) reads.
-// Either `data` holds normalised floats, or (a CompactGrid) `u8`/`u16` hold the source integers and
-// `lut` maps each integer to its normalised value.
 struct GridView {
   const float* data = nullptr;
   int32_t nx = 0, ny = 0, nz = 0;
-  const uint8_t* u8 = nullptr;
-  const uint16_t* u16 = nullptr;
-  const float* lut = nullptr;
 };
 inline GridView view_of(const Volume& v) {
   return GridView{v.data.data(), int32_t(v.dims.x), int32_t(v.dims.y), int32_t(v.dims.z)};
 }
-
-VNR_HD VNR_INLINE float grid_voxel(const GridView& g, int64_t i) {
-  return g.u8 ? g.lut[g.u8[i]] : (g.u16 ? g.lut[g.u16[i]] : g.data[i]);
-}
-
-// A compact in-memory copy of an 8- or 16-bit volume for sampling: the source integers plus a
-// table integer -> normalised value, built from and verified against Volume::data, so lookups are
-// bit-identical to the float grid while touching 4x (2x) less memory (bonsai: 16 MiB, L3-resident,
-// instead of 64 MiB). make_compact_grid returns false when the volume is not 8/16-bit or its values
-// do not map back exactly (e.g. a non-integer explicit range clamps some voxels).
-struct CompactGrid {
-  big_vector<uint8_t> u8;
-  big_vector<uint16_t> u16;
-  std::vector<float> lut;
-  GridView view;
-};
-bool make_compact_grid(const Volume& v, CompactGrid& out);
 
 // Cell-centred, clamp-to-edge trilinear lookup at u in [0,1)^3 (compat.md B.2):
 // p = u*N - 0.5 clamped to [0, N-1] per axis; trilinear between floor(p) and min(floor(p)+1, N-1).
@@ -111,7 +89,7 @@ VNR_HD VNR_INLINE float grid_lookup(const GridView& g, float ux, float uy, float
     t[d] = q - fl;
   }
   const int64_t sx = 1, sy = g.nx, sz = int64_t(g.nx) * g.ny;
-  auto at = [&](int32_t x, int32_t y, int32_t z) { return grid_voxel(g, x * sx + y * sy + z * sz); };
+  auto at = [&](int32_t x, int32_t y, int32_t z) { return g.data[x * sx + y * sy + z * sz]; };
   float c00 = at(i0[0], i0[1], i0[2]) * (1 - t[0]) + at(i1[0], i0[1], i0[2]) * t[0];
   float c10 = at(i0[0], i1[1], i0[2]) * (1 - t[0]) + at(i1[0], i1[1], i0[2]) * t[0];
   float c01 = at(i0[0], i0[1], i1[2]) * (1 - t[0]) + at(i1[0], i0[1], i1[2]) * t[0];
