@@ -8,8 +8,8 @@ sh scripts/setup.sh
 sh scripts/build.sh
 mkdir -p out/demo
 VNR=./build/vnr
-$VNR synth marschner-lobb --dims 128,128,128 -o out/demo/marschner_lobb.json
+$VNR synth marschner-lobb --dims 128,128,128 -o out/demo/marschner_lobb.json --force
 $VNR train out/demo/marschner_lobb.json -o out/demo/marschner_lobb.vnr --target-ratio 20 --steps 500 \
   --report out/demo/train_report.json
 $VNR info out/demo/marschner_lobb.vnr
-$VNR decode out/demo/marschner_lobb.vnr -o out/demo/decoded.nrrd
+$VNR decode out/demo/marschner_lobb.vnr -o out/demo/decoded.nrrd --force

@@ -227,3 +227,19 @@ TEST(Cli, InterruptedTrainingSavesTheModel) {
   Model m = load_model(d + "/int.vnr");
   EXPECT_TRUE(m.training["interrupted"].get<bool>());
 }
+
+// decode and synth never silently replace existing volume files.
+TEST(Cli, OutputsAreNotOverwrittenWithoutForce) {
+  const std::string d = dir();
+  ASSERT_EQ(run("synth noise --dims 8,8,8 -o " + d + "/ow.json").code, 0);
+  const std::string original = read_file(d + "/ow.raw");
+  expect_error("synth marschner-lobb --dims 8,8,8 -o " + d + "/ow.json", "--force");
+  EXPECT_EQ(read_file(d + "/ow.raw"), original);
+  ASSERT_EQ(run("train " + d + "/ow.json -o " + d + "/ow.vnr --config small --steps 3 --batch 1024 -q --no-ssim").code, 0);
+  // Decoding onto the source's own raw file (whose sidecar is ow.json) is refused...
+  expect_error("decode " + d + "/ow.vnr -o " + d + "/ow.raw -q", "already exists");
+  EXPECT_EQ(read_file(d + "/ow.raw"), original);
+  // ...unless asked for.
+  EXPECT_EQ(run("decode " + d + "/ow.vnr -o " + d + "/ow.raw -q --force").code, 0);
+  EXPECT_NE(read_file(d + "/ow.raw"), original);
+}

@@ -20,6 +20,9 @@ struct VolumeArgs {
 
 Int3 parse_dims(const std::string& s);
 void write_report(const std::string& path, const Json& report);  // atomic; "" = no report
+// Refuses to replace existing volume files (a decoded or generated volume must never silently
+// overwrite someone's data) unless force is set.
+void check_no_overwrite(const std::vector<std::string>& files, bool force);
 std::string human_bytes(double bytes);
 
 void add_train(CLI::App& app);

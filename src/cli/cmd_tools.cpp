@@ -60,7 +60,7 @@ void add_decode(CLI::App& app) {
   struct Args {
     std::string model, output, dims, dtype = "float32";
     int threads = 0;
-    bool quiet = false;
+    bool quiet = false, force = false;
   };
   auto a = std::make_shared<Args>();
   CLI::App* c = app.add_subcommand("decode", "decode a model to a volume file (raw + JSON sidecar, or NRRD)");
@@ -70,8 +70,10 @@ void add_decode(CLI::App& app) {
   c->add_option("--dtype", a->dtype, "float32, or 'source' for the original data type")->capture_default_str();
   c->add_option("--threads", a->threads, "CPU threads (default: all cores)");
   c->add_flag("-q,--quiet", a->quiet, "no progress output");
+  c->add_flag("--force", a->force, "replace existing output files");
   c->callback([a]() {
     set_num_threads(a->threads);
+    check_no_overwrite(volume_output_files(a->output), a->force);
     Model m = load_model(a->model);
     Int3 dims = a->dims.empty() ? m.dims : parse_dims(a->dims);
     DType out_t = a->dtype == "source" ? m.source_dtype : parse_dtype(a->dtype);
@@ -154,6 +156,7 @@ void add_synth(CLI::App& app) {
   struct Args {
     std::string kind, dims, output;
     uint64_t seed = 1;
+    bool force = false;
   };
   auto a = std::make_shared<Args>();
   CLI::App* c = app.add_subcommand("synth", "write a procedural volume (raw + JSON sidecar), streamed");
@@ -161,8 +164,11 @@ void add_synth(CLI::App& app) {
   c->add_option("--dims", a->dims, "X,Y,Z")->required();
   c->add_option("-o,--output", a->output, "OUT.json (the raw data goes to OUT.raw)")->required();
   c->add_option("--seed", a->seed, "seed of the noise field")->capture_default_str();
+  c->add_flag("--force", a->force, "replace existing output files");
   c->callback([a]() {
     Int3 d = parse_dims(a->dims);
+    if (a->output.size() > 5 && a->output.compare(a->output.size() - 5, 5, ".json") == 0)
+      check_no_overwrite({a->output, a->output.substr(0, a->output.size() - 5) + ".raw"}, a->force);
     auto t0 = std::chrono::steady_clock::now();
     synth_volume(a->kind, d, a->output, a->seed);
     std::printf("wrote %s (%lldx%lldx%lld float32) in %.2fs\n", a->output.c_str(), (long long)d.x, (long long)d.y,

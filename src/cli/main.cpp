@@ -61,6 +61,12 @@ void write_report(const std::string& path, const Json& report) {
   write_file_atomic(path, report.dump(2) + "\n");
 }
 
+void check_no_overwrite(const std::vector<std::string>& files, bool force) {
+  if (force) return;
+  for (const std::string& f : files)
+    if (file_exists(f)) fail("'{}' already exists; choose another output or pass --force to replace it", f);
+}
+
 std::string human_bytes(double b) {
   const char* u[] = {"B", "KiB", "MiB", "GiB", "TiB"};
   int i = 0;

@@ -81,6 +81,11 @@ VolumeWriter::VolumeWriter(const std::string& path, Int3 dims, DType dtype, Vec3
   }
 }
 
+std::vector<std::string> volume_output_files(const std::string& path) {
+  if (is_nrrd_path(path)) return {path};
+  return {path, strip_extension(path) + ".json"};
+}
+
 VolumeWriter::~VolumeWriter() = default;  // an uncommitted AtomicFile removes its temporary
 
 std::string VolumeWriter::sidecar_path() const {

@@ -2,6 +2,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <vector>
 #include "vnr/core/fileio.h"
 #include "vnr/core/math.h"
 #include "vnr/volume/volume.h"
@@ -37,6 +38,9 @@ private:
   double seen_lo_ = 1e308, seen_hi_ = -1e308;  // finite min/max of the stored values (sidecar range)
   std::unique_ptr<AtomicFile> file_;
 };
+
+// The files a VolumeWriter for `path` creates (the data file, and the sidecar for raw output).
+std::vector<std::string> volume_output_files(const std::string& path);
 
 // Procedural volumes for demos, tests and benchmarks, streamed to disk (raw + sidecar).
 //   marschner-lobb: the Marschner-Lobb test signal (alpha 0.25, f_M 6) on [-1,1]^3, float32;
