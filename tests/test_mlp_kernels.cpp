@@ -274,3 +274,27 @@ TEST(MlpKernels, LeadingDimensionSkipsTrailingColumns) {
     for (int c = 0; c < ldw; ++c)
       EXPECT_NEAR(g1[r * ldw + c], c < cols ? g2[r * cols + c] : 7.0f, 1e-4f) << r << "," << c;  // untouched past cols
 }
+
+// The fused 16-wide forward equals the layer-by-layer reference (ReLU hidden layers, one output).
+TEST(MlpKernels, Fused16WideForwardMatchesLayerByLayer) {
+  std::mt19937 gen(8);
+  std::uniform_real_distribution<float> U(-0.5f, 0.5f);
+  for (int n_hidden : {1, 2, 4}) {
+    const int k0 = 8, ldw0 = 16, n = 64;
+    std::vector<float> W0(16 * ldw0), Wh(16 * 16 * 4), Wout(16), X(ldw0 * n);
+    for (auto* v : {&W0, &Wh, &Wout, &X})
+      for (auto& e : *v) e = U(gen);
+    std::vector<const float*> hp;
+    for (int l = 0; l + 1 < n_hidden; ++l) hp.push_back(Wh.data() + l * 256);
+    std::vector<float> fused(n);
+    vnr::kernels::mlp_forward_16(W0.data(), k0, ldw0, hp.data(), n_hidden - 1, Wout.data(), X.data(), n, fused.data());
+    std::vector<float> a(16 * n), b(16 * n), y(n);
+    vnr::kernels::ref::matmul_fwd(W0.data(), 16, k0, X.data(), a.data(), n, true, ldw0);
+    for (int l = 0; l + 1 < n_hidden; ++l) {
+      vnr::kernels::ref::matmul_fwd(hp[l], 16, 16, a.data(), b.data(), n, true);
+      std::swap(a, b);
+    }
+    vnr::kernels::ref::matmul_fwd(Wout.data(), 1, 16, a.data(), y.data(), n, false);
+    for (int s = 0; s < n; ++s) EXPECT_NEAR(fused[s], y[s], 1e-5f) << n_hidden << " " << s;
+  }
+}

@@ -299,6 +299,38 @@ void MatmulBwdWeights(const float* dY, int rows, const float* X, int cols, int n
   }
 }
 
+// Whole forward pass of a 16-wide ReLU MLP with one output, lanes = samples, every activation in
+// registers: a 16-wide network's GEMMs are too small (K = 8-16) for the tiled kernels to reach the
+// FMA peak, while here each weight is one broadcast-FMA and nothing is stored between layers.
+void MlpForward16(const float* W0, int k0, int ldw0, const float* const* Wh, int n_mid, const float* Wout,
+                  const float* X0, int n, float* out) {
+  constexpr int kW = 16;
+  const DF d;
+  const size_t N = hn::Lanes(d);
+  using V = hn::Vec<DF>;
+  const V zero = hn::Zero(d);
+  for (size_t s0 = 0; s0 + N <= size_t(n); s0 += N) {
+    V h[kW];
+    for (int o = 0; o < kW; ++o) h[o] = zero;
+    for (int c = 0; c < k0; ++c) {
+      const V x = hn::LoadU(d, X0 + size_t(c) * n + s0);
+      for (int o = 0; o < kW; ++o) h[o] = hn::MulAdd(hn::Set(d, W0[size_t(o) * ldw0 + c]), x, h[o]);
+    }
+    for (int o = 0; o < kW; ++o) h[o] = hn::Max(h[o], zero);
+    for (int l = 0; l < n_mid; ++l) {
+      const float* W = Wh[l];
+      V g[kW];
+      for (int o = 0; o < kW; ++o) g[o] = zero;
+      for (int i = 0; i < kW; ++i)
+        for (int o = 0; o < kW; ++o) g[o] = hn::MulAdd(hn::Set(d, W[o * kW + i]), h[i], g[o]);
+      for (int o = 0; o < kW; ++o) h[o] = hn::Max(g[o], zero);
+    }
+    V y = zero;
+    for (int i = 0; i < kW; ++i) y = hn::MulAdd(hn::Set(d, Wout[i]), h[i], y);
+    hn::StoreU(y, d, out + s0);
+  }
+}
+
 const char* TargetNameImpl() { return hwy::TargetName(HWY_TARGET); }
 
 #undef VNR_MLP_WIDE
@@ -313,6 +345,12 @@ HWY_EXPORT(MatmulFwd);
 HWY_EXPORT(MatmulBwdData);
 HWY_EXPORT(MatmulBwdWeights);
 HWY_EXPORT(TargetNameImpl);
+HWY_EXPORT(MlpForward16);
+
+void mlp_forward_16(const float* W0, int k0, int ldw0, const float* const* Wh, int n_mid, const float* Wout,
+                    const float* X0, int n, float* out) {
+  HWY_DYNAMIC_DISPATCH(MlpForward16)(W0, k0, ldw0, Wh, n_mid, Wout, X0, n, out);
+}
 
 void matmul_fwd(const float* W, int rows, int cols, const float* X, float* Y, int n, bool relu, int ldw) {
   HWY_DYNAMIC_DISPATCH(MatmulFwd)(W, rows, cols, X, Y, n, relu, ldw > 0 ? ldw : cols);

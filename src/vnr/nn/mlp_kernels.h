@@ -16,6 +16,11 @@ void matmul_bwd_data(const float* W, int rows, int cols, const float* dY, const 
                      int ldw = 0);
 // dW[r*ldw + c] += sum_s dY[r*n + s] * X[c*n + s]
 void matmul_bwd_weights(const float* dY, int rows, const float* X, int cols, int n, float* dW, int ldw = 0);
+// Whole forward pass of a 16-wide, bias-free ReLU MLP with one output (pre-activation) for n samples
+// (n a multiple of 16), activations kept in registers: W0 is 16 x ldw0 of which the first k0 columns
+// are used; Wh[0..n_mid) are the 16 x 16 hidden matrices; Wout the 16 weights of output row 0.
+void mlp_forward_16(const float* W0, int k0, int ldw0, const float* const* Wh, int n_mid, const float* Wout,
+                    const float* X0, int n, float* out);
 // Name of the SIMD target chosen at run time (e.g. "AVX3", "AVX2", "SSE4", "EMU128").
 const char* simd_target_name();
 

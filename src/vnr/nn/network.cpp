@@ -317,6 +317,14 @@ void Network::infer_chunk(const float* x, const float* y, const float* z, int n,
   float* o = h1 + size_t(m.width) * n;
   encode(x, y, z, n, X0);
   const bool relu = m.activation == Activation::ReLU;
+  if (relu && m.width == 16 && m.n_out == 1 && m.n_hidden <= 16 && n % 16 == 0) {
+    const float* Wh[16];
+    for (uint32_t k = 1; k < m.n_hidden; ++k) Wh[k - 1] = params.data() + m.offset[k];
+    kernels::mlp_forward_16(params.data() + m.offset[0], first_layer_cols(m), int(m.in_pad), Wh, int(m.n_hidden - 1),
+                            params.data() + m.offset[m.n_hidden], X0, n, o);
+    for (int s = 0; s < n; ++s) out[s] = activate(m.output_activation, o[s]);
+    return;
+  }
   const float* in = X0;
   for (uint32_t k = 0; k < m.n_hidden; ++k) {
     float* h = (k & 1) ? h1 : h0;
