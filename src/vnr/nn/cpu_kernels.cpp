@@ -100,6 +100,9 @@ HWY_INLINE int ValidBlocks(bool vec_ok, const float* x, const float* y, const fl
 constexpr int kAhead = VNR_PREFETCH_BLOCKS;
 
 HWY_INLINE bool VectorPathOk(const GridLevel& L, const GridLayout& g) {
+  // Without hardware FMA, Highway's MulAdd rounds twice; the scalar path (fmaf, correctly rounded)
+  // keeps results bit-identical to the reference on every target.
+  if (!HWY_NATIVE_FMA) return false;
   if (g.interpolation == Interpolation::Nearest) return false;
   // Dense levels need idx < 2 n_l for the single subtraction: true when n_l >= res^3 (not tiled).
   if (!L.hashed && !L.pow2_mask && uint64_t(L.n_entries) < uint64_t(L.res) * L.res * L.res) return false;
