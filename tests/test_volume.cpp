@@ -1,4 +1,5 @@
 #include <gtest/gtest.h>
+#include <hwy/targets.h>
 #include "vnr/core/rng.h"
 #include <unistd.h>
 #include <zlib.h>
@@ -839,7 +840,12 @@ TEST(Lookup, BatchIsBitIdenticalToPointLookup) {
     z.push_back(i % 17 == 0 ? 1.0f : rng.next_float());
   }
   std::vector<float> out(x.size());
-  vnr::grid_lookup_batch(g, x.data(), y.data(), z.data(), int64_t(x.size()), out.data());
-  for (size_t i = 0; i < x.size(); ++i) ASSERT_EQ(out[i], vnr::grid_lookup(g, x[i], y[i], z[i])) << i;
+  for (int64_t t : hwy::SupportedAndGeneratedTargets()) {  // every SIMD target this machine has
+    hwy::SetSupportedTargetsForTest(t);
+    vnr::grid_lookup_batch(g, x.data(), y.data(), z.data(), int64_t(x.size()), out.data());
+    for (size_t i = 0; i < x.size(); ++i)
+      ASSERT_EQ(out[i], vnr::grid_lookup(g, x[i], y[i], z[i])) << hwy::TargetName(t) << " " << i;
+  }
+  hwy::SetSupportedTargetsForTest(0);
 }
 
