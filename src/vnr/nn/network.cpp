@@ -55,6 +55,7 @@ MlpLayout make_mlp_layout(const ModelConfig& cfg, uint32_t n_output_dims) {
   m.enc_width = encoding_width(cfg.encoding);
   m.in_pad = uint32_t(next_multiple(m.enc_width, std::lcm(align, encoding_min_alignment(cfg.encoding))));
   m.pad_value = cfg.encoding.type == EncodingType::Grid ? 0.0f : 1.0f;
+  m.first_cols = m.pad_value == 0.0f ? m.enc_width : m.in_pad;
   m.width = nc.n_neurons;
   m.n_hidden = nc.n_hidden_layers;
   m.n_out = n_output_dims;
@@ -79,8 +80,8 @@ uint64_t count_params(const Json& config, uint32_t n_output_dims) {
   return make_mlp_layout(c, n_output_dims).n_params + grid;
 }
 
-Network::Network(const Json& config, uint32_t n_output_dims) : cfg_json_(config), cfg_(ModelConfig::from_json(config)) {
-  cfg_json_ = cfg_.to_json();  // canonical, every key explicit
+Network::Network(const Json& config, uint32_t n_output_dims)
+    : cfg_(ModelConfig::from_json(config)), cfg_json_(cfg_.to_json()) {  // canonical: every key explicit
   if (has_grid()) grid_ = make_grid_layout(cfg_.encoding);
   mlp_ = make_mlp_layout(cfg_, n_output_dims);
   params.assign(n_params(), 0.0f);
@@ -160,20 +161,18 @@ void Network::encode(const float* x, const float* y, const float* z, int n, floa
 void Network::encode_point(const float xyz[3], float* out) const {
   const EncodingConfig& e = cfg_.encoding;
   switch (e.type) {
-    case EncodingType::Grid: {
-      const int F = int(grid_.n_features);
+    case EncodingType::Grid:
       for (uint32_t l = 0; l < grid_.n_levels; ++l) {
-        GridCorners c;
-        grid_corners(grid_.levels[l], grid_.interpolation, xyz[0], xyz[1], xyz[2], c);
-        for (int f = 0; f < F; ++f) {
-          float acc = 0.0f;
-          for (int k = 0; k < 8; ++k)
-            acc = std::fma(c.weight[k], half_to_float(grid_half()[(uint64_t(grid_.levels[l].offset) + c.entry[k]) * F + f]), acc);
-          out[l * F + f] = acc;
+        const GridLevel& L = grid_.levels[l];
+        float* o = out + l * grid_.n_features;
+        switch (grid_.n_features) {
+          case 1: grid_level_forward<1>(L, grid_.interpolation, grid_half(), xyz[0], xyz[1], xyz[2], o, 1); break;
+          case 2: grid_level_forward<2>(L, grid_.interpolation, grid_half(), xyz[0], xyz[1], xyz[2], o, 1); break;
+          case 4: grid_level_forward<4>(L, grid_.interpolation, grid_half(), xyz[0], xyz[1], xyz[2], o, 1); break;
+          case 8: grid_level_forward<8>(L, grid_.interpolation, grid_half(), xyz[0], xyz[1], xyz[2], o, 1); break;
         }
       }
       break;
-    }
     case EncodingType::Frequency: {
       const uint32_t nf = e.n_frequencies;
       for (uint32_t j = 0; j < 3 * 2 * nf; ++j) {
@@ -250,17 +249,13 @@ void Network::encode_point_input_grad(const float xyz[3], float* jac) const {
   }
 }
 
-// Columns of W_0 that see real inputs: tcnn pads grid encodings with zeros (those columns contribute
-// nothing and are skipped); parameter-free encodings pad with 1.0, which acts as a bias.
-static int first_layer_cols(const MlpLayout& m) { return int(m.pad_value == 0.0f ? m.enc_width : m.in_pad); }
-
 void Network::mlp_forward(const float* X0, int n, float* acts, float* out_pre, float* out) const {
   const MlpLayout& m = mlp_;
   const bool relu = m.activation == Activation::ReLU;
   const float* in = X0;
   for (uint32_t k = 0; k < m.n_hidden; ++k) {
     float* h = acts + size_t(k) * m.width * n;
-    const int cols = k == 0 ? first_layer_cols(m) : int(m.cols[k]);
+    const int cols = k == 0 ? int(m.first_cols) : int(m.cols[k]);
     kernels::matmul_fwd(params.data() + m.offset[k], int(m.rows[k]), cols, in, h, n, relu, int(m.cols[k]));
     in = h;
   }
@@ -293,7 +288,7 @@ void Network::mlp_backward(const float* X0, const float* acts, const float* d_ou
   }
   // Gradients of the zero-padded input columns are exactly 0 and not computed; dX0 rows past the
   // encoding width are not written (nothing reads them).
-  const int k0 = first_layer_cols(m);
+  const int k0 = int(m.first_cols);
   kernels::matmul_bwd_weights(g_cur, int(m.width), X0, k0, n, dW + m.offset[0], int(m.in_pad));
   if (dX0)
     kernels::matmul_bwd_data(params.data() + m.offset[0], int(m.width), k0, g_cur, nullptr, dX0, n, int(m.in_pad));
@@ -305,35 +300,28 @@ void Network::grid_backward_level(uint32_t level, const float* x, const float* y
 }
 
 size_t Network::infer_workspace_floats() const {
-  // X0 + two ping-pong hidden buffers + output rows
-  return (size_t(mlp_.in_pad) + 2 * size_t(mlp_.width) + mlp_.n_out) * chunk_;
+  // X0, every hidden activation, the output's pre-activation and activation
+  return (size_t(mlp_.in_pad) + size_t(mlp_.n_hidden) * mlp_.width + 2 * size_t(mlp_.n_out)) * chunk_;
 }
 
 void Network::infer_chunk(const float* x, const float* y, const float* z, int n, float* out, float* ws) const {
   const MlpLayout& m = mlp_;
   float* X0 = ws;
-  float* h0 = X0 + size_t(m.in_pad) * n;
-  float* h1 = h0 + size_t(m.width) * n;
-  float* o = h1 + size_t(m.width) * n;
+  float* acts = X0 + size_t(m.in_pad) * n;
+  float* pre = acts + acts_floats(n);
+  float* y_out = pre + size_t(m.n_out) * n;
   encode(x, y, z, n, X0);
-  const bool relu = m.activation == Activation::ReLU;
-  if (relu && m.width == 16 && m.n_out == 1 && m.n_hidden <= 16 && n % 16 == 0) {
+  if (m.activation == Activation::ReLU && m.width == 16 && m.n_out == 1 && m.n_hidden <= 16 && n % 16 == 0) {
+    // 16-wide networks: the whole forward pass in registers (the tiled GEMMs cannot fill the FMA pipes).
     const float* Wh[16];
     for (uint32_t k = 1; k < m.n_hidden; ++k) Wh[k - 1] = params.data() + m.offset[k];
-    kernels::mlp_forward_16(params.data() + m.offset[0], first_layer_cols(m), int(m.in_pad), Wh, int(m.n_hidden - 1),
-                            params.data() + m.offset[m.n_hidden], X0, n, o);
-    for (int s = 0; s < n; ++s) out[s] = activate(m.output_activation, o[s]);
+    kernels::mlp_forward_16(params.data() + m.offset[0], int(m.first_cols), int(m.in_pad), Wh, int(m.n_hidden - 1),
+                            params.data() + m.offset[m.n_hidden], X0, n, pre);
+    for (int s = 0; s < n; ++s) out[s] = activate(m.output_activation, pre[s]);
     return;
   }
-  const float* in = X0;
-  for (uint32_t k = 0; k < m.n_hidden; ++k) {
-    float* h = (k & 1) ? h1 : h0;
-    const int cols = k == 0 ? first_layer_cols(m) : int(m.cols[k]);
-    kernels::matmul_fwd(params.data() + m.offset[k], int(m.rows[k]), cols, in, h, n, relu, int(m.cols[k]));
-    in = h;
-  }
-  kernels::matmul_fwd(params.data() + m.offset[m.n_hidden], int(m.n_out), int(m.width), in, o, n, false);
-  for (int s = 0; s < n; ++s) out[s] = activate(m.output_activation, o[s]);
+  mlp_forward(X0, n, acts, pre, y_out);
+  std::copy(y_out, y_out + n, out);  // the first output row
 }
 
 void Network::infer(const float* coords, int64_t n, float* out) const {

@@ -21,6 +21,7 @@ struct MlpLayout {
   uint32_t enc_width = 0;  // encoding output width before padding
   uint32_t in_pad = 0;     // padded MLP input width
   float pad_value = 0;     // 0 for grids, 1 for parameter-free encodings (acts as a bias input)
+  uint32_t first_cols = 0; // columns of W_0 that see real inputs: zero-padded ones (grids) are skipped
   uint32_t width = 0, n_hidden = 0;
   uint32_t n_out = 1, out_pad = 16;
   uint32_t n_matrices = 0;           // n_hidden + 1
@@ -101,8 +102,8 @@ private:
   void infer_chunk(const float* x, const float* y, const float* z, int n, float* out, float* ws) const;
   size_t infer_workspace_floats() const;
 
-  Json cfg_json_;
   ModelConfig cfg_;
+  Json cfg_json_;
   big_vector<uint16_t> grid_half_;
   int chunk_ = kChunk;
   GridLayout grid_;

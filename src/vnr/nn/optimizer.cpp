@@ -21,11 +21,6 @@ float Adam::learning_rate_at(const AdamConfig& a, const DecayConfig& d, uint64_t
   return a.learning_rate * f;
 }
 
-namespace {
-struct AdamConsts {
-  float lr, lr_nm, beta1, beta2, eps, l2, rel, abs_, lo, hi;
-};
-}  // namespace
 
 void Adam::step(float* params, float* grads, uint16_t* non_matrix_half) {
   // ExponentialDecay: t = steps completed so far.
@@ -42,31 +37,21 @@ void Adam::step(float* params, float* grads, uint16_t* non_matrix_half) {
     bias_sqrt_.push_back(std::sqrt(1.0f - std::pow(cfg_.beta2, cc)));
     bias_den_.push_back(1.0f - std::pow(cfg_.beta1, cc));
   }
-  AdamConsts k;
-  k.lr = base_lr_ * factor_;
-  k.lr_nm = k.lr * cfg_.non_matrix_learning_rate_factor;
-  k.beta1 = cfg_.beta1;
-  k.beta2 = cfg_.beta2;
-  k.eps = cfg_.epsilon;
-  k.l2 = cfg_.l2_reg;
-  k.rel = cfg_.relative_decay;
-  k.abs_ = cfg_.absolute_decay;
-  k.lo = 0.0f;
-  k.hi = FLT_MAX;
+  // Matrix (MLP) parameters first: l2 applies and they are never skipped.
+  kernels::AdamStep ks{base_lr_ * factor_, cfg_.beta1, cfg_.beta2, cfg_.epsilon, cfg_.l2_reg, cfg_.relative_decay,
+                       cfg_.absolute_decay, 0.0f, FLT_MAX, true, bias_sqrt_.data(), bias_den_.data()};
   if (cfg_.adabound) {
     float s = float(step_);
-    k.lo = 0.1f - 0.1f / ((1.0f - cfg_.beta2) * s + 1.0f);
-    k.hi = 0.1f + 0.1f / ((1.0f - cfg_.beta2) * s);
+    ks.lo = 0.1f - 0.1f / ((1.0f - cfg_.beta2) * s + 1.0f);
+    ks.hi = 0.1f + 0.1f / ((1.0f - cfg_.beta2) * s);
   }
-  // Matrix (MLP) and non-matrix (grid) parameters differ in l2 and zero-gradient skipping.
-  kernels::AdamStep ks{k.lr, k.beta1, k.beta2, k.eps, k.l2, k.rel, k.abs_, k.lo, k.hi, true,
-                       bias_sqrt_.data(), bias_den_.data()};
   if (cfg_.optimize_matrix_params)
     kernels::adam_range(ks, params, grads, m.data(), v.data(), c.data(), nullptr, int64_t(n_matrix_));
   else
     std::fill(grads, grads + n_matrix_, 0.0f);
+  // Grid (non-matrix) parameters: skipped where the gradient is exactly 0.
   ks.matrix = false;
-  ks.lr = k.lr_nm;
+  ks.lr *= cfg_.non_matrix_learning_rate_factor;
   const int64_t n_nm = int64_t(n_params_ - n_matrix_);
   float* p = params + n_matrix_;
   float* g = grads + n_matrix_;
