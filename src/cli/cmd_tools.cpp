@@ -79,8 +79,8 @@ void add_decode(CLI::App& app) {
     DType out_t = a->dtype == "source" ? m.source_dtype : parse_dtype(a->dtype);
     // Slabs of ~16 M voxels: memory stays bounded whatever the output size.
     const int64_t slab = std::max<int64_t>(1, (int64_t(1) << 24) / std::max<int64_t>(1, dims.x * dims.y));
-    Vec3f spacing{float(m.spacing.x * m.dims.x / dims.x), float(m.spacing.y * m.dims.y / dims.y),
-                  float(m.spacing.z * m.dims.z / dims.z)};
+    // Voxel size relative to the model's grid (model files carry no physical spacing).
+    Vec3f spacing{float(double(m.dims.x) / dims.x), float(double(m.dims.y) / dims.y), float(double(m.dims.z) / dims.z)};
     VolumeWriter w(a->output, dims, out_t, spacing, std::make_pair(m.lo, m.hi));
     std::vector<float> buf(size_t(dims.x * dims.y * std::min<int64_t>(slab, dims.z)));
     Progress bar("decode", double(dims.z), a->quiet);
@@ -167,8 +167,7 @@ void add_synth(CLI::App& app) {
   c->add_flag("--force", a->force, "replace existing output files");
   c->callback([a]() {
     Int3 d = parse_dims(a->dims);
-    if (a->output.size() > 5 && a->output.compare(a->output.size() - 5, 5, ".json") == 0)
-      check_no_overwrite({a->output, a->output.substr(0, a->output.size() - 5) + ".raw"}, a->force);
+    check_no_overwrite(synth_output_files(a->output), a->force);
     auto t0 = std::chrono::steady_clock::now();
     synth_volume(a->kind, d, a->output, a->seed);
     std::printf("wrote %s (%lldx%lldx%lld float32) in %.2fs\n", a->output.c_str(), (long long)d.x, (long long)d.y,

@@ -60,7 +60,6 @@ void run_train(const TrainArgs& a) {
   model.source_dtype = vol.source_dtype;
   model.lo = vol.lo;
   model.hi = vol.hi;
-  model.spacing = vol.spacing;
   Network& net = *model.net;
   if (!a.quiet && a.target_ratio <= 0 && model.param_bytes() > vol.source_bytes())
     std::fprintf(stderr, "note: the model (%s) is larger than the volume (%s); use --target-ratio R to compress\n",

@@ -14,7 +14,6 @@ struct Model {
   Int3 dims;
   DType source_dtype = DType::Float32;
   double lo = 0, hi = 1;
-  Vec3f spacing{1, 1, 1};
   Json training;  // summary written by `vnr train`
   uint64_t param_bytes() const { return net->n_params() * 2; }  // fp16, as stored
 };

@@ -19,6 +19,10 @@ Source describe_sidecar(const std::string& json_path, const Json& j);
 Source describe_scene(const std::string& json_path, const Json& j);  // instantvnr VIDI3D or DIVA
 Source describe_nrrd(const std::string& path);
 
+// "little"/"big" (also "le"/"be", "little_endian"/"big_endian", any case) -> big endian?
+// Errors read "<prefix>unknown <name> '<word>' (allowed: little, big)".
+bool parse_byte_order(const std::string& word, const std::string& prefix, const std::string& name);
+
 // "16x8x8" / "16x8x8x3"
 std::string dims_string(const Int3& d, int n_timesteps = 1);
 

@@ -79,12 +79,6 @@ std::string first_existing(const Json& v, const std::string& what, const std::st
        json_dir.empty() ? "." : json_dir);
 }
 
-bool parse_endian_word(const std::string& s, const std::string& what) {
-  std::string l = to_lower(s);
-  if (l == "little" || l == "little_endian" || l == "le") return false;
-  if (l == "big" || l == "big_endian" || l == "be") return true;
-  fail("'{}': unknown byte order '{}' (allowed: little, big)", what, s);
-}
 
 std::pair<double, double> min_max_object(const Json& v, const std::string& what, const std::string& key,
                                          const char* lo_key, const char* hi_key) {
@@ -144,7 +138,7 @@ Source describe_sidecar(const std::string& json_path, const Json& j) {
     d.n_timesteps = int(t);
   }
   d.dtype = parse_dtype(json_str(require(j, "dtype", json_path), json_path, "\"dtype\""));
-  if (j.contains("byte_order")) d.big_endian = parse_endian_word(json_str(j["byte_order"], json_path, "\"byte_order\""), json_path);
+  if (j.contains("byte_order")) d.big_endian = parse_byte_order(json_str(j["byte_order"], json_path, "\"byte_order\""), "'" + json_path + "': ", "byte order");
   if (j.contains("offset")) {
     int64_t off = json_int(j["offset"], json_path, "\"offset\"");
     if (off < 0) fail("'{}': \"offset\" must not be negative", json_path);
@@ -193,7 +187,7 @@ Source describe_scene(const std::string& json_path, const Json& j) {
     Int3 dims = xyz_dims(require(e, "dimensions", json_path, ctx.c_str()), json_path, "dataSource.dimensions");
     DType type = parse_dtype(json_str(require(e, "type", json_path, ctx.c_str()), json_path, "dataSource.type"));
     bool big = false;
-    if (e.contains("endian")) big = parse_endian_word(json_str(e["endian"], json_path, "dataSource.endian"), json_path);
+    if (e.contains("endian")) big = parse_byte_order(json_str(e["endian"], json_path, "dataSource.endian"), "'" + json_path + "': ", "byte order");
     uint64_t offset = 0;
     if (e.contains("offset")) {
       int64_t off = json_int(e["offset"], json_path, "dataSource.offset");

@@ -195,9 +195,7 @@ Source describe_nrrd(const std::string& path) {
   }
 
   if (has("endian")) {
-    std::string e = to_lower(field("endian"));
-    if (e == "big") d.big_endian = true;
-    else if (e != "little") fail("'{}': malformed NRRD header: endian '{}' (allowed: little, big)", path, e);
+    d.big_endian = parse_byte_order(field("endian"), "'" + path + "': malformed NRRD header: ", "endian");
   }
 
   std::string enc = to_lower(field("encoding"));

@@ -93,14 +93,18 @@ float synth_value(const std::string& kind, float ux, float uy, float uz, uint64_
   return eval(parse_kind(kind), ux, uy, uz, seed);
 }
 
-void synth_volume(const std::string& kind, Int3 dims, const std::string& out_json, uint64_t seed) {
-  Kind k = parse_kind(kind);
+std::vector<std::string> synth_output_files(const std::string& out_json) {
   if (out_json.size() < 6 || out_json.compare(out_json.size() - 5, 5, ".json") != 0)
     fail("synthetic volume output '{}' must be a .json sidecar path (the data goes beside it as .raw)", out_json);
+  return volume_output_files(out_json.substr(0, out_json.size() - 5) + ".raw");
+}
+
+void synth_volume(const std::string& kind, Int3 dims, const std::string& out_json, uint64_t seed) {
+  Kind k = parse_kind(kind);
+  const std::string raw = synth_output_files(out_json)[0];
   if (dims.x <= 0 || dims.y <= 0 || dims.z <= 0 || dims.x > (1 << 30) || dims.y > (1 << 30) ||
       dims.count() > (uint64_t(1) << 40))
     fail("invalid dims {}x{}x{} for a synthetic volume", dims.x, dims.y, dims.z);
-  const std::string raw = out_json.substr(0, out_json.size() - 5) + ".raw";
   VolumeWriter w(raw, dims, DType::Float32);
 
   // Voxel centres (i + 0.5)/N, rounded to float exactly as a caller of synth_value would.

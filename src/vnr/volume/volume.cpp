@@ -19,6 +19,13 @@ std::string dims_string(const Int3& d, int n_timesteps) {
   return s;
 }
 
+bool parse_byte_order(const std::string& word, const std::string& prefix, const std::string& name) {
+  const std::string l = to_lower(word);
+  if (l == "little" || l == "little_endian" || l == "le") return false;
+  if (l == "big" || l == "big_endian" || l == "be") return true;
+  fail("{}unknown {} '{}' (allowed: little, big)", prefix, name, word);
+}
+
 }  // namespace detail
 
 namespace {
@@ -69,12 +76,6 @@ uint64_t checked_frame_bytes(const Int3& d, DType t, const std::string& what) {
   return n * dtype_size(t);
 }
 
-bool parse_endian_option(const std::string& s) {
-  std::string l = to_lower(s);
-  if (l == "little" || l == "le") return false;
-  if (l == "big" || l == "be") return true;
-  fail("unknown --endian '{}' (allowed: little, big)", s);
-}
 
 // gzread would silently pass uncompressed bytes through; catch a mislabelled file here.
 void check_gzip_magic(const VolumeDesc& d) {
@@ -114,7 +115,7 @@ VolumeDesc describe_volume(const std::string& path, const RawOptions& opts) {
   // Command-line overrides win over any descriptor.
   if (opts.dims) d.dims = *opts.dims;
   if (opts.dtype) d.dtype = parse_dtype(*opts.dtype);
-  if (opts.endian) d.big_endian = parse_endian_option(*opts.endian);
+  if (opts.endian) d.big_endian = detail::parse_byte_order(*opts.endian, "", "--endian");
   if (opts.offset) {
     d.offset = *opts.offset;
     s.data_at_end = false;

@@ -47,6 +47,8 @@ std::vector<std::string> volume_output_files(const std::string& path);
 //   noise: multi-scale value noise (6 octaves), float32, deterministic for a seed.
 // `out_json` is the sidecar path; the raw file is written beside it with extension .raw.
 void synth_volume(const std::string& kind, Int3 dims, const std::string& out_json, uint64_t seed = 1);
+// The files synth_volume(out_json) writes: the .raw data and the sidecar; error unless out_json ends in .json.
+std::vector<std::string> synth_output_files(const std::string& out_json);
 // The same fields evaluated at one point u in [0,1]^3 (for tests and analytic checks).
 float synth_value(const std::string& kind, float ux, float uy, float uz, uint64_t seed = 1);
 
