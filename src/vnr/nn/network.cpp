@@ -92,7 +92,8 @@ Network::Network(const Json& config, uint32_t n_output_dims)
 void Network::sync_half_table() { floats_to_halves(grid_table(), grid_half_.data(), grid_params()); }
 
 double Network::flops_forward_per_sample() const {
-  double mac = double(mlp_.width) * mlp_.in_pad + double(mlp_.n_hidden - 1) * mlp_.width * mlp_.width +
+  // The work actually done: the first layer skips zero-padded inputs (first_cols).
+  double mac = double(mlp_.width) * mlp_.first_cols + double(mlp_.n_hidden - 1) * mlp_.width * mlp_.width +
                double(mlp_.n_out) * mlp_.width;
   return 2.0 * mac;
 }
