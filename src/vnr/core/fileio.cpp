@@ -5,6 +5,7 @@
 #include <cerrno>
 #include <cstring>
 #include "vnr/core/error.h"
+#include "vnr/core/json.h"
 
 namespace vnr {
 
@@ -41,6 +42,31 @@ std::string dirname_of(const std::string& path) {
 std::string join_path(const std::string& dir, const std::string& name) {
   if (dir.empty() || (!name.empty() && name[0] == '/')) return name;
   return dir + "/" + name;
+}
+
+std::string basename_of(const std::string& path) {
+  size_t slash = path.find_last_of('/');
+  return slash == std::string::npos ? path : path.substr(slash + 1);
+}
+
+namespace {
+// Position of the extension's dot, or npos when the last path component has none.
+size_t extension_dot(const std::string& path) {
+  size_t slash = path.find_last_of('/');
+  size_t dot = path.find_last_of('.');
+  if (dot == std::string::npos || (slash != std::string::npos && dot < slash)) return std::string::npos;
+  return dot;
+}
+}  // namespace
+
+std::string extension_of(const std::string& path) {
+  size_t dot = extension_dot(path);
+  return dot == std::string::npos ? std::string() : to_lower(path.substr(dot));
+}
+
+std::string strip_extension(const std::string& path) {
+  size_t dot = extension_dot(path);
+  return dot == std::string::npos ? path : path.substr(0, dot);
 }
 
 AtomicFile::AtomicFile(const std::string& path) : path_(path) {

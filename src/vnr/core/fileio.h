@@ -11,6 +11,9 @@ uint64_t file_size(const std::string& path);     // clear error if missing
 bool file_exists(const std::string& path);
 std::string dirname_of(const std::string& path);  // "" for a bare file name
 std::string join_path(const std::string& dir, const std::string& name);  // name if absolute
+std::string basename_of(const std::string& path);      // the part after the last '/'
+std::string extension_of(const std::string& path);     // lower-case, with the dot (".nrrd"); "" if none
+std::string strip_extension(const std::string& path);  // path without its extension
 
 // Writes a file atomically: data goes to "<path>.tmp-<pid>" in the same directory and is renamed
 // over <path> on commit(), so readers never see a half-written file and a crash leaves the old

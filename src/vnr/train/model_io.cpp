@@ -2,17 +2,15 @@
 #include <chrono>
 #include <cmath>
 #include "vnr/core/error.h"
+#include "vnr/core/fileio.h"
 #include "vnr/core/progress.h"
 #include "vnr/volume/metrics.h"
 
 namespace vnr {
 
 bool is_instantvnr_path(const std::string& path) {
-  auto ends = [&](const char* s) {
-    std::string e = s;
-    return path.size() >= e.size() && to_lower(path.substr(path.size() - e.size())) == e;
-  };
-  return ends(".bson") || ends(".json");
+  const std::string e = extension_of(path);
+  return e == ".bson" || e == ".json";
 }
 
 void save_model(const std::string& path, const Model& m) {

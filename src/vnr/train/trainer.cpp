@@ -1,10 +1,8 @@
 #include "vnr/train/trainer.h"
 #include <chrono>
-#include <algorithm>
 #include <cstring>
 #include "vnr/core/error.h"
 #include "vnr/core/parallel.h"
-#include "vnr/core/progress.h"
 #include "vnr/nn/loss.h"
 
 namespace vnr {
@@ -18,18 +16,18 @@ Trainer::Trainer(Network& net, std::shared_ptr<Sampler> sampler, TrainOptions op
   const MlpLayout& m = net.mlp();
   grads_.assign(net.n_params(), 0.0f);
   dW_.assign(n_threads_, std::vector<float>(m.n_params, 0.0f));
-  // workspace per thread: target, X0, acts, out_pre, out, dout, scratch
   // Chunks of the network's preferred size, halved until they divide the batch (so every chunk
   // is full and the encoding-gradient rows all have the same stride).
   int C = net.chunk();
   while (opts_.batch % C) C /= 2;
   chunk_ = C;
+  // workspace per thread: target, X0, acts, out_pre, out, dout, scratch
   size_t ws = C + size_t(m.in_pad) * C + net.acts_floats(C) + 3 * size_t(m.n_out) * C + 2 * size_t(m.width) * C;
   ws_.assign(n_threads_, std::vector<float>(ws, 0.0f));
   xs_.resize(opts_.batch);
   ys_.resize(opts_.batch);
   zs_.resize(opts_.batch);
-  const int64_t n_chunks = (opts_.batch + C - 1) / C;
+  const int64_t n_chunks = opts_.batch / C;
   if (net.has_grid()) dEnc_.resize(size_t(n_chunks) * C * m.in_pad);
   chunk_loss_.resize(n_chunks);
 }

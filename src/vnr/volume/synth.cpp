@@ -6,6 +6,7 @@
 #include <vector>
 #include "vnr/core/error.h"
 #include "vnr/core/parallel.h"
+#include "vnr/core/fileio.h"
 #include "vnr/volume/writer.h"
 
 namespace vnr {
@@ -94,9 +95,9 @@ float synth_value(const std::string& kind, float ux, float uy, float uz, uint64_
 }
 
 std::vector<std::string> synth_output_files(const std::string& out_json) {
-  if (out_json.size() < 6 || out_json.compare(out_json.size() - 5, 5, ".json") != 0)
+  if (extension_of(out_json) != ".json" || basename_of(strip_extension(out_json)).empty())
     fail("synthetic volume output '{}' must be a .json sidecar path (the data goes beside it as .raw)", out_json);
-  return volume_output_files(out_json.substr(0, out_json.size() - 5) + ".raw");
+  return volume_output_files(strip_extension(out_json) + ".raw");
 }
 
 void synth_volume(const std::string& kind, Int3 dims, const std::string& out_json, uint64_t seed) {

@@ -35,13 +35,6 @@ using detail::Source;
 
 constexpr uint64_t kMaxVoxels = uint64_t(1) << 40;
 
-std::string extension_lower(const std::string& path) {
-  size_t slash = path.find_last_of('/');
-  size_t dot = path.find_last_of('.');
-  if (dot == std::string::npos || (slash != std::string::npos && dot < slash)) return "";
-  return to_lower(path.substr(dot));
-}
-
 bool has_nrrd_magic(const std::string& path) {
   std::FILE* f = std::fopen(path.c_str(), "rb");
   if (!f) return false;
@@ -95,7 +88,7 @@ void check_gzip_magic(const VolumeDesc& d) {
 
 VolumeDesc describe_volume(const std::string& path, const RawOptions& opts) {
   file_size(path);  // missing, unreadable or a directory: says so with the path
-  const std::string ext = extension_lower(path);
+  const std::string ext = extension_of(path);
   Source s;
   bool plain_raw = false;
   if (ext == ".json") {

@@ -11,21 +11,7 @@
 namespace vnr {
 namespace {
 
-bool is_nrrd_path(const std::string& p) {
-  return p.size() >= 5 && to_lower(p.substr(p.size() - 5)) == ".nrrd";
-}
-
-std::string strip_extension(const std::string& p) {
-  size_t slash = p.find_last_of('/');
-  size_t dot = p.find_last_of('.');
-  if (dot == std::string::npos || (slash != std::string::npos && dot < slash)) return p;
-  return p.substr(0, dot);
-}
-
-std::string basename_of(const std::string& p) {
-  size_t slash = p.find_last_of('/');
-  return slash == std::string::npos ? p : p.substr(slash + 1);
-}
+bool is_nrrd_path(const std::string& p) { return extension_of(p) == ".nrrd"; }
 
 // NRRD spells the floating types "float"/"double"; the integer names are vnr's own.
 const char* nrrd_type(DType t) {
