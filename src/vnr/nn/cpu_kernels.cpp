@@ -114,6 +114,29 @@ using DFF = hn::CappedTag<float, F>;  // the F features of one grid entry
 template <int F>
 using DHF = hn::Rebind<hwy::float16_t, DFF<F>>;
 
+// The software pipeline shared by the forward gather and the backward scatter: for the first nb
+// blocks of N samples, the corners of block b + kAhead are computed and their table lines
+// prefetched while body(block b's corners, b * N) runs, so the random accesses of the large levels
+// overlap instead of waiting one by one. `table` is the level's base (fp16 table or fp32 gradient).
+template <int F, typename P, typename Body>
+HWY_INLINE void PipelinedBlocks(const GridLevel& L, bool smooth, const float* x, const float* y, const float* z,
+                                int nb, size_t N, const P* table, bool pf, Body&& body) {
+  CornerBlock cbs[kAhead + 1];
+  for (int b = 0; b < nb && b < kAhead; ++b) {
+    CornersVec(L, smooth, x + b * N, y + b * N, z + b * N, cbs[b]);
+    PrefetchCorners<F>(table, cbs[b], N, pf);
+  }
+  for (int b = 0; b < nb; ++b) {
+    if (b + kAhead < nb) {
+      const size_t sa = size_t(b + kAhead) * N;
+      CornerBlock& ahead = cbs[(b + kAhead) % (kAhead + 1)];
+      CornersVec(L, smooth, x + sa, y + sa, z + sa, ahead);
+      PrefetchCorners<F>(table, ahead, N, pf);
+    }
+    body(cbs[b % (kAhead + 1)], size_t(b) * N);
+  }
+}
+
 template <int F>
 void EncodeF(const GridLayout& g, const uint16_t* table, const float* x, const float* y, const float* z, int n,
              float* X0) {
@@ -126,24 +149,9 @@ void EncodeF(const GridLayout& g, const uint16_t* table, const float* x, const f
     const uint16_t* lt = table + uint64_t(L.offset) * F;
     // Levels whose table fits in L2 gain nothing from prefetching; bigger ones are latency-bound.
     const bool pf = uint64_t(L.n_entries) * F * sizeof(uint16_t) > (uint64_t(1) << 18);
-    // Software pipeline: the corners of block b + kAhead are computed and prefetched while block b
-    // is gathered, so the random reads of the large levels overlap instead of waiting one by one.
     const int nb = ValidBlocks(vec_ok, x, y, z, n, N);
-    CornerBlock cbs[kAhead + 1];
     const bool smooth = g.interpolation == Interpolation::Smoothstep;
-    for (int b = 0; b < nb && b < kAhead; ++b) {
-      CornersVec(L, smooth, x + b * N, y + b * N, z + b * N, cbs[b]);
-      PrefetchCorners<F>(lt, cbs[b], N, pf);
-    }
-    for (int b = 0; b < nb; ++b) {
-      const int s0 = b * int(N);
-      if (b + kAhead < nb) {
-        const int sa = (b + kAhead) * int(N);
-        CornerBlock& ahead = cbs[(b + kAhead) % (kAhead + 1)];
-        CornersVec(L, smooth, x + sa, y + sa, z + sa, ahead);
-        PrefetchCorners<F>(lt, ahead, N, pf);
-      }
-      const CornerBlock& cur = cbs[b % (kAhead + 1)];
+    PipelinedBlocks<F>(L, smooth, x, y, z, nb, N, lt, pf, [&](const CornerBlock& cur, size_t s0) {
       // F features of a corner: one fp16 load, one conversion, one FMA per vector of features.
       const DFF<F> dff;
       const DHF<F> dhf;
@@ -161,7 +169,7 @@ void EncodeF(const GridLayout& g, const uint16_t* table, const float* x, const f
         for (size_t v = 0; v < NV; ++v) hn::StoreU(acc[v], dff, tmp + v * NF);
         for (int f = 0; f < F; ++f) out[f * n + s0 + s] = tmp[f];
       }
-    }
+    });
     for (int s = nb * int(N); s < n; ++s) grid_level_forward<F>(L, g.interpolation, table, x[s], y[s], z[s], out + s, n);
   }
 }
@@ -189,28 +197,13 @@ void BackwardF(const GridLayout& g, uint32_t l, const float* x, const float* y, 
   for (int64_t c0 = 0; c0 < n; c0 += chunk) {
     const float* dy = dEnc + (c0 / chunk) * int64_t(in_pad) * chunk + int64_t(l) * F * chunk;
     const int64_t m = n - c0 < chunk ? n - c0 : chunk;
-    // Same software pipeline as the forward: gradient lines of block b + kAhead are prefetched
-    // (for writing) while block b is scattered.
     const int nb = ValidBlocks(vec_ok, x + c0, y + c0, z + c0, m, size_t(N));
-    CornerBlock cbs[kAhead + 1];
-    for (int b = 0; b < nb && b < kAhead; ++b) {
-      CornersVec(L, smooth, x + c0 + b * N, y + c0 + b * N, z + c0 + b * N, cbs[b]);
-      PrefetchCorners<F>(lg, cbs[b], size_t(N), pf);
-    }
-    for (int b = 0; b < nb; ++b) {
-      const int64_t s0 = b * N;
-      if (b + kAhead < nb) {
-        const int64_t sa = c0 + (b + kAhead) * N;
-        CornerBlock& ahead = cbs[(b + kAhead) % (kAhead + 1)];
-        CornersVec(L, smooth, x + sa, y + sa, z + sa, ahead);
-        PrefetchCorners<F>(lg, ahead, size_t(N), pf);
-      }
-      const CornerBlock& cur = cbs[b % (kAhead + 1)];
+    PipelinedBlocks<F>(L, smooth, x + c0, y + c0, z + c0, nb, size_t(N), lg, pf, [&](const CornerBlock& cur, size_t s0) {
       // Per corner: one vector load of the F gradients, one FMA, one store.
       const DFF<F> dff;
       constexpr size_t NV = (F + hn::MaxLanes(DFF<F>()) - 1) / hn::MaxLanes(DFF<F>());
       const size_t NF = hn::Lanes(dff);
-      for (int64_t s = 0; s < N; ++s) {
+      for (size_t s = 0; s < size_t(N); ++s) {
         alignas(64) float gtmp[NV * kMaxLanes];
         for (int f = 0; f < F; ++f) gtmp[f] = dy[f * chunk + s0 + s];
         hn::Vec<DFF<F>> gv[NV];
@@ -222,7 +215,7 @@ void BackwardF(const GridLayout& g, uint32_t l, const float* x, const float* y, 
             hn::StoreU(hn::MulAdd(w, gv[v], hn::LoadU(dff, gr + v * NF)), dff, gr + v * NF);
         }
       }
-    }
+    });
     for (int64_t s = int64_t(nb) * N; s < m; ++s)
       grid_level_backward<F>(L, g.interpolation, grad, x[c0 + s], y[c0 + s], z[c0 + s], dy + s, chunk);
   }
