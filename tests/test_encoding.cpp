@@ -274,6 +274,8 @@ TEST(Config, UnsupportedValuesListAllowed) {
   };
   EXPECT_NE(msg(model({{"otype", "TriangleWave"}})).find("allowed: HashGrid"), std::string::npos);
   EXPECT_NE(msg(model(hashgrid(2, 3, 10, 4))).find("1, 2, 4 or 8"), std::string::npos);
+  EXPECT_NE(msg(model({{"otype", "OneBlob"}, {"n_bins", 2048}})).find("1..1024"), std::string::npos);
+  EXPECT_NE(msg(model({{"otype", "Frequency"}, {"n_frequencies", 33}})).find("1..32"), std::string::npos);
   EXPECT_NE(msg(model(hashgrid(2, 2, 10, 4), "FullyFusedMLP", 48)).find("16, 32, 64 or 128"), std::string::npos);
   EXPECT_NE(msg(model(hashgrid(2, 2, 10, 4), "ResNet")).find("allowed: FullyFusedMLP"), std::string::npos);
   Json bad_loss = model(hashgrid(2, 2, 10, 4));

@@ -31,21 +31,21 @@ double median(std::vector<double> v) {
 // MLP forward (+ backward when training) alone over chunks, all threads: GFLOP/s.
 double mlp_gflops(const Network& net, bool training, double seconds) {
   const MlpLayout& m = net.mlp();
-  const int kChunk = net.chunk();
-  double flops_per_chunk = net.flops_forward_per_sample() * kChunk * (training ? 3.0 : 1.0);
+  const int C = net.chunk();
+  double flops_per_chunk = net.flops_forward_per_sample() * C * (training ? 3.0 : 1.0);
   std::vector<double> per_thread(num_threads(), 0.0);
   double el = 0;
   parallel_threads([&](int t, int nt) {
-    std::vector<float> X0(size_t(m.in_pad) * kChunk, 0.5f), acts(net.acts_floats(kChunk)), out(m.n_out * kChunk),
-        dout(m.n_out * kChunk, 1e-3f), dW(m.n_params), dX(size_t(m.in_pad) * kChunk), scratch(2 * m.width * kChunk);
+    std::vector<float> X0(size_t(m.in_pad) * C, 0.5f), acts(net.acts_floats(C)), out(m.n_out * C),
+        dout(m.n_out * C, 1e-3f), dW(m.n_params), dX(size_t(m.in_pad) * C), scratch(2 * m.width * C);
     Pcg32 rng(t + 1);
     for (auto& x : X0) x = rng.next_float();
     auto t0 = std::chrono::steady_clock::now();
     int64_t chunks = 0;
     while (seconds_since(t0) < seconds) {
       for (int r = 0; r < 16; ++r, ++chunks) {
-        net.mlp_forward(X0.data(), kChunk, acts.data(), out.data(), out.data());
-        if (training) net.mlp_backward(X0.data(), acts.data(), dout.data(), kChunk, dW.data(), dX.data(), scratch.data());
+        net.mlp_forward(X0.data(), C, acts.data(), out.data(), out.data());
+        if (training) net.mlp_backward(X0.data(), acts.data(), dout.data(), C, dW.data(), dX.data(), scratch.data());
       }
     }
     per_thread[t] = chunks * flops_per_chunk / seconds_since(t0);

@@ -82,11 +82,13 @@ EncodingConfig parse_encoding(const Json& j) {
   } else if (lo == "frequency") {
     e.type = EncodingType::Frequency;
     e.n_frequencies = get_or<uint32_t>(j, "n_frequencies", 12u, w);
-    if (e.n_frequencies < 1 || e.n_frequencies > 32) fail("encoding: n_frequencies must be in 1..32");
+    if (e.n_frequencies < 1 || e.n_frequencies > kMaxFrequencies)
+      fail("encoding: n_frequencies must be in 1..{}, got {}", kMaxFrequencies, e.n_frequencies);
   } else if (lo == "oneblob") {
     e.type = EncodingType::OneBlob;
     e.n_bins = get_or<uint32_t>(j, "n_bins", 16u, w);
-    if (e.n_bins < 1 || (e.n_bins & (e.n_bins - 1))) fail("encoding: n_bins must be a power of two, got {}", e.n_bins);
+    if (e.n_bins < 1 || e.n_bins > kMaxOneBlobBins || (e.n_bins & (e.n_bins - 1)))
+      fail("encoding: n_bins must be a power of two in 1..{}, got {}", kMaxOneBlobBins, e.n_bins);
   } else if (lo == "identity") {
     e.type = EncodingType::Identity;
     e.scale = get_or<float>(j, "scale", 1.0f, w);

@@ -15,6 +15,10 @@ enum class Interpolation { Nearest, Linear, Smoothstep };
 enum class Activation { None, ReLU, Exponential, Sine, Sigmoid, Squareplus, Softplus };
 enum class LossType { L1, L2, RelativeL2, RelativeL1 };
 
+// Bounds of the parameter-free encodings (their per-point outputs live in fixed-size stack buffers).
+constexpr uint32_t kMaxFrequencies = 32, kMaxOneBlobBins = 1024;
+constexpr uint32_t kMaxParameterFreeWidth = 3 * kMaxOneBlobBins;  // >= 3 * 2 * kMaxFrequencies
+
 struct EncodingConfig {
   EncodingType type = EncodingType::Grid;
   // Grid

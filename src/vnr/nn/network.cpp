@@ -147,7 +147,8 @@ void Network::encode(const float* x, const float* y, const float* z, int n, floa
       break;
     }
     default: {
-      float buf[3 * 2 * 32 > 3 * 1024 ? 3 * 2 * 32 : 3 * 1024];
+      static_assert(kMaxParameterFreeWidth >= 3 * 2 * kMaxFrequencies);
+      float buf[kMaxParameterFreeWidth];
       for (int s = 0; s < n; ++s) {
         const float p[3] = {x[s], y[s], z[s]};
         encode_point(p, buf);
