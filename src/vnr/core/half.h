@@ -9,7 +9,7 @@ namespace vnr {
 // IEEE binary16 <-> binary32 with round-to-nearest-even (the model files store fp16, as tcnn does).
 VNR_HD inline uint16_t float_to_half(float f) {
   uint32_t x;
-  std::memcpy(&x, &f, 4);
+  memcpy(&x, &f, 4);  // plain memcpy: also available in CUDA device code
   uint32_t sign = (x >> 16) & 0x8000u;
   uint32_t absx = x & 0x7fffffffu;
   if (absx >= 0x7f800000u) return uint16_t(sign | 0x7c00u | (absx > 0x7f800000u ? 0x200u : 0u));  // inf/nan
@@ -49,7 +49,7 @@ VNR_HD inline float half_to_float(uint16_t h) {
     x = sign | ((exp + 112u) << 23) | (mant << 13);
   }
   float f;
-  std::memcpy(&f, &x, 4);
+  memcpy(&f, &x, 4);
   return f;
 }
 
