@@ -243,3 +243,69 @@ TEST(Cli, OutputsAreNotOverwrittenWithoutForce) {
   EXPECT_EQ(run("decode " + d + "/ow.vnr -o " + d + "/ow.raw -q --force").code, 0);
   EXPECT_NE(read_file(d + "/ow.raw"), original);
 }
+
+TEST(Cli, RenderModelAndVolumeWithReportsAndReference) {
+  const std::string d = dir();
+  ASSERT_EQ(run("synth marschner-lobb --dims 24,24,24 -o " + d + "/rv.json --force").code, 0);
+  ASSERT_EQ(run("train " + d + "/rv.json -o " + d + "/rv.vnr --config small --steps 40 --batch 8192 -q --macrocell-size 8").code, 0);
+  // the model carries its online macro-cells
+  Model m = load_model(d + "/rv.vnr");
+  ASSERT_TRUE(m.macrocells.has_value());
+  EXPECT_EQ(m.macrocells->cells, (Int3{3, 3, 3}));
+  // ground truth, as a float image, then the model compared with it
+  Result g = run("render " + d + "/rv.json -o " + d + "/ref.pfm --size 40x32 -q");
+  ASSERT_EQ(g.code, 0) << g.err;
+  for (const char* mode : {"raymarch", "shadow", "pathtrace"})
+    for (const char* strategy : {"streaming", "inshader"}) {
+      Result r = run("render " + d + "/rv.vnr -o " + d + "/img.png --size 40x32 -q --mode " + mode + " --strategy " +
+                     strategy + " --reference " + d + "/ref.pfm --report " + d + "/render.json");
+      ASSERT_EQ(r.code, 0) << r.err;
+      Json rep = parse_json_file(d + "/render.json");
+      for (const char* k : {"seconds_per_frame", "frames", "rays", "field_samples", "image_psnr", "image_ssim"})
+        EXPECT_TRUE(rep.contains(k)) << k;
+      EXPECT_EQ(rep["rays"].get<int64_t>(), 40 * 32);
+      EXPECT_GT(rep["field_samples"].get<int64_t>(), 0);
+      EXPECT_EQ(rep["macrocells"], "online");
+      if (std::string(mode) == "raymarch") EXPECT_GT(rep["image_psnr"].get<double>(), 20.0);
+    }
+  Result b = run("bench render " + d + "/rv.vnr --size 24x24 --frames 1 --warmup 0 --modes raymarch --report " + d +
+                 "/bench.json");
+  ASSERT_EQ(b.code, 0) << b.err;
+  Json bench = parse_json_file(d + "/bench.json");
+  ASSERT_EQ(bench["rows"].size(), 4u);
+  for (const Json& row : bench["rows"]) {
+    EXPECT_EQ(row["mode"], "raymarch");
+    EXPECT_GT(row["fps"].get<double>(), 0);
+    EXPECT_GT(row["field_samples_per_second"].get<double>(), 0);
+  }
+  EXPECT_NE(b.out.find("| raymarch | streaming | online |"), std::string::npos) << b.out;
+}
+
+TEST(Cli, RenderBadInputGivesOneClearErrorLine) {
+  const std::string d = dir();
+  ASSERT_EQ(run("synth noise --dims 8,8,8 -o " + d + "/rb.json --force").code, 0);
+  const std::string v = d + "/rb.json";
+  {
+    std::ofstream(d + "/bad_tf.json") << "{\"colors\": [[0, 1, 0, 0]], \"opacities\": [[0.5, 2.0]]}";
+    std::ofstream(d + "/bad_scene.json") << "{\"camera\": {\"eye\": [1, 2, 3], \"center\": [1, 2, 3]}, \"fov\": 3}";
+    std::ofstream(d + "/broken.json") << "{\"camera\": ";
+  }
+  expect_error("render " + v + " -o " + d + "/x.png --tf nosuchpreset", "nosuchpreset");
+  expect_error("render " + v + " -o " + d + "/x.png --tf " + d + "/bad_tf.json", "bad_tf.json");
+  expect_error("render " + v + " -o " + d + "/x.png --scene " + d + "/bad_scene.json", "fov");
+  expect_error("render " + v + " -o " + d + "/x.png --scene " + d + "/broken.json", "broken.json");
+  expect_error("render " + v + " -o " + d + "/x.png --mode raytrace", "raytrace");
+  expect_error("render " + v + " -o " + d + "/x.png --strategy fast", "fast");
+  expect_error("render " + v + " -o " + d + "/x.png --macrocells online", "online");
+  expect_error("render " + v + " -o " + d + "/x.jpg", ".png or .pfm");
+  expect_error("render " + v + " -o " + d + "/x.png --size 10", "WxH");
+  expect_error("render " + v + " -o " + d + "/x.png --step 0", "step");
+  expect_error("render " + v + " -o " + d + "/x.png --spp 0", "spp");
+  expect_error("render " + v + " -o " + d + "/x.png --orbit 10,95", "orbit");
+  expect_error("render " + v + " -o " + d + "/x.png --eye 1,2,3", "--center");
+  expect_error("render " + v + " -o " + d + "/x.png --frobnicate", "frobnicate");
+  expect_error("render " + v + " -o " + d + "/x.png --size 8x8 --reference " + d + "/nosuch.png", "nosuch.png");
+  ASSERT_EQ(run("render " + v + " -o " + d + "/small.png --size 4x4 -q").code, 0);
+  expect_error("render " + v + " -o " + d + "/x.png --size 8x8 --reference " + d + "/small.png", "size");
+  expect_error("render " + d + "/nosuch.vnr -o " + d + "/x.png", "nosuch.vnr");
+}

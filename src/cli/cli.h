@@ -32,5 +32,19 @@ void add_info(CLI::App& app);
 void add_synth(CLI::App& app);
 void add_convert(CLI::App& app);
 void add_bench(CLI::App& app);
+void add_render(CLI::App& app);
+void add_bench_render(CLI::App& bench);
+
+// Rendering options shared by `vnr render` and `vnr bench render`.
+struct RenderArgs {
+  std::string scene, tf, mode = "raymarch", strategy = "streaming", macrocells, size = "768x768";
+  std::string orbit, eye, center, up = "0,1,0", light, background, volume;
+  float step = 1, step_max = 0, fovy = 30, density = 1;
+  uint32_t seed = 0;
+  int k = 0, macrocell_size = 16, threads = 0;
+  bool shade = false;
+  void add(CLI::App* app);
+};
+void parse_size(const std::string& s, int* w, int* h);
 
 }  // namespace vnr::cli

@@ -126,17 +126,23 @@ void run_bench(const BenchArgs& a) {
 }  // namespace
 
 void add_bench(CLI::App& app) {
-  auto a = std::make_shared<BenchArgs>();
-  CLI::App* c = app.add_subcommand("bench", "measure training or inference throughput");
-  c->add_option("what", a->what, "train | infer")->required()->check(CLI::IsMember({"train", "infer"}));
-  c->add_option("volume", a->volume, "volume to sample")->required();
-  c->add_option("--config", a->config, "preset or config file")->capture_default_str();
-  c->add_option("--seconds", a->seconds, "timed duration")->capture_default_str();
-  c->add_option("--batch", a->batch, "samples per batch")->capture_default_str();
-  c->add_option("--threads", a->threads, "CPU threads (default: all cores)");
-  c->add_option("--report", a->report, "write a JSON report");
-  a->vol.add(c);
-  c->callback([a]() { run_bench(*a); });
+  CLI::App* bench = app.add_subcommand("bench", "measure training, inference or rendering throughput");
+  bench->require_subcommand(1);
+  for (const char* what : {"train", "infer"}) {
+    auto a = std::make_shared<BenchArgs>();
+    a->what = what;
+    CLI::App* c = bench->add_subcommand(
+        what, std::string(what) == "train" ? "training throughput on a volume" : "batched inference throughput");
+    c->add_option("volume", a->volume, "volume to sample")->required();
+    c->add_option("--config", a->config, "preset or config file")->capture_default_str();
+    c->add_option("--seconds", a->seconds, "timed duration")->capture_default_str();
+    c->add_option("--batch", a->batch, "samples per batch")->capture_default_str();
+    c->add_option("--threads", a->threads, "CPU threads (default: all cores)");
+    c->add_option("--report", a->report, "write a JSON report");
+    a->vol.add(c);
+    c->callback([a]() { run_bench(*a); });
+  }
+  add_bench_render(*bench);
 }
 
 }  // namespace vnr::cli

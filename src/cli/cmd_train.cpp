@@ -29,6 +29,7 @@ struct TrainArgs {
   int64_t steps = -1, batch = 65536;
   uint32_t seed = 1337;
   int threads = 0;
+  int macrocell_size = 16;
   bool quiet = false, no_ssim = false;
   VolumeArgs vol;
 };
@@ -38,6 +39,7 @@ void run_train(const TrainArgs& a) {
   // Everything that can be checked without the data is checked first, so mistakes fail fast.
   if (a.batch <= 0 || a.batch % kChunk != 0) fail("--batch must be a positive multiple of {}, got {}", kChunk, a.batch);
   if (a.steps < -1) fail("--steps must be non-negative, got {}", a.steps);
+  if (a.macrocell_size < 0) fail("--macrocell-size must be 0 (none) or positive, got {}", a.macrocell_size);
   Json config = load_config(a.config);
   VolumeDesc desc = describe_volume(a.volume, a.vol.raw());
   auto t_load = std::chrono::steady_clock::now();
@@ -68,6 +70,7 @@ void run_train(const TrainArgs& a) {
 
   const int64_t steps = a.steps >= 0 ? a.steps : (a.seconds > 0 ? INT64_MAX : 1000);
   Trainer trainer(net, std::make_shared<InCoreSampler>(vol), TrainOptions{a.batch, a.seed});
+  if (a.macrocell_size > 0) trainer.enable_online_ranges(vol.dims, a.macrocell_size);
   const bool by_time = a.seconds > 0 && a.steps < 0;
   Progress bar("train", by_time ? a.seconds : double(steps), a.quiet);
   auto t0 = std::chrono::steady_clock::now();
@@ -95,6 +98,7 @@ void run_train(const TrainArgs& a) {
   model.training = {{"steps", done}, {"seconds", train_seconds}, {"interrupted", bool(g_interrupted)}, {"batch", a.batch}, {"seed", a.seed},
                     {"final_loss", loss}, {"psnr", ev.psnr}, {"threads", num_threads()}};
   if (!a.no_ssim) model.training["ssim"] = ev.ssim;
+  if (trainer.has_online_ranges()) model.macrocells = trainer.online_ranges();
   save_model(a.output, model);
   const uint64_t model_bytes = file_size(a.output);
   const double ratio = double(vol.source_bytes()) / double(model_bytes);
@@ -141,6 +145,9 @@ void add_train(CLI::App& app) {
   c->add_option("--seed", a->seed, "seed for initialisation and sampling")->capture_default_str();
   c->add_option("--threads", a->threads, "CPU threads (default: all cores)");
   c->add_option("--report", a->report, "write a JSON report");
+  c->add_option("--macrocell-size", a->macrocell_size,
+                 "voxels per macro-cell of the value ranges recorded from the training samples for rendering (0: none)")
+      ->capture_default_str();
   c->add_flag("--no-ssim", a->no_ssim, "skip the 3-D SSIM of the final evaluation");
   c->add_flag("-q,--quiet", a->quiet, "no progress output");
   a->vol.add(c);

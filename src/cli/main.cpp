@@ -89,6 +89,7 @@ int main(int argc, char** argv) {
   add_synth(app);
   add_convert(app);
   add_bench(app);
+  add_render(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::CallForHelp& e) {

@@ -22,6 +22,10 @@ void save_model(const std::string& path, const Model& m) {
   f.hi = m.hi;
   f.params = m.net->params_half();
   f.training = m.training;
+  if (m.macrocells) {
+    f.macrocell_dims = m.macrocells->cells;
+    f.macrocell_ranges = m.macrocells->to_pairs();
+  }
   if (is_instantvnr_path(path)) write_instantvnr(path, f);
   else write_vnr(path, f);
 }
@@ -39,6 +43,13 @@ Model load_model(const std::string& path) {
   m.lo = f.lo;
   m.hi = f.hi;
   m.training = f.training;
+  if (!(f.macrocell_dims == Int3{}) && f.dims.count() > 0) {
+    try {
+      m.macrocells = ValueRangeGrid::from_pairs(f.dims, f.macrocell_dims, f.macrocell_ranges);
+    } catch (const Error& e) {
+      fail("'{}': {}", path, e.what());
+    }
+  }
   return m;
 }
 

@@ -1,8 +1,10 @@
 #pragma once
 #include <memory>
+#include <optional>
 #include <string>
 #include "vnr/nn/model_file.h"
 #include "vnr/nn/network.h"
+#include "vnr/volume/value_range_grid.h"
 #include "vnr/volume/volume.h"
 
 namespace vnr {
@@ -15,6 +17,7 @@ struct Model {
   DType source_dtype = DType::Float32;
   double lo = 0, hi = 1;
   Json training;  // summary written by `vnr train`
+  std::optional<ValueRangeGrid> macrocells;  // value ranges built online while training (or imported)
   uint64_t param_bytes() const { return net->n_params() * 2; }  // fp16, as stored
 };
 

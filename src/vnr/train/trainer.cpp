@@ -59,6 +59,7 @@ float Trainer::step() {
       float* z = zs_.data() + c * C;
       const int n = int(C);
       sampler_->sample(opts_.seed, step, uint64_t(c), n, x, y, z, target);
+      if (!thread_ranges_.empty()) thread_ranges_[t].add_samples(x, y, z, target, n);
       net_.encode(x, y, z, n, X0);
       net_.mlp_forward(X0, n, acts, out_pre, out);
       double loss = 0;
@@ -102,6 +103,17 @@ float Trainer::step() {
   for (double l : chunk_loss_) loss += l;
   loss_history_.push_back(float(loss));
   return float(loss);
+}
+
+void Trainer::enable_online_ranges(Int3 dims, int cell_size) {
+  thread_ranges_.assign(size_t(n_threads_), ValueRangeGrid(dims, cell_size));
+}
+
+ValueRangeGrid Trainer::online_ranges() const {
+  if (thread_ranges_.empty()) fail("online macro-cells were not enabled for this training run");
+  ValueRangeGrid g = thread_ranges_[0];
+  for (size_t t = 1; t < thread_ranges_.size(); ++t) g.merge(thread_ranges_[t]);
+  return g;
 }
 
 }  // namespace vnr

@@ -5,6 +5,7 @@
 #include "vnr/nn/network.h"
 #include "vnr/nn/optimizer.h"
 #include "vnr/train/sampler.h"
+#include "vnr/volume/value_range_grid.h"
 
 namespace vnr {
 
@@ -31,6 +32,11 @@ public:
   const std::vector<float>& loss_history() const { return loss_history_; }
   Network& network() { return net_; }
   const TrainOptions& options() const { return opts_; }
+  // Online macro-cells (paper "Macro-Cell Optimization"): from now on every training sample widens the
+  // value range of its macro-cells (compat.md B.6); each thread keeps its own grid, merged on request.
+  void enable_online_ranges(Int3 dims, int cell_size = 16);
+  bool has_online_ranges() const { return !thread_ranges_.empty(); }
+  ValueRangeGrid online_ranges() const;
   // Seconds spent in each phase of the last step (sample+MLP, grid backward, optimizer).
   double phase_seconds[3] = {0, 0, 0};
 
@@ -47,6 +53,7 @@ private:
   std::vector<float> xs_, ys_, zs_, dEnc_;
   std::vector<double> chunk_loss_;
   std::vector<float> loss_history_;
+  std::vector<ValueRangeGrid> thread_ranges_;
 };
 
 }  // namespace vnr

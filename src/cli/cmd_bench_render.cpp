@@ -1,0 +1,182 @@
+// vnr bench render: the paper's frame-rate table for one model or volume -- frames/s of
+// {ray marching, shadows, path tracing} x {in-shader, streaming} x {without, with macro-cells} -- and
+// how much of the field's raw batched query rate each renderer keeps. The camera orbits the volume
+// (360 degrees over the timed frames, like the VTK peer) so every cell sees the same views.
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include "cli.h"
+#include "render_setup.h"
+#include "vnr/core/error.h"
+#include "vnr/core/parallel.h"
+#include "vnr/core/progress.h"
+#include "vnr/core/rng.h"
+
+namespace vnr::cli {
+
+namespace {
+
+double median_of(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  return v.empty() ? 0 : v[v.size() / 2];
+}
+
+std::vector<std::string> split_list(const std::string& s) {
+  std::vector<std::string> out;
+  size_t b = 0;
+  while (b <= s.size()) {
+    size_t e = s.find(',', b);
+    if (e == std::string::npos) e = s.size();
+    if (e > b) out.push_back(s.substr(b, e - b));
+    b = e + 1;
+  }
+  return out;
+}
+
+// The field's batched query rate on uniformly random points: what `vnr bench infer` measures.
+double raw_query_rate(const Field& field, double seconds) {
+  const int64_t n = 1 << 20;
+  std::vector<float> x(n), y(n), z(n), v(n);
+  Pcg32 rng(42);
+  for (int64_t i = 0; i < n; ++i) x[i] = rng.next_float(), y[i] = rng.next_float(), z[i] = rng.next_float();
+  field.query(x.data(), y.data(), z.data(), n, v.data());  // warm-up
+  std::vector<double> rates;
+  auto t_all = std::chrono::steady_clock::now();
+  while (rates.size() < 3 || (seconds_since(t_all) < seconds && rates.size() < 50)) {
+    auto t0 = std::chrono::steady_clock::now();
+    field.query(x.data(), y.data(), z.data(), n, v.data());
+    rates.push_back(double(n) / seconds_since(t0));
+  }
+  return median_of(rates);
+}
+
+struct Cell {
+  RenderMode mode;
+  RenderStrategy strategy;
+  MacroCellMode mc;
+};
+
+}  // namespace
+
+void add_bench_render(CLI::App& bench) {
+  struct Args {
+    std::string input, report, modes = "raymarch,shadow,pathtrace", strategies = "inshader,streaming",
+                                  macrocells, tune_k;
+    int frames = 6, warmup = 1;
+    RenderArgs r;
+    VolumeArgs vol;
+  };
+  auto a = std::make_shared<Args>();
+  a->r.size = "512x512";
+  CLI::App* c = bench.add_subcommand("render", "frames/s of every integrator x strategy x macro-cell setting");
+  c->add_option("input", a->input, "model (.vnr, instantvnr BSON) or volume")->required();
+  c->add_option("--frames", a->frames, "timed frames per cell (the camera orbits 360 degrees over them)")
+      ->capture_default_str();
+  c->add_option("--warmup", a->warmup, "untimed frames per cell")->capture_default_str();
+  c->add_option("--modes", a->modes, "comma-separated subset of raymarch,shadow,pathtrace")->capture_default_str();
+  c->add_option("--strategies", a->strategies, "comma-separated subset of inshader,streaming")->capture_default_str();
+  c->add_option("--with-macrocells", a->macrocells,
+                "the 'with' setting: grid or online (default: online for a vnr-trained model, else grid)");
+  c->add_option("--tune-k", a->tune_k,
+                "instead of the table: streaming ray-marching frames/s for each K in this list (e.g. 1,2,4,8,16,32)");
+  c->add_option("--report", a->report, "write a JSON report");
+  a->r.add(c);
+  a->vol.add(c);
+  c->callback([a]() {
+    set_num_threads(a->r.threads);
+    if (a->frames < 1 || a->warmup < 0) fail("--frames must be at least 1 and --warmup at least 0");
+    RenderSource src = open_render_source(a->input, a->r.volume, a->vol);
+    RenderSetup setup = make_render_setup(a->r, src);
+    MacroCellMode with = a->macrocells.empty() ? default_macrocell_mode(src) : parse_macrocell_mode(a->macrocells);
+    if (with == MacroCellMode::Off) with = src.volume ? MacroCellMode::Grid : MacroCellMode::Off;
+    if (with == MacroCellMode::Off)
+      fail("no macro-cells to compare with: give a model trained by vnr (online ranges) or --volume");
+    MacroCells mc_off = make_macrocells(src, MacroCellMode::Off, a->r.macrocell_size);
+    MacroCells mc_on = make_macrocells(src, with, a->r.macrocell_size);
+    mc_off.update(setup.tf);
+    mc_on.update(setup.tf);
+
+    const double raw = raw_query_rate(*src.field, 2.0);
+    // The orbit: frame i of n looks from azimuth 360 i / n (elevation from --orbit, or 0).
+    float elevation = 0;
+    if (!a->r.orbit.empty()) std::sscanf(a->r.orbit.c_str(), "%*f,%f", &elevation);
+    auto camera_of = [&](int i) { return orbit_camera(src.box, 360.0f * float(i) / float(a->frames), elevation, a->r.fovy); };
+
+    auto run_cell = [&](const RenderOptions& o, const MacroCells& mc, RenderStats* total) {
+      Renderer r(*src.field, src.box, mc, setup.tf, camera_of(0), o);
+      Image img(o.width, o.height);
+      for (int i = 0; i < a->warmup; ++i) r.render_frame(uint32_t(i), img);
+      std::vector<double> times;
+      for (int i = 0; i < a->frames; ++i) {
+        r.set_camera(camera_of(i));
+        RenderStats st;
+        r.render_frame(uint32_t(i), img, &st);
+        times.push_back(st.seconds);
+        total->field_samples += st.field_samples;
+        total->seconds += st.seconds;
+        total->frames += 1;
+      }
+      return 1.0 / median_of(times);
+    };
+
+    Json report;
+    report["input"] = src.description;
+    report["field"] = src.field->kind();
+    report["size"] = {setup.options.width, setup.options.height};
+    report["threads"] = num_threads();
+    report["raw_field_samples_per_second"] = raw;
+    std::printf("%s (%s field), %dx%d, %d threads; raw batched field query: %.2f M samples/s\n\n",
+                src.description.c_str(), src.field->kind(), setup.options.width, setup.options.height, num_threads(),
+                raw / 1e6);
+
+    if (!a->tune_k.empty()) {
+      std::printf("| K | frames/s | field samples/s (M) | samples/frame (M) |\n|---|---|---|---|\n");
+      Json rows = Json::array();
+      for (const std::string& ks : split_list(a->tune_k)) {
+        RenderOptions o = setup.options;
+        o.mode = RenderMode::RayMarch;
+        o.strategy = RenderStrategy::Streaming;
+        o.samples_per_iteration = std::stoi(ks);
+        RenderStats tot;
+        double fps = run_cell(o, mc_on, &tot);
+        double sps = double(tot.field_samples) / tot.seconds;
+        std::printf("| %s | %.2f | %.2f | %.2f |\n", ks.c_str(), fps, sps / 1e6,
+                    double(tot.field_samples) / tot.frames / 1e6);
+        std::fflush(stdout);
+        rows.push_back({{"k", std::stoi(ks)}, {"fps", fps}, {"field_samples_per_second", sps}});
+      }
+      report["tune_k"] = rows;
+      write_report(a->report, report);
+      return;
+    }
+
+    std::vector<Cell> cells;
+    for (const std::string& m : split_list(a->modes))
+      for (const std::string& s : split_list(a->strategies))
+        for (MacroCellMode mc : {MacroCellMode::Off, with})
+          cells.push_back(Cell{parse_render_mode(m), parse_render_strategy(s), mc});
+    std::printf("| mode | strategy | macro-cells | frames/s | field samples/s (M) | of raw query rate |\n"
+                "|---|---|---|---|---|---|\n");
+    Json rows = Json::array();
+    for (const Cell& cell : cells) {
+      RenderOptions o = setup.options;
+      o.mode = cell.mode;
+      o.strategy = cell.strategy;
+      RenderStats tot;
+      double fps = run_cell(o, cell.mc == MacroCellMode::Off ? mc_off : mc_on, &tot);
+      double sps = double(tot.field_samples) / tot.seconds;
+      std::printf("| %s | %s | %s | %.2f | %.2f | %.0f%% |\n", render_mode_name(cell.mode),
+                  render_strategy_name(cell.strategy), macrocell_mode_name(cell.mc), fps, sps / 1e6, 100 * sps / raw);
+      std::fflush(stdout);
+      rows.push_back({{"mode", render_mode_name(cell.mode)},
+                      {"strategy", render_strategy_name(cell.strategy)},
+                      {"macrocells", macrocell_mode_name(cell.mc)},
+                      {"fps", fps},
+                      {"field_samples_per_second", sps}});
+    }
+    report["rows"] = rows;
+    write_report(a->report, report);
+  });
+}
+
+}  // namespace vnr::cli

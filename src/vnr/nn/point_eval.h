@@ -1,0 +1,106 @@
+#pragma once
+// Single-point evaluation of a Network, for the renderer's "in-shader" strategy (each ray queries the
+// field one point at a time inside its own loop). Same semantics as Network::infer: the fp16 grid
+// working copy (grid_half()), the same encoding (every grid type and interpolation; parameter-free
+// encodings go through Network::encode_point), the bias-free MLP with its hidden and output
+// activations. Only the MLP summation order differs (results agree to rounding); the grid features
+// are bit-identical to Network::encode_point.
+//
+// Construction (once per frame / model) copies the MLP weights into a SIMD-friendly layout and
+// resolves the Highway dispatch once into one function pointer, specialised on the features per
+// level and the MLP panel width; eval() is then const, thread-safe and allocation-free.
+//
+//   Encoding: the 8 corners of every level are computed at once with lanes = levels, then the F
+//   fp16 features of each corner are loaded, converted and accumulated (one FMA per corner, in
+//   corner order as the reference). All corner loads of all levels are independent, so their cache
+//   misses overlap.
+//   MLP: weights transposed into panels of PW (16/32/64) outputs: for each input i the panel row
+//   W[p*PW .. p*PW+PW, i] is contiguous and FMAs into PW/lanes accumulators with x[i] broadcast;
+//   several accumulator sets break the FMA latency chains. After a ReLU layer, the inputs that are
+//   exactly zero are compacted away (their products add exactly 0, so results are unchanged; only
+//   enabled when every weight is finite, as 0 * inf would be NaN).
+#include <cstdint>
+#include <hwy/aligned_allocator.h>
+#include "vnr/nn/config.h"
+#include "vnr/nn/grid_encoding.h"
+
+namespace vnr {
+
+class Network;
+
+// Internal: everything the per-target kernels read. Plain data, filled by the constructor.
+struct PointEvalData {
+  static constexpr uint32_t kMaxWidth = 1024;  // NetworkConfig: n_neurons in 1..1024
+  // ---- encoding ----
+  const Network* net = nullptr;       // parameter-free encodings: Network::encode_point
+  const uint16_t* table = nullptr;    // fp16 grid (net.grid_half())
+  GridLayout grid;
+  bool has_grid = false;
+  int prefetch = 2;              // prefetch the corners' lines of the large levels first
+  // Level constants as lane arrays (lanes = levels; padded to kMaxGridLevels with harmless values).
+  alignas(64) float lvl_scale[kMaxGridLevels];
+  // Corner index = X ^ Y ^ Z (hashed) or X + Y + Z (dense) with Y = cy * m1, Z = cz * m2.
+  alignas(64) uint32_t lvl_m1[kMaxGridLevels], lvl_m2[kMaxGridLevels];
+  alignas(64) uint32_t lvl_n[kMaxGridLevels];       // n_l
+  alignas(64) uint32_t lvl_mask[kMaxGridLevels];    // n_l - 1 for power-of-two n_l, else ~0
+  alignas(64) uint32_t lvl_hashed[kMaxGridLevels];
+  alignas(64) uint32_t lvl_offset[kMaxGridLevels];  // first entry of the level
+  const uint16_t* lvl_ptr[kMaxGridLevels];          // the level's table
+  bool feature_major = false;         // F = 2 gather path: encoding stored as enc[f * L + l]
+  uint8_t lvl_vec[kMaxGridLevels];    // 0: the level takes the scalar path (tiled levels with n_l < res^3)
+  uint8_t lvl_big[kMaxGridLevels];    // table of the level beyond L2: prefetch candidates
+  // ---- MLP ----
+  uint32_t k0 = 0;         // inputs of W_0 that are used (first_cols)
+  uint32_t in_pad = 0, enc_width = 0;
+  float pad_value = 0;
+  uint32_t width = 0, n_hidden = 0;
+  uint32_t panel = 16, n_panels = 1, width_pad = 16;  // hidden outputs in n_panels panels of `panel`
+  bool relu = true, skip_zeros = false;
+  Activation out_act = Activation::None;
+  const float* layer[34] = {};  // layer k: n_panels blocks of (K_k rows x panel), row i = input i
+  const float* wout = nullptr;  // first output row, width_pad floats (zero-padded)
+};
+
+class PointEvaluator {
+public:
+  // Keeps a reference to net (its fp16 grid and, for parameter-free encodings, encode_point): net
+  // must outlive the evaluator; rebuild the evaluator after changing net's parameters.
+  // skip_zero_activations: compact away exact zeros after ReLU layers (bit-for-bit the same
+  // products; off only for measurements).
+  explicit PointEvaluator(const Network& net, bool skip_zero_activations = true);
+  PointEvaluator(PointEvaluator&&) = default;
+  PointEvaluator& operator=(PointEvaluator&&) = default;
+
+  // First network output (after the output activation) at u = (x, y, z), normally in [0, 1)^3.
+  float eval(float x, float y, float z) const { return eval_(d_, x, y, z); }
+
+  // The two halves of eval(), for tests and profiling. encode writes the padded encoding (in_pad()
+  // floats, pad_value past the encoding width); mlp reads one and returns what eval() would.
+  void encode(float x, float y, float z, float* enc) const { encode_(d_, x, y, z, enc); }
+  float mlp(const float* enc) const { return mlp_(d_, enc); }
+
+  uint32_t in_pad() const { return d_.in_pad; }
+  bool skips_zeros() const { return d_.skip_zeros; }
+  const char* simd_target() const { return target_; }  // the Highway target chosen at construction
+
+  // Function pointers the per-target code fills in (public for the dispatch glue only).
+  using EvalFn = float (*)(const PointEvalData&, float, float, float);
+  using EncodeFn = void (*)(const PointEvalData&, float, float, float, float*);
+  using MlpFn = float (*)(const PointEvalData&, const float*);
+  struct Kernels {
+    EvalFn eval = nullptr;
+    EncodeFn encode = nullptr;
+    MlpFn mlp = nullptr;
+    const char* target = "";
+  };
+
+private:
+  PointEvalData d_;
+  hwy::AlignedFreeUniquePtr<float[]> weights_;
+  EvalFn eval_ = nullptr;
+  EncodeFn encode_ = nullptr;
+  MlpFn mlp_ = nullptr;
+  const char* target_ = "";
+};
+
+}  // namespace vnr

@@ -1,0 +1,132 @@
+#pragma once
+// Macro-cells (compat.md B.6, paper "Macro-Cell Optimization"): a coarse grid over the volume box whose
+// cells carry the largest opacity the transfer function can give inside them. Ray marching skips
+// transparent cells and adapts its step to the cell's opacity; the path tracer uses the values as
+// per-cell majorants. `MacroCellView` + the DDA below are the per-ray (VNR_HD) part.
+#include <cmath>
+#include <cstdint>
+#include <string>
+#include <vector>
+#include "vnr/core/hd.h"
+#include "vnr/core/math.h"
+#include "vnr/render/transfer_function.h"
+#include "vnr/volume/value_range_grid.h"
+
+namespace vnr {
+
+enum class MacroCellMode { Grid, Online, Off };
+MacroCellMode parse_macrocell_mode(const std::string& s);
+const char* macrocell_mode_name(MacroCellMode m);
+
+struct MacroCellView {
+  const float* max_opacity = nullptr;  // per cell, x fastest
+  int32_t nx = 0, ny = 0, nz = 0;
+  Vec3f cell_world{16, 16, 16};  // world size of one cell per axis
+  Vec3f inv_cell_world{1.0f / 16, 1.0f / 16, 1.0f / 16};
+};
+
+class MacroCells {
+public:
+  // `ranges` = per-cell value ranges; `box` = world size of the volume box (dims * spacing).
+  MacroCells(ValueRangeGrid ranges, Vec3f box);
+  // One cell over the whole box (--macrocells off): its range is [lo, hi] (the full range by default).
+  static MacroCells single(Int3 dims, Vec3f box, float lo = 0, float hi = 1);
+  // Recomputes the per-cell max opacity for a transfer function (B.6: table entries
+  // floor(min*(N-1)+0.5)-1 .. floor(max*(N-1)+0.5)+1, clamped, over the TF's window).
+  void update(const TransferFunction& tf);
+  MacroCellView view() const;
+  const ValueRangeGrid& ranges() const { return ranges_; }
+  const std::vector<float>& max_opacity() const { return max_opacity_; }
+  // Fraction of cells that are transparent for the current TF (for reports).
+  double empty_fraction() const;
+
+private:
+  ValueRangeGrid ranges_;
+  Vec3f box_, cell_world_;
+  std::vector<float> max_opacity_;
+};
+
+// 3-D DDA (Amanatides-Woo) over the macro-cells, resumable: the whole traversal state lives in this
+// POD so a streaming ray can stop after any cell and continue in the next iteration.
+struct DdaState {
+  int32_t cell[3];
+  int32_t step[3];
+  float t_next[3];   // ray parameter where the ray leaves the current cell along each axis
+  float t_delta[3];  // ray parameter per cell along each axis
+  float t_end;       // where the ray leaves the volume box
+};
+
+VNR_HD VNR_INLINE void dda_init(const MacroCellView& mc, Vec3f org, Vec3f dir, float t0, float t1, DdaState& s) {
+  const float o[3] = {org.x, org.y, org.z}, d[3] = {dir.x, dir.y, dir.z};
+  const float cw[3] = {mc.cell_world.x, mc.cell_world.y, mc.cell_world.z};
+  const float icw[3] = {mc.inv_cell_world.x, mc.inv_cell_world.y, mc.inv_cell_world.z};
+  const int32_t n[3] = {mc.nx, mc.ny, mc.nz};
+  for (int a = 0; a < 3; ++a) {
+    float p = o[a] + d[a] * t0;
+    int32_t c = int32_t(floorf(p * icw[a]));
+    c = c < 0 ? 0 : (c > n[a] - 1 ? n[a] - 1 : c);
+    s.cell[a] = c;
+    if (d[a] > 0) {
+      s.step[a] = 1;
+      s.t_delta[a] = cw[a] / d[a];
+      s.t_next[a] = (float(c + 1) * cw[a] - o[a]) / d[a];
+    } else if (d[a] < 0) {
+      s.step[a] = -1;
+      s.t_delta[a] = -cw[a] / d[a];
+      s.t_next[a] = (float(c) * cw[a] - o[a]) / d[a];
+    } else {
+      s.step[a] = 0;
+      s.t_delta[a] = INFINITY;
+      s.t_next[a] = INFINITY;
+    }
+  }
+  s.t_end = t1;
+}
+
+VNR_HD VNR_INLINE int64_t dda_cell_index(const MacroCellView& mc, const DdaState& s) {
+  return s.cell[0] + int64_t(mc.nx) * (s.cell[1] + int64_t(mc.ny) * s.cell[2]);
+}
+
+// Where the ray leaves the current cell (never beyond the box exit).
+VNR_HD VNR_INLINE float dda_cell_exit(const DdaState& s) {
+  float t = s.t_next[0] < s.t_next[1] ? s.t_next[0] : s.t_next[1];
+  t = t < s.t_next[2] ? t : s.t_next[2];
+  return t < s.t_end ? t : s.t_end;
+}
+
+// Steps into the next cell; returns false when the ray has left the grid or the box.
+VNR_HD VNR_INLINE bool dda_advance(const MacroCellView& mc, DdaState& s) {
+  int a = s.t_next[0] < s.t_next[1] ? (s.t_next[0] < s.t_next[2] ? 0 : 2) : (s.t_next[1] < s.t_next[2] ? 1 : 2);
+  if (s.t_next[a] >= s.t_end) return false;
+  s.cell[a] += s.step[a];
+  const int32_t n = a == 0 ? mc.nx : (a == 1 ? mc.ny : mc.nz);
+  if (s.cell[a] < 0 || s.cell[a] >= n) return false;
+  s.t_next[a] += s.t_delta[a];
+  return true;
+}
+
+// Ray / axis-aligned box [0, box] intersection; false when the ray misses it.
+VNR_HD VNR_INLINE bool intersect_box(Vec3f org, Vec3f dir, Vec3f box, float* t0, float* t1) {
+  const float o[3] = {org.x, org.y, org.z}, d[3] = {dir.x, dir.y, dir.z}, b[3] = {box.x, box.y, box.z};
+  float lo = 0, hi = INFINITY;
+  for (int a = 0; a < 3; ++a) {
+    if (d[a] == 0) {
+      if (o[a] < 0 || o[a] > b[a]) return false;
+      continue;
+    }
+    float inv = 1.0f / d[a];
+    float ta = (0 - o[a]) * inv, tb = (b[a] - o[a]) * inv;
+    if (ta > tb) {
+      float t = ta;
+      ta = tb;
+      tb = t;
+    }
+    lo = ta > lo ? ta : lo;
+    hi = tb < hi ? tb : hi;
+  }
+  *t0 = lo;
+  *t1 = hi;
+  return lo < hi;
+}
+
+}  // namespace vnr

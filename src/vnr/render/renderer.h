@@ -1,0 +1,95 @@
+#pragma once
+// Frame rendering: the three integrators of integrators.h in two execution strategies.
+//  - in-shader: every pixel's ray runs its whole loop and evaluates the field one point at a time
+//    (GridPointFn / NetworkPointFn), the paper's baseline;
+//  - sample streaming: wavefront ray queues; each iteration a coordinate stage emits up to K samples
+//    per live ray, one batched Field::query evaluates them all, a shading stage consumes them, and
+//    finished rays are compacted away (paper Figs. "Ray marching algorithms using sample-streaming"
+//    and "path tracing algorithm using sample-streaming"). Shadow rays are a second streaming pass.
+// Both strategies call the same per-ray functions in the same order, so for the same seed they give
+// the same image whenever the two field evaluations agree bit for bit (they do for the grid).
+#include <cstdint>
+#include <string>
+#include <vector>
+#include "vnr/render/camera.h"
+#include "vnr/render/field.h"
+#include "vnr/render/image.h"
+#include "vnr/render/integrators.h"
+#include "vnr/render/macrocell.h"
+#include "vnr/render/scene.h"
+#include "vnr/render/transfer_function.h"
+
+namespace vnr {
+
+enum class RenderMode { RayMarch, Shadow, PathTrace };
+enum class RenderStrategy { InShader, Streaming };
+RenderMode parse_render_mode(const std::string& s);
+RenderStrategy parse_render_strategy(const std::string& s);
+const char* render_mode_name(RenderMode m);
+const char* render_strategy_name(RenderStrategy s);
+
+// Samples per live ray per streaming iteration (B.7): measured on this backend with
+// `vnr bench render --tune-k` (README, "Rendering").
+constexpr int kDefaultSamplesPerIteration = 8;
+
+struct RenderOptions {
+  RenderMode mode = RenderMode::RayMarch;
+  RenderStrategy strategy = RenderStrategy::Streaming;
+  int width = 768, height = 768;
+  float step = 1;             // s1, world units (voxels)
+  float step_max = 0;         // s2; 0 = 16 * step (compat.md B.7 default)
+  float density_scale = 1;    // path tracing
+  bool shade = false;         // gradient shading for ray marching
+  uint32_t seed = 0;
+  int samples_per_iteration = kDefaultSamplesPerIteration;  // K
+  Vec3f background{0, 0, 0};
+  DirectionalLight light;
+};
+
+struct RenderStats {
+  int frames = 0;
+  int64_t rays = 0;           // primary rays (pixels x frames)
+  int64_t field_samples = 0;  // field evaluations (including gradient neighbours)
+  int64_t iterations = 0;     // streaming iterations
+  double seconds = 0;
+};
+
+class Renderer {
+public:
+  // field, macro-cells and tf must outlive the renderer; box = world size of the volume box.
+  Renderer(const Field& field, Vec3f box, const MacroCells& mc, const TransferFunction& tf, const Camera& cam,
+           const RenderOptions& opt);
+  // Renders frame number `frame` (its jitter and random numbers) into img (overwritten).
+  void render_frame(uint32_t frame, Image& img, RenderStats* stats = nullptr);
+  // Renders `frames` frames (0, 1, ...) and returns their average (progressive accumulation).
+  Image render(int frames, RenderStats* stats = nullptr);
+  // A new view for the next frames (e.g. an orbit); the light flip of B.8 follows the camera.
+  void set_camera(const Camera& cam);
+  const RenderParams& params() const { return params_; }
+
+private:
+  template <class PointFn>
+  void inshader(const PointFn& f, Image& img, RenderStats& st);
+  void stream_march(Image& img, RenderStats& st);
+  void stream_path(Image& img, RenderStats& st);
+  // Evaluates the compacted query buffers.
+  void query(int64_t n, RenderStats& st);
+
+  const Field& field_;
+  RenderOptions opt_;
+  Camera camera_;
+  RenderParams params_;
+  // Streaming buffers, kept between frames.
+  std::vector<MarchState> march_;
+  std::vector<ShadowState> shadow_;
+  std::vector<PathState> path_;
+  std::vector<int32_t> live_, next_live_;
+  std::vector<uint8_t> keep_;
+  std::vector<int32_t> count_;
+  std::vector<int64_t> offset_;
+  std::vector<Vec3f> spos_;
+  std::vector<float> sdt_;
+  std::vector<float> qx_, qy_, qz_, qv_;
+};
+
+}  // namespace vnr

@@ -1,0 +1,33 @@
+#pragma once
+// Scene files: instantvnr's scene JSON (instantvnr-formats README section 1) or vnr's own scene
+// JSON. Everything is optional; the renderer fills in defaults (compat.md B.8, B.10).
+#include <optional>
+#include <string>
+#include "vnr/core/math.h"
+#include "vnr/render/camera.h"
+#include "vnr/render/transfer_function.h"
+
+namespace vnr {
+
+// Directional light: `direction` points from the scene toward the light.
+struct DirectionalLight {
+  Vec3f direction = normalize(Vec3f{0.7f, 0.9f, 0.4f});
+  Vec3f color{1, 1, 1};
+};
+
+struct Scene {
+  std::optional<Camera> camera;          // world space of B.2
+  std::optional<TransferFunction> tf;
+  std::optional<DirectionalLight> light;
+  std::optional<Vec3f> background;
+  bool has_volume = false;               // an instantvnr scene names its volume (dataSource)
+};
+
+// instantvnr scenes: `view.camera` eye/center are in voxel-index units with voxel centres on
+// integers; they are converted to B.2 world space by adding 0.5 per axis. The TF comes from
+// `view.volume.transferFunction` (over the normalised range). vnr scenes:
+// {"camera": {"eye": [x,y,z], "center": [...], "up": [...], "fovy": deg}, "transfer_function":
+// <TF object or preset name>, "light": {"direction": [...], "color": [...]}, "background": [r,g,b]}.
+Scene load_scene(const std::string& path);
+
+}  // namespace vnr

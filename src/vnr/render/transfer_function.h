@@ -1,0 +1,53 @@
+#pragma once
+// Transfer functions (compat.md B.5, instantvnr-formats README 1.4): a table of N RGBA entries, entry
+// i at normalised value lo + i/(N-1) * (hi - lo), linearly interpolated, clamped at the ends. Colour
+// is straight (not premultiplied); alpha is the opacity per unit step (one voxel).
+#include <string>
+#include <vector>
+#include "vnr/core/hd.h"
+#include "vnr/core/json.h"
+#include "vnr/core/math.h"
+
+namespace vnr {
+
+struct TransferFunction {
+  std::vector<Vec4f> table;  // N >= 2 entries
+  float lo = 0, hi = 1;      // window over normalised values [0,1] that the table spans
+  std::string name;          // preset name or file, for reports
+};
+
+// POD view for per-sample code.
+struct TfView {
+  const Vec4f* table = nullptr;
+  int n = 0;
+  float lo = 0, scale = 1;  // u -> (u - lo) * scale in [0,1]
+};
+inline TfView view_of(const TransferFunction& tf) {
+  float w = tf.hi - tf.lo;
+  return TfView{tf.table.data(), int(tf.table.size()), tf.lo, w > 0 ? 1.0f / w : 0.0f};
+}
+
+VNR_HD VNR_INLINE Vec4f tf_lookup(const TfView& tf, float u) {
+  float x = clampf((u - tf.lo) * tf.scale, 0.0f, 1.0f) * float(tf.n - 1);
+  int i = int(x);
+  if (i > tf.n - 2) i = tf.n - 2;
+  float t = x - float(i);
+  const Vec4f a = tf.table[i], b = tf.table[i + 1];
+  return Vec4f{a.x + (b.x - a.x) * t, a.y + (b.y - a.y) * t, a.z + (b.z - a.z) * t, a.w + (b.w - a.w) * t};
+}
+
+// Built-in presets by name (see tf_preset_names()); "ramp" is the VTK peer's transfer function.
+std::vector<std::string> tf_preset_names();
+bool is_tf_preset(const std::string& name);
+TransferFunction tf_preset(const std::string& name);
+
+// Parses any of: an instantvnr transfer-function object ({"alphaArray", "colorControls",
+// "opacityControl", "gaussianObjects", "resolution"}), a standalone instantvnr TF file
+// ({"transferFunction": {...}}), a whole instantvnr scene (view.volume.transferFunction), or vnr's
+// simple format {"colors": [[v, r, g, b], ...], "opacities": [[v, a], ...], "resolution": N,
+// "range": [lo, hi]}. `where` names the source in error messages.
+TransferFunction tf_from_json(const Json& j, const std::string& where);
+// A preset name, or a JSON file in one of the formats above.
+TransferFunction load_transfer_function(const std::string& file_or_preset);
+
+}  // namespace vnr
