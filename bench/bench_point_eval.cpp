@@ -1,10 +1,12 @@
 // Single-thread throughput of PointEvaluator::eval (the in-shader renderer's per-sample query) next
 // to batched Network::infer on the same points, so the ratio is visible. Counters: items_per_second
-// = points/s; ns/pt.
+// = points/s; per_pt = time per point.
 //   Models: Paper (HashGrid 8x8, 2^19, MLP 64x4), Ngp (HashGrid 16x2, 2^19, MLP 64x4), Small (4x2, 16x2).
 //   Points: Random (uniform in the cube: every corner a cold line in the large levels) or Ray
 //   (ray-marching order: 256 steps of 1/256 along random rays, so consecutive queries share lines).
 //   Encode / Mlp variants time the two halves of eval() alone (Mlp on precomputed encodings).
+//   Eval args: skip = compaction of zero ReLU outputs on; pf = PointEvaluator::prefetch(next point)
+//   before each eval (what a ray loop can do: the next sample's position is known).
 #include <benchmark/benchmark.h>
 
 #include <cmath>
@@ -83,19 +85,27 @@ const std::vector<float>& points(bool ray) {
 
 void set_rate(benchmark::State& state, int64_t pts) {
   state.SetItemsProcessed(pts);
-  state.counters["ns/pt"] = benchmark::Counter(double(pts) * 1e-9,
-                                               benchmark::Counter::kIsRate | benchmark::Counter::kInvert);
+  state.counters["per_pt"] = benchmark::Counter(double(pts), benchmark::Counter::kIsRate | benchmark::Counter::kInvert);
 }
 
-// Args: model, ray, skip zeros.
+// Args: model, ray, skip zeros, prefetch (pe.prefetch(next point) before each eval, as a ray loop can).
 void BM_PointEval_Eval(benchmark::State& state) {
   const Network& net = model_net(int(state.range(0)));
   const std::vector<float>& p = points(state.range(1) != 0);
   const PointEvaluator pe(net, state.range(2) != 0);
+  const bool pf = state.range(3) != 0;
   int64_t done = 0;
   float sink = 0;
   for (auto _ : state) {
-    for (int i = 0; i < kPoints; ++i) sink += pe.eval(p[3 * i], p[3 * i + 1], p[3 * i + 2]);
+    if (pf) {
+      for (int i = 0; i < kPoints; ++i) {
+        const int nx = i + 1 < kPoints ? i + 1 : i;
+        pe.prefetch(p[3 * nx], p[3 * nx + 1], p[3 * nx + 2]);
+        sink += pe.eval(p[3 * i], p[3 * i + 1], p[3 * i + 2]);
+      }
+    } else {
+      for (int i = 0; i < kPoints; ++i) sink += pe.eval(p[3 * i], p[3 * i + 1], p[3 * i + 2]);
+    }
     done += kPoints;
   }
   benchmark::DoNotOptimize(sink);
@@ -157,11 +167,12 @@ void BM_PointEval_Mlp(benchmark::State& state) {
 }
 
 void Models(benchmark::internal::Benchmark* b) {
-  b->ArgNames({"model", "ray", "skip"});
+  b->ArgNames({"model", "ray", "skip", "pf"});
   for (int m : {0, 1, 2})
-    for (int ray : {0, 1}) b->Args({m, ray, 1});
-  b->Args({0, 0, 0});
-  b->Args({1, 0, 0});
+    for (int ray : {0, 1})
+      for (int pf : {0, 1}) b->Args({m, ray, 1, pf});
+  b->Args({0, 0, 0, 0});
+  b->Args({1, 0, 0, 0});
   b->Unit(benchmark::kMillisecond);
 }
 

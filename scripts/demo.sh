@@ -13,3 +13,10 @@ $VNR train out/demo/marschner_lobb.json -o out/demo/marschner_lobb.vnr --target-
   --report out/demo/train_report.json
 $VNR info out/demo/marschner_lobb.vnr
 $VNR decode out/demo/marschner_lobb.vnr -o out/demo/decoded.nrrd --force
+# Render the network directly (no decoding) and the ground truth, and compare the two images.
+$VNR render out/demo/marschner_lobb.json -o out/demo/ground_truth.png --size 512x512 --orbit 30,20 -q
+$VNR render out/demo/marschner_lobb.vnr -o out/demo/neural.png --size 512x512 --orbit 30,20 \
+  --reference out/demo/ground_truth.png --report out/demo/render_report.json
+$VNR render out/demo/marschner_lobb.vnr -o out/demo/neural_pathtraced.png --size 512x512 --orbit 30,20 \
+  --mode pathtrace --spp 8
+echo "images in out/demo: ground_truth.png, neural.png, neural_pathtraced.png"

@@ -49,7 +49,8 @@ std::vector<Case> cases() {
       {"hash_L12F1_w16x2", model(hashgrid(12, 1, 14, 4, 1.7), 16, 2)},
       {"dense_L4F4_w32x2", model(hashgrid(4, 4, 19, 3, 1.5, "Linear", "DenseGrid"), 32, 2)},
       {"dense_L3F2_w16x3", model(hashgrid(3, 2, 19, 5, 2.0, "Linear", "DenseGrid"), 16, 3)},
-      {"tiled_L4F2_w16x2", model(hashgrid(4, 2, 19, 4, 2.0, "Linear", "TiledGrid"), 16, 2)},
+      {"tiled_L4F2_w16x2", model(hashgrid(4, 2, 19, 3, 1.7, "Linear", "TiledGrid"), 16, 2)},
+      {"tiled_L4F8_w64x2", model(hashgrid(4, 8, 19, 4, 2.0, "Linear", "TiledGrid"), 64, 2)},
       {"smoothstep_w32x2", model(hashgrid(6, 2, 14, 4, 2.0, "Smoothstep"), 32, 2)},
       {"smoothstep_F8_w64x2", model(hashgrid(4, 8, 16, 4, 2.0, "Smoothstep"), 64, 2)},
       {"nearest_w16x2", model(hashgrid(5, 2, 14, 4, 2.0, "Nearest"), 16, 2)},
@@ -67,7 +68,7 @@ std::vector<Case> cases() {
 }
 
 // Grid parameters U[-1, 1] (fp16 working copy re-synced) and MLP matrices scaled up, so that outputs
-// are of order 1-100 rather than tiny.
+// are of order 0.1-10 rather than ~1e-5 (tcnn's grid init is U[-1e-4, 1e-4]).
 void randomise(Network& net, uint32_t seed, float mlp_scale = 1.5f) {
   std::mt19937 gen(seed);
   std::uniform_real_distribution<float> U(-1.f, 1.f);
@@ -138,7 +139,7 @@ void check_network(const Network& net, const char* label, bool relative = false,
   EXPECT_GT(mag, 1e-7) << "outputs vanish";
   for (bool skip : {true, false}) {
     PointEvaluator pe(net, skip);
-    EXPECT_EQ(pe.skips_zeros(), skip && net.mlp().activation == Activation::ReLU);
+    EXPECT_EQ(pe.skips_zeros(), skip && net.mlp().activation == Activation::ReLU && net.mlp().width > 32);
     for (int64_t i = 0; i < n; ++i) got[i] = pe.eval(pts[3 * i], pts[3 * i + 1], pts[3 * i + 2]);
     expect_close(got, want, pts, skip ? "eval vs infer (skip zeros)" : "eval vs infer (dense)", tol_abs);
   }
@@ -299,4 +300,30 @@ TEST(PointEval, NonFiniteWeightsDisableSkipping) {
     else if (std::isinf(want[i])) EXPECT_EQ(got[i], want[i]) << i;
     else EXPECT_NEAR(got[i], want[i], 1e-5 * (1 + std::fabs(want[i]))) << i;
   }
+}
+
+// prefetch() is only a hint: any point (outside the cube, NaN, parameter-free encodings) is fine and
+// results do not change.
+TEST(PointEval, PrefetchHintHasNoEffect) {
+  for (const char* cname : {"paper", "small"}) {
+    Network net(preset_config(cname));
+    net.init_params(61);
+    randomise(net, 62);
+    PointEvaluator pe(net);
+    std::vector<float> pts = random_points(500, 63);
+    for (int i = 0; i < 500; ++i) {
+      const float* p = &pts[3 * i];
+      const float before = pe.eval(p[0], p[1], p[2]);
+      pe.prefetch(p[0], p[1], p[2]);
+      pe.prefetch(-3.0f, 2.5f, NAN);
+      pe.prefetch(1.0f, 1.0f, 1.0f);
+      const float after = pe.eval(p[0], p[1], p[2]);
+      ASSERT_EQ(std::memcmp(&before, &after, 4), 0);
+    }
+  }
+  Network net(model(Json{{"otype", "Frequency"}, {"n_frequencies", 4}}, 32, 2));
+  net.init_params(64);
+  PointEvaluator pe(net);
+  pe.prefetch(0.5f, 0.5f, 0.5f);
+  EXPECT_NEAR(pe.eval(0.5f, 0.5f, 0.5f), net.eval_reference(0.5f, 0.5f, 0.5f), 1e-5);
 }

@@ -7,7 +7,7 @@
 
 #include <cmath>
 #include <cstring>
-#include <cstdlib>
+#include <utility>
 #include "vnr/nn/loss.h"
 #include "vnr/nn/network.h"
 #include "vnr/nn/point_eval.h"
@@ -33,6 +33,18 @@ using DHF = hn::Rebind<hwy::float16_t, DFF<F>>;
 constexpr size_t kGridEncMax = kMaxGridLevels * 8;
 constexpr size_t kFreeEncMax = kMaxParameterFreeWidth;
 constexpr size_t kHMax = PointEvalData::kMaxWidth + 64;  // width padded to the panel width
+
+// Calls fn(std::integral_constant<int, k>) for k = 0 .. n-1: a guaranteed unroll with a constant k
+// (GCC does not honour "#pragma GCC unroll" on these loops at -O2, and a run-time corner index
+// sends the lattice vectors through memory).
+template <class Fn, int... K>
+HWY_INLINE void UnrollImpl(Fn&& fn, std::integer_sequence<int, K...>) {
+  (fn(std::integral_constant<int, K>()), ...);
+}
+template <int n, class Fn>
+HWY_INLINE void Unroll(Fn&& fn) {
+  UnrollImpl(fn, std::make_integer_sequence<int, n>());
+}
 
 // ---------------------------------------------------------------- encoding
 
@@ -69,11 +81,12 @@ HWY_INLINE void SetupLattice(const PointEvalData& d, uint32_t l0, const VF (&pin
   const hn::Vec<DU> y[2] = {y0, hn::Add(y0, m1)};
   t.z[0] = z0;
   t.z[1] = hn::Add(z0, m2);
-  for (int k = 0; k < 4; ++k) {
+  Unroll<4>([&](auto kc) {
+    constexpr int k = kc;
     t.xy_hash[k] = hn::Xor(x[k & 1], y[k >> 1]);
     t.xy_sum[k] = hn::Add(x[k & 1], y[k >> 1]);
     t.wxy[k] = hn::Mul(k & 1 ? sv[0] : sm[0], k & 2 ? sv[1] : sm[1]);
-  }
+  });
   t.wz[0] = sm[2];
   t.wz[1] = sv[2];
   t.n = hn::Load(du, d.lvl_n + l0);
@@ -93,45 +106,10 @@ HWY_INLINE hn::Vec<DU> CornerEntry(const LevelLattice& t, int k) {
 // Weight of corner k: (wx * wy) * wz, the reference's product order.
 HWY_INLINE VF CornerWeight(const LevelLattice& t, int k) { return hn::Mul(t.wxy[k & 3], t.wz[k >> 2]); }
 
-// F = 2 with hardware gathers, lanes = levels: per corner one 32-bit gather fetches both features
-// of every level; accumulation per (level, feature) stays in corner order (bit-identical).
-// Output is feature-major: out[f * L + l] (the constructor permutes W_0's rows to match).
-HWY_INLINE void EncodeGather2(const PointEvalData& d, const VF (&pin)[3], float* HWY_RESTRICT out) {
-  const DF df;
-  const DU du;
-  const DI di;
-  const hn::Rebind<uint16_t, DF> du16;
-  const hn::Rebind<hwy::float16_t, DF> dh16;
-  const uint32_t L = d.grid.n_levels;
-  const bool nearest = d.grid.interpolation == Interpolation::Nearest;
-  const bool smooth = d.grid.interpolation == Interpolation::Smoothstep;
-  const int32_t* HWY_RESTRICT words = reinterpret_cast<const int32_t*>(d.table);  // entry e: word e
-  for (uint32_t l0 = 0; l0 < L; l0 += uint32_t(kN)) {
-    LevelLattice t;
-    SetupLattice(d, l0, pin, smooth, t);
-    const auto off = hn::Load(du, d.lvl_offset + l0);
-    VF acc0 = hn::Zero(df), acc1 = hn::Zero(df);
-    const int kn = nearest ? 1 : 8;
-    for (int k = 0; k < kn; ++k) {
-      const auto e = hn::BitCast(di, hn::Add(CornerEntry(t, k), off));
-      const auto w = hn::BitCast(du, hn::GatherIndex(di, words, e));
-      const VF f0 = hn::PromoteTo(df, hn::BitCast(dh16, hn::TruncateTo(du16, w)));
-      const VF f1 = hn::PromoteTo(df, hn::BitCast(dh16, hn::TruncateTo(du16, hn::ShiftRight<16>(w))));
-      const VF wk = nearest ? hn::Set(df, 1.0f) : CornerWeight(t, k);
-      acc0 = hn::MulAdd(wk, f0, acc0);
-      acc1 = hn::MulAdd(wk, f1, acc1);
-    }
-    const auto valid = hn::FirstN(df, L - l0);
-    hn::BlendedStore(acc0, valid, df, out + l0);
-    hn::BlendedStore(acc1, valid, df, out + L + l0);
-  }
-}
-
-// Grid encoding of one point into out[0, L*F): level-major (out[l*F + f], the network's order), or
-// for the gather path (d.feature_major) feature-major. Corner entries and weights of all levels
-// are computed with lanes = levels (exactly grid_corners()' arithmetic, so bit-identical), then
-// each level accumulates its corners' fp16 features in corner order with FMA
-// (grid_level_forward's order).
+// Grid encoding of one point into out[0, L*F) (out[l*F + f], the network's order). Corner entries
+// and weights of all levels are computed with lanes = levels (exactly grid_corners()' arithmetic,
+// so bit-identical), then each level accumulates its corners' fp16 features in corner order with
+// FMA (grid_level_forward's order).
 template <int F>
 HWY_INLINE void EncodeGrid(const PointEvalData& d, float x, float y, float z, float* HWY_RESTRICT out) {
   const GridLayout& g = d.grid;
@@ -141,18 +119,11 @@ HWY_INLINE void EncodeGrid(const PointEvalData& d, float x, float y, float z, fl
   // multiply-add (else MulAdd rounds twice and would differ from the reference's fmaf).
   const bool inside = x >= 0.0f && x <= 1.0f && y >= 0.0f && y <= 1.0f && z >= 0.0f && z <= 1.0f;
   if (!HWY_NATIVE_FMA || !inside) {
-    if (d.feature_major) {
-      for (uint32_t l = 0; l < L; ++l) grid_level_forward<F>(g.levels[l], g.interpolation, table, x, y, z, out + l, L);
-    } else {
-      for (uint32_t l = 0; l < L; ++l) grid_level_forward<F>(g.levels[l], g.interpolation, table, x, y, z, out + l * F, 1);
-    }
+    for (uint32_t l = 0; l < L; ++l) grid_level_forward<F>(g.levels[l], g.interpolation, table, x, y, z, out + l * F, 1);
     return;
   }
   const DF df;
   const VF pin[3] = {hn::Set(df, x), hn::Set(df, y), hn::Set(df, z)};
-  if constexpr (F == 2) {
-    if (d.feature_major) return EncodeGather2(d, pin, out);
-  }
   const bool nearest = g.interpolation == Interpolation::Nearest;
   const bool smooth = g.interpolation == Interpolation::Smoothstep;
   const int kn = nearest ? 1 : 8;
@@ -163,17 +134,22 @@ HWY_INLINE void EncodeGrid(const PointEvalData& d, float x, float y, float z, fl
     for (uint32_t l0 = 0; l0 < L; l0 += uint32_t(kN)) {  // kN divides kMaxGridLevels
       LevelLattice t;
       SetupLattice(d, l0, pin, smooth, t);
-      for (int k = 0; k < kn; ++k) {
-        hn::Store(CornerEntry(t, k), du, ent[k] + l0);
-        hn::Store(nearest ? hn::Set(df, 1.0f) : CornerWeight(t, k), df, wt[k] + l0);
+      if (nearest) {  // tcnn: the lower corner, weight 1
+        hn::Store(CornerEntry(t, 0), du, ent[0] + l0);
+        hn::Store(hn::Set(df, 1.0f), df, wt[0] + l0);
+      } else {
+        Unroll<8>([&](auto k) {
+          hn::Store(CornerEntry(t, k), du, ent[k] + l0);
+          hn::Store(CornerWeight(t, k), df, wt[k] + l0);
+        });
       }
     }
   }
   // Start the cache misses of the large levels before any of them is needed: the loads below
   // then overlap instead of waiting in turn behind the reorder window. L2 hint, as the batched
   // encoder (more misses in flight than the L1 tracks).
-  if (d.prefetch) {
-    for (uint32_t l = 0; l < L; ++l)
+  if (d.first_big < L) {
+    for (uint32_t l = d.first_big; l < L; ++l)
       if (d.lvl_big[l])
         for (int k = 0; k < kn; ++k) __builtin_prefetch(d.lvl_ptr[l] + uint64_t(ent[k][l]) * F, 0, 2);
   }
@@ -189,12 +165,39 @@ HWY_INLINE void EncodeGrid(const PointEvalData& d, float x, float y, float z, fl
     const uint16_t* HWY_RESTRICT lt = d.lvl_ptr[l];
     hn::Vec<DFF<F>> acc[NV];
     for (size_t v = 0; v < NV; ++v) acc[v] = hn::Zero(dff);
-    for (int k = 0; k < kn; ++k) {
+    auto corner = [&](int k) {  // one fp16 load, one conversion, one FMA per vector of features
       const auto* th = reinterpret_cast<const hwy::float16_t*>(lt + uint64_t(ent[k][l]) * F);
       const auto w = hn::Set(dff, wt[k][l]);
       for (size_t v = 0; v < NV; ++v) acc[v] = hn::MulAdd(w, hn::PromoteTo(dff, hn::LoadU(dhf, th + v * NF)), acc[v]);
-    }
+    };
+    if (nearest) corner(0);
+    else Unroll<8>(corner);
     for (size_t v = 0; v < NV; ++v) hn::StoreU(acc[v], dff, out + l * F + v * NF);
+  }
+}
+
+// Prefetch hint for a point evaluated soon: the corner lines of the large levels, into L2.
+template <int F>
+HWY_INLINE void PrefetchGrid(const PointEvalData& d, float x, float y, float z) {
+  const bool inside = x >= 0.0f && x <= 1.0f && y >= 0.0f && y <= 1.0f && z >= 0.0f && z <= 1.0f;
+  if (!HWY_NATIVE_FMA || !inside || d.first_big >= d.grid.n_levels) return;
+  const DF df;
+  const DU du;
+  const VF pin[3] = {hn::Set(df, x), hn::Set(df, y), hn::Set(df, z)};
+  const uint32_t L = d.grid.n_levels;
+  const bool nearest = d.grid.interpolation == Interpolation::Nearest;
+  const bool smooth = d.grid.interpolation == Interpolation::Smoothstep;
+  alignas(64) uint32_t ent[8][kN];
+  for (uint32_t l0 = d.first_big / uint32_t(kN) * uint32_t(kN); l0 < L; l0 += uint32_t(kN)) {
+    LevelLattice t;
+    SetupLattice(d, l0, pin, smooth, t);
+    Unroll<8>([&](auto k) { hn::Store(CornerEntry(t, k), du, ent[k]); });
+    const uint32_t le = L < l0 + uint32_t(kN) ? L : l0 + uint32_t(kN);
+    for (uint32_t l = l0; l < le; ++l)
+      if (d.lvl_big[l]) {
+        const int kn = nearest ? 1 : 8;
+        for (int k = 0; k < kn; ++k) __builtin_prefetch(d.lvl_ptr[l] + uint64_t(ent[k][l - l0]) * F, 0, 2);
+      }
   }
 }
 
@@ -212,18 +215,6 @@ HWY_INLINE void Encode(const PointEvalData& d, float x, float y, float z, float*
 }
 
 // ---------------------------------------------------------------- MLP
-
-#ifndef VNR_PE_SWPF
-#define VNR_PE_SWPF 0
-#endif
-#ifndef VNR_PE_SWPF_DENSE
-#define VNR_PE_SWPF_DENSE 0
-#endif
-#ifndef VNR_PE_PFDIST
-#define VNR_PE_PFDIST 8
-#endif
-constexpr bool kSwPf = VNR_PE_SWPF, kSwPfDense = VNR_PE_SWPF_DENSE;
-constexpr int kPfDist = VNR_PE_PFDIST;
 
 // Accumulator sets: enough independent FMA chains (NV * S >= 8) to cover latency x throughput.
 template <int NV>
@@ -281,11 +272,6 @@ HWY_INLINE void DensePanel(const float* HWY_RESTRICT W, const float* HWY_RESTRIC
   for (; i + S <= K; i += S) {
 #pragma GCC unroll 16
     for (int s = 0; s < S; ++s) {
-      if (kSwPfDense) {
-        const float* pr = W + size_t(i + s + kPfDist) * PW;
-#pragma GCC unroll 16
-        for (size_t c = 0; c < NV * kN * 4; c += 64) __builtin_prefetch(reinterpret_cast<const char*>(pr) + c, 0, 3);
-      }
       const VF xv = hn::Set(df, x[i + s]);
       const float* HWY_RESTRICT row = W + size_t(i + s) * PW;
 #pragma GCC unroll 16
@@ -317,11 +303,6 @@ HWY_INLINE void SparsePanel(const float* HWY_RESTRICT W, const float* HWY_RESTRI
   for (; j + S <= nnz; j += S) {
 #pragma GCC unroll 16
     for (int s = 0; s < S; ++s) {
-      if (kSwPf) {
-        const float* pr = W + rows[j + s + kPfDist];
-#pragma GCC unroll 16
-        for (size_t c = 0; c < NV * kN * 4; c += 64) __builtin_prefetch(reinterpret_cast<const char*>(pr) + c, 0, 3);
-      }
       const VF xv = hn::Set(df, vals[j + s]);
       const float* HWY_RESTRICT row = W + rows[j + s];
 #pragma GCC unroll 16
@@ -369,7 +350,7 @@ HWY_INLINE float MlpForward(const PointEvalData& d, const float* HWY_RESTRICT x0
   const DF df;
   alignas(64) float hbuf[2][kHMax];
   alignas(64) float vals[kHMax + kN];
-  alignas(64) int32_t rows[kHMax + kN + 64];
+  alignas(64) int32_t rows[kHMax + kN];
   const float* in = x0;
   uint32_t K = d.k0;
   const uint32_t np = d.n_panels;
@@ -415,37 +396,25 @@ HWY_NOINLINE float Eval(const PointEvalData& d, float x, float y, float z) {
 
 template <int F>
 HWY_NOINLINE void EncodeOnly(const PointEvalData& d, float x, float y, float z, float* out) {
-  if constexpr (F != 0) {
-    if (d.feature_major) {  // back to the network's level-major order
-      alignas(64) float fm[kGridEncMax];
-      Encode<F>(d, x, y, z, fm);
-      const uint32_t L = d.grid.n_levels;
-      for (uint32_t l = 0; l < L; ++l)
-        for (int f = 0; f < F; ++f) out[l * F + f] = fm[f * L + l];
-    } else {
-      Encode<F>(d, x, y, z, out);
-    }
+  Encode<F>(d, x, y, z, out);
+  if constexpr (F != 0)
     for (uint32_t j = d.enc_width; j < d.in_pad; ++j) out[j] = d.pad_value;
-  } else {
-    Encode<F>(d, x, y, z, out);
-  }
 }
 
 template <int PW>
 HWY_NOINLINE float MlpOnly(const PointEvalData& d, const float* enc) {
-  if (d.feature_major) {  // the network's level-major encoding to the kernel's feature-major one
-    alignas(64) float fm[kGridEncMax];
-    const uint32_t L = d.grid.n_levels, F = d.grid.n_features;
-    for (uint32_t l = 0; l < L; ++l)
-      for (uint32_t f = 0; f < F; ++f) fm[f * L + l] = enc[l * F + f];
-    return MlpForward<PW>(d, fm);
-  }
   return MlpForward<PW>(d, enc);
 }
 
 template <int F>
-void PickPanel(const PointEvalData& d, PointEvaluator::Kernels* k) {
+HWY_NOINLINE void Prefetch(const PointEvalData& d, float x, float y, float z) {
+  if constexpr (F != 0) PrefetchGrid<F>(d, x, y, z);
+}
+
+template <int F>
+void PickKernels(const PointEvalData& d, PointEvaluator::Kernels* k) {
   k->encode = &EncodeOnly<F>;
+  k->prefetch = &Prefetch<F>;
   switch (d.panel) {
     case 16: k->eval = &Eval<F, 16>; k->mlp = &MlpOnly<16>; break;
     case 32: k->eval = &Eval<F, 32>; k->mlp = &MlpOnly<32>; break;
@@ -455,11 +424,11 @@ void PickPanel(const PointEvalData& d, PointEvaluator::Kernels* k) {
 
 void SelectKernels(const PointEvalData& d, PointEvaluator::Kernels* k) {
   switch (d.has_grid ? d.grid.n_features : 0) {
-    case 1: PickPanel<1>(d, k); break;
-    case 2: PickPanel<2>(d, k); break;
-    case 4: PickPanel<4>(d, k); break;
-    case 8: PickPanel<8>(d, k); break;
-    default: PickPanel<0>(d, k); break;
+    case 1: PickKernels<1>(d, k); break;
+    case 2: PickKernels<2>(d, k); break;
+    case 4: PickKernels<4>(d, k); break;
+    case 8: PickKernels<8>(d, k); break;
+    default: PickKernels<0>(d, k); break;
   }
   k->target = hwy::TargetName(HWY_TARGET);
 }
@@ -488,7 +457,6 @@ PointEvaluator::PointEvaluator(const Network& net, bool skip_zero_activations) {
     d.grid = net.grid();
     const GridLayout& g = d.grid;
     const uint32_t F = g.n_features;
-    bool all_vec = true;
     for (uint32_t l = 0; l < uint32_t(kMaxGridLevels); ++l) {
       const bool real = l < g.n_levels;
       const GridLevel L = real ? g.levels[l] : GridLevel{0.0f, 1, 8, 0, 0, 7};
@@ -502,14 +470,10 @@ PointEvaluator::PointEvaluator(const Network& net, bool skip_zero_activations) {
       d.lvl_ptr[l] = d.table + uint64_t(L.offset) * F;
       // Dense indices of inputs in [0, 1] stay below 2 n_l when n_l >= res^3 (not tiled).
       d.lvl_vec[l] = (L.hashed || L.pow2_mask || uint64_t(L.n_entries) >= uint64_t(L.res) * L.res * L.res) ? 1 : 0;
-      all_vec = all_vec && (!real || d.lvl_vec[l]);
       d.lvl_big[l] = real && uint64_t(L.n_entries) * F * sizeof(uint16_t) > (uint64_t(1) << 18);
+      if (d.lvl_big[l] && d.first_big == kMaxGridLevels) d.first_big = l;
     }
     if (g.n_levels * F > kMaxGridLevels * 8) fail("PointEvaluator: grid encoding too wide");
-    // Two features per level: one 32-bit gather per corner across levels (int32 word indices).
-    d.feature_major = F == 2 && all_vec && g.n_entries < (uint64_t(1) << 31) &&
-                      reinterpret_cast<uintptr_t>(d.table) % 4 == 0;
-    if (const char* e = std::getenv("VNR_PE_NOGATHER")) if (std::atoi(e)) d.feature_major = false;
   } else if (m.in_pad > kMaxParameterFreeWidth) {
     fail("PointEvaluator: encoding width {} exceeds {}", m.in_pad, kMaxParameterFreeWidth);
   }
@@ -540,18 +504,11 @@ PointEvaluator::PointEvaluator(const Network& net, bool skip_zero_activations) {
     const uint32_t K = K_of(k);
     const uint64_t cols = m.cols[k];
     const float* W = P + m.offset[k];
-    // Input q of the kernel is network input col(q): the identity, except W_0 under a
-    // feature-major encoding (q = f * L + l holds network input l * F + f).
-    auto col = [&](uint32_t q) {
-      if (k != 0 || !d.feature_major) return q;
-      const uint32_t L = d.grid.n_levels, F = d.grid.n_features;
-      return (q % L) * F + q / L;
-    };
     for (uint32_t p = 0; p < d.n_panels; ++p)
       for (uint32_t i = 0; i < K; ++i)
         for (uint32_t o = 0; o < d.panel; ++o) {
           const uint32_t r = p * d.panel + o;
-          const float v = r < m.width ? W[r * cols + col(i)] : 0.0f;
+          const float v = r < m.width ? W[r * cols + i] : 0.0f;
           finite = finite && std::isfinite(v);
           *w++ = v;
         }
@@ -563,14 +520,16 @@ PointEvaluator::PointEvaluator(const Network& net, bool skip_zero_activations) {
     finite = finite && std::isfinite(v);
     *w++ = v;
   }
-  d.skip_zeros = skip_zero_activations && d.relu && finite;
-  if (const char* e = std::getenv("VNR_PE_PREFETCH")) d.prefetch = std::atoi(e);
+  // Compaction pays from 64 neurons on (measured: at 16 and 32 the per-layer compaction and the
+  // data-dependent loop cost more than the skipped FMAs).
+  d.skip_zeros = skip_zero_activations && d.relu && finite && m.width > 32;
 
   Kernels k;
   HWY_DYNAMIC_DISPATCH(point_eval::SelectKernels)(d, &k);
   eval_ = k.eval;
   encode_ = k.encode;
   mlp_ = k.mlp;
+  prefetch_ = k.prefetch;
   target_ = k.target;
 }
 

@@ -7,18 +7,21 @@
 // are bit-identical to Network::encode_point.
 //
 // Construction (once per frame / model) copies the MLP weights into a SIMD-friendly layout and
-// resolves the Highway dispatch once into one function pointer, specialised on the features per
-// level and the MLP panel width; eval() is then const, thread-safe and allocation-free.
+// resolves the Highway dispatch once into function pointers specialised on the features per level
+// and the MLP panel width; eval() is then one indirect call, const, thread-safe and allocation-free
+// (stack buffers sized by the config limits: 32 levels x 8 features, 1024 neurons, 3072-wide
+// parameter-free encodings).
 //
-//   Encoding: the 8 corners of every level are computed at once with lanes = levels, then the F
-//   fp16 features of each corner are loaded, converted and accumulated (one FMA per corner, in
-//   corner order as the reference). All corner loads of all levels are independent, so their cache
-//   misses overlap.
+//   Encoding: the 8 corners of every level are computed at once with lanes = levels (index terms
+//   shared between corners: two integer multiplies per level vector), the corner lines of the
+//   levels whose table exceeds L2 are prefetched (L2 hint) so that all their misses overlap, then
+//   each corner's F fp16 features are loaded, converted and accumulated (one FMA per corner, in
+//   corner order as the reference). prefetch() issues the same prefetches for a later point.
 //   MLP: weights transposed into panels of PW (16/32/64) outputs: for each input i the panel row
 //   W[p*PW .. p*PW+PW, i] is contiguous and FMAs into PW/lanes accumulators with x[i] broadcast;
-//   several accumulator sets break the FMA latency chains. After a ReLU layer, the inputs that are
-//   exactly zero are compacted away (their products add exactly 0, so results are unchanged; only
-//   enabled when every weight is finite, as 0 * inf would be NaN).
+//   2-8 accumulator sets break the FMA latency chains. After a ReLU layer of more than 32 neurons,
+//   the inputs that are exactly zero are compacted away (their products add exactly 0, so the
+//   result is unchanged up to summation order; only when every weight is finite, as 0 * inf is NaN).
 #include <cstdint>
 #include <hwy/aligned_allocator.h>
 #include "vnr/nn/config.h"
@@ -36,7 +39,7 @@ struct PointEvalData {
   const uint16_t* table = nullptr;    // fp16 grid (net.grid_half())
   GridLayout grid;
   bool has_grid = false;
-  int prefetch = 2;              // prefetch the corners' lines of the large levels first
+  uint32_t first_big = kMaxGridLevels;  // first level whose table exceeds 256 KiB (prefetched)
   // Level constants as lane arrays (lanes = levels; padded to kMaxGridLevels with harmless values).
   alignas(64) float lvl_scale[kMaxGridLevels];
   // Corner index = X ^ Y ^ Z (hashed) or X + Y + Z (dense) with Y = cy * m1, Z = cz * m2.
@@ -46,9 +49,8 @@ struct PointEvalData {
   alignas(64) uint32_t lvl_hashed[kMaxGridLevels];
   alignas(64) uint32_t lvl_offset[kMaxGridLevels];  // first entry of the level
   const uint16_t* lvl_ptr[kMaxGridLevels];          // the level's table
-  bool feature_major = false;         // F = 2 gather path: encoding stored as enc[f * L + l]
   uint8_t lvl_vec[kMaxGridLevels];    // 0: the level takes the scalar path (tiled levels with n_l < res^3)
-  uint8_t lvl_big[kMaxGridLevels];    // table of the level beyond L2: prefetch candidates
+  uint8_t lvl_big[kMaxGridLevels];    // the level's table exceeds 256 KiB (L2-sized): corner lines prefetched
   // ---- MLP ----
   uint32_t k0 = 0;         // inputs of W_0 that are used (first_cols)
   uint32_t in_pad = 0, enc_width = 0;
@@ -65,14 +67,19 @@ class PointEvaluator {
 public:
   // Keeps a reference to net (its fp16 grid and, for parameter-free encodings, encode_point): net
   // must outlive the evaluator; rebuild the evaluator after changing net's parameters.
-  // skip_zero_activations: compact away exact zeros after ReLU layers (bit-for-bit the same
-  // products; off only for measurements).
+  // skip_zero_activations: compact away the exact zeros after ReLU layers for widths > 32 (the
+  // remaining products are the same; off only for measurements).
   explicit PointEvaluator(const Network& net, bool skip_zero_activations = true);
   PointEvaluator(PointEvaluator&&) = default;
   PointEvaluator& operator=(PointEvaluator&&) = default;
 
   // First network output (after the output activation) at u = (x, y, z), normally in [0, 1)^3.
   float eval(float x, float y, float z) const { return eval_(d_, x, y, z); }
+
+  // Optional hint for a point that will be evaluated soon (e.g. the ray's next sample): starts the
+  // cache misses of its large grid levels now, so that they overlap the current evaluation.
+  // No effect on results; a no-op for parameter-free encodings or points outside the unit cube.
+  void prefetch(float x, float y, float z) const { prefetch_(d_, x, y, z); }
 
   // The two halves of eval(), for tests and profiling. encode writes the padded encoding (in_pad()
   // floats, pad_value past the encoding width); mlp reads one and returns what eval() would.
@@ -87,10 +94,12 @@ public:
   using EvalFn = float (*)(const PointEvalData&, float, float, float);
   using EncodeFn = void (*)(const PointEvalData&, float, float, float, float*);
   using MlpFn = float (*)(const PointEvalData&, const float*);
+  using PrefetchFn = void (*)(const PointEvalData&, float, float, float);
   struct Kernels {
     EvalFn eval = nullptr;
     EncodeFn encode = nullptr;
     MlpFn mlp = nullptr;
+    PrefetchFn prefetch = nullptr;
     const char* target = "";
   };
 
@@ -100,6 +109,7 @@ private:
   EvalFn eval_ = nullptr;
   EncodeFn encode_ = nullptr;
   MlpFn mlp_ = nullptr;
+  PrefetchFn prefetch_ = nullptr;
   const char* target_ = "";
 };
 

@@ -7,6 +7,10 @@
 
 namespace vnr {
 
+namespace {
+constexpr int kTile = 8;  // pixels per side of the tiles rays are grouped in
+}  // namespace
+
 RenderMode parse_render_mode(const std::string& s) {
   std::string l = to_lower(s);
   if (l == "raymarch") return RenderMode::RayMarch;
@@ -71,15 +75,18 @@ void Renderer::inshader(const PointFn& f, Image& img, RenderStats& st) {
   const RenderParams& p = params_;
   const int W = opt_.width, H = opt_.height;
   const int64_t n = int64_t(W) * H;
-  constexpr int64_t kTile = 64;  // consecutive pixels of a row, dealt round-robin to threads
-  const int64_t n_tiles = (n + kTile - 1) / kTile;
+  // 8x8 pixel tiles dealt round-robin to threads: neighbouring rays read neighbouring voxels.
+  const int tiles_x = (W + kTile - 1) / kTile, tiles_y = (H + kTile - 1) / kTile;
+  const int64_t n_tiles = int64_t(tiles_x) * tiles_y;
   std::atomic<int64_t> samples{0};
   const RenderMode mode = opt_.mode;
   parallel_threads([&](int t, int nt) {
     int64_t my_samples = 0;
     for (int64_t tile = t; tile < n_tiles; tile += nt) {
-      for (int64_t i = tile * kTile; i < std::min(n, (tile + 1) * kTile); ++i) {
-        const int ix = int(i % W), iy = int(i / W);
+      const int x0 = int(tile % tiles_x) * kTile, y0 = int(tile / tiles_x) * kTile;
+      for (int iy = y0; iy < std::min(H, y0 + kTile); ++iy)
+        for (int ix = x0; ix < std::min(W, x0 + kTile); ++ix) {
+        const int64_t i = int64_t(iy) * W + ix;
         if (mode == RenderMode::PathTrace) {
           PathState s;
           if (pt_begin(p, ix, iy, s) && pt_sample(p, s)) {
@@ -122,7 +129,7 @@ void Renderer::inshader(const PointFn& f, Image& img, RenderStats& st) {
         } else {
           img.pixels[i] = march_pixel(p, s);
         }
-      }
+        }
     }
     samples += my_samples;
   });
@@ -137,11 +144,27 @@ void Renderer::query(int64_t n, RenderStats& st) {
 }
 
 namespace {
+// All pixel indices of a W x H image in 8x8-tile order (the streaming queues start in this order so
+// that neighbouring queue entries are neighbouring rays).
+void tiled_pixel_order(int W, int H, std::vector<int32_t>& out) {
+  out.clear();
+  for (int y0 = 0; y0 < H; y0 += kTile)
+    for (int x0 = 0; x0 < W; x0 += kTile)
+      for (int y = y0; y < std::min(H, y0 + kTile); ++y)
+        for (int x = x0; x < std::min(W, x0 + kTile); ++x) out.push_back(int32_t(y) * W + x);
+}
 // Keeps the live rays whose keep flag is set, in order.
 void compact(std::vector<int32_t>& live, const std::vector<uint8_t>& keep, std::vector<int32_t>& scratch) {
   scratch.clear();
   for (size_t r = 0; r < live.size(); ++r)
     if (keep[r]) scratch.push_back(live[r]);
+  live.swap(scratch);
+}
+// Keeps the pixels (live holds pixel indices) whose keep flag is set.
+void compact_pixels(std::vector<int32_t>& live, const std::vector<uint8_t>& keep, std::vector<int32_t>& scratch) {
+  scratch.clear();
+  for (int32_t i : live)
+    if (keep[i]) scratch.push_back(i);
   live.swap(scratch);
 }
 constexpr int64_t kGrain = 512;  // rays per parallel work item in the streaming stages
@@ -160,9 +183,8 @@ void Renderer::stream_march(Image& img, RenderStats& st) {
   parallel_for_range(n, 4096, [&](int64_t b, int64_t e) {
     for (int64_t i = b; i < e; ++i) keep_[i] = march_begin(p, int(i % W), int(i / W), march_[i]);
   });
-  live_.resize(size_t(n));
-  for (int64_t i = 0; i < n; ++i) live_[i] = int32_t(i);
-  compact(live_, keep_, next_live_);
+  tiled_pixel_order(W, opt_.height, live_);
+  compact_pixels(live_, keep_, next_live_);
 
   // The streaming loop shared by primary and shadow rays: next(ray, pos, dt) emits samples,
   // shade(ray, pos, dt, values) consumes them; rays that end are dropped.
@@ -227,9 +249,8 @@ void Renderer::stream_march(Image& img, RenderStats& st) {
   parallel_for_range(n, 4096, [&](int64_t b, int64_t e) {
     for (int64_t i = b; i < e; ++i) keep_[i] = shadow_begin(p, march_[i], shadow_[i]);
   });
-  live_.resize(size_t(n));
-  for (int64_t i = 0; i < n; ++i) live_[i] = int32_t(i);
-  compact(live_, keep_, next_live_);
+  tiled_pixel_order(W, opt_.height, live_);
+  compact_pixels(live_, keep_, next_live_);
   stream(
       1, [&](int32_t i, Vec3f* pos, float* dt) { return shadow_next(p, shadow_[i], pos, dt); },
       [&](Vec3f pos, float* x, float* y, float* z) {
@@ -254,9 +275,8 @@ void Renderer::stream_path(Image& img, RenderStats& st) {
       if (!keep_[i]) img.pixels[i] = pt_pixel(s);
     }
   });
-  live_.resize(size_t(n));
-  for (int64_t i = 0; i < n; ++i) live_[i] = int32_t(i);
-  compact(live_, keep_, next_live_);
+  tiled_pixel_order(W, opt_.height, live_);
+  compact_pixels(live_, keep_, next_live_);
   while (!live_.empty()) {
     const int64_t nl = int64_t(live_.size());
     qx_.resize(size_t(nl));
