@@ -24,6 +24,7 @@ void write_report(const std::string& path, const Json& report);  // atomic; "" =
 // overwrite someone's data) unless force is set.
 void check_no_overwrite(const std::vector<std::string>& files, bool force);
 std::string human_bytes(double bytes);
+double median(std::vector<double> v);  // upper median; 0 for none
 
 void add_train(CLI::App& app);
 void add_eval(CLI::App& app);

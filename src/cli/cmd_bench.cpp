@@ -23,11 +23,6 @@ struct BenchArgs {
   VolumeArgs vol;
 };
 
-double median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  return v.empty() ? 0 : v[v.size() / 2];
-}
-
 // MLP forward (+ backward when training) alone over chunks, all threads: GFLOP/s.
 double mlp_gflops(const Network& net, bool training, double seconds) {
   const MlpLayout& m = net.mlp();

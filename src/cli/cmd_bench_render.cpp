@@ -16,11 +16,6 @@ namespace vnr::cli {
 
 namespace {
 
-double median_of(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  return v.empty() ? 0 : v[v.size() / 2];
-}
-
 std::vector<std::string> split_list(const std::string& s) {
   std::vector<std::string> out;
   size_t b = 0;
@@ -47,7 +42,7 @@ double raw_query_rate(const Field& field, double seconds) {
     field.query(x.data(), y.data(), z.data(), n, v.data());
     rates.push_back(double(n) / seconds_since(t0));
   }
-  return median_of(rates);
+  return median(rates);
 }
 
 struct Cell {
@@ -98,9 +93,9 @@ void add_bench_render(CLI::App& bench) {
 
     const double raw = raw_query_rate(*src.field, 2.0);
     // The orbit: frame i of n looks from azimuth 360 i / n (elevation from --orbit, or 0).
-    float elevation = 0;
-    if (!a->r.orbit.empty()) std::sscanf(a->r.orbit.c_str(), "%*f,%f", &elevation);
-    auto camera_of = [&](int i) { return orbit_camera(src.box, 360.0f * float(i) / float(a->frames), elevation, a->r.fovy); };
+    auto camera_of = [&](int i) {
+      return orbit_camera(src.box, 360.0f * float(i) / float(a->frames), setup.orbit_elevation, a->r.fovy);
+    };
 
     auto run_cell = [&](const RenderOptions& o, const MacroCells& mc, RenderStats* total) {
       Renderer r(*src.field, src.box, mc, setup.tf, camera_of(0), o);
@@ -116,7 +111,7 @@ void add_bench_render(CLI::App& bench) {
         total->seconds += st.seconds;
         total->frames += 1;
       }
-      return 1.0 / median_of(times);
+      return 1.0 / median(times);
     };
 
     Json report;

@@ -91,12 +91,12 @@ RenderSetup make_render_setup(const RenderArgs& a, const RenderSource& src) {
         fail("--orbit expects AZIMUTH[,ELEVATION] in degrees (elevation in (-90, 90)), got '{}'", a.orbit);
     }
     r.camera = orbit_camera(src.box, az, el, a.fovy);
+    r.orbit_elevation = el;
   } else {
     r.camera = *scene.camera;
   }
   if (scene.light) o.light = *scene.light;
   if (!a.light.empty()) o.light.direction = parse_vec3(a.light, "--light");
-  if (length(o.light.direction) <= 0) fail("the light direction must not be zero");
   if (scene.background) o.background = *scene.background;
   if (!a.background.empty()) o.background = parse_vec3(a.background, "--background");
   r.macrocell_mode = a.macrocells.empty() ? default_macrocell_mode(src) : parse_macrocell_mode(a.macrocells);
@@ -139,12 +139,7 @@ void add_render(CLI::App& app) {
     Image acc(setup.options.width, setup.options.height), frame(setup.options.width, setup.options.height);
     for (int f = 0; f < a->spp; ++f) {
       renderer.render_frame(uint32_t(f), frame, &st);
-      const float w = 1.0f / float(f + 1);
-      parallel_for(int64_t(acc.pixels.size()), [&](int64_t i) {
-        Vec4f& p = acc.pixels[i];
-        const Vec4f& q = frame.pixels[i];
-        p = Vec4f{p.x + (q.x - p.x) * w, p.y + (q.y - p.y) * w, p.z + (q.z - p.z) * w, p.w + (q.w - p.w) * w};
-      });
+      accumulate_frame(acc, frame, f);
       bar.update(f + 1, fmt::format("{:.3f} s/frame", st.seconds / st.frames));
     }
     bar.finish();

@@ -43,6 +43,7 @@ struct RenderSetup {
   TransferFunction tf;
   Camera camera;
   MacroCellMode macrocell_mode = MacroCellMode::Off;
+  float orbit_elevation = 0;  // degrees, from --orbit
 };
 RenderSetup make_render_setup(const RenderArgs& a, const RenderSource& src);
 

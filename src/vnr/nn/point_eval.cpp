@@ -256,42 +256,11 @@ HWY_INLINE void StorePanel(const VF (&y)[NV], bool relu, float* HWY_RESTRICT out
   for (int v = 0; v < NV; ++v) hn::Store(relu ? hn::Max(y[v], hn::Zero(df)) : y[v], df, out + v * kN);
 }
 
-// One panel of NV vectors of outputs over K dense inputs: out = act(sum_i x[i] * W[i*PW .. +PW]).
-template <int NV>
-HWY_INLINE void DensePanel(const float* HWY_RESTRICT W, const float* HWY_RESTRICT x, uint32_t K, bool relu,
-                           float* HWY_RESTRICT out) {
-  constexpr int S = SetsFor<NV>();
-  constexpr size_t PW = NV * kN;
-  const DF df;
-  VF acc[S][NV];
-#pragma GCC unroll 16
-  for (int s = 0; s < S; ++s)
-#pragma GCC unroll 16
-    for (int v = 0; v < NV; ++v) acc[s][v] = hn::Zero(df);
-  uint32_t i = 0;
-  for (; i + S <= K; i += S) {
-#pragma GCC unroll 16
-    for (int s = 0; s < S; ++s) {
-      const VF xv = hn::Set(df, x[i + s]);
-      const float* HWY_RESTRICT row = W + size_t(i + s) * PW;
-#pragma GCC unroll 16
-      for (int v = 0; v < NV; ++v) acc[s][v] = hn::MulAdd(xv, hn::Load(df, row + v * kN), acc[s][v]);
-    }
-  }
-  for (; i < K; ++i) {
-    const VF xv = hn::Set(df, x[i]);
-    const float* HWY_RESTRICT row = W + size_t(i) * PW;
-#pragma GCC unroll 16
-    for (int v = 0; v < NV; ++v) acc[0][v] = hn::MulAdd(xv, hn::Load(df, row + v * kN), acc[0][v]);
-  }
-  ReduceSets(acc);
-  StorePanel<NV>(acc[0], relu, out);
-}
-
-// The same over a compacted input list: vals[j] = x[i_j] != 0, rows[j] = i_j * PW.
-template <int NV>
-HWY_INLINE void SparsePanel(const float* HWY_RESTRICT W, const float* HWY_RESTRICT vals,
-                            const int32_t* HWY_RESTRICT rows, uint32_t nnz, bool relu, float* HWY_RESTRICT out) {
+// One panel of NV vectors of outputs: out = act(sum_j vals[j] * W[row_of(j) .. +PW]) over n inputs.
+// Dense inputs use row_of(i) = i * PW; compacted ones (vals[j] = x[i_j] != 0) a table of i_j * PW.
+template <int NV, class RowOf>
+HWY_INLINE void Panel(const float* HWY_RESTRICT W, const float* HWY_RESTRICT vals, RowOf row_of, uint32_t n,
+                      bool relu, float* HWY_RESTRICT out) {
   constexpr int S = SetsFor<NV>();
   const DF df;
   VF acc[S][NV];
@@ -300,18 +269,18 @@ HWY_INLINE void SparsePanel(const float* HWY_RESTRICT W, const float* HWY_RESTRI
 #pragma GCC unroll 16
     for (int v = 0; v < NV; ++v) acc[s][v] = hn::Zero(df);
   uint32_t j = 0;
-  for (; j + S <= nnz; j += S) {
+  for (; j + S <= n; j += S) {
 #pragma GCC unroll 16
     for (int s = 0; s < S; ++s) {
       const VF xv = hn::Set(df, vals[j + s]);
-      const float* HWY_RESTRICT row = W + rows[j + s];
+      const float* HWY_RESTRICT row = W + row_of(j + s);
 #pragma GCC unroll 16
       for (int v = 0; v < NV; ++v) acc[s][v] = hn::MulAdd(xv, hn::Load(df, row + v * kN), acc[s][v]);
     }
   }
-  for (; j < nnz; ++j) {
+  for (; j < n; ++j) {
     const VF xv = hn::Set(df, vals[j]);
-    const float* HWY_RESTRICT row = W + rows[j];
+    const float* HWY_RESTRICT row = W + row_of(j);
 #pragma GCC unroll 16
     for (int v = 0; v < NV; ++v) acc[0][v] = hn::MulAdd(xv, hn::Load(df, row + v * kN), acc[0][v]);
   }
@@ -360,9 +329,11 @@ HWY_INLINE float MlpForward(const PointEvalData& d, const float* HWY_RESTRICT x0
     const size_t panel_floats = size_t(K) * PW;
     if (k > 0 && d.skip_zeros) {
       const uint32_t nnz = CompactPositive(in, d.width_pad, PW, vals, rows);
-      for (uint32_t p = 0; p < np; ++p) SparsePanel<NV>(W + p * panel_floats, vals, rows, nnz, d.relu, h + p * PW);
+      for (uint32_t p = 0; p < np; ++p)
+        Panel<NV>(W + p * panel_floats, vals, [rows](uint32_t j) { return size_t(rows[j]); }, nnz, d.relu, h + p * PW);
     } else {
-      for (uint32_t p = 0; p < np; ++p) DensePanel<NV>(W + p * panel_floats, in, K, d.relu, h + p * PW);
+      for (uint32_t p = 0; p < np; ++p)
+        Panel<NV>(W + p * panel_floats, in, [](uint32_t i) { return size_t(i) * PW; }, K, d.relu, h + p * PW);
     }
     // Outputs past the width (zero weights) are 0 after ReLU; keep them 0 without ReLU too (0 * inf).
     for (uint32_t o = d.width; o < d.width_pad; ++o) h[o] = 0.0f;

@@ -74,7 +74,6 @@ template <class PointFn>
 void Renderer::inshader(const PointFn& f, Image& img, RenderStats& st) {
   const RenderParams& p = params_;
   const int W = opt_.width, H = opt_.height;
-  const int64_t n = int64_t(W) * H;
   // 8x8 pixel tiles dealt round-robin to threads: neighbouring rays read neighbouring voxels.
   const int tiles_x = (W + kTile - 1) / kTile, tiles_y = (H + kTile - 1) / kTile;
   const int64_t n_tiles = int64_t(tiles_x) * tiles_y;
@@ -170,6 +169,11 @@ void compact_pixels(std::vector<int32_t>& live, const std::vector<uint8_t>& keep
 constexpr int64_t kGrain = 512;  // rays per parallel work item in the streaming stages
 }  // namespace
 
+void Renderer::start_queue() {
+  tiled_pixel_order(opt_.width, opt_.height, live_);
+  compact_pixels(live_, keep_, next_live_);
+}
+
 void Renderer::stream_march(Image& img, RenderStats& st) {
   const RenderParams& p = params_;
   const int W = opt_.width;
@@ -183,8 +187,7 @@ void Renderer::stream_march(Image& img, RenderStats& st) {
   parallel_for_range(n, 4096, [&](int64_t b, int64_t e) {
     for (int64_t i = b; i < e; ++i) keep_[i] = march_begin(p, int(i % W), int(i / W), march_[i]);
   });
-  tiled_pixel_order(W, opt_.height, live_);
-  compact_pixels(live_, keep_, next_live_);
+  start_queue();
 
   // The streaming loop shared by primary and shadow rays: next(ray, pos, dt) emits samples,
   // shade(ray, pos, dt, values) consumes them; rays that end are dropped.
@@ -249,8 +252,7 @@ void Renderer::stream_march(Image& img, RenderStats& st) {
   parallel_for_range(n, 4096, [&](int64_t b, int64_t e) {
     for (int64_t i = b; i < e; ++i) keep_[i] = shadow_begin(p, march_[i], shadow_[i]);
   });
-  tiled_pixel_order(W, opt_.height, live_);
-  compact_pixels(live_, keep_, next_live_);
+  start_queue();
   stream(
       1, [&](int32_t i, Vec3f* pos, float* dt) { return shadow_next(p, shadow_[i], pos, dt); },
       [&](Vec3f pos, float* x, float* y, float* z) {
@@ -275,8 +277,7 @@ void Renderer::stream_path(Image& img, RenderStats& st) {
       if (!keep_[i]) img.pixels[i] = pt_pixel(s);
     }
   });
-  tiled_pixel_order(W, opt_.height, live_);
-  compact_pixels(live_, keep_, next_live_);
+  start_queue();
   while (!live_.empty()) {
     const int64_t nl = int64_t(live_.size());
     qx_.resize(size_t(nl));
@@ -324,17 +325,21 @@ void Renderer::render_frame(uint32_t frame, Image& img, RenderStats* stats) {
   st.seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
 
+void accumulate_frame(Image& acc, const Image& frame, int index) {
+  const float w = 1.0f / float(index + 1);  // running mean
+  parallel_for(int64_t(acc.pixels.size()), [&](int64_t i) {
+    Vec4f& a = acc.pixels[i];
+    const Vec4f& b = frame.pixels[i];
+    a = Vec4f{a.x + (b.x - a.x) * w, a.y + (b.y - a.y) * w, a.z + (b.z - a.z) * w, a.w + (b.w - a.w) * w};
+  });
+}
+
 Image Renderer::render(int frames, RenderStats* stats) {
   if (frames < 1) fail("the number of frames (samples per pixel) must be at least 1 (got {})", frames);
   Image acc(opt_.width, opt_.height), frame_img(opt_.width, opt_.height);
   for (int f = 0; f < frames; ++f) {
     render_frame(uint32_t(f), frame_img, stats);
-    const float w = 1.0f / float(f + 1);  // running mean
-    parallel_for(int64_t(acc.pixels.size()), [&](int64_t i) {
-      Vec4f& a = acc.pixels[i];
-      const Vec4f& b = frame_img.pixels[i];
-      a = Vec4f{a.x + (b.x - a.x) * w, a.y + (b.y - a.y) * w, a.z + (b.z - a.z) * w, a.w + (b.w - a.w) * w};
-    });
+    accumulate_frame(acc, frame_img, f);
   }
   return acc;
 }

@@ -54,6 +54,9 @@ struct RenderStats {
   double seconds = 0;
 };
 
+// Progressive accumulation: acc becomes the mean of frames 0..index (acc held the mean of 0..index-1).
+void accumulate_frame(Image& acc, const Image& frame, int index);
+
 class Renderer {
 public:
   // field, macro-cells and tf must outlive the renderer; box = world size of the volume box.
@@ -72,6 +75,8 @@ private:
   void inshader(const PointFn& f, Image& img, RenderStats& st);
   void stream_march(Image& img, RenderStats& st);
   void stream_path(Image& img, RenderStats& st);
+  // Starts a streaming pass: the live queue = pixels whose keep_ flag is set, in 8x8-tile order.
+  void start_queue();
   // Evaluates the compacted query buffers.
   void query(int64_t n, RenderStats& st);
 

@@ -317,30 +317,26 @@ TransferFunction tf_from_vnr(const Json& j, const std::string& where) {
     if (k != "colors" && k != "opacities" && k != "resolution" && k != "range")
       fail("{}: unknown transfer-function key \"{}\" (allowed: colors, opacities, resolution, range)", where, k);
   }
+  // [[v, c1, ...], ...]: each point an array of names.size() numbers in [0,1].
+  auto points = [&](const char* key, const std::vector<const char*>& names, const char* shape) {
+    const std::string w = where + ": " + key;
+    const Json& arr = array_of(member(j, key, where), w);
+    if (arr.empty()) fail("{}: needs at least one {} point", w, shape);
+    std::vector<std::vector<double>> out;
+    for (size_t k = 0; k < arr.size(); ++k) {
+      const std::string wk = fmt::format("{}[{}]", w, k);
+      if (!arr[k].is_array() || arr[k].size() != names.size()) fail("{}: expected {}", wk, shape);
+      std::vector<double> p;
+      for (size_t c = 0; c < names.size(); ++c) p.push_back(unit_number(arr[k][c], wk + " " + names[c]));
+      out.push_back(p);
+    }
+    return out;
+  };
   std::vector<ColorPoint> colors;
-  {
-    const std::string w = where + ": colors";
-    const Json& arr = array_of(member(j, "colors", where), w);
-    if (arr.empty()) fail("{}: needs at least one [v, r, g, b] point", w);
-    for (size_t k = 0; k < arr.size(); ++k) {
-      const std::string wk = fmt::format("{}[{}]", w, k);
-      if (!arr[k].is_array() || arr[k].size() != 4) fail("{}: expected [v, r, g, b]", wk);
-      colors.push_back({unit_number(arr[k][0], wk + " v"),
-                        Vec3f{float(unit_number(arr[k][1], wk + " r")), float(unit_number(arr[k][2], wk + " g")),
-                              float(unit_number(arr[k][3], wk + " b"))}});
-    }
-  }
+  for (const auto& p : points("colors", {"v", "r", "g", "b"}, "[v, r, g, b]"))
+    colors.push_back({p[0], Vec3f{float(p[1]), float(p[2]), float(p[3])}});
   std::vector<AlphaPoint> alphas;
-  {
-    const std::string w = where + ": opacities";
-    const Json& arr = array_of(member(j, "opacities", where), w);
-    if (arr.empty()) fail("{}: needs at least one [v, a] point", w);
-    for (size_t k = 0; k < arr.size(); ++k) {
-      const std::string wk = fmt::format("{}[{}]", w, k);
-      if (!arr[k].is_array() || arr[k].size() != 2) fail("{}: expected [v, a]", wk);
-      alphas.push_back({unit_number(arr[k][0], wk + " v"), float(unit_number(arr[k][1], wk + " a"))});
-    }
-  }
+  for (const auto& p : points("opacities", {"v", "a"}, "[v, a]")) alphas.push_back({p[0], float(p[1])});
   int n = kDefaultResolution;
   if (auto it = j.find("resolution"); it != j.end()) n = resolution_of(*it, where + ": resolution");
   float lo = 0, hi = 1;
