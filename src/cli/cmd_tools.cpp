@@ -8,16 +8,20 @@
 #include "vnr/core/fileio.h"
 #include "vnr/core/parallel.h"
 #include "vnr/core/progress.h"
+#include "vnr/core/units.h"
 #include "vnr/train/model_io.h"
+#include "vnr/volume/stream.h"
 #include "vnr/volume/writer.h"
 
 namespace vnr::cli {
 
 void add_eval(CLI::App& app) {
   struct Args {
-    std::string model, volume, report;
+    std::string model, volume, report, memory_budget;
     int threads = 0;
-    bool no_ssim = false;
+    int64_t sample = 0;
+    uint64_t seed = 0;
+    bool no_ssim = false, quiet = false;
     VolumeArgs vol;
   };
   auto a = std::make_shared<Args>();
@@ -27,32 +31,136 @@ void add_eval(CLI::App& app) {
   c->add_option("--report", a->report, "write a JSON report");
   c->add_option("--threads", a->threads, "CPU threads (default: all cores)");
   c->add_flag("--no-ssim", a->no_ssim, "skip the 3-D SSIM");
+  c->add_option("--sample", a->sample,
+                "estimate PSNR (with a 95% interval) from N random voxels, read one by one: any volume size, "
+                "uncompressed data only, no SSIM");
+  c->add_option("--seed", a->seed, "seed of the --sample voxels")->capture_default_str();
+  c->add_option("--memory-budget", a->memory_budget,
+                "memory for the volume and the decoded copy, e.g. 8GiB (default: half the available memory); "
+                "a larger volume is evaluated in streamed z-slabs");
+  c->add_flag("-q,--quiet", a->quiet, "no progress output");
   a->vol.add(c);
-  c->callback([a]() {
+  c->callback([a, c]() {
     set_num_threads(a->threads);
     Model m = load_model(a->model);
-    RawOptions raw = a->vol.raw();
-    Volume vol = load_volume(describe_volume(a->volume, raw), a->vol.load());
-    if (!(vol.dims == m.dims))
+    const VolumeDesc desc = describe_volume(a->volume, a->vol.raw());
+    const LoadOptions load_opts = a->vol.load();
+    const Int3 dims = desc.dims;
+    if (!(dims == m.dims))
       std::fprintf(stderr, "note: model was trained on %lldx%lldx%lld, evaluating at %lldx%lldx%lld\n",
-                   (long long)m.dims.x, (long long)m.dims.y, (long long)m.dims.z, (long long)vol.dims.x,
-                   (long long)vol.dims.y, (long long)vol.dims.z);
-    EvalResult ev = evaluate(*m.net, vol, !a->no_ssim);
-    uint64_t model_bytes = file_size(a->model);
-    double ratio = double(vol.source_bytes()) / double(model_bytes);
+                   (long long)m.dims.x, (long long)m.dims.y, (long long)m.dims.z, (long long)dims.x,
+                   (long long)dims.y, (long long)dims.z);
+    const uint64_t model_bytes = file_size(a->model);
+    const uint64_t volume_bytes = dims.count() * dtype_size(desc.dtype);
+    const double ratio = double(volume_bytes) / double(model_bytes);
+    const bool sampled = c->count("--sample") > 0;
+    if (sampled && a->sample <= 0) fail("--sample expects a positive number of voxels, got {}", a->sample);
+
+    // The in-memory path holds the normalised volume and the decoded copy: 8 bytes per voxel.
+    uint64_t budget = available_memory_bytes() / 2;
+    if (!a->memory_budget.empty()) {
+      try {
+        budget = parse_byte_size(a->memory_budget);
+      } catch (const Error& e) {
+        fail("--memory-budget: {}", e.what());
+      }
+    }
+    const uint64_t full_bytes = dims.count() * 2 * sizeof(float);
+    const std::string method = sampled ? "sampled" : (full_bytes <= budget ? "full" : "streamed");
+
+    Json report = {{"method", method},
+                   {"compression_ratio", ratio},
+                   {"model_bytes", model_bytes},
+                   {"volume_bytes", volume_bytes}};
+    if (method == "full") {  // unchanged: load, then decode every voxel
+      Volume vol = load_volume(desc, load_opts);
+      EvalResult ev = evaluate(*m.net, vol, !a->no_ssim);
+      std::printf("PSNR %.2f dB", ev.psnr);
+      if (!a->no_ssim) std::printf(", SSIM %.4f", ev.ssim);
+      std::printf(", max |error| %.4g (%.4g in data units), compression ratio %.2f, decoded in %.2fs\n",
+                  ev.max_abs_error, ev.max_abs_error_original, ratio, ev.decode_seconds);
+      report.update({{"psnr", ev.psnr},
+                     {"psnr_ci95", nullptr},
+                     {"ssim", a->no_ssim ? Json(nullptr) : Json(ev.ssim)},
+                     {"mse", ev.mse},
+                     {"max_abs_error", ev.max_abs_error},
+                     {"max_abs_error_original", ev.max_abs_error_original},
+                     {"samples", dims.count()},
+                     {"value_range", {vol.lo, vol.hi}},
+                     {"value_range_source", "volume"},
+                     {"decode_seconds", ev.decode_seconds}});
+      write_report(a->report, report);
+      return;
+    }
+
+    // Streamed and sampled evaluation never hold the volume, so they must know its value range up
+    // front: an explicit one (--range, sidecar) as load_volume would use it, else the range the
+    // model was trained with, else one scan of the volume.
+    ValueRange range;
+    std::string range_source = "volume";
+    if (desc.range_lo && desc.range_hi) {
+      range = scan_value_range(desc, load_opts);  // reads nothing
+    } else if (!desc.range_lo && !desc.range_hi && model_file_has_value_range(a->model)) {
+      range = ValueRange{m.lo, m.hi};
+      range_source = "model";
+    } else {
+      Progress bar("value range", 1.0, a->quiet);
+      range = scan_value_range(desc, load_opts, [&](double f) { bar.update(f); });
+      bar.finish();
+      range_source = "scan";
+    }
+    report["value_range"] = {range.lo, range.hi};
+    report["value_range_source"] = range_source;
+
+    if (method == "sampled") {
+      SampledEval ev = evaluate_sampled(*m.net, desc, range.lo, range.hi, a->sample, a->seed, load_opts);
+      std::printf("PSNR %.2f dB (95%% interval %.2f to %.2f dB, from %lld sampled voxels), max |error| seen %.4g "
+                  "(%.4g in data units), compression ratio %.2f, decoded in %.2fs\n",
+                  ev.psnr, ev.psnr_ci95_lo, ev.psnr_ci95_hi, (long long)ev.samples, ev.max_abs_error,
+                  ev.max_abs_error_original, ratio, ev.decode_seconds);
+      report.update({{"psnr", ev.psnr},
+                     {"psnr_ci95", {ev.psnr_ci95_lo, ev.psnr_ci95_hi}},
+                     {"ssim", nullptr},
+                     {"mse", ev.mse},
+                     {"mse_stderr", ev.mse_stderr},
+                     {"max_abs_error", ev.max_abs_error},
+                     {"max_abs_error_original", ev.max_abs_error_original},
+                     {"samples", ev.samples},
+                     {"seed", a->seed},
+                     {"decode_seconds", ev.decode_seconds}});
+      write_report(a->report, report);
+      return;
+    }
+
+    // Streamed: slabs sized so that the slab arrays (the slab as read and the decoded slab; with
+    // SSIM also a copy with the 6 slices of window overlap) fit the budget, at most 16 M voxels
+    // each and at least one slice. Buffers of a few MiB per thread come on top.
+    const int64_t slice = dims.x * dims.y;
+    const int64_t arrays = a->no_ssim ? 2 : 3, overlap = a->no_ssim ? 0 : 6;
+    const int64_t budget_slices = int64_t(budget / (uint64_t(arrays) * sizeof(float) * uint64_t(slice))) - overlap;
+    const int64_t slab_slices =
+        std::clamp<int64_t>(std::min(budget_slices, (int64_t(1) << 24) / slice), 1, dims.z);
+    std::fprintf(stderr,
+                 "note: evaluating in streamed slabs of %lld slices: holding the volume and the decoded copy "
+                 "would take %s, over the memory budget of %s\n",
+                 (long long)slab_slices, human_bytes(double(full_bytes)).c_str(), human_bytes(double(budget)).c_str());
+    Progress bar("eval", 1.0, a->quiet);
+    EvalResult ev = evaluate_streamed(*m.net, desc, range.lo, range.hi, load_opts, !a->no_ssim,
+                                      [&](double f) { bar.update(f); }, slab_slices * slice);
+    bar.finish();
     std::printf("PSNR %.2f dB", ev.psnr);
     if (!a->no_ssim) std::printf(", SSIM %.4f", ev.ssim);
     std::printf(", max |error| %.4g (%.4g in data units), compression ratio %.2f, decoded in %.2fs\n",
                 ev.max_abs_error, ev.max_abs_error_original, ratio, ev.decode_seconds);
-    write_report(a->report, {{"psnr", ev.psnr},
-                             {"ssim", a->no_ssim ? Json(nullptr) : Json(ev.ssim)},
-                             {"mse", ev.mse},
-                             {"max_abs_error", ev.max_abs_error},
-                             {"max_abs_error_original", ev.max_abs_error_original},
-                             {"compression_ratio", ratio},
-                             {"model_bytes", model_bytes},
-                             {"volume_bytes", vol.source_bytes()},
-                             {"decode_seconds", ev.decode_seconds}});
+    report.update({{"psnr", ev.psnr},
+                   {"psnr_ci95", nullptr},
+                   {"ssim", a->no_ssim ? Json(nullptr) : Json(ev.ssim)},
+                   {"mse", ev.mse},
+                   {"max_abs_error", ev.max_abs_error},
+                   {"max_abs_error_original", ev.max_abs_error_original},
+                   {"samples", dims.count()},
+                   {"decode_seconds", ev.decode_seconds}});
+    write_report(a->report, report);
   });
 }
 
@@ -156,7 +264,8 @@ void add_synth(CLI::App& app) {
   struct Args {
     std::string kind, dims, output;
     uint64_t seed = 1;
-    bool force = false;
+    int timesteps = 0;
+    bool force = false, file_list = false;
   };
   auto a = std::make_shared<Args>();
   CLI::App* c = app.add_subcommand("synth", "write a procedural volume (raw + JSON sidecar), streamed");
@@ -164,11 +273,26 @@ void add_synth(CLI::App& app) {
   c->add_option("--dims", a->dims, "X,Y,Z")->required();
   c->add_option("-o,--output", a->output, "OUT.json (the raw data goes to OUT.raw)")->required();
   c->add_option("--seed", a->seed, "seed of the noise field")->capture_default_str();
+  c->add_option("--timesteps", a->timesteps,
+                "write a time series of T timesteps in which the field drifts smoothly (a 4-D sidecar: all frames "
+                "in OUT.raw)");
+  c->add_flag("--file-list", a->file_list,
+              "with --timesteps: one raw file per timestep (OUT_t0000.raw, ...) named by a file-list sidecar");
   c->add_flag("--force", a->force, "replace existing output files");
   c->callback([a]() {
     Int3 d = parse_dims(a->dims);
-    check_no_overwrite(synth_output_files(a->output), a->force);
+    if (a->file_list && a->timesteps <= 0) fail("--file-list needs --timesteps T");
+    if (a->timesteps < 0) fail("--timesteps must be positive, got {}", a->timesteps);
     auto t0 = std::chrono::steady_clock::now();
+    if (a->timesteps > 0) {
+      check_no_overwrite(synth_series_output_files(a->output, a->timesteps, a->file_list), a->force);
+      synth_series(a->kind, d, a->timesteps, a->output, a->seed, a->file_list);
+      std::printf("wrote %s (%lldx%lldx%lld float32, %d timesteps%s) in %.2fs\n", a->output.c_str(), (long long)d.x,
+                  (long long)d.y, (long long)d.z, a->timesteps, a->file_list ? ", one file each" : "",
+                  seconds_since(t0));
+      return;
+    }
+    check_no_overwrite(synth_output_files(a->output), a->force);
     synth_volume(a->kind, d, a->output, a->seed);
     std::printf("wrote %s (%lldx%lldx%lld float32) in %.2fs\n", a->output.c_str(), (long long)d.x, (long long)d.y,
                 (long long)d.z, seconds_since(t0));

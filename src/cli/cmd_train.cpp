@@ -2,14 +2,20 @@
 #include <csignal>
 #include <cmath>
 #include <cstdio>
+#include <optional>
 #include "cli.h"
+#include "train_cli.h"
 #include "vnr/core/error.h"
 #include "vnr/core/fileio.h"
 #include "vnr/core/parallel.h"
 #include "vnr/core/progress.h"
+#include "vnr/core/units.h"
 #include "vnr/nn/config.h"
+#include "vnr/online/preview.h"
 #include "vnr/train/model_io.h"
+#include "vnr/train/streaming_samplers.h"
 #include "vnr/train/trainer.h"
+#include "vnr/volume/stream.h"
 
 namespace vnr::cli {
 
@@ -23,54 +29,130 @@ extern "C" void on_sigint(int) {
   std::signal(SIGINT, SIG_DFL);
 }
 
-struct TrainArgs {
-  std::string volume, output, config = "paper", report;
-  double target_ratio = 0, seconds = 0;
-  int64_t steps = -1, batch = 65536;
-  uint32_t seed = 1337;
-  int threads = 0;
-  int macrocell_size = 16;
-  bool quiet = false, no_ssim = false;
-  VolumeArgs vol;
+// Where the training samples come from, and the volume when it is in memory.
+struct TrainingData {
+  std::string kind;  // incore | outofcore | mmap
+  std::shared_ptr<Sampler> sampler;
+  std::optional<Volume> vol;                       // incore only
+  std::shared_ptr<OutOfCoreSampler> out_of_core;   // outofcore only
+  std::shared_ptr<const RawVolumeFile> raw_file;   // outofcore only
+  Int3 dims;
+  DType dtype = DType::Float32;
+  double lo = 0, hi = 1;
+  uint64_t source_bytes() const { return dims.count() * dtype_size(dtype); }
 };
+
+TrainingData open_training_data(const TrainArgs& a, const VolumeDesc& desc, uint64_t budget) {
+  TrainingData t;
+  t.dims = desc.dims;
+  t.dtype = desc.dtype;
+  const uint64_t in_core_bytes = desc.dims.count() * sizeof(float);
+  t.kind = a.sampler.empty() ? (in_core_bytes <= budget ? "incore" : "outofcore") : a.sampler;
+  if (t.kind != "outofcore" && (a.blocks > 0 || a.refresh > 0 || !a.block_dims.empty()))
+    fail("--blocks, --refresh and --block-dims apply to --sampler outofcore (this run samples {})", t.kind);
+  auto t0 = std::chrono::steady_clock::now();
+  if (t.kind == "incore") {
+    if (in_core_bytes > budget)
+      fail("the volume needs {} in memory, more than the memory budget of {}; use --sampler outofcore (or mmap), or "
+           "raise --memory-budget",
+           human_bytes(double(in_core_bytes)), human_bytes(double(budget)));
+    t.vol = load_volume(desc, a.vol.load());
+    t.lo = t.vol->lo;
+    t.hi = t.vol->hi;
+    t.sampler = std::make_shared<InCoreSampler>(*t.vol);
+    if (!a.quiet)
+      std::fprintf(stderr, "volume %s: %lldx%lldx%lld %s, %s, range [%g, %g], loaded in %.1fs\n", a.volume.c_str(),
+                   (long long)t.dims.x, (long long)t.dims.y, (long long)t.dims.z, dtype_name(t.dtype),
+                   human_bytes(double(t.source_bytes())).c_str(), t.lo, t.hi, seconds_since(t0));
+    return t;
+  }
+  if (t.kind != "outofcore" && t.kind != "mmap") fail("unknown --sampler '{}' (allowed: incore, outofcore, mmap)", t.kind);
+  // The value range: the descriptor's, or one streaming pass (the volume is never loaded).
+  const bool known_range = desc.range_lo && desc.range_hi;
+  Progress scan_bar("value range", 1.0, a.quiet || known_range);
+  ValueRange r = scan_value_range(desc, a.vol.load(), [&](double f) { scan_bar.update(f); });
+  scan_bar.finish();
+  t.lo = r.lo;
+  t.hi = r.hi;
+  if (!a.quiet)
+    std::fprintf(stderr, "volume %s: %lldx%lldx%lld %s, %s, range [%g, %g]%s; sampled %s\n", a.volume.c_str(),
+                 (long long)t.dims.x, (long long)t.dims.y, (long long)t.dims.z, dtype_name(t.dtype),
+                 human_bytes(double(t.source_bytes())).c_str(), t.lo, t.hi,
+                 known_range ? " (from the descriptor)" : fmt::format(" (scanned in {:.1f}s)", seconds_since(t0)).c_str(),
+                 t.kind == "mmap" ? "through a memory map" : "out of core");
+  if (t.kind == "mmap") {
+    t.sampler = std::make_shared<MmapSampler>(std::make_shared<MappedVolume>(desc, t.lo, t.hi, a.vol.load().non_finite));
+    return t;
+  }
+  t.raw_file = std::make_shared<RawVolumeFile>(desc, t.lo, t.hi, a.vol.load().non_finite);
+  OutOfCoreOptions o;
+  o.memory_budget = budget;
+  o.blocks = a.blocks;
+  o.refresh = a.refresh;
+  if (!a.block_dims.empty()) o.block_dims = parse_dims(a.block_dims);
+  Progress fill_bar("fill blocks", 1.0, a.quiet);
+  o.fill_progress = [&](double f) { fill_bar.update(f); };
+  t.out_of_core = std::make_shared<OutOfCoreSampler>(t.raw_file, a.seed, o);
+  const OutOfCoreSampler& s = *t.out_of_core;
+  fill_bar.finish(fmt::format("({} blocks in {:.1f}s)", s.blocks(), s.fill_seconds()));
+  if (!a.quiet)
+    std::fprintf(stderr,
+                 "out-of-core buffer: %lld blocks of %lldx%lldx%lld voxels, %lld replaced per step; %s held of a %s "
+                 "budget\n",
+                 (long long)s.blocks(), (long long)s.block_dims().x, (long long)s.block_dims().y,
+                 (long long)s.block_dims().z, (long long)s.refresh(), human_bytes(double(s.bytes_held())).c_str(),
+                 human_bytes(double(budget)).c_str());
+  t.sampler = t.out_of_core;
+  return t;
+}
 
 void run_train(const TrainArgs& a) {
   set_num_threads(a.threads);
+  if (!a.timesteps.empty()) {
+    if (a.preview.enabled()) fail("--preview-* options are not supported with --timesteps");
+    return run_train_series(a);
+  }
   // Everything that can be checked without the data is checked first, so mistakes fail fast.
   if (a.batch <= 0 || a.batch % kChunk != 0) fail("--batch must be a positive multiple of {}, got {}", kChunk, a.batch);
   if (a.steps < -1) fail("--steps must be non-negative, got {}", a.steps);
   if (a.macrocell_size < 0) fail("--macrocell-size must be 0 (none) or positive, got {}", a.macrocell_size);
+  if (a.checkpoint_every < 0) fail("--checkpoint-every must be non-negative, got {}", a.checkpoint_every);
+  if (a.blocks < 0 || a.refresh < 0) fail("--blocks and --refresh must be positive");
+  if (a.continuous || a.switch_every) fail("--continuous and --switch-every need --timesteps");
+  const std::optional<PreviewOptions> preview_opts = a.preview.options();  // checks the flags, creates the dir
+  const uint64_t budget =
+      a.memory_budget.empty() ? available_memory_bytes() / 2 : parse_byte_size(a.memory_budget);
+  if (budget == 0) fail("--memory-budget must be positive");
   Json config = load_config(a.config);
   VolumeDesc desc = describe_volume(a.volume, a.vol.raw());
-  auto t_load = std::chrono::steady_clock::now();
-  Volume vol = load_volume(desc, a.vol.load());
-  if (!a.quiet)
-    std::fprintf(stderr, "volume %s: %lldx%lldx%lld %s, %s, range [%g, %g], loaded in %.1fs\n", a.volume.c_str(),
-                 (long long)vol.dims.x, (long long)vol.dims.y, (long long)vol.dims.z, dtype_name(vol.source_dtype),
-                 human_bytes(double(vol.source_bytes())).c_str(), vol.lo, vol.hi, seconds_since(t_load));
-  if (vol.hi == vol.lo && !a.quiet)
-    std::fprintf(stderr, "note: the volume is constant (%g); it is represented as normalised 0\n", vol.lo);
+  TrainingData data = open_training_data(a, desc, budget);
+  if (data.hi == data.lo && !a.quiet)
+    std::fprintf(stderr, "note: the volume is constant (%g); it is represented as normalised 0\n", data.lo);
 
   if (a.target_ratio > 0) {
     std::string note;
-    config = size_config_for_ratio(config, vol.source_bytes(), a.target_ratio, &note);
+    config = size_config_for_ratio(config, data.source_bytes(), a.target_ratio, &note);
     if (!a.quiet) std::fprintf(stderr, "%s\n", note.c_str());
   }
-  Model model;
-  model.net = std::make_unique<Network>(config);
-  model.dims = vol.dims;
-  model.source_dtype = vol.source_dtype;
-  model.lo = vol.lo;
-  model.hi = vol.hi;
+  Model model = new_model(config, data.dims, data.dtype, data.lo, data.hi, a.seed);
   Network& net = *model.net;
-  if (!a.quiet && a.target_ratio <= 0 && model.param_bytes() > vol.source_bytes())
+  if (!a.quiet && a.target_ratio <= 0 && model.param_bytes() > data.source_bytes())
     std::fprintf(stderr, "note: the model (%s) is larger than the volume (%s); use --target-ratio R to compress\n",
-                 human_bytes(double(model.param_bytes())).c_str(), human_bytes(double(vol.source_bytes())).c_str());
-  net.init_params(a.seed);
+                 human_bytes(double(model.param_bytes())).c_str(), human_bytes(double(data.source_bytes())).c_str());
 
   const int64_t steps = a.steps >= 0 ? a.steps : (a.seconds > 0 ? INT64_MAX : 1000);
-  Trainer trainer(net, std::make_shared<InCoreSampler>(vol), TrainOptions{a.batch, a.seed});
-  if (a.macrocell_size > 0) trainer.enable_online_ranges(vol.dims, a.macrocell_size);
+  Trainer trainer(net, data.sampler, TrainOptions{a.batch, a.seed});
+  if (a.macrocell_size > 0) trainer.enable_online_ranges(data.dims, a.macrocell_size);
+  std::unique_ptr<TrainPreview> preview;
+  if (preview_opts) preview = std::make_unique<TrainPreview>(*preview_opts, trainer, data.dims);
+  double preview_seconds = 0;  // left out of the training time and samples/s
+  auto training_summary = [&](int64_t done, double seconds, float loss) {
+    Json j = {{"steps", done},          {"seconds", seconds}, {"interrupted", bool(g_interrupted)},
+              {"batch", a.batch},       {"seed", a.seed},     {"final_loss", loss},
+              {"threads", num_threads()}, {"sampler", data.kind}};
+    if (trainer.has_online_ranges()) model.macrocells = trainer.online_ranges();
+    return j;
+  };
   const bool by_time = a.seconds > 0 && a.steps < 0;
   Progress bar("train", by_time ? a.seconds : double(steps), a.quiet);
   auto t0 = std::chrono::steady_clock::now();
@@ -78,58 +160,129 @@ void run_train(const TrainArgs& a) {
   int64_t done = 0;
   g_interrupted = 0;
   auto previous = std::signal(SIGINT, on_sigint);
-  while (done < steps && !g_interrupted) {
-    loss = trainer.step();
-    ++done;
-    double el = seconds_since(t0);
-    if (!std::isfinite(loss)) fail("training diverged at step {} (loss {}); try a smaller learning rate", done, loss);
-    bar.update(by_time ? el : double(done),
-               fmt::format("step {} loss {:.5f} {:.2f} M samples/s", done, loss, double(done) * a.batch / el / 1e6));
-    if (a.seconds > 0 && el >= a.seconds) break;
+  try {
+    while (done < steps && !g_interrupted) {
+      loss = trainer.step();
+      ++done;
+      if (preview) preview_seconds += preview->after_step(done);
+      double el = seconds_since(t0) - preview_seconds;
+      if (!std::isfinite(loss)) fail("training diverged at step {} (loss {}); try a smaller learning rate", done, loss);
+      std::string extra = fmt::format("step {} loss {:.5f} {:.2f} M samples/s", done, loss, double(done) * a.batch / el / 1e6);
+      if (data.out_of_core) extra += fmt::format(" io wait {:.1f}s", data.out_of_core->io_wait_seconds());
+      bar.update(by_time ? el : double(done), extra);
+      if (a.checkpoint_every > 0 && done % a.checkpoint_every == 0 && done < steps) {
+        model.training = training_summary(done, seconds_since(t0), loss);
+        model.training["checkpoint"] = true;
+        save_model(a.output, model);
+      }
+      if (a.seconds > 0 && el >= a.seconds) break;
+    }
+  } catch (const std::exception& e) {
+    // The data went away under us (or similar): keep the training done so far, then report.
+    std::signal(SIGINT, previous == SIG_ERR ? SIG_DFL : previous);
+    bar.finish();
+    if (done == 0) throw;
+    model.training = training_summary(done, seconds_since(t0), loss);
+    model.training["error"] = e.what();
+    save_model(a.output, model);
+    fail("{}; the model after {} steps was saved to {} (not evaluated)", e.what(), done, a.output);
   }
-  const double train_seconds = seconds_since(t0);
+  if (preview) preview_seconds += preview->finish(done);  // the final state, unless just written
+  const double train_seconds = seconds_since(t0) - preview_seconds;
   std::signal(SIGINT, previous == SIG_ERR ? SIG_DFL : previous);
   bar.finish(fmt::format("({} steps, loss {:.5f})", done, loss));
   if (g_interrupted)
     std::fprintf(stderr, "interrupted after %lld steps: evaluating and saving the model (Ctrl-C again to abort)\n",
                  (long long)done);
 
-  EvalResult ev = evaluate(net, vol, !a.no_ssim);
-  model.training = {{"steps", done}, {"seconds", train_seconds}, {"interrupted", bool(g_interrupted)}, {"batch", a.batch}, {"seed", a.seed},
-                    {"final_loss", loss}, {"psnr", ev.psnr}, {"threads", num_threads()}};
-  if (!a.no_ssim) model.training["ssim"] = ev.ssim;
-  if (trainer.has_online_ranges()) model.macrocells = trainer.online_ranges();
+  // Evaluation: exact over the volume in memory; a volume that is not in memory gets a PSNR
+  // estimate from random voxels (a full pass can take longer than the training did).
+  model.training = training_summary(done, train_seconds, loss);
+  Json eval_json;
+  double psnr, max_err, max_err_orig;
+  std::optional<double> ssim;
+  std::string psnr_note;
+  if (data.vol) {
+    EvalResult ev = evaluate(net, *data.vol, !a.no_ssim);
+    psnr = ev.psnr;
+    max_err = ev.max_abs_error;
+    max_err_orig = ev.max_abs_error_original;
+    if (!a.no_ssim) ssim = ev.ssim;
+    eval_json = {{"method", "full"}};
+  } else {
+    const int64_t n = std::min<int64_t>(int64_t(1) << 20, int64_t(data.dims.count()));
+    SampledEval ev = evaluate_sampled(net, desc, data.lo, data.hi, n, a.seed + 1, a.vol.load());
+    psnr = ev.psnr;
+    max_err = ev.max_abs_error;
+    max_err_orig = ev.max_abs_error_original;
+    eval_json = {{"method", "sampled"}, {"samples", ev.samples}, {"psnr_ci95", {ev.psnr_ci95_lo, ev.psnr_ci95_hi}}};
+    psnr_note = fmt::format(" (estimated from {} random voxels, 95% interval {:.2f}..{:.2f}; `vnr eval` for the full "
+                            "volume)",
+                            ev.samples, ev.psnr_ci95_lo, ev.psnr_ci95_hi);
+  }
+  model.training["psnr"] = psnr;
+  if (ssim) model.training["ssim"] = *ssim;
   save_model(a.output, model);
   const uint64_t model_bytes = file_size(a.output);
-  const double ratio = double(vol.source_bytes()) / double(model_bytes);
+  const double ratio = double(data.source_bytes()) / double(model_bytes);
   const double sps = double(done) * a.batch / train_seconds;
   std::printf("trained %lld steps in %.2fs (%.2f M samples/s), final loss %.6f\n", (long long)done, train_seconds,
               sps / 1e6, loss);
-  std::printf("PSNR %.2f dB", ev.psnr);
-  if (!a.no_ssim) std::printf(", SSIM %.4f", ev.ssim);
-  std::printf(", max |error| %.4g (%.4g in data units)\n", ev.max_abs_error, ev.max_abs_error_original);
+  if (preview)
+    std::printf("previews: %lld PNG(s) in %s, %.2fs (not counted as training time)\n",
+                (long long)preview->frames_written(), preview_opts->dir.c_str(), preview_seconds);
+  std::printf("PSNR %.2f dB%s", psnr, psnr_note.c_str());
+  if (ssim) std::printf(", SSIM %.4f", *ssim);
+  std::printf(", max |error| %.4g (%.4g in data units)\n", max_err, max_err_orig);
   std::printf("model %s: %s, %llu parameters; volume %s; compression ratio %.2f\n", a.output.c_str(),
               human_bytes(double(model_bytes)).c_str(), (unsigned long long)net.n_params(),
-              human_bytes(double(vol.source_bytes())).c_str(), ratio);
+              human_bytes(double(data.source_bytes())).c_str(), ratio);
   Json report = {{"steps", done},
                  {"seconds", train_seconds},
+                 {"seconds_per_step", done > 0 ? train_seconds / double(done) : 0.0},
                  {"samples_per_second", sps},
                  {"final_loss", loss},
-                 {"psnr", ev.psnr},
-                 {"ssim", a.no_ssim ? Json(nullptr) : Json(ev.ssim)},
-                 {"max_abs_error", ev.max_abs_error},
+                 {"psnr", psnr},
+                 {"ssim", ssim ? Json(*ssim) : Json(nullptr)},
+                 {"evaluation", eval_json},
+                 {"max_abs_error", max_err},
                  {"n_params", net.n_params()},
                  {"model_bytes", model_bytes},
-                 {"volume_bytes", vol.source_bytes()},
+                 {"volume_bytes", data.source_bytes()},
                  {"compression_ratio", ratio},
                  {"batch", a.batch},
                  {"threads", num_threads()},
+                 {"sampler", data.kind},
+                 {"memory_budget", budget},
                  {"loss_history", trainer.loss_history()},
+                 {"preview_seconds", preview_seconds},
                  {"config", net.config_json()}};
+  if (data.out_of_core) {
+    const OutOfCoreSampler& s = *data.out_of_core;
+    report["out_of_core"] = {{"blocks", s.blocks()},
+                             {"refresh", s.refresh()},
+                             {"block_dims", {s.block_dims().x, s.block_dims().y, s.block_dims().z}},
+                             {"bytes_held", s.bytes_held()},
+                             {"fill_seconds", s.fill_seconds()},
+                             {"io_wait_seconds", s.io_wait_seconds()},
+                             {"blocks_loaded", s.blocks_loaded()},
+                             {"bytes_read", data.raw_file->bytes_read()}};
+  }
   write_report(a.report, report);
 }
 
 }  // namespace
+
+Model new_model(const Json& config, Int3 dims, DType dtype, double lo, double hi, uint32_t seed) {
+  Model model;
+  model.net = std::make_unique<Network>(config);
+  model.dims = dims;
+  model.source_dtype = dtype;
+  model.lo = lo;
+  model.hi = hi;
+  model.net->init_params(seed);
+  return model;
+}
 
 void add_train(CLI::App& app) {
   auto a = std::make_shared<TrainArgs>();
@@ -148,9 +301,30 @@ void add_train(CLI::App& app) {
   c->add_option("--macrocell-size", a->macrocell_size,
                  "voxels per macro-cell of the value ranges recorded from the training samples for rendering (0: none)")
       ->capture_default_str();
+  c->add_option("--sampler", a->sampler,
+                 "where training samples come from: incore (volume in memory), outofcore (random block buffer "
+                 "refreshed by background reads), mmap (memory-mapped file; the paper's baseline). Default: incore "
+                 "when the volume fits the memory budget, else outofcore")
+      ->check(CLI::IsMember({"incore", "outofcore", "mmap"}));
+  c->add_option("--memory-budget", a->memory_budget,
+                "memory for the training data, e.g. 16MiB, 2GiB (default: half of the available memory)");
+  c->add_option("--blocks", a->blocks, "outofcore: blocks in the buffer (default 65536, scaled down to the budget)");
+  c->add_option("--refresh", a->refresh, "outofcore: blocks replaced per step (default blocks/64)");
+  c->add_option("--block-dims", a->block_dims,
+                "outofcore: interior voxels of a block X,Y,Z (default 256 along x, y = z for about 64 KiB of data)");
+  c->add_option("--checkpoint-every", a->checkpoint_every,
+                "write the model (atomically) every N steps while training, not only at the end");
+  c->add_option("--timesteps", a->timesteps,
+                 "train a time series: all, A-B or A,B,C; one model per timestep in the -o directory, each "
+                 "warm-started from the previous one");
+  c->add_flag("--continuous", a->continuous,
+              "with --timesteps: keep training one network while the target timestep advances every "
+              "--switch-every steps (fixed learning rate), reporting the steps PSNR takes to recover");
+  c->add_option("--switch-every", a->switch_every, "with --continuous: training steps per timestep");
   c->add_flag("--no-ssim", a->no_ssim, "skip the 3-D SSIM of the final evaluation");
   c->add_flag("-q,--quiet", a->quiet, "no progress output");
   a->vol.add(c);
+  a->preview.add(c);
   c->callback([a]() { run_train(*a); });
 }
 

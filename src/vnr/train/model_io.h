@@ -1,4 +1,6 @@
 #pragma once
+#include <cstdint>
+#include <functional>
 #include <memory>
 #include <optional>
 #include <string>
@@ -38,6 +40,42 @@ EvalResult evaluate(const Network& net, const Volume& vol, bool with_ssim = true
 
 // Decodes the network at voxel centres of `dims` for z-slices [z0, z1) into out (normalised units).
 void decode_slices(const Network& net, Int3 dims, int64_t z0, int64_t z1, float* out);
+// The same for n voxels given by index (x + dims.x * (y + dims.y * z)): bit-identical to the
+// values decode_slices gives those voxels.
+void decode_voxels(const Network& net, Int3 dims, const int64_t* voxel_index, int64_t n, float* out);
+
+// Whether the model file records the value range of the volume it was trained on: .vnr files do,
+// instantvnr BSON files do not (load_model then gives [0, 1]). Reads only the file's first bytes.
+bool model_file_has_value_range(const std::string& path);
+
+// evaluate() for a volume that is not in memory: the volume (desc, normalised with [lo, hi] as
+// load_volume would) is streamed in z-slabs of about slab_voxels voxels (0: 16 M voxels, i.e.
+// 64 MiB per copy; at least one slice) and the network is decoded slab by slab. Memory: two
+// slab-sized float arrays (the volume as read, the network's values); with SSIM a third, and
+// 6 slices of overlap. PSNR, MSE and max error match evaluate() on the loaded volume up to the
+// order of a double sum; the SSIM is the same mean over every 7x7x7 window (windows crossing a
+// slab boundary see the 6 slices before it), equal to ssim3d's up to rounding (~1e-14).
+// `progress` gets the fraction of slices done.
+EvalResult evaluate_streamed(const Network& net, const VolumeDesc& desc, double lo, double hi,
+                             const LoadOptions& opts, bool with_ssim = true,
+                             const std::function<void(double fraction)>& progress = {}, int64_t slab_voxels = 0);
+
+// PSNR estimated from n_samples voxels drawn uniformly (with replacement; deterministic for a
+// seed), read with VoxelReader (uncompressed data only) and decoded as evaluate() decodes them.
+// The 95% interval is the normal interval mean +- 1.96 standard errors of the per-voxel squared
+// error, mapped through PSNR = 10 log10(1/MSE) (an interval end at MSE <= 0 is reported as 999).
+// Memory: O(min(n_samples, 1 M)).
+struct SampledEval {
+  double psnr = 0;                        // from the sampled MSE
+  double psnr_ci95_lo = 0, psnr_ci95_hi = 0;
+  double mse = 0, mse_stderr = 0;         // normalised units
+  double max_abs_error = 0;               // largest error among the samples, normalised units
+  double max_abs_error_original = 0;      // the same in original units
+  int64_t samples = 0;
+  double decode_seconds = 0;
+};
+SampledEval evaluate_sampled(const Network& net, const VolumeDesc& desc, double lo, double hi, int64_t n_samples,
+                             uint64_t seed, const LoadOptions& opts = {});
 
 // Sizes the grid of `config` (log2_hashmap_size, and n_levels if needed) so the fp16 model is about
 // volume_bytes / ratio. Returns the adjusted config; `note` describes the choice.

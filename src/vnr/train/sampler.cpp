@@ -2,8 +2,7 @@
 
 namespace vnr {
 
-void InCoreSampler::sample(uint64_t seed, uint64_t step, uint64_t chunk, int n, float* x, float* y, float* z,
-                           float* target) const {
+void uniform_coordinates(uint64_t seed, uint64_t step, uint64_t chunk, int n, float* x, float* y, float* z) {
   // Four independent pcg32 streams (x, y, z of every 4th sample each) so the LCG multiply chains
   // run in parallel instead of one after another.
   constexpr int kStreams = 4;
@@ -21,6 +20,11 @@ void InCoreSampler::sample(uint64_t seed, uint64_t step, uint64_t chunk, int n, 
     y[i] = rng[0].next_float();
     z[i] = rng[0].next_float();
   }
+}
+
+void InCoreSampler::sample(uint64_t seed, uint64_t step, uint64_t chunk, int n, float* x, float* y, float* z,
+                           float* target) const {
+  uniform_coordinates(seed, step, chunk, n, x, y, z);
   grid_lookup_batch(grid_, x, y, z, n, target);
 }
 

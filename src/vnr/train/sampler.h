@@ -6,8 +6,10 @@
 namespace vnr {
 
 // Produces training samples: coordinates in [0,1)^3 (SoA) and normalised target values.
-// sample() is called concurrently for disjoint chunks of one step; a chunk's samples depend only
-// on (seed, step, chunk index), never on which thread runs it.
+// begin_step() runs on one thread before a step's samples are drawn (samplers that stream data
+// do their bookkeeping there); sample() is then called concurrently for disjoint chunks of the
+// step, and a chunk's samples depend only on (seed, step, chunk index), never on which thread
+// runs it.
 class Sampler {
 public:
   virtual ~Sampler() = default;
@@ -15,6 +17,18 @@ public:
   virtual void sample(uint64_t seed, uint64_t step, uint64_t chunk, int n, float* x, float* y, float* z,
                       float* target) const = 0;
 };
+
+// The RNG of one chunk of one step.
+inline Pcg32 chunk_rng(uint64_t seed, uint64_t step, uint64_t chunk) {
+  return Pcg32(seed * 0x9E3779B97F4A7C15ULL + step * 0xD1B54A32D192ED03ULL + 1, chunk);
+}
+
+// An integer in [0, n) from one draw (multiply-shift; the bias is below n / 2^32).
+VNR_HD inline uint32_t rng_below(Pcg32& rng, uint32_t n) { return uint32_t((uint64_t(rng.next_uint()) * n) >> 32); }
+
+// Uniform coordinates in [0,1)^3 for one chunk (compat.md B.3), shared by every sampler that
+// draws positions uniformly over the whole volume.
+void uniform_coordinates(uint64_t seed, uint64_t step, uint64_t chunk, int n, float* x, float* y, float* z);
 
 // Uniform coordinates, cell-centred trilinear targets from a volume in memory (compat.md B.3).
 class InCoreSampler : public Sampler {
@@ -27,10 +41,5 @@ public:
 private:
   GridView grid_;
 };
-
-// The RNG of one chunk of one step.
-inline Pcg32 chunk_rng(uint64_t seed, uint64_t step, uint64_t chunk) {
-  return Pcg32(seed * 0x9E3779B97F4A7C15ULL + step * 0xD1B54A32D192ED03ULL + 1, chunk);
-}
 
 }  // namespace vnr

@@ -15,6 +15,8 @@ struct Source {
   std::string origin;              // the descriptor named in messages ("" for a plain raw file)
 };
 
+// "file" is one data file (with an optional 4th dim: timesteps stored one after another in it) or an
+// array of files, one per timestep (a file list; same size each, checked here).
 Source describe_sidecar(const std::string& json_path, const Json& j);
 Source describe_scene(const std::string& json_path, const Json& j);  // instantvnr VIDI3D or DIVA
 Source describe_nrrd(const std::string& path);

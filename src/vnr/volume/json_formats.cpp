@@ -1,4 +1,6 @@
 // JSON volume descriptors: vnr/shared sidecars and instantvnr scene files (VIDI3D and DIVA).
+// A sidecar's "file" may also be an array of file names: a time series with one data file per
+// timestep (same dims, dtype, byte order and offset; the files must all have the same size).
 #include <cmath>
 #include <limits>
 #include "vnr/core/error.h"
@@ -123,8 +125,27 @@ Source describe_sidecar(const std::string& json_path, const Json& j) {
   Source s;
   s.origin = json_path;
   VolumeDesc& d = s.desc;
-  std::string file = json_str(require(j, "file", json_path), json_path, "\"file\"");
-  d.path = join_path(dirname_of(json_path), file);
+  const Json& file = require(j, "file", json_path);
+  if (file.is_array()) {
+    // A file list: one data file per timestep, all with the same dims, dtype and size.
+    if (file.empty()) fail("'{}': \"file\" is an empty array (a time series lists one data file per timestep)", json_path);
+    uint64_t first_size = 0;
+    for (size_t t = 0; t < file.size(); ++t) {
+      std::string p = join_path(dirname_of(json_path), json_str(file[t], json_path, "\"file\" entry"));
+      if (!file_exists(p)) fail("'{}': data file '{}' of timestep {} does not exist", json_path, p, t);
+      uint64_t size = file_size(p);
+      if (t == 0) first_size = size;
+      else if (size != first_size)
+        fail("'{}': the files of a time series must have the same size, but '{}' (timestep {}) has {} bytes and '{}' "
+             "(timestep 0) has {}",
+             json_path, p, t, size, s.files[0], first_size);
+      s.files.push_back(p);
+    }
+    d.path = s.files[0];
+    d.n_timesteps = int(s.files.size());
+  } else {
+    d.path = join_path(dirname_of(json_path), json_str(file, json_path, "\"file\""));
+  }
 
   const Json& dims = require(j, "dims", json_path);
   if (!dims.is_array() || (dims.size() != 3 && dims.size() != 4))
@@ -135,8 +156,11 @@ Source describe_sidecar(const std::string& json_path, const Json& j) {
     int64_t t = json_int(dims[3], json_path, "\"dims\"");
     if (t <= 0 || t > std::numeric_limits<int>::max())
       fail("'{}': the 4th dim (timesteps) must be a positive integer, got {}", json_path, t);
+    if (!s.files.empty() && t != int64_t(s.files.size()))
+      fail("'{}': the 4th dim says {} timesteps but \"file\" lists {} files", json_path, t, s.files.size());
     d.n_timesteps = int(t);
   }
+  if (s.files.size() == 1) s.files.clear();  // a list of one is a plain file
   d.dtype = parse_dtype(json_str(require(j, "dtype", json_path), json_path, "\"dtype\""));
   if (j.contains("byte_order")) d.big_endian = parse_byte_order(json_str(j["byte_order"], json_path, "\"byte_order\""), "'" + json_path + "': ", "byte order");
   if (j.contains("offset")) {

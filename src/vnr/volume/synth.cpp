@@ -1,12 +1,16 @@
 // Procedural test volumes with closed forms (Marschner-Lobb) or cheap deterministic structure at
 // every scale (value noise), streamed to disk slab by slab.
 #include <algorithm>
+#include <bit>
 #include <cmath>
+#include <cstring>
+#include <memory>
 #include <numbers>
 #include <vector>
 #include "vnr/core/error.h"
 #include "vnr/core/parallel.h"
 #include "vnr/core/fileio.h"
+#include "vnr/core/json.h"
 #include "vnr/volume/writer.h"
 
 namespace vnr {
@@ -88,6 +92,51 @@ float eval(Kind k, float ux, float uy, float uz, uint64_t seed) {
   return v;
 }
 
+// Voxel centres (i + 0.5)/N, rounded to float exactly as a caller of synth_value would, moved to
+// where timestep t samples the field (t = 0: unchanged).
+struct Centres {
+  std::vector<float> x, y, z;
+};
+
+// Timestep t of a series samples the field at u - t * velocity: the field drifts by `velocity` (in
+// units of the volume's extent) per timestep.
+constexpr double kSeriesVelocity[3] = {0.02, 0.015, 0.01};
+
+inline float series_coord(float u, int t, int axis) { return float(double(u) - double(t) * kSeriesVelocity[axis]); }
+
+Centres centres(Int3 dims, int t) {
+  auto axis = [t](int64_t n, int a) {
+    std::vector<float> c(static_cast<size_t>(n));
+    for (int64_t i = 0; i < n; ++i) c[size_t(i)] = series_coord(float((double(i) + 0.5) / double(n)), t, a);
+    return c;
+  };
+  return Centres{axis(dims.x, 0), axis(dims.y, 1), axis(dims.z, 2)};
+}
+
+// Evaluates the field on the grid of centres in z-slabs of about 4 M voxels, handing each slab
+// (x fastest) to sink(values, n_slices).
+template <typename Sink>
+void for_each_slab(Kind k, Int3 dims, const Centres& c, uint64_t seed, Sink&& sink) {
+  const int64_t slice = dims.x * dims.y;
+  const int64_t slab = std::max<int64_t>(1, (int64_t(1) << 22) / slice);
+  std::vector<float> buf(size_t(std::min(slab, dims.z) * slice));
+  for (int64_t z0 = 0; z0 < dims.z; z0 += slab) {
+    const int64_t nz = std::min(slab, dims.z - z0);
+    parallel_for_range(nz * dims.y, 16, [&](int64_t b, int64_t e) {
+      for (int64_t row = b; row < e; ++row) {  // row = y + ny * (z - z0)
+        int64_t y = row % dims.y, z = z0 + row / dims.y;
+        float* out = buf.data() + row * dims.x;
+        if (k == Kind::Noise) {
+          value_noise_row(c.x.data(), dims.x, c.y[size_t(y)], c.z[size_t(z)], seed, out);
+        } else {
+          for (int64_t x = 0; x < dims.x; ++x) out[x] = eval(k, c.x[size_t(x)], c.y[size_t(y)], c.z[size_t(z)], seed);
+        }
+      }
+    });
+    sink(static_cast<const float*>(buf.data()), nz);
+  }
+}
+
 }  // namespace
 
 float synth_value(const std::string& kind, float ux, float uy, float uz, uint64_t seed) {
@@ -107,33 +156,71 @@ void synth_volume(const std::string& kind, Int3 dims, const std::string& out_jso
       dims.count() > (uint64_t(1) << 40))
     fail("invalid dims {}x{}x{} for a synthetic volume", dims.x, dims.y, dims.z);
   VolumeWriter w(raw, dims, DType::Float32);
-
-  // Voxel centres (i + 0.5)/N, rounded to float exactly as a caller of synth_value would.
-  auto centres = [](int64_t n) {
-    std::vector<float> c(static_cast<size_t>(n));
-    for (int64_t i = 0; i < n; ++i) c[size_t(i)] = float((double(i) + 0.5) / double(n));
-    return c;
-  };
-  const std::vector<float> cx = centres(dims.x), cy = centres(dims.y), cz = centres(dims.z);
-  const int64_t slice = dims.x * dims.y;
-  const int64_t slab = std::max<int64_t>(1, (int64_t(1) << 22) / slice);
-  std::vector<float> buf(size_t(std::min(slab, dims.z) * slice));
-  for (int64_t z0 = 0; z0 < dims.z; z0 += slab) {
-    const int64_t nz = std::min(slab, dims.z - z0);
-    parallel_for_range(nz * dims.y, 16, [&](int64_t b, int64_t e) {
-      for (int64_t row = b; row < e; ++row) {  // row = y + ny * (z - z0)
-        int64_t y = row % dims.y, z = z0 + row / dims.y;
-        float* out = buf.data() + row * dims.x;
-        if (k == Kind::Noise) {
-          value_noise_row(cx.data(), dims.x, cy[size_t(y)], cz[size_t(z)], seed, out);
-        } else {
-          for (int64_t x = 0; x < dims.x; ++x) out[x] = eval(k, cx[size_t(x)], cy[size_t(y)], cz[size_t(z)], seed);
-        }
-      }
-    });
-    w.write_slices(buf.data(), nz);
-  }
+  const Centres c = centres(dims, 0);
+  for_each_slab(k, dims, c, seed, [&](const float* buf, int64_t nz) { w.write_slices(buf, nz); });
   w.commit();
+}
+
+// ---- time series ----
+
+float synth_series_value(const std::string& kind, int timestep, float ux, float uy, float uz, uint64_t seed) {
+  return eval(parse_kind(kind), series_coord(ux, timestep, 0), series_coord(uy, timestep, 1),
+              series_coord(uz, timestep, 2), seed);
+}
+
+std::vector<std::string> synth_series_output_files(const std::string& out_json, int timesteps, bool file_list) {
+  const std::string raw = synth_output_files(out_json)[0];  // validates out_json
+  if (!file_list) return {raw, out_json};
+  std::vector<std::string> files;
+  for (int t = 0; t < timesteps; ++t) files.push_back(fmt::format("{}_t{:04d}.raw", strip_extension(out_json), t));
+  files.push_back(out_json);
+  return files;
+}
+
+void synth_series(const std::string& kind, Int3 dims, int timesteps, const std::string& out_json, uint64_t seed,
+                  bool file_list) {
+  Kind k = parse_kind(kind);
+  if (timesteps <= 0 || timesteps > (1 << 20)) fail("a synthetic series needs 1 to 2^20 timesteps, got {}", timesteps);
+  const std::vector<std::string> files = synth_series_output_files(out_json, timesteps, file_list);
+  if (dims.x <= 0 || dims.y <= 0 || dims.z <= 0 || dims.x > (1 << 30) || dims.y > (1 << 30) ||
+      dims.count() > (uint64_t(1) << 40) || dims.count() * uint64_t(timesteps) > (uint64_t(1) << 40))
+    fail("invalid dims {}x{}x{}x{} for a synthetic series", dims.x, dims.y, dims.z, timesteps);
+
+  // float32, little endian on disk; all data files are committed before the sidecar that names them.
+  std::vector<std::unique_ptr<AtomicFile>> out;
+  double lo = 1e308, hi = -1e308;
+  std::vector<unsigned char> bytes;
+  for (int t = 0; t < timesteps; ++t) {
+    if (t == 0 || file_list) out.push_back(std::make_unique<AtomicFile>(files[file_list ? size_t(t) : 0]));
+    AtomicFile& f = *out.back();
+    for_each_slab(k, dims, centres(dims, t), seed, [&](const float* buf, int64_t nz) {
+      const size_t n = size_t(nz * dims.x * dims.y);
+      for (size_t i = 0; i < n; ++i) {
+        lo = std::min(lo, double(buf[i]));
+        hi = std::max(hi, double(buf[i]));
+      }
+      bytes.resize(n * 4);
+      std::memcpy(bytes.data(), buf, n * 4);
+      if constexpr (std::endian::native == std::endian::big)
+        for (size_t i = 0; i < n; ++i) std::reverse(bytes.begin() + std::ptrdiff_t(4 * i), bytes.begin() + std::ptrdiff_t(4 * i + 4));
+      f.write(bytes.data(), bytes.size());
+    });
+  }
+  Json side;
+  if (file_list) {
+    side["file"] = Json::array();
+    for (int t = 0; t < timesteps; ++t) side["file"].push_back(basename_of(files[size_t(t)]));
+    side["dims"] = {dims.x, dims.y, dims.z};
+  } else {
+    side["file"] = basename_of(files[0]);
+    side["dims"] = {dims.x, dims.y, dims.z, timesteps};
+  }
+  side["dtype"] = "float32";
+  side["byte_order"] = "little";
+  side["spacing"] = {1.0, 1.0, 1.0};
+  side["value_range"] = {lo, hi};  // the min/max over all timesteps: every timestep normalises alike
+  for (auto& f : out) f->commit();
+  write_file_atomic(out_json, side.dump(2) + "\n");
 }
 
 }  // namespace vnr

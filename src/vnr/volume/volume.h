@@ -73,11 +73,15 @@ inline GridView view_of(const Volume& v) {
   return GridView{v.data.data(), int32_t(v.dims.x), int32_t(v.dims.y), int32_t(v.dims.z)};
 }
 
-// Cell-centred, clamp-to-edge trilinear lookup at u in [0,1)^3 (compat.md B.2):
-// p = u*N - 0.5 clamped to [0, N-1] per axis; trilinear between floor(p) and min(floor(p)+1, N-1).
-VNR_HD VNR_INLINE float grid_lookup(const GridView& g, float ux, float uy, float uz) {
-  float p[3] = {ux * float(g.nx) - 0.5f, uy * float(g.ny) - 0.5f, uz * float(g.nz) - 0.5f};
-  int32_t n[3] = {g.nx, g.ny, g.nz};
+// Cell-centred, clamp-to-edge trilinear interpolation at u in [0,1)^3 (compat.md B.2) over any
+// voxel accessor at(x, y, z) with global indices: p = u*N - 0.5 clamped to [0, N-1] per axis;
+// trilinear between floor(p) and min(floor(p)+1, N-1). The in-memory grid, out-of-core blocks and
+// memory-mapped files all go through this one function, so they agree bit for bit.
+template <typename At>
+VNR_HD VNR_INLINE float cell_centred_trilinear(int32_t nx, int32_t ny, int32_t nz, float ux, float uy, float uz,
+                                               const At& at) {
+  float p[3] = {ux * float(nx) - 0.5f, uy * float(ny) - 0.5f, uz * float(nz) - 0.5f};
+  int32_t n[3] = {nx, ny, nz};
   int32_t i0[3], i1[3];
   float t[3];
   for (int d = 0; d < 3; ++d) {
@@ -88,8 +92,6 @@ VNR_HD VNR_INLINE float grid_lookup(const GridView& g, float ux, float uy, float
     i1[d] = i0[d] + 1 < n[d] ? i0[d] + 1 : n[d] - 1;
     t[d] = q - fl;
   }
-  const int64_t sx = 1, sy = g.nx, sz = int64_t(g.nx) * g.ny;
-  auto at = [&](int32_t x, int32_t y, int32_t z) { return g.data[x * sx + y * sy + z * sz]; };
   float c00 = at(i0[0], i0[1], i0[2]) * (1 - t[0]) + at(i1[0], i0[1], i0[2]) * t[0];
   float c10 = at(i0[0], i1[1], i0[2]) * (1 - t[0]) + at(i1[0], i1[1], i0[2]) * t[0];
   float c01 = at(i0[0], i0[1], i1[2]) * (1 - t[0]) + at(i1[0], i0[1], i1[2]) * t[0];
@@ -97,6 +99,13 @@ VNR_HD VNR_INLINE float grid_lookup(const GridView& g, float ux, float uy, float
   float c0 = c00 * (1 - t[1]) + c10 * t[1];
   float c1 = c01 * (1 - t[1]) + c11 * t[1];
   return c0 * (1 - t[2]) + c1 * t[2];
+}
+
+// The lookup on an in-memory normalised grid.
+VNR_HD VNR_INLINE float grid_lookup(const GridView& g, float ux, float uy, float uz) {
+  const int64_t sy = g.nx, sz = int64_t(g.nx) * g.ny;
+  return cell_centred_trilinear(g.nx, g.ny, g.nz, ux, uy, uz,
+                                [&](int32_t x, int32_t y, int32_t z) { return g.data[x + y * sy + z * sz]; });
 }
 
 // The same lookup for n points (SoA), vectorised with gathers; bit-identical to grid_lookup.

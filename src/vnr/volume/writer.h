@@ -52,4 +52,18 @@ std::vector<std::string> synth_output_files(const std::string& out_json);
 // The same fields evaluated at one point u in [0,1]^3 (for tests and analytic checks).
 float synth_value(const std::string& kind, float ux, float uy, float uz, uint64_t seed = 1);
 
+// A smoothly evolving series of `timesteps` frames of the same fields: timestep t is the field
+// drifted by t * (0.02, 0.015, 0.01) of the volume's extent (f_t(u) = f(u - t v); t = 0 is
+// synth_volume's volume), float32. Written as one 4-D sidecar (out_json; "<out>.raw" holds the
+// frames one after another, "dims": [x, y, z, T]) or, with file_list, as a file-list sidecar
+// naming one raw file per timestep ("<out>_t0000.raw", ...). The sidecar's value_range is the
+// min/max over all timesteps, so every timestep normalises alike. Deterministic for a seed; files
+// written atomically, the sidecar last.
+void synth_series(const std::string& kind, Int3 dims, int timesteps, const std::string& out_json, uint64_t seed = 1,
+                  bool file_list = false);
+// The files synth_series writes (data files, then the sidecar).
+std::vector<std::string> synth_series_output_files(const std::string& out_json, int timesteps, bool file_list);
+// Timestep t of the series at one point (bit-identical to the stored voxel values at voxel centres).
+float synth_series_value(const std::string& kind, int timestep, float ux, float uy, float uz, uint64_t seed = 1);
+
 }  // namespace vnr

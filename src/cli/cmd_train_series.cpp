@@ -1,0 +1,313 @@
+// `vnr train SERIES --timesteps all|A-B|A,B,C -o DIR [--continuous --switch-every N]`: time-varying
+// volumes (paper appendix "Adaptivity with Time-Varying Data"); the training itself is
+// vnr/train/series.h. Models go to DIR/t0000.vnr, DIR/t0001.vnr, ... (the series' timestep index,
+// zero-padded to 4 digits), each written atomically as soon as its timestep is done, and the report
+// (DIR/series.json unless --report) is rewritten after every timestep, so a failure or Ctrl-C
+// later leaves every finished model and its row on disk.
+#include <chrono>
+#include <csignal>
+#include <cstdio>
+#include <filesystem>
+#include <memory>
+#include <system_error>
+#include "cli.h"
+#include "train_cli.h"
+#include "vnr/core/error.h"
+#include "vnr/core/fileio.h"
+#include "vnr/core/parallel.h"
+#include "vnr/core/progress.h"
+#include "vnr/nn/config.h"
+#include "vnr/train/model_io.h"
+#include "vnr/train/series.h"
+
+namespace vnr::cli {
+namespace {
+
+namespace fs = std::filesystem;
+
+// Ctrl-C stops after the current step; that timestep (window) is still evaluated and saved, and the
+// series ends there. A second Ctrl-C exits at once.
+volatile std::sig_atomic_t g_series_interrupted = 0;
+extern "C" void on_sigint_series(int) {
+  g_series_interrupted = 1;
+  std::signal(SIGINT, SIG_DFL);
+}
+
+struct SigintGuard {
+  void (*previous)(int);
+  SigintGuard() {
+    g_series_interrupted = 0;
+    previous = std::signal(SIGINT, on_sigint_series);
+  }
+  ~SigintGuard() { std::signal(SIGINT, previous == SIG_ERR ? SIG_DFL : previous); }
+};
+
+void check_series_args(const TrainArgs& a) {
+  if (a.batch <= 0 || a.batch % kChunk != 0) fail("--batch must be a positive multiple of {}, got {}", kChunk, a.batch);
+  if (a.steps < -1) fail("--steps must be non-negative, got {}", a.steps);
+  if (a.seconds < 0) fail("--seconds must not be negative, got {}", a.seconds);
+  if (a.macrocell_size < 0) fail("--macrocell-size must be 0 (none) or positive, got {}", a.macrocell_size);
+  if (a.vol.timestep >= 0)
+    fail("--timestep picks one timestep of a single-volume run; with --timesteps give the selection there "
+         "(e.g. --timesteps {})",
+         a.vol.timestep);
+  if (a.continuous) {
+    if (a.switch_every <= 0)
+      fail("--continuous needs --switch-every N (training steps per timestep, N > 0), got {}", a.switch_every);
+    if (a.steps >= 0 || a.seconds > 0)
+      fail("--continuous trains --switch-every steps per timestep; --steps and --seconds do not apply");
+  } else if (a.switch_every != 0) {
+    fail("--switch-every needs --continuous");
+  }
+  if (!a.sampler.empty() && a.sampler != "incore")
+    fail("--sampler {} is not supported with --timesteps (each timestep is trained in memory)", a.sampler);
+  if (a.checkpoint_every > 0)
+    fail("--checkpoint-every does not apply to --timesteps (each timestep's model is written as soon as it is done)");
+  const std::string ext = extension_of(a.output);
+  if (ext == ".vnr" || ext == ".bson")
+    fail("-o '{}' looks like a model file; with --timesteps -o names a directory (models go to DIR/t0000.vnr, ...)",
+         a.output);
+  std::error_code ec;
+  if (fs::exists(a.output, ec) && !fs::is_directory(a.output, ec))
+    fail("-o '{}' is an existing file; with --timesteps -o names a directory for the per-timestep models",
+         a.output);
+}
+
+void make_output_dir(const std::string& dir) {
+  std::error_code ec;
+  if (fs::is_directory(dir, ec)) return;
+  fs::create_directories(dir, ec);
+  if (ec || !fs::is_directory(dir)) fail("cannot create output directory '{}': {}", dir, ec ? ec.message() : "unknown error");
+}
+
+Json eval_row(const EvalResult& ev, bool ssim) {
+  return {{"psnr", ev.psnr}, {"ssim", ssim ? Json(ev.ssim) : Json(nullptr)}, {"max_abs_error", ev.max_abs_error},
+          {"max_abs_error_original", ev.max_abs_error_original}};
+}
+
+}  // namespace
+
+void run_train_series(const TrainArgs& a) {
+  check_series_args(a);
+  Json config = load_config(a.config);
+  const RawOptions raw = a.vol.raw();
+  const LoadOptions load_opts = a.vol.load();
+
+  // The series and the selection, every selected timestep described (validated) before training.
+  // (timestep 0 given explicitly: a plain raw file then counts the whole frames it holds)
+  const VolumeDesc desc0 = describe_volume(a.volume, [&] {
+    RawOptions r = raw;
+    r.timestep = 0;
+    return r;
+  }());
+  if (desc0.n_timesteps <= 1)
+    fail("'{}' has a single timestep; --timesteps needs a time series (a 4-D sidecar, a sidecar whose \"file\" "
+         "lists one file per timestep, or a scene with several dataSource entries)",
+         a.volume);
+  const std::vector<int> ts = parse_timestep_selection(a.timesteps, desc0.n_timesteps);
+  for (int t : ts) {
+    RawOptions r = raw;
+    r.timestep = t;
+    describe_volume(a.volume, r);
+  }
+  const uint64_t frame_bytes = desc0.dims.count() * dtype_size(desc0.dtype);
+  if (a.target_ratio > 0) {
+    std::string note;
+    config = size_config_for_ratio(config, frame_bytes, a.target_ratio, &note);
+    if (!a.quiet) std::fprintf(stderr, "%s (per timestep)\n", note.c_str());
+  }
+  make_output_dir(a.output);
+  const std::string report_path = a.report.empty() ? join_path(a.output, "series.json") : a.report;
+  if (!a.quiet)
+    std::fprintf(stderr, "series %s: %lldx%lldx%lld %s x %d timesteps; training %zu (%s)%s\n", a.volume.c_str(),
+                 (long long)desc0.dims.x, (long long)desc0.dims.y, (long long)desc0.dims.z, dtype_name(desc0.dtype),
+                 desc0.n_timesteps, ts.size(), a.timesteps.c_str(),
+                 a.continuous ? fmt::format(", continuously, {} steps each", a.switch_every).c_str() : "");
+
+  Model model = new_model(config, desc0.dims, desc0.dtype, 0, 1, a.seed);
+  FrameLoader load = [&](int t) {
+    RawOptions r = raw;
+    r.timestep = t;
+    return load_volume(describe_volume(a.volume, r), load_opts);
+  };
+
+  const bool by_time = !a.continuous && a.seconds > 0 && a.steps < 0;
+  std::unique_ptr<Progress> bar;
+  SeriesHooks hooks;
+  hooks.stop = [] { return g_series_interrupted != 0; };
+  Json rows = Json::array();
+  Json report = {{"mode", a.continuous ? "continuous" : "per_timestep"},
+                 {"volume", a.volume},
+                 {"output_dir", a.output},
+                 {"timesteps", ts},
+                 {"n_timesteps", desc0.n_timesteps},
+                 {"batch", a.batch},
+                 {"seed", a.seed},
+                 {"threads", num_threads()},
+                 {"volume_bytes", frame_bytes}};
+  int saved = 0;
+  auto save = [&](const Model& m, int t) {
+    const std::string path = join_path(a.output, timestep_model_name(t));
+    save_model(path, m);
+    ++saved;
+    return path;
+  };
+  auto t_all = std::chrono::steady_clock::now();
+
+  try {
+    SigintGuard guard;
+    if (!a.continuous) {
+      SeriesOptions so;
+      so.train = TrainOptions{a.batch, a.seed};
+      so.steps = a.steps >= 0 ? a.steps : (a.seconds > 0 ? -1 : 1000);
+      so.seconds = a.seconds;
+      so.macrocell_size = a.macrocell_size;
+      so.ssim = !a.no_ssim;
+      report["steps_per_timestep"] = so.steps >= 0 ? Json(so.steps) : Json(nullptr);
+      report["seconds_per_timestep"] = a.seconds;
+      report["config"] = model.net->config_json();
+      auto t_start = std::chrono::steady_clock::now();
+      hooks.on_loaded = [&](int t, double) {
+        bar = std::make_unique<Progress>(fmt::format("t{:04d}", t), by_time ? a.seconds : double(so.steps), a.quiet);
+        t_start = std::chrono::steady_clock::now();
+      };
+      hooks.on_step = [&](int, int64_t s, float loss) {
+        bar->update(by_time ? seconds_since(t_start) : double(s), fmt::format("step {} loss {:.5f}", s, loss));
+      };
+      std::printf("timestep  start  steps  seconds  final loss  PSNR (dB)%s  model\n", a.no_ssim ? "" : "   SSIM");
+      auto done = [&](const TimestepResult& r, const Model& m) {
+        bar->finish(fmt::format("({} steps, loss {:.5f})", r.steps, r.final_loss));
+        const std::string path = save(m, r.timestep);
+        const uint64_t bytes = file_size(path);
+        Json row = {{"timestep", r.timestep},
+                    {"model", path},
+                    {"warm_start", r.warm_started},
+                    {"steps", r.steps},
+                    {"seconds", r.seconds},
+                    {"load_seconds", r.load_seconds},
+                    {"final_loss", r.final_loss},
+                    {"lo", r.lo},
+                    {"hi", r.hi},
+                    {"model_bytes", bytes},
+                    {"compression_ratio", double(frame_bytes) / double(bytes)},
+                    {"interrupted", r.interrupted}};
+        row.update(eval_row(r.eval, !a.no_ssim));
+        rows.push_back(row);
+        report["rows"] = rows;
+        report["complete"] = false;
+        write_report(report_path, report);
+        std::printf("t%04d     %-5s  %5lld  %7.2f  %10.6f  %9.2f%s  %s\n", r.timestep, r.warm_started ? "warm" : "init",
+                    (long long)r.steps, r.seconds, r.final_loss, r.eval.psnr,
+                    a.no_ssim ? "" : fmt::format("  {:.4f}", r.eval.ssim).c_str(), path.c_str());
+        std::fflush(stdout);
+      };
+      std::vector<TimestepResult> res = train_series(model, ts, load, so, hooks, done);
+      const bool interrupted = !res.empty() && res.back().interrupted;
+      report["interrupted"] = interrupted;
+      report["complete"] = !interrupted;
+      report["total_seconds"] = seconds_since(t_all);
+      write_report(report_path, report);
+      if (interrupted)
+        std::fprintf(stderr, "interrupted: stopped after timestep %d (its model is saved; later timesteps were not trained)\n",
+                     res.back().timestep);
+      std::printf("%zu model%s in %s, report %s\n", res.size(), res.size() == 1 ? "" : "s", a.output.c_str(),
+                  report_path.c_str());
+    } else {
+      ContinuousOptions co;
+      co.train = TrainOptions{a.batch, a.seed};
+      co.switch_every = a.switch_every;
+      co.macrocell_size = a.macrocell_size;
+      co.ssim = !a.no_ssim;
+      bar = std::make_unique<Progress>("train", double(a.switch_every) * double(ts.size()), a.quiet);
+      int64_t global = 0;
+      hooks.on_step = [&](int t, int64_t, float loss) {
+        ++global;
+        bar->update(double(global), fmt::format("timestep {} step {} loss {:.5f}", t, global, loss));
+      };
+      Json windows = Json::array();
+      std::vector<WindowResult> done_windows;
+      float lr = 0;
+      auto done = [&](const WindowResult& w, const Model& m) {
+        const std::string path = save(m, w.timestep);
+        const uint64_t bytes = file_size(path);
+        lr = m.net->config().adam.learning_rate;
+        Json sw = nullptr;
+        if (w.has_switch)
+          sw = {{"from", w.from_timestep},
+                {"psnr_before", w.psnr_before},
+                {"psnr_after", w.psnr_after},
+                {"recovered", w.recovery_steps >= 0},
+                {"recovery_steps", w.recovery_steps >= 0 ? Json(w.recovery_steps) : Json(nullptr)},
+                {"recovery_seconds", w.recovery_steps >= 0 ? Json(w.recovery_seconds) : Json(nullptr)}};
+        Json row = {{"timestep", w.timestep},
+                    {"model", path},
+                    {"first_step", w.first_step},
+                    {"steps", w.steps},
+                    {"seconds", w.seconds},
+                    {"load_seconds", w.load_seconds},
+                    {"final_loss", w.final_loss},
+                    {"probe_psnr_end", w.psnr_end},
+                    {"lo", w.lo},
+                    {"hi", w.hi},
+                    {"model_bytes", bytes},
+                    {"compression_ratio", double(frame_bytes) / double(bytes)},
+                    {"interrupted", w.interrupted},
+                    {"switch", sw}};
+        row.update(eval_row(w.eval, !a.no_ssim));
+        windows.push_back(row);
+        done_windows.push_back(w);
+        report["rows"] = windows;
+        report["complete"] = false;
+        report["switch_every"] = a.switch_every;
+        report["learning_rate"] = lr;
+        report["config"] = m.net->config_json();
+        write_report(report_path, report);
+      };
+      ContinuousResult res = train_continuous(model, ts, load, co, hooks, done);
+      const bool interrupted = !res.windows.empty() && res.windows.back().interrupted;
+      bar->finish(fmt::format("({} steps, loss {:.5f})", global, res.loss_history.empty() ? 0.f : res.loss_history.back()));
+      Json probes = Json::array();
+      for (const ProbePoint& p : res.probes) probes.push_back({p.step, p.timestep, p.psnr});
+      report["probe_voxels"] = res.probe_voxels;
+      report["probe_every"] = co.probe_every;
+      report["recovery_tolerance_db"] = co.recovery_tolerance_db;
+      report["probes"] = probes;
+      report["loss_history"] = res.loss_history;
+      report["interrupted"] = interrupted;
+      report["complete"] = !interrupted;
+      report["total_seconds"] = seconds_since(t_all);
+      write_report(report_path, report);
+      if (interrupted)
+        std::fprintf(stderr, "interrupted in timestep %d: its model is saved; later timesteps were not trained\n",
+                     res.windows.back().timestep);
+
+      std::printf("continuous training: %lld steps, %lld per timestep, learning rate fixed at %g; PSNR probe: %lld "
+                  "voxels every %lld steps\n",
+                  (long long)global, (long long)a.switch_every, double(res.learning_rate), (long long)res.probe_voxels,
+                  (long long)co.probe_every);
+      std::printf("timestep  steps  seconds  PSNR (dB)  model\n");
+      for (size_t i = 0; i < done_windows.size(); ++i)
+        std::printf("t%04d     %5lld  %7.2f  %9.2f  %s\n", done_windows[i].timestep, (long long)done_windows[i].steps,
+                    done_windows[i].seconds, done_windows[i].eval.psnr, windows[i]["model"].get<std::string>().c_str());
+      if (done_windows.size() > 1) {
+        std::printf("switch          PSNR before  PSNR after  recovered after\n");
+        for (const WindowResult& w : done_windows) {
+          if (!w.has_switch) continue;
+          std::string rec = w.recovery_steps >= 0
+                                ? fmt::format("{} steps ({:.2f} s)", w.recovery_steps, w.recovery_seconds)
+                                : fmt::format("not recovered within {} steps", w.steps);
+          std::printf("t%04d -> t%04d  %8.2f dB  %7.2f dB  %s\n", w.from_timestep, w.timestep, w.psnr_before,
+                      w.psnr_after, rec.c_str());
+        }
+      }
+      std::printf("%zu model%s in %s, report %s\n", done_windows.size(), done_windows.size() == 1 ? "" : "s",
+                  a.output.c_str(), report_path.c_str());
+    }
+  } catch (const Error& e) {
+    if (saved == 0) throw;
+    fail("{} ({} finished model{} kept in '{}', rows in '{}')", e.what(), saved, saved == 1 ? "" : "s", a.output,
+         report_path);
+  }
+}
+
+}  // namespace vnr::cli

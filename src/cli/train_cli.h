@@ -1,0 +1,37 @@
+#pragma once
+// `vnr train`: the options shared by single-volume training (cmd_train.cpp) and time series
+// (cmd_train_series.cpp).
+#include <string>
+#include "cli.h"
+#include "preview.h"
+#include "vnr/train/model_io.h"
+
+namespace vnr::cli {
+
+struct TrainArgs {
+  std::string volume, output, config = "paper", report;
+  double target_ratio = 0, seconds = 0;
+  int64_t steps = -1, batch = 65536;
+  uint32_t seed = 1337;
+  int threads = 0;
+  int macrocell_size = 16;
+  bool quiet = false, no_ssim = false;
+  VolumeArgs vol;
+  PreviewArgs preview;  // --preview-every N --preview-dir DIR [--preview-size/-mode/-tf]
+  // Samplers (issue 4): incore | outofcore | mmap; "" = incore when the volume fits the budget.
+  std::string sampler, memory_budget, block_dims;
+  int64_t blocks = 0, refresh = 0;  // 0 = defaults scaled to the budget
+  int64_t checkpoint_every = 0;     // steps between atomic model writes (0: only at the end)
+  // Time series: "" = one volume; "all", "A-B" or "A,B,C" = those timesteps.
+  std::string timesteps;
+  bool continuous = false;
+  int64_t switch_every = 0;  // --continuous: steps per timestep
+};
+
+// A fresh model for a volume of these dims/dtype/range, parameters initialised from `seed`.
+Model new_model(const Json& config, Int3 dims, DType dtype, double lo, double hi, uint32_t seed);
+
+// `vnr train SERIES --timesteps ... -o DIR`, with or without --continuous.
+void run_train_series(const TrainArgs& a);
+
+}  // namespace vnr::cli

@@ -1,0 +1,55 @@
+#include "vnr/core/units.h"
+#include <unistd.h>
+#include <cctype>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include "vnr/core/error.h"
+
+namespace vnr {
+
+uint64_t parse_byte_size(const std::string& text) {
+  const char* s = text.c_str();
+  char* end = nullptr;
+  double v = std::strtod(s, &end);
+  if (end == s || !std::isfinite(v) || v < 0)
+    fail("invalid size '{}' (examples: 4096, 512KiB, 16MiB, 2GiB)", text);
+  std::string unit;
+  for (const char* p = end; *p; ++p)
+    if (!std::isspace(static_cast<unsigned char>(*p))) unit += char(std::tolower(static_cast<unsigned char>(*p)));
+  if (!unit.empty() && unit.back() == 'b') unit.pop_back();
+  if (!unit.empty() && unit.back() == 'i') unit.pop_back();
+  double mult;
+  if (unit.empty()) mult = 1;
+  else if (unit == "k") mult = 1024.0;
+  else if (unit == "m") mult = 1024.0 * 1024;
+  else if (unit == "g") mult = 1024.0 * 1024 * 1024;
+  else if (unit == "t") mult = 1024.0 * 1024 * 1024 * 1024;
+  else fail("invalid size '{}': unknown unit (allowed: B, KiB, MiB, GiB, TiB)", text);
+  double bytes = v * mult;
+  if (bytes >= 1.8e19) fail("invalid size '{}': too large", text);
+  return uint64_t(std::llround(bytes));
+}
+
+uint64_t physical_memory_bytes() {
+  long pages = sysconf(_SC_PHYS_PAGES), page = sysconf(_SC_PAGESIZE);
+  return pages > 0 && page > 0 ? uint64_t(pages) * uint64_t(page) : (uint64_t(8) << 30);
+}
+
+uint64_t available_memory_bytes() {
+  if (std::FILE* f = std::fopen("/proc/meminfo", "r")) {
+    char line[256];
+    unsigned long long kb = 0;
+    bool found = false;
+    while (std::fgets(line, sizeof line, f))
+      if (std::sscanf(line, "MemAvailable: %llu kB", &kb) == 1) {
+        found = true;
+        break;
+      }
+    std::fclose(f);
+    if (found) return uint64_t(kb) * 1024;
+  }
+  return physical_memory_bytes();
+}
+
+}  // namespace vnr

@@ -1,0 +1,200 @@
+#pragma once
+// Time-varying volumes (paper, appendix "Adaptivity with Time-Varying Data").
+//
+// Two ways to train a series of timesteps, both CLI-free:
+//
+//  * train_series: one model per timestep. The first timestep trains from the network it is given
+//    (normally freshly initialised); each following one starts from the previous timestep's
+//    parameters (warm start) with a fresh optimizer (fresh Adam moments and, if the config has one,
+//    a restarted learning-rate schedule) and the same step/second budget.
+//
+//  * train_continuous: the paper's experiment. ONE network and ONE Adam for the whole run, the
+//    learning rate fixed (the config's ExponentialDecay removed), never reset; the sampler's
+//    target timestep advances every `switch_every` steps. After each switch it measures how many
+//    steps the network takes to recover.
+//
+// Recovery, precisely. A *probe* is a fixed set P of voxels chosen once per run (`probe_voxels`,
+// default 2^16, drawn uniformly with replacement by pcg32 from the seed; every voxel in x-fastest
+// order when the volume has no more voxels than that). probe PSNR(net, t) = 10 log10(1 / MSE) over
+// P between the network decoded at the voxel centres (as `evaluate` decodes them) and timestep t's
+// normalised voxel values (999 when the MSE is 0). Probes are taken at the start of every window
+// (0 steps after the switch), every `probe_every` steps after it, and after the window's last step.
+// For the switch from timestep a to timestep b at global step S (S steps done on earlier windows):
+//   psnr_before = probe PSNR(net, a) after step S (the last step trained on a),
+//   psnr_after  = probe PSNR(net, b) after step S (same parameters, new target),
+//   recovery_steps = the smallest s in {0, probe_every, 2 probe_every, ..., switch_every} such that
+//                    probe PSNR(net, b) after step S + s >= psnr_before - recovery_tolerance_db
+//                    (so it is exact to the probe interval, and 0 when the new timestep is already
+//                    fitted as well as the old one was), or -1 ("not recovered") when no probe of
+//                    the window reaches it.
+//   recovery_seconds = training time (steps only: no probes, loading or evaluation) from the switch
+//                      to that probe.
+#include <cstdint>
+#include <functional>
+#include <string>
+#include <vector>
+#include "vnr/core/json.h"
+#include "vnr/train/model_io.h"
+#include "vnr/train/sampler.h"
+#include "vnr/train/trainer.h"
+#include "vnr/volume/volume.h"
+
+namespace vnr {
+
+// Parses a timestep selection for a series of n_timesteps: "all", "A-B" (inclusive), "A,B,C", or a
+// comma list mixing both ("0-2,5"). Timesteps come back in the order written. Errors: empty or
+// malformed text, a descending range, an index outside [0, n_timesteps), a timestep listed twice.
+std::vector<int> parse_timestep_selection(const std::string& spec, int n_timesteps);
+
+// The model file name of timestep t inside an output directory: "t0000.vnr" (zero-padded to 4
+// digits, more if t >= 10000). t is the series' own timestep index, not the position in the selection.
+std::string timestep_model_name(int timestep, const std::string& extension = ".vnr");
+
+// Loads timestep t (normalised, as load_volume does). Called once per timestep, in order of the
+// selection, only when that timestep is needed; may throw vnr::Error. Every frame must have the
+// same dims.
+using FrameLoader = std::function<Volume(int timestep)>;
+
+struct SeriesHooks {
+  std::function<bool()> stop;                                          // polled after every step: true ends the run (Ctrl-C)
+  std::function<void(int timestep, int64_t step, float loss)> on_step;  // step counts from 1 within the timestep / window
+  std::function<void(int timestep, double load_seconds)> on_loaded;    // a timestep's volume is in memory
+};
+
+// ---------------------------------------------------------------------------------------------
+// One model per timestep, warm-started.
+
+struct SeriesOptions {
+  TrainOptions train;        // batch; the i-th timestep of the selection samples with seed train.seed + i
+  int64_t steps = 1000;      // per timestep; < 0 = no step limit (then `seconds` must be > 0)
+  int64_t warm_steps = -1;   // per warm-started timestep (-1: `steps`)
+  double seconds = 0;        // wall-clock training limit per timestep (0: none)
+  bool warm_start = true;    // false: every timestep restarts from init_params(init_seed) (a cold baseline)
+  uint32_t init_seed = 1337; // only with warm_start = false
+  int macrocell_size = 16;   // online macro-cells recorded per timestep's own training (0: none)
+  bool ssim = false;         // also compute the 3-D SSIM at the end of each timestep
+};
+
+struct TimestepResult {
+  int timestep = 0;
+  bool warm_started = false;
+  int64_t steps = 0;
+  double seconds = 0;       // training steps only
+  double load_seconds = 0;
+  float final_loss = 0;
+  EvalResult eval;          // the whole volume, at voxel centres
+  double lo = 0, hi = 1;    // the timestep's value range (original units)
+  bool interrupted = false; // hooks.stop ended this timestep (and the run)
+  std::vector<float> loss_history;
+};
+
+// Trains `model` through the selected timesteps. On entry model.net holds the first timestep's
+// starting parameters. After each timestep, model.{dims, source_dtype, lo, hi, training,
+// macrocells} describe it and `done(result, model)` is called (save the model there: the network
+// keeps changing afterwards). A failure (e.g. a frame that cannot be loaded) propagates after the
+// `done` calls of every timestep finished before it.
+std::vector<TimestepResult> train_series(Model& model, const std::vector<int>& timesteps, const FrameLoader& load,
+                                         const SeriesOptions& opts, const SeriesHooks& hooks = {},
+                                         const std::function<void(const TimestepResult&, const Model&)>& done = {});
+
+// ---------------------------------------------------------------------------------------------
+// Continuous training across timesteps.
+
+// A sampler that forwards to an InCoreSampler whose grid can be switched between steps (not during
+// one): what train_continuous trains through.
+class SwitchableSampler : public Sampler {
+public:
+  explicit SwitchableSampler(GridView g = {}) : inner_(g) {}
+  void set_target(GridView g) { inner_ = InCoreSampler(g); }
+  void begin_step(uint64_t step) override { inner_.begin_step(step); }
+  void sample(uint64_t seed, uint64_t step, uint64_t chunk, int n, float* x, float* y, float* z,
+              float* target) const override {
+    inner_.sample(seed, step, chunk, n, x, y, z, target);
+  }
+
+private:
+  InCoreSampler inner_;
+};
+
+// The probe PSNR of the header comment: a fixed voxel subset of a grid of `dims`.
+class PsnrProbe {
+public:
+  PsnrProbe(Int3 dims, int64_t n_voxels, uint64_t seed);
+  double psnr(const Network& net, const Volume& vol) const;  // vol.dims must equal dims
+  int64_t size() const { return int64_t(index_.size()); }
+  const std::vector<int64_t>& voxels() const { return index_; }
+
+private:
+  Int3 dims_;
+  std::vector<int64_t> index_;
+  std::vector<float> x_, y_, z_;
+  mutable std::vector<float> out_;
+};
+
+// `config` with the ExponentialDecay wrapper removed (a constant learning rate) and, when
+// learning_rate > 0, Adam's learning rate replaced. The result is in canonical form.
+Json fixed_learning_rate_config(const Json& config, float learning_rate = 0);
+
+struct ContinuousOptions {
+  TrainOptions train;                 // batch and sampling seed (one stream over the whole run)
+  int64_t switch_every = 0;           // steps per timestep (> 0)
+  float learning_rate = 0;            // 0: the config's (Adam's base) learning rate; never decayed
+  int64_t probe_voxels = 1 << 16;     // |P|
+  int64_t probe_every = 10;           // steps between probes
+  uint64_t probe_seed = 0x5eed;       // which voxels P holds
+  double recovery_tolerance_db = 0;   // recovered when PSNR >= psnr_before - tolerance
+  int macrocell_size = 16;            // online macro-cells from each window's own samples (0: none)
+  bool ssim = false;                  // 3-D SSIM in the end-of-window evaluation
+};
+
+struct ProbePoint {
+  int64_t step = 0;  // global steps done when probed
+  int timestep = 0;  // the timestep the probe compared against (the current target)
+  double psnr = 0;
+};
+
+struct WindowResult {
+  int timestep = 0;
+  int64_t first_step = 0;   // global steps done before the window
+  int64_t steps = 0;        // steps trained in the window
+  double seconds = 0;       // training steps only
+  double load_seconds = 0;
+  float final_loss = 0;
+  EvalResult eval;          // whole volume, after the window's last step
+  double lo = 0, hi = 1;
+  double psnr_end = 0;      // probe PSNR after the window's last step
+  // The switch into this window (all windows but the first):
+  bool has_switch = false;
+  int from_timestep = -1;
+  double psnr_before = 0, psnr_after = 0;
+  int64_t recovery_steps = -1;   // -1: not recovered within the window
+  double recovery_seconds = 0;   // valid when recovery_steps >= 0
+  bool interrupted = false;
+};
+
+struct ContinuousResult {
+  std::vector<WindowResult> windows;
+  std::vector<ProbePoint> probes;
+  std::vector<float> loss_history;           // every step of the run
+  std::vector<float> learning_rate_history;  // the learning rate Adam used at every step
+  float learning_rate = 0;                   // the fixed rate
+  int64_t probe_voxels = 0;                  // |P| actually used
+  Json config;                               // the fixed-rate config the network was trained with
+};
+
+// The recovery rule of the header comment on the probes of one window: `probes` holds the probes of
+// the new timestep, in step order (probes before `switch_step`, the global step of the switch, are
+// ignored). Returns the steps from the switch to the first probe with psnr >= threshold, or -1.
+int64_t steps_to_recover(const std::vector<ProbePoint>& probes, int64_t switch_step, double threshold);
+
+// Trains model.net continuously over the selected timesteps (in order), `switch_every` steps each.
+// model.net is first replaced by a network of fixed_learning_rate_config(its config,
+// opts.learning_rate) with the same parameters. After each window, model.{dims, source_dtype, lo,
+// hi, training, macrocells} describe that timestep and `done(window, model)` is called (save the
+// model there). Frames are loaded when their window starts (at most two in memory; loading is not
+// counted in any timing).
+ContinuousResult train_continuous(Model& model, const std::vector<int>& timesteps, const FrameLoader& load,
+                                  const ContinuousOptions& opts, const SeriesHooks& hooks = {},
+                                  const std::function<void(const WindowResult&, const Model&)>& done = {});
+
+}  // namespace vnr

@@ -1,0 +1,102 @@
+#pragma once
+// Samplers for volumes that are not in memory (paper, "Out-of-Core Sampling").
+#include <condition_variable>
+#include <exception>
+#include <functional>
+#include <memory>
+#include <mutex>
+#include <thread>
+#include <vector>
+#include "vnr/core/memory.h"
+#include "vnr/train/sampler.h"
+#include "vnr/volume/raw_access.h"
+
+namespace vnr {
+
+struct OutOfCoreOptions {
+  uint64_t memory_budget = uint64_t(1) << 30;  // bytes: blocks in use + blocks being loaded + buffers
+  int64_t blocks = 0;   // R, blocks in the buffer; 0 = the paper's 65,536, scaled down to the budget
+  int64_t refresh = 0;  // S, blocks replaced per step; 0 = the paper's R/64 (1,024 of 65,536)
+  Int3 block_dims{0, 0, 0};  // interior voxels of a block; 0 = default_block_dims()
+  int io_threads = 16;       // reader threads (each blocks in pread; many keep the disk queue full)
+  std::function<void(double fraction)> fill_progress;  // during the initial fill
+};
+
+// Interior size of a block when none is given: 256 voxels along x (rows are contiguous in the
+// file and a block costs one read per row, so long rows mean few reads) and equal y/z extents
+// such that a block holds about 64 KiB of source data, as in the paper; clamped to the volume.
+Int3 default_block_dims(Int3 volume_dims, DType dtype);
+
+// The paper's random block buffer. R blocks of the volume (each stored normalised with one layer of
+// ghost voxels, so trilinear interpolation near a block's faces reads the true neighbours) are kept
+// in memory; every step, S of them are replaced by randomly chosen blocks that reader threads load
+// while the step trains. A sample picks a random block of the buffer and a random voxel in it,
+// jitters it by up to half a voxel and interpolates the target exactly as the in-core lookup does.
+//
+// Deterministic for a seed: the blocks chosen at step s are swapped in at the start of step s + 1,
+// waiting for the reads if they are not done, so I/O timing never changes what is sampled.
+class OutOfCoreSampler : public Sampler {
+public:
+  OutOfCoreSampler(std::shared_ptr<const RawVolumeFile> file, uint64_t seed, const OutOfCoreOptions& opts);
+  ~OutOfCoreSampler() override;
+  void begin_step(uint64_t step) override;
+  void sample(uint64_t seed, uint64_t step, uint64_t chunk, int n, float* x, float* y, float* z,
+              float* target) const override;
+
+  int64_t blocks() const { return R_; }
+  int64_t refresh() const { return S_; }
+  Int3 block_dims() const { return bd_; }
+  uint64_t bytes_held() const;     // everything this sampler allocated (≤ the budget)
+  double fill_seconds() const { return fill_seconds_; }
+  double io_wait_seconds() const { return io_wait_seconds_; }  // time begin_step waited for reads
+  uint64_t blocks_loaded() const { return blocks_loaded_; }
+  const RawVolumeFile& file() const { return *file_; }
+
+private:
+  struct Job {
+    int64_t slot;     // buffer slot the block replaces
+    int64_t block;    // block index in the volume's block grid
+    int32_t storage;  // storage the block is read into
+  };
+  Int3 block_origin(int64_t block) const;
+  void run_jobs(std::vector<Job>& jobs);  // hands jobs to the readers (returns at once)
+  void wait_jobs();                        // rethrows a reader's error
+  void reader_loop(int thread);
+
+  std::shared_ptr<const RawVolumeFile> file_;
+  uint64_t seed_;
+  Int3 dims_, bd_, stored_, grid_;  // volume, block interior, block with ghosts, blocks per axis
+  int64_t n_blocks_ = 0, R_ = 0, S_ = 0, block_floats_ = 0;
+  big_vector<float> storage_;              // (R + S) stored blocks
+  std::vector<Int3> storage_origin_;       // interior origin of the block in each storage
+  std::vector<int32_t> slot_storage_;      // slot -> storage
+  std::vector<int32_t> spare_;             // S storages being loaded (not referenced by slots)
+  std::vector<Job> pending_;               // reads issued at the previous step
+  double fill_seconds_ = 0, io_wait_seconds_ = 0;
+  uint64_t blocks_loaded_ = 0;
+
+  // Reader pool.
+  std::vector<std::thread> readers_;
+  std::vector<std::vector<unsigned char>> scratch_;
+  std::mutex mu_;
+  std::condition_variable work_cv_, done_cv_;
+  std::vector<Job>* jobs_ = nullptr;
+  size_t next_job_ = 0, jobs_done_ = 0;
+  bool stop_ = false;
+  std::exception_ptr error_;
+};
+
+// The baseline the paper compares with: uniform random coordinates (the in-core sampler's), targets
+// read through a memory map of the file, so every sample may fault pages in from disk.
+class MmapSampler : public Sampler {
+public:
+  explicit MmapSampler(std::shared_ptr<const MappedVolume> volume);
+  void begin_step(uint64_t step) override;
+  void sample(uint64_t seed, uint64_t step, uint64_t chunk, int n, float* x, float* y, float* z,
+              float* target) const override;
+
+private:
+  std::shared_ptr<const MappedVolume> vol_;
+};
+
+}  // namespace vnr

@@ -1,0 +1,298 @@
+// Out-of-core and memory-mapped training samplers (paper, "Out-of-Core Sampling"): block
+// interpolation equals the in-memory lookup bit for bit, reads stay inside the file, the buffer
+// stays inside the memory budget, training converges like in-core sampling, and a volume file
+// that changes under a run gives a clear error (and, from the CLI, keeps the model trained so far).
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+#include <unistd.h>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <random>
+#include <thread>
+#include <fmt/format.h>
+#include "vnr/core/fileio.h"
+#include "vnr/core/parallel.h"
+#include "vnr/nn/config.h"
+#include "vnr/train/model_io.h"
+#include "vnr/train/streaming_samplers.h"
+#include "vnr/train/trainer.h"
+#include "vnr/volume/stream.h"
+#include "vnr/volume/writer.h"
+
+using namespace vnr;
+namespace fs = std::filesystem;
+
+namespace {
+
+std::string temp_dir() {
+  static std::string d = [] {
+    std::string p = testing::TempDir() + "vnr_ooc_" + std::to_string(::getpid());
+    fs::create_directories(p);
+    return p;
+  }();
+  return d;
+}
+
+// A uint16 volume with random values behind a `header`-byte header, `timesteps` frames one after
+// another, described by a sidecar (integers normalise exactly on every path, so equality is exact).
+std::string write_u16_volume(const std::string& name, Int3 d, uint64_t header = 0, int timesteps = 1,
+                             uint32_t seed = 5) {
+  std::string raw = temp_dir() + "/" + name + ".raw", json = temp_dir() + "/" + name + ".json";
+  std::ofstream f(raw, std::ios::binary);
+  std::mt19937 rng(seed);
+  std::vector<unsigned char> pad(header, 0xEE);
+  f.write(reinterpret_cast<const char*>(pad.data()), std::streamsize(header));
+  std::vector<uint16_t> v(d.count() * uint64_t(timesteps));
+  for (auto& x : v) x = uint16_t(rng() % 60000);
+  f.write(reinterpret_cast<const char*>(v.data()), std::streamsize(v.size() * 2));
+  f.close();
+  write_file_atomic(json, fmt::format(R"({{"file": "{}.raw", "dims": [{}, {}, {}, {}], "dtype": "uint16", "offset": {}}})",
+                                      name, d.x, d.y, d.z, timesteps, header));
+  return json;
+}
+
+struct Samples {
+  std::vector<float> x, y, z, t;
+};
+Samples draw(const Sampler& s, uint64_t seed, uint64_t step, int n) {
+  Samples o{std::vector<float>(n), std::vector<float>(n), std::vector<float>(n), std::vector<float>(n)};
+  s.sample(seed, step, 0, n, o.x.data(), o.y.data(), o.z.data(), o.t.data());
+  return o;
+}
+
+}  // namespace
+
+TEST(OutOfCore, DefaultBlockShapeHoldsAbout64KiB) {
+  Int3 b = default_block_dims(Int3{2048, 2048, 1600}, DType::Float32);
+  EXPECT_EQ(b.x, 256);
+  EXPECT_EQ(b.y, 8);
+  EXPECT_EQ(b.z, 8);
+  EXPECT_EQ(b.count() * 4, 65536u);
+  Int3 u8 = default_block_dims(Int3{2048, 2048, 1600}, DType::UInt8);
+  EXPECT_EQ(u8.count(), 65536u);
+  Int3 small = default_block_dims(Int3{20, 3, 40}, DType::UInt16);  // clamped to the volume
+  EXPECT_EQ(small.x, 20);
+  EXPECT_EQ(small.y, 3);
+}
+
+// Every sample's target equals the in-memory lookup at its coordinate bit for bit, including
+// samples within half a voxel of a block face (which interpolate with the ghost layer) and on the
+// volume's border (clamp-to-edge ghosts); coordinates stay in [0,1).
+TEST(OutOfCore, BlockLookupEqualsFullVolumeIncludingGhostVoxels) {
+  const Int3 d{37, 29, 23};
+  const std::string json = write_u16_volume("ghost", d);
+  VolumeDesc desc = describe_volume(json);
+  Volume vol = load_volume(desc);
+  auto file = std::make_shared<RawVolumeFile>(desc, vol.lo, vol.hi, NonFinitePolicy::Error);
+  OutOfCoreOptions o;
+  o.block_dims = Int3{8, 5, 4};
+  o.blocks = 40;
+  o.refresh = 6;
+  o.io_threads = 3;
+  OutOfCoreSampler s(file, 9, o);
+  const GridView g = view_of(vol);
+  int64_t near_face = 0, total = 0;
+  for (uint64_t step = 0; step < 6; ++step) {
+    s.begin_step(step);
+    Samples a = draw(s, 9, step, 4096);
+    for (size_t i = 0; i < a.x.size(); ++i) {
+      ASSERT_GE(a.x[i], 0.f);
+      ASSERT_LT(a.x[i], 1.f);
+      ASSERT_EQ(a.t[i], grid_lookup(g, a.x[i], a.y[i], a.z[i])) << "sample " << i << " of step " << step;
+      // Within half a voxel of an interior block face along x: interpolation reads the neighbour block.
+      float px = a.x[i] * float(d.x);
+      float fx = px - 8.f * std::floor(px / 8.f);
+      near_face += (fx < 0.5f || fx > 7.5f);
+      ++total;
+    }
+  }
+  EXPECT_GT(near_face, total / 16);  // ~1/8 of samples use a ghost layer along x alone
+  EXPECT_EQ(s.blocks_loaded(), uint64_t(40 + 5 * 6));  // initial fill + 5 completed refreshes
+}
+
+TEST(OutOfCore, ReadsStayInsideTheTimestepsBytesAndSamplesAreDeterministic) {
+  const Int3 d{30, 20, 10};
+  const uint64_t header = 123, frame = d.count() * 2;
+  const std::string json = write_u16_volume("bounded", d, header, 3);
+  for (int t : {0, 1, 2}) {
+    RawOptions ro;
+    ro.timestep = t;
+    VolumeDesc desc = describe_volume(json, ro);
+    auto file = std::make_shared<RawVolumeFile>(desc, 0, 65535, NonFinitePolicy::Error);
+    OutOfCoreOptions o;
+    o.block_dims = Int3{16, 4, 4};
+    o.blocks = 30;
+    o.refresh = 5;
+    o.io_threads = 1;
+    OutOfCoreSampler a(file, 3, o);
+    o.io_threads = 7;
+    OutOfCoreSampler b(file, 3, o);
+    for (uint64_t step = 0; step < 8; ++step) {
+      a.begin_step(step);
+      b.begin_step(step);
+      Samples sa = draw(a, 3, step, 1000), sb = draw(b, 3, step, 1000);
+      ASSERT_EQ(sa.x, sb.x);  // reader count and I/O timing never change the samples
+      ASSERT_EQ(sa.t, sb.t);
+    }
+    // Reads stay inside this timestep's bytes, and reach both of its ends (border blocks).
+    const uint64_t begin = header + uint64_t(t) * frame;
+    EXPECT_EQ(file->min_read_begin(), begin);
+    EXPECT_EQ(file->max_read_end(), begin + frame);
+  }
+}
+
+TEST(OutOfCore, BufferStaysInsideTheMemoryBudget) {
+  const Int3 d{64, 64, 64};
+  const std::string json = write_u16_volume("budget", d);
+  VolumeDesc desc = describe_volume(json);
+  auto file = std::make_shared<RawVolumeFile>(desc, 0, 65535, NonFinitePolicy::Error);
+  for (uint64_t budget : {uint64_t(64) << 10, uint64_t(200) << 10, uint64_t(1) << 20}) {
+    OutOfCoreOptions o;
+    o.memory_budget = budget;
+    o.block_dims = Int3{16, 4, 4};
+    OutOfCoreSampler s(file, 1, o);
+    EXPECT_LE(s.bytes_held(), budget);
+    EXPECT_GT(s.bytes_held(), budget * 3 / 4);  // and uses most of it
+    EXPECT_EQ(s.refresh(), std::max<int64_t>(1, s.blocks() / 64));
+  }
+  OutOfCoreOptions tiny;
+  tiny.memory_budget = 4096;
+  try {
+    OutOfCoreSampler s(file, 1, tiny);
+    FAIL() << "a budget below one block must be refused";
+  } catch (const std::exception& e) {
+    EXPECT_NE(std::string(e.what()).find("memory budget"), std::string::npos) << e.what();
+  }
+}
+
+// mmap sampling is in-core sampling read through a memory map: same coordinates, same targets.
+TEST(Mmap, SamplesEqualInCoreSampler) {
+  const Int3 d{33, 17, 21};
+  const std::string json = write_u16_volume("mmap", d, 77);
+  VolumeDesc desc = describe_volume(json);
+  Volume vol = load_volume(desc);
+  MmapSampler m(std::make_shared<MappedVolume>(desc, vol.lo, vol.hi, NonFinitePolicy::Error));
+  InCoreSampler in(vol);
+  m.begin_step(4);
+  Samples a = draw(m, 11, 4, 3000), b = draw(in, 11, 4, 3000);
+  EXPECT_EQ(a.x, b.x);
+  EXPECT_EQ(a.t, b.t);
+}
+
+// Training with a memory budget of 1/4 of the volume's float copy (the buffer holds ~9% of the
+// voxels at a time) converges like in-core training. Tolerance, established by measurement here
+// (64^3 noise, small preset, 1000 steps of 4096, 88 blocks of 16x4x4, 12 replaced per step): the
+// mean loss of the last 50 steps was 1.11x in-core's and the PSNR 1.4 dB lower (35.4 vs 36.8 dB);
+// the test allows 1.25x and 2.5 dB. (With the default refresh of blocks/64 the buffer turns over
+// too slowly for a run this short: 30.3 dB.)
+TEST(OutOfCore, LossCurveMatchesInCoreWithinTolerance) {
+  const std::string json = temp_dir() + "/noise64.json";
+  synth_volume("noise", Int3{64, 64, 64}, json, 3);
+  VolumeDesc desc = describe_volume(json);
+  Volume vol = load_volume(desc);
+  auto train = [&](std::shared_ptr<Sampler> sampler, std::vector<float>* hist) {
+    Network net(load_config("small"));
+    net.init_params(7);
+    Trainer t(net, std::move(sampler), TrainOptions{4096, 7});
+    for (int i = 0; i < 1000; ++i) t.step();
+    *hist = t.loss_history();
+    return evaluate(net, vol, false).psnr;
+  };
+  auto tail_mean = [](const std::vector<float>& h) {
+    double s = 0;
+    for (size_t i = h.size() - 50; i < h.size(); ++i) s += h[i];
+    return s / 50;
+  };
+  std::vector<float> h_in, h_ooc;
+  double psnr_in = train(std::make_shared<InCoreSampler>(vol), &h_in);
+  auto file = std::make_shared<RawVolumeFile>(desc, vol.lo, vol.hi, NonFinitePolicy::Error);
+  OutOfCoreOptions o;
+  o.memory_budget = vol.dims.count() * sizeof(float) / 4;
+  o.block_dims = Int3{16, 4, 4};
+  o.refresh = 12;
+  auto ooc = std::make_shared<OutOfCoreSampler>(file, 7, o);
+  double psnr_ooc = train(ooc, &h_ooc);
+  EXPECT_LE(ooc->bytes_held(), o.memory_budget);
+  EXPECT_NEAR(tail_mean(h_ooc) / tail_mean(h_in), 1.0, 0.25) << tail_mean(h_ooc) << " vs " << tail_mean(h_in);
+  EXPECT_NEAR(psnr_ooc, psnr_in, 2.5);
+  EXPECT_LE(file->max_read_end(), desc.offset + vol.dims.count() * 4);
+}
+
+TEST(OutOfCore, FileThatChangesOrDisappearsIsAClearError) {
+  const Int3 d{32, 16, 16};
+  for (std::string what : {"truncated", "deleted", "replaced"}) {
+    const std::string json = write_u16_volume("change_" + what, d);
+    VolumeDesc desc = describe_volume(json);
+    auto file = std::make_shared<RawVolumeFile>(desc, 0, 65535, NonFinitePolicy::Error);
+    OutOfCoreOptions o;
+    o.block_dims = Int3{16, 4, 4};
+    o.blocks = 8;
+    o.refresh = 2;
+    OutOfCoreSampler s(file, 1, o);
+    MmapSampler m(std::make_shared<MappedVolume>(desc, 0, 65535, NonFinitePolicy::Error));
+    s.begin_step(0);
+    m.begin_step(0);
+    if (what == "truncated") fs::resize_file(desc.path, d.count());
+    if (what == "deleted") fs::remove(desc.path);
+    if (what == "replaced") {
+      write_file_atomic(desc.path + ".new", std::string(d.count() * 2, '\0'));
+      fs::rename(desc.path + ".new", desc.path);
+    }
+    const char* expect = what == "truncated" ? "changed size" : (what == "deleted" ? "disappeared" : "replaced");
+    for (Sampler* sampler : {static_cast<Sampler*>(&s), static_cast<Sampler*>(&m)}) {
+      try {
+        sampler->begin_step(1);
+        FAIL() << what << ": no error";
+      } catch (const std::exception& e) {
+        EXPECT_NE(std::string(e.what()).find(expect), std::string::npos) << e.what();
+        EXPECT_NE(std::string(e.what()).find(desc.path), std::string::npos) << e.what();
+      }
+    }
+  }
+}
+
+TEST(OutOfCore, GzipDataIsRefusedWithAClearError) {
+  VolumeDesc desc;
+  desc.path = "x.nrrd";
+  desc.dims = Int3{4, 4, 4};
+  desc.encoding = "gzip";
+  try {
+    RawVolumeFile f(desc, 0, 1, NonFinitePolicy::Error);
+    FAIL();
+  } catch (const std::exception& e) {
+    EXPECT_NE(std::string(e.what()).find("vnr convert"), std::string::npos) << e.what();
+  }
+}
+
+// From the CLI: the volume file disappears while `vnr train --sampler outofcore` runs; the run
+// stops with one clear error line, and the model trained so far is on disk and loads.
+TEST(OutOfCoreCli, VolumeDeletedDuringTrainingKeepsTheModel) {
+  const std::string json = temp_dir() + "/vanish.json", model = temp_dir() + "/vanish.vnr";
+  synth_volume("noise", Int3{48, 48, 48}, json, 2);
+  const std::string err = temp_dir() + "/vanish.err";
+  const std::string cmd = std::string(VNR_CLI_PATH) + " train " + json + " -o " + model +
+                          " --config small --batch 4096 --seconds 120 --sampler outofcore --memory-budget 64KiB "
+                          "--block-dims 16,4,4 --checkpoint-every 5 -q 2>" + err;
+  std::thread runner([&] {
+    int st = std::system(cmd.c_str());
+    EXPECT_TRUE(WIFEXITED(st));
+    EXPECT_NE(WEXITSTATUS(st), 0);
+  });
+  // Wait for the first checkpoint (training is under way), then delete the data.
+  auto t0 = std::chrono::steady_clock::now();
+  while (!file_exists(model) && std::chrono::steady_clock::now() - t0 < std::chrono::seconds(60))
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  ASSERT_TRUE(file_exists(model));
+  fs::remove(strip_extension(json) + ".raw");
+  runner.join();
+  const std::string msg = read_file(err);
+  EXPECT_NE(msg.find("disappeared during training"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("was saved to"), std::string::npos) << msg;
+  EXPECT_EQ(std::count(msg.begin(), msg.end(), '\n'), 1) << msg;
+  Model m = load_model(model);
+  EXPECT_GE(m.training["steps"].get<int64_t>(), 5);
+  EXPECT_TRUE(m.training.contains("error"));
+}
