@@ -1,6 +1,7 @@
-// Evaluating volumes that need not fit in memory (volume/stream.h, train/model_io.h): the streamed
-// value range and slabs must reproduce load_volume exactly, streamed evaluation must reproduce
-// evaluate(), and the sampled estimate must bracket the full PSNR.
+// Evaluating volumes that need not fit in memory (volume/stream.h, volume/raw_access.h,
+// train/model_io.h): the streamed value range and slabs and the voxels read at random must
+// reproduce load_volume exactly, streamed evaluation must reproduce evaluate(), and the sampled
+// estimate must bracket the full PSNR.
 #include <gtest/gtest.h>
 #include <unistd.h>
 #include <zlib.h>
@@ -22,6 +23,7 @@
 #include "vnr/nn/network.h"
 #include "vnr/train/model_io.h"
 #include "vnr/volume/metrics.h"
+#include "vnr/volume/raw_access.h"
 #include "vnr/volume/stream.h"
 #include "vnr/volume/volume.h"
 #include "vnr/volume/writer.h"
@@ -257,7 +259,7 @@ TEST(StreamVolume, GzipNrrdStreamsLikeLoadVolume) {
   expect_bitwise_equal(concatenated_slabs(d, r.lo, r.hi, {}, 2 * 42), v, "gzip");
 
   // Random access into gzip data is refused with one clear line.
-  std::string msg = error_of([&] { VoxelReader reader(d, r.lo, r.hi); });
+  std::string msg = error_of([&] { RawVolumeFile file(d, r.lo, r.hi, NonFinitePolicy::Error); });
   EXPECT_NE(msg.find("gzip"), std::string::npos) << msg;
   EXPECT_NE(msg.find("uncompressed"), std::string::npos) << msg;
   EXPECT_EQ(msg.find('\n'), std::string::npos) << msg;
@@ -265,6 +267,9 @@ TEST(StreamVolume, GzipNrrdStreamsLikeLoadVolume) {
   net.init_params(1);
   msg = error_of([&] { evaluate_sampled(net, d, r.lo, r.hi, 100, 1); });
   EXPECT_NE(msg.find("gzip"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("sampled evaluation"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("without --sample streams"), std::string::npos) << msg;
+  EXPECT_EQ(msg.find("vnr convert"), std::string::npos) << msg;  // converts models, not volumes
 
   // A stream that ends early: load_volume's size message.
   write_bytes(dir / "s.nrrd", hdr);
@@ -293,7 +298,7 @@ TEST(StreamVolume, ShortRawFileIsAClearError) {
   std::string msg = error_of([&] { for_each_slab(d, 0, 4000, {}, 64, count_calls); });
   EXPECT_NE(msg.find("unexpected end of file"), std::string::npos) << msg;
   EXPECT_EQ(calls, 5);  // 700 bytes hold 5 whole slices of 64 uint16 voxels
-  msg = error_of([&] { VoxelReader reader(d, 0, 4000); });
+  msg = error_of([&] { RawVolumeFile file(d, 0, 4000, NonFinitePolicy::Error); });
   EXPECT_NE(msg.find("is 700 bytes, expected at least 1024"), std::string::npos) << msg;
 }
 
@@ -316,12 +321,12 @@ TEST(StreamVolume, NonFiniteValuesFollowLoadVolumesPolicy) {
   EXPECT_EQ(error_of([&] { for_each_slab(d, -2, 7, {}, 20 * 2, [&](int64_t, int64_t, const float*) { ++calls; }); }),
             expected);
   EXPECT_EQ(calls, 0);  // the first slab already holds a NaN
-  VoxelReader strict(d, -2, 7);
+  RawVolumeFile strict(d, -2, 7, NonFinitePolicy::Error);
   const int64_t bad = 37, good = 3;
   float out = -1;
-  std::string msg = error_of([&] { strict.read(&bad, 1, &out); });
+  std::string msg = error_of([&] { strict.read_voxels(&bad, 1, &out); });
   EXPECT_NE(msg.find("voxel (2,3,1)"), std::string::npos) << msg;
-  EXPECT_NO_THROW(strict.read(&good, 1, &out));
+  EXPECT_NO_THROW(strict.read_voxels(&good, 1, &out));
 
   for (NonFinitePolicy p : {NonFinitePolicy::Zero, NonFinitePolicy::Clamp}) {
     LoadOptions o;
@@ -331,15 +336,15 @@ TEST(StreamVolume, NonFiniteValuesFollowLoadVolumesPolicy) {
     EXPECT_EQ(r.lo, v.lo);
     EXPECT_EQ(r.hi, v.hi);
     expect_bitwise_equal(concatenated_slabs(d, r.lo, r.hi, o, 20 * 4), v, "policy");
-    VoxelReader reader(d, r.lo, r.hi, o);
+    RawVolumeFile file(d, r.lo, r.hi, p);
     std::vector<int64_t> idx = {37, 0, 1, 80, 5, 119};
     std::vector<float> got(idx.size());
-    reader.read(idx.data(), int64_t(idx.size()), got.data());
+    file.read_voxels(idx.data(), int64_t(idx.size()), got.data());
     for (size_t i = 0; i < idx.size(); ++i) EXPECT_EQ(got[i], v.data[size_t(idx[i])]) << idx[i];
   }
 }
 
-TEST(StreamVolume, VoxelReaderEqualsLoadVolumeBitForBit) {
+TEST(StreamVolume, ReadVoxelsEqualsLoadVolumeBitForBit) {
   TmpDir dir;
   const Int3 dims{31, 17, 12};
   int k = 0;
@@ -356,8 +361,8 @@ TEST(StreamVolume, VoxelReaderEqualsLoadVolumeBitForBit) {
     o.endian = c.big ? "big" : "little";
     VolumeDesc d = describe_volume(path, o);
     Volume v = load_volume(d);
-    VoxelReader reader(d, v.lo, v.hi);
-    EXPECT_EQ(reader.voxel_count(), int64_t(dims.count()));
+    RawVolumeFile file(d, v.lo, v.hi, NonFinitePolicy::Error);
+    EXPECT_EQ(file.voxel_count(), int64_t(dims.count()));
     // Random order with repeats, plus both ends of the file.
     Pcg32 rng(7);
     std::vector<int64_t> idx(3000);
@@ -365,7 +370,7 @@ TEST(StreamVolume, VoxelReaderEqualsLoadVolumeBitForBit) {
     idx.push_back(0);
     idx.push_back(int64_t(dims.count()) - 1);
     std::vector<float> got(idx.size());
-    reader.read(idx.data(), int64_t(idx.size()), got.data());
+    file.read_voxels(idx.data(), int64_t(idx.size()), got.data());
     for (size_t i = 0; i < idx.size(); ++i)
       ASSERT_EQ(std::memcmp(&got[i], &v.data[size_t(idx[i])], sizeof(float)), 0) << "voxel " << idx[i];
   }
@@ -373,8 +378,8 @@ TEST(StreamVolume, VoxelReaderEqualsLoadVolumeBitForBit) {
   float out;
   Case c = kCases[0];
   VolumeDesc d = write_raw(dir / "u8.raw", c, dims, random_values(c, size_t(dims.count()), 1));
-  VoxelReader reader(d, 0, 255);
-  EXPECT_NE(error_of([&] { reader.read(&outside, 1, &out); }).find("out of range"), std::string::npos);
+  RawVolumeFile file(d, 0, 255, NonFinitePolicy::Error);
+  EXPECT_NE(error_of([&] { file.read_voxels(&outside, 1, &out); }).find("out of range"), std::string::npos);
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -67,14 +67,8 @@ void add_eval(CLI::App& app) {
     }
     const uint64_t full_bytes = dims.count() * 2 * sizeof(float);
     const std::string method = sampled ? "sampled" : (full_bytes <= budget ? "full" : "streamed");
-
-    Json report = {{"method", method},
-                   {"compression_ratio", ratio},
-                   {"model_bytes", model_bytes},
-                   {"volume_bytes", volume_bytes}};
-    if (method == "full") {  // unchanged: load, then decode every voxel
-      Volume vol = load_volume(desc, load_opts);
-      EvalResult ev = evaluate(*m.net, vol, !a->no_ssim);
+    // The line and report keys of a whole-volume evaluation (in memory or streamed).
+    auto print_whole = [&](const EvalResult& ev, Json& report) {
       std::printf("PSNR %.2f dB", ev.psnr);
       if (!a->no_ssim) std::printf(", SSIM %.4f", ev.ssim);
       std::printf(", max |error| %.4g (%.4g in data units), compression ratio %.2f, decoded in %.2fs\n",
@@ -86,10 +80,18 @@ void add_eval(CLI::App& app) {
                      {"max_abs_error", ev.max_abs_error},
                      {"max_abs_error_original", ev.max_abs_error_original},
                      {"samples", dims.count()},
-                     {"value_range", {vol.lo, vol.hi}},
-                     {"value_range_source", "volume"},
                      {"decode_seconds", ev.decode_seconds}});
       write_report(a->report, report);
+    };
+
+    Json report = {{"method", method},
+                   {"compression_ratio", ratio},
+                   {"model_bytes", model_bytes},
+                   {"volume_bytes", volume_bytes}};
+    if (method == "full") {  // unchanged: load, then decode every voxel
+      Volume vol = load_volume(desc, load_opts);
+      report.update({{"value_range", {vol.lo, vol.hi}}, {"value_range_source", "volume"}});
+      print_whole(evaluate(*m.net, vol, !a->no_ssim), report);
       return;
     }
 
@@ -148,19 +150,7 @@ void add_eval(CLI::App& app) {
     EvalResult ev = evaluate_streamed(*m.net, desc, range.lo, range.hi, load_opts, !a->no_ssim,
                                       [&](double f) { bar.update(f); }, slab_slices * slice);
     bar.finish();
-    std::printf("PSNR %.2f dB", ev.psnr);
-    if (!a->no_ssim) std::printf(", SSIM %.4f", ev.ssim);
-    std::printf(", max |error| %.4g (%.4g in data units), compression ratio %.2f, decoded in %.2fs\n",
-                ev.max_abs_error, ev.max_abs_error_original, ratio, ev.decode_seconds);
-    report.update({{"psnr", ev.psnr},
-                   {"psnr_ci95", nullptr},
-                   {"ssim", a->no_ssim ? Json(nullptr) : Json(ev.ssim)},
-                   {"mse", ev.mse},
-                   {"max_abs_error", ev.max_abs_error},
-                   {"max_abs_error_original", ev.max_abs_error_original},
-                   {"samples", dims.count()},
-                   {"decode_seconds", ev.decode_seconds}});
-    write_report(a->report, report);
+    print_whole(ev, report);
   });
 }
 

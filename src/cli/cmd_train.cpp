@@ -116,6 +116,7 @@ void run_train(const TrainArgs& a) {
   if (a.batch <= 0 || a.batch % kChunk != 0) fail("--batch must be a positive multiple of {}, got {}", kChunk, a.batch);
   if (a.steps < -1) fail("--steps must be non-negative, got {}", a.steps);
   if (a.macrocell_size < 0) fail("--macrocell-size must be 0 (none) or positive, got {}", a.macrocell_size);
+  if (a.eval_samples < 0) fail("--eval-samples must be non-negative, got {}", a.eval_samples);
   if (a.checkpoint_every < 0) fail("--checkpoint-every must be non-negative, got {}", a.checkpoint_every);
   if (a.blocks < 0 || a.refresh < 0) fail("--blocks and --refresh must be positive");
   if (a.continuous || a.switch_every) fail("--continuous and --switch-every need --timesteps");
@@ -146,6 +147,7 @@ void run_train(const TrainArgs& a) {
   std::unique_ptr<TrainPreview> preview;
   if (preview_opts) preview = std::make_unique<TrainPreview>(*preview_opts, trainer, data.dims);
   double preview_seconds = 0;  // left out of the training time and samples/s
+  std::vector<double> step_seconds;
   auto training_summary = [&](int64_t done, double seconds, float loss) {
     Json j = {{"steps", done},          {"seconds", seconds}, {"interrupted", bool(g_interrupted)},
               {"batch", a.batch},       {"seed", a.seed},     {"final_loss", loss},
@@ -162,7 +164,9 @@ void run_train(const TrainArgs& a) {
   auto previous = std::signal(SIGINT, on_sigint);
   try {
     while (done < steps && !g_interrupted) {
+      auto t_step = std::chrono::steady_clock::now();
       loss = trainer.step();
+      step_seconds.push_back(seconds_since(t_step));
       ++done;
       if (preview) preview_seconds += preview->after_step(done);
       double el = seconds_since(t0) - preview_seconds;
@@ -209,8 +213,8 @@ void run_train(const TrainArgs& a) {
     max_err_orig = ev.max_abs_error_original;
     if (!a.no_ssim) ssim = ev.ssim;
     eval_json = {{"method", "full"}};
-  } else {
-    const int64_t n = std::min<int64_t>(int64_t(1) << 20, int64_t(data.dims.count()));
+  } else if (a.eval_samples > 0) {
+    const int64_t n = std::min<int64_t>(a.eval_samples, int64_t(data.dims.count()));
     SampledEval ev = evaluate_sampled(net, desc, data.lo, data.hi, n, a.seed + 1, a.vol.load());
     psnr = ev.psnr;
     max_err = ev.max_abs_error;
@@ -219,8 +223,12 @@ void run_train(const TrainArgs& a) {
     psnr_note = fmt::format(" (estimated from {} random voxels, 95% interval {:.2f}..{:.2f}; `vnr eval` for the full "
                             "volume)",
                             ev.samples, ev.psnr_ci95_lo, ev.psnr_ci95_hi);
+  } else {
+    psnr = max_err = max_err_orig = std::nan("");
+    eval_json = {{"method", "none"}};
+    psnr_note = " (not evaluated: --eval-samples 0)";
   }
-  model.training["psnr"] = psnr;
+  if (std::isfinite(psnr)) model.training["psnr"] = psnr;
   if (ssim) model.training["ssim"] = *ssim;
   save_model(a.output, model);
   const uint64_t model_bytes = file_size(a.output);
@@ -240,6 +248,8 @@ void run_train(const TrainArgs& a) {
   Json report = {{"steps", done},
                  {"seconds", train_seconds},
                  {"seconds_per_step", done > 0 ? train_seconds / double(done) : 0.0},
+                 {"median_step_seconds", median(step_seconds)},
+                 {"step_seconds", step_seconds},
                  {"samples_per_second", sps},
                  {"final_loss", loss},
                  {"psnr", psnr},
@@ -312,6 +322,9 @@ void add_train(CLI::App& app) {
   c->add_option("--refresh", a->refresh, "outofcore: blocks replaced per step (default blocks/64)");
   c->add_option("--block-dims", a->block_dims,
                 "outofcore: interior voxels of a block X,Y,Z (default 256 along x, y = z for about 64 KiB of data)");
+  c->add_option("--eval-samples", a->eval_samples,
+                "when the volume is not in memory: random voxels of the final PSNR estimate (0: no evaluation)")
+      ->capture_default_str();
   c->add_option("--checkpoint-every", a->checkpoint_every,
                 "write the model (atomically) every N steps while training, not only at the end");
   c->add_option("--timesteps", a->timesteps,

@@ -10,6 +10,7 @@
 #include "vnr/core/progress.h"
 #include "vnr/core/rng.h"
 #include "vnr/volume/metrics.h"
+#include "vnr/volume/raw_access.h"
 #include "vnr/volume/stream.h"
 
 namespace vnr {
@@ -177,7 +178,8 @@ EvalResult evaluate_streamed(const Network& net, const VolumeDesc& desc, double 
 SampledEval evaluate_sampled(const Network& net, const VolumeDesc& desc, double lo, double hi, int64_t n_samples,
                              uint64_t seed, const LoadOptions& opts) {
   if (n_samples <= 0) fail("the number of samples must be positive, got {}", n_samples);
-  VoxelReader reader(desc, lo, hi, opts);
+  const RawVolumeFile file(desc, lo, hi, opts.non_finite, "sampled evaluation",
+                           "evaluating without --sample streams gzip data");
   const uint64_t n_voxels = desc.dims.count();
   // Fixed batches: memory stays bounded and the draws do not depend on the thread count.
   const int64_t batch = std::min<int64_t>(n_samples, int64_t(1) << 20);
@@ -192,7 +194,7 @@ SampledEval evaluate_sampled(const Network& net, const VolumeDesc& desc, double 
       uint64_t r = (uint64_t(rng.next_uint()) << 32) | rng.next_uint();
       idx[size_t(i)] = int64_t(r % n_voxels);  // modulo bias <= n_voxels / 2^64: negligible
     }
-    reader.read(idx.data(), m, truth.data());
+    file.read_voxels(idx.data(), m, truth.data());
     auto t0 = std::chrono::steady_clock::now();
     decode_voxels(net, desc.dims, idx.data(), m, decoded.data());
     s.decode_seconds += seconds_since(t0);

@@ -61,7 +61,7 @@ EvalResult evaluate_streamed(const Network& net, const VolumeDesc& desc, double 
                              const std::function<void(double fraction)>& progress = {}, int64_t slab_voxels = 0);
 
 // PSNR estimated from n_samples voxels drawn uniformly (with replacement; deterministic for a
-// seed), read with VoxelReader (uncompressed data only) and decoded as evaluate() decodes them.
+// seed), read with RawVolumeFile (uncompressed data only) and decoded as evaluate() decodes them.
 // The 95% interval is the normal interval mean +- 1.96 standard errors of the per-voxel squared
 // error, mapped through PSNR = 10 log10(1/MSE) (an interval end at MSE <= 0 is reported as 999).
 // Memory: O(min(n_samples, 1 M)).

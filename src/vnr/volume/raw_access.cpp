@@ -4,43 +4,20 @@
 #include <sys/stat.h>
 #include <unistd.h>
 #include <algorithm>
-#include <bit>
 #include <cerrno>
 #include <cmath>
 #include <cstring>
+#include <numeric>
+#include <type_traits>
 #include <vector>
 #include "vnr/core/error.h"
+#include "vnr/volume/formats.h"
 
 namespace vnr {
+
+using namespace detail;
+
 namespace {
-
-template <typename T>
-inline double load_element(const unsigned char* p, bool swap) {
-  unsigned char b[sizeof(T)];
-  if (swap) {
-    for (size_t i = 0; i < sizeof(T); ++i) b[i] = p[sizeof(T) - 1 - i];
-  } else {
-    std::memcpy(b, p, sizeof(T));
-  }
-  T v;
-  std::memcpy(&v, b, sizeof(T));
-  return double(v);
-}
-
-template <typename F>
-decltype(auto) with_element_type(DType t, F&& f) {
-  switch (t) {
-    case DType::Int8: return f(int8_t{});
-    case DType::UInt8: return f(uint8_t{});
-    case DType::Int16: return f(int16_t{});
-    case DType::UInt16: return f(uint16_t{});
-    case DType::Int32: return f(int32_t{});
-    case DType::UInt32: return f(uint32_t{});
-    case DType::Float32: return f(float{});
-    case DType::Float64: return f(double{});
-  }
-  return f(float{});
-}
 
 struct FileIdentity {
   uint64_t size;
@@ -68,48 +45,78 @@ void check_same_file(const std::string& path, uint64_t size, dev_t dev, ino_t in
     fail("the volume file '{}' changed size during training: {} bytes, now {}", path, size, uint64_t(st.st_size));
 }
 
-void require_raw(const VolumeDesc& desc, const char* what) {
+// load_volume's pivot for desc's timestep: an explicit range end, else the first finite sample in
+// file order.
+double pivot_of(int fd, const VolumeDesc& desc) {
+  double pivot = 0;
+  if (pivot_from_desc(desc, &pivot)) return pivot;
+  const int64_t n = int64_t(desc.dims.count()), esize = int64_t(dtype_size(desc.dtype));
+  const int64_t per = std::min<int64_t>(n, int64_t(1) << 16);
+  std::vector<unsigned char> buf(size_t(per * esize));
+  bool found = false;
+  for (int64_t i0 = 0; i0 < n && !found; i0 += per) {
+    const int64_t m = std::min(per, n - i0);
+    pread_exact(fd, buf.data(), size_t(m * esize), desc.offset + uint64_t(i0 * esize), desc.path);
+    with_sample_type(desc.dtype, [&](auto tag) {
+      found = find_pivot<typename decltype(tag)::type>(buf.data(), m, needs_swap(desc), &pivot);
+    });
+  }
+  return pivot;  // none found: every sample is NaN/Inf, and those do not use the pivot
+}
+
+// The data file of desc, open for reading, after the checks both access paths share: raw
+// encoding, valid dims and range, a file that holds the timestep.
+struct DataFile {
+  int fd;
+  FileIdentity id;
+  double pivot;
+};
+
+DataFile open_data(const VolumeDesc& desc, double lo, double hi, const std::string& what,
+                   const std::string& alternative) {
   if (desc.encoding != "raw")
-    fail("'{}' is {}-compressed; {} needs uncompressed data (write a raw copy with `vnr convert`)", desc.path,
-         desc.encoding, what);
+    fail("'{}' is {}-encoded, and {} reads voxels at random offsets, which needs uncompressed data (raw, or NRRD "
+         "with 'encoding: raw'){}{}",
+         desc.path, desc.encoding, what, alternative.empty() ? "" : "; ", alternative);
+  check_dims(desc);
+  check_range(desc, lo, hi);
+  DataFile f;
+  f.fd = ::open(desc.path.c_str(), O_RDONLY | O_CLOEXEC);
+  if (f.fd < 0) fail("cannot open '{}': {}", desc.path, std::strerror(errno));
+  try {
+    f.id = identity_of_fd(f.fd, desc.path);
+    const uint64_t need = desc.offset + desc.dims.count() * dtype_size(desc.dtype);
+    if (f.id.size < need)
+      fail("'{}' is {} bytes, expected at least {} ({} {} from byte {}; did the file change since it was described?)",
+           desc.path, f.id.size, need, dims_string(desc.dims), dtype_name(desc.dtype), desc.offset);
+    f.pivot = pivot_of(f.fd, desc);
+  } catch (...) {
+    ::close(f.fd);
+    throw;
+  }
+  return f;
+}
+
+[[noreturn]] void nonfinite_voxel_error(const VolumeDesc& desc, int64_t x, int64_t y, int64_t z) {
+  fail("'{}' contains NaN/Inf values (voxel ({},{},{}) is one); use --nan zero|clamp", desc.path, x, y, z);
 }
 
 }  // namespace
 
-int64_t normalise_elements(DType dtype, bool swap, const unsigned char* src, int64_t n, const Normaliser& norm,
-                           float* out) {
-  return with_element_type(dtype, [&](auto tag) -> int64_t {
-    using T = decltype(tag);
-    int64_t first_bad = -1;
-    for (int64_t i = 0; i < n; ++i) {
-      double v = load_element<T>(src + size_t(i) * sizeof(T), swap);
-      if constexpr (std::is_floating_point_v<T>)
-        if (first_bad < 0 && !std::isfinite(v)) first_bad = i;
-      out[i] = norm(v);
-    }
-    return first_bad;
-  });
-}
-
 // ---------------------------------------------------------------------------------------------
-RawVolumeFile::RawVolumeFile(const VolumeDesc& desc, double lo, double hi, NonFinitePolicy policy)
-    : desc_(desc), norm_(lo, hi, policy), policy_(policy) {
-  require_raw(desc, "out-of-core sampling");
+RawVolumeFile::RawVolumeFile(const VolumeDesc& desc, double lo, double hi, NonFinitePolicy policy,
+                             const std::string& what, const std::string& alternative)
+    : desc_(desc), policy_(policy) {
+  DataFile f = open_data(desc, lo, hi, what, alternative);
+  fd_ = f.fd;
+  file_bytes_ = f.id.size;
+  dev_ = f.id.dev;
+  ino_ = f.id.ino;
+  norm_.set(f.pivot, lo, hi, policy);
   esize_ = dtype_size(desc.dtype);
-  swap_ = desc.big_endian != (std::endian::native == std::endian::big);
+  swap_ = needs_swap(desc);
   frame_bytes_ = desc.dims.count() * esize_;
-  fd_ = ::open(desc.path.c_str(), O_RDONLY | O_CLOEXEC);
-  if (fd_ < 0) fail("cannot open '{}': {}", desc.path, std::strerror(errno));
-  FileIdentity id = identity_of_fd(fd_, desc.path);
-  file_bytes_ = id.size;
-  dev_ = id.dev;
-  ino_ = id.ino;
-  if (desc.offset + frame_bytes_ > file_bytes_) {
-    ::close(fd_);
-    fail("'{}' holds {} bytes, but timestep {} needs bytes {}..{}", desc.path, file_bytes_, desc.timestep, desc.offset,
-         desc.offset + frame_bytes_);
-  }
-  // Blocks are read in random order: no readahead of data nobody asked for.
+  // Voxels are read in random order: no readahead of data nobody asked for.
   ::posix_fadvise(fd_, 0, 0, POSIX_FADV_RANDOM);
 }
 
@@ -117,19 +124,8 @@ RawVolumeFile::~RawVolumeFile() {
   if (fd_ >= 0) ::close(fd_);
 }
 
-void RawVolumeFile::pread_exact(unsigned char* dst, size_t bytes, uint64_t file_offset) const {
-  size_t done = 0;
-  while (done < bytes) {
-    ssize_t r = ::pread(fd_, dst + done, bytes - done, off_t(file_offset + done));
-    if (r < 0) {
-      if (errno == EINTR) continue;
-      fail("cannot read '{}' at byte {}: {}", desc_.path, file_offset + done, std::strerror(errno));
-    }
-    if (r == 0)
-      fail("the volume file '{}' ended at byte {} while reading voxels up to byte {}: it changed size during training",
-           desc_.path, file_offset + done, file_offset + bytes);
-    done += size_t(r);
-  }
+void RawVolumeFile::read_bytes(unsigned char* dst, size_t bytes, uint64_t file_offset) const {
+  pread_exact(fd_, dst, bytes, file_offset, desc_.path);
   bytes_read_.fetch_add(bytes, std::memory_order_relaxed);
   uint64_t end = file_offset + bytes, cur = max_read_end_.load(std::memory_order_relaxed);
   while (end > cur && !max_read_end_.compare_exchange_weak(cur, end, std::memory_order_relaxed)) {
@@ -147,6 +143,7 @@ void RawVolumeFile::read_box(Int3 origin, Int3 size, float* out, unsigned char* 
   const int64_t in_row = x_hi - x_lo;
   if (in_row <= 0) fail("read_box: box x range [{}, {}) misses the volume", origin.x, origin.x + size.x);
   const int64_t lead = x_lo - origin.x;
+  const bool strict = policy_ == NonFinitePolicy::Error;
   for (int64_t k = 0; k < size.z; ++k) {
     const int64_t z = clamp(origin.z + k, d.z);
     for (int64_t j = 0; j < size.y; ++j) {
@@ -162,42 +159,80 @@ void RawVolumeFile::read_box(Int3 origin, Int3 size, float* out, unsigned char* 
         continue;
       }
       const uint64_t voxel = (uint64_t(z) * uint64_t(d.y) + uint64_t(y)) * uint64_t(d.x) + uint64_t(x_lo);
-      pread_exact(scratch, size_t(in_row) * esize_, desc_.offset + voxel * esize_);
-      int64_t bad = normalise_elements(desc_.dtype, swap_, scratch, in_row, norm_, row + lead);
-      if (bad >= 0 && policy_ == NonFinitePolicy::Error)
-        fail("'{}' contains NaN/Inf (voxel ({},{},{})); use --nan zero|clamp", desc_.path, x_lo + bad, y, z);
+      read_bytes(scratch, size_t(in_row) * esize_, desc_.offset + voxel * esize_);
+      with_sample_type(desc_.dtype, [&](auto tag) {
+        using T = typename decltype(tag)::type;
+        const PivotNormaliser norm = norm_;
+        for (int64_t i = 0; i < in_row; ++i) {
+          double v = element<T>(scratch + i * int64_t(sizeof(T)), swap_);
+          if (std::is_floating_point_v<T> && strict && !std::isfinite(v)) nonfinite_voxel_error(desc_, x_lo + i, y, z);
+          row[lead + i] = norm(v);
+        }
+      });
       for (int64_t i = 0; i < lead; ++i) row[i] = row[lead];
       for (int64_t i = lead + in_row; i < size.x; ++i) row[i] = row[lead + in_row - 1];
     }
   }
 }
 
+void RawVolumeFile::read_voxels(const int64_t* voxel_index, int64_t n, float* out) const {
+  if (n <= 0) return;
+  const int64_t n_voxels = voxel_count(), esize = int64_t(esize_);
+  for (int64_t i = 0; i < n; ++i)
+    if (voxel_index[i] < 0 || voxel_index[i] >= n_voxels)
+      fail("'{}': voxel index {} out of range (the volume has {} voxels)", desc_.path, voxel_index[i], n_voxels);
+
+  // Visit the voxels in file order and read nearby ones with one pread: a run grows while the next
+  // voxel is within kMaxGap bytes and the run stays under kMaxRun bytes.
+  constexpr int64_t kMaxGap = 16 << 10, kMaxRun = 1 << 20;
+  std::vector<int64_t> order(static_cast<size_t>(n));
+  std::iota(order.begin(), order.end(), int64_t(0));
+  std::sort(order.begin(), order.end(), [&](int64_t a, int64_t b) { return voxel_index[a] < voxel_index[b]; });
+  std::vector<unsigned char> buf(size_t(kMaxRun + esize));
+  for (int64_t s = 0; s < n;) {
+    const int64_t first = voxel_index[order[size_t(s)]];
+    int64_t e = s + 1;
+    while (e < n) {
+      const int64_t v = voxel_index[order[size_t(e)]], prev = voxel_index[order[size_t(e - 1)]];
+      if ((v - prev) * esize > kMaxGap || (v - first + 1) * esize > kMaxRun) break;
+      ++e;
+    }
+    const int64_t last = voxel_index[order[size_t(e - 1)]];
+    read_bytes(buf.data(), size_t((last - first + 1) * esize), desc_.offset + uint64_t(first * esize));
+    with_sample_type(desc_.dtype, [&](auto tag) {
+      using T = typename decltype(tag)::type;
+      for (int64_t k = s; k < e; ++k) {
+        const int64_t idx = voxel_index[order[size_t(k)]];
+        double v = element<T>(buf.data() + (idx - first) * esize, swap_);
+        if (!std::isfinite(v) && policy_ == NonFinitePolicy::Error) {
+          const int64_t nx = desc_.dims.x, ny = desc_.dims.y;
+          nonfinite_voxel_error(desc_, idx % nx, (idx / nx) % ny, idx / (nx * ny));
+        }
+        out[order[size_t(k)]] = norm_(v);
+      }
+    });
+    s = e;
+  }
+}
+
 void RawVolumeFile::check_unchanged() const { check_same_file(desc_.path, file_bytes_, dev_, ino_); }
 
 // ---------------------------------------------------------------------------------------------
-MappedVolume::MappedVolume(const VolumeDesc& desc, double lo, double hi, NonFinitePolicy policy)
-    : desc_(desc), norm_(lo, hi, policy) {
-  require_raw(desc, "memory-mapped sampling");
+MappedVolume::MappedVolume(const VolumeDesc& desc, double lo, double hi, NonFinitePolicy policy) : desc_(desc) {
   // Non-finite values cannot be reported from inside a lookup: they read as lo (or hi for +Inf
   // under --nan clamp); the value-range pass has already refused them unless --nan allowed them.
-  swap_ = desc.big_endian != (std::endian::native == std::endian::big);
+  DataFile f = open_data(desc, lo, hi, "memory-mapped sampling", "");
+  file_bytes_ = f.id.size;
+  dev_ = f.id.dev;
+  ino_ = f.id.ino;
+  norm_.set(f.pivot, lo, hi, policy);
+  swap_ = needs_swap(desc);
   const uint64_t frame = desc.dims.count() * dtype_size(desc.dtype);
-  int fd = ::open(desc.path.c_str(), O_RDONLY | O_CLOEXEC);
-  if (fd < 0) fail("cannot open '{}': {}", desc.path, std::strerror(errno));
-  FileIdentity id = identity_of_fd(fd, desc.path);
-  file_bytes_ = id.size;
-  dev_ = id.dev;
-  ino_ = id.ino;
-  if (desc.offset + frame > file_bytes_) {
-    ::close(fd);
-    fail("'{}' holds {} bytes, but timestep {} needs bytes {}..{}", desc.path, file_bytes_, desc.timestep, desc.offset,
-         desc.offset + frame);
-  }
   const uint64_t page = uint64_t(::sysconf(_SC_PAGESIZE));
   const uint64_t start = desc.offset / page * page;
   map_bytes_ = size_t(desc.offset + frame - start);
-  map_ = ::mmap(nullptr, map_bytes_, PROT_READ, MAP_SHARED, fd, off_t(start));
-  ::close(fd);
+  map_ = ::mmap(nullptr, map_bytes_, PROT_READ, MAP_SHARED, f.fd, off_t(start));
+  ::close(f.fd);
   if (map_ == MAP_FAILED) fail("cannot memory-map '{}': {}", desc.path, std::strerror(errno));
   ::madvise(map_, map_bytes_, MADV_RANDOM);
   base_ = static_cast<const unsigned char*>(map_) + (desc.offset - start);
@@ -209,14 +244,14 @@ MappedVolume::~MappedVolume() {
 
 void MappedVolume::lookup(const float* x, const float* y, const float* z, int64_t n, float* out) const {
   const Int3 d = desc_.dims;
-  with_element_type(desc_.dtype, [&](auto tag) {
-    using T = decltype(tag);
+  with_sample_type(desc_.dtype, [&](auto tag) {
+    using T = typename decltype(tag)::type;
     const T* data = reinterpret_cast<const T*>(base_);
     const int64_t sy = d.x, sz = d.x * d.y;
     const bool swap = swap_;
-    const Normaliser norm = norm_;
+    const PivotNormaliser norm = norm_;
     auto at = [&](int32_t i, int32_t j, int32_t k) {
-      return norm(load_element<T>(reinterpret_cast<const unsigned char*>(data + (i + j * sy + k * sz)), swap));
+      return norm(element<T>(reinterpret_cast<const unsigned char*>(data + (i + j * sy + k * sz)), swap));
     };
     for (int64_t s = 0; s < n; ++s)
       out[s] = cell_centred_trilinear(int32_t(d.x), int32_t(d.y), int32_t(d.z), x[s], y[s], z[s], at);

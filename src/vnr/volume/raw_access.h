@@ -1,65 +1,62 @@
 #pragma once
 // Random access to an uncompressed volume file without loading it: the out-of-core and
-// memory-mapped training samplers read through these (paper, "Out-of-Core Sampling").
+// memory-mapped training samplers (paper, "Out-of-Core Sampling") and sampled evaluation read
+// through these. Values are normalised exactly as load_volume normalises them (compat.md B.1), bit
+// for bit: with the same pivot (an explicit range end of the description, else the first finite
+// sample of the timestep, read at construction) and the same arithmetic (sample_io.h).
 #include <atomic>
 #include <cstdint>
 #include <string>
 #include <sys/types.h>
+#include "vnr/volume/sample_io.h"
 #include "vnr/volume/volume.h"
 
 namespace vnr {
 
-// Normalisation of one source value (compat.md B.1): u = clamp((v - lo) / (hi - lo), 0, 1);
-// a constant volume maps to 0. Non-finite values follow the policy (Error is the caller's check).
-struct Normaliser {
-  double lo = 0, inv = 0;  // inv = 1 / (hi - lo), or 0 for a constant volume
-  bool clamp_inf = false;
-  Normaliser() = default;
-  Normaliser(double lo_, double hi_, NonFinitePolicy p)
-      : lo(lo_), inv(hi_ > lo_ ? 1.0 / (hi_ - lo_) : 0.0), clamp_inf(p == NonFinitePolicy::Clamp) {}
-  float operator()(double v) const {
-    if (!(v - v == 0)) return (clamp_inf && v > 0 && inv > 0) ? 1.f : 0.f;  // NaN, -Inf -> lo; +Inf -> per policy
-    double u = (v - lo) * inv;
-    return u <= 0 ? 0.f : (u >= 1 ? 1.f : float(u));
-  }
-};
-
 // pread access to the voxels of one timestep of a raw-encoded volume. Thread-safe: any number of
-// threads may read at once. Every read is checked against the file's size, so a file that
-// shrinks gives a clear error instead of garbage, and reads never leave [offset, offset + frame).
+// threads may read at once. Reads never leave [offset, offset + frame), and a file that shrinks
+// gives a clear error instead of garbage.
 class RawVolumeFile {
 public:
-  // `desc` must be raw-encoded (a gzip NRRD gets an error suggesting `vnr convert`).
-  RawVolumeFile(const VolumeDesc& desc, double lo, double hi, NonFinitePolicy policy);
+  // Normalises with range [lo, hi]. Compressed data is refused with one line naming `what` (what
+  // the voxels are read for) and, if not empty, `alternative` (what to do instead).
+  RawVolumeFile(const VolumeDesc& desc, double lo, double hi, NonFinitePolicy policy,
+                const std::string& what = "out-of-core sampling", const std::string& alternative = "");
   ~RawVolumeFile();
   RawVolumeFile(const RawVolumeFile&) = delete;
   RawVolumeFile& operator=(const RawVolumeFile&) = delete;
 
   Int3 dims() const { return desc_.dims; }
   const VolumeDesc& desc() const { return desc_; }
-  const Normaliser& normaliser() const { return norm_; }
   uint64_t frame_bytes() const { return frame_bytes_; }
+  int64_t voxel_count() const { return int64_t(desc_.dims.count()); }
 
   // Normalised voxels of the box [origin, origin + size) (x fastest) into out. Indices outside the
   // volume read the nearest edge voxel (clamp-to-edge, as the trilinear lookup does), which is
   // how ghost layers at the volume's border are filled. `scratch` holds at least
-  // scratch_bytes(size.x) bytes.
+  // scratch_bytes(size.x) bytes. NaN/Inf under NonFinitePolicy::Error: an error naming the voxel.
   void read_box(Int3 origin, Int3 size, float* out, unsigned char* scratch) const;
   size_t scratch_bytes(int64_t nx) const { return size_t(nx) * esize_; }
+
+  // out[i] = normalised value of voxel voxel_index[i] (x + nx * (y + ny * z)), any order, repeats
+  // allowed; an index outside the volume is an error. Nearby voxels are read together. NaN/Inf
+  // under NonFinitePolicy::Error: an error naming the voxel.
+  void read_voxels(const int64_t* voxel_index, int64_t n, float* out) const;
 
   // Fails with a clear message if the file disappeared, was replaced or changed size since it
   // was opened. Cheap (one stat); called once per training step.
   void check_unchanged() const;
 
+  // Bytes read by read_box and read_voxels so far, and the lowest and highest file offsets they
+  // read (inside the timestep's bytes).
   uint64_t bytes_read() const { return bytes_read_.load(std::memory_order_relaxed); }
-  // The lowest and highest file offsets read so far (reads stay inside the timestep's bytes).
   uint64_t min_read_begin() const { return min_read_begin_.load(std::memory_order_relaxed); }
   uint64_t max_read_end() const { return max_read_end_.load(std::memory_order_relaxed); }
 
 private:
-  void pread_exact(unsigned char* dst, size_t bytes, uint64_t file_offset) const;
+  void read_bytes(unsigned char* dst, size_t bytes, uint64_t file_offset) const;
   VolumeDesc desc_;
-  Normaliser norm_;
+  detail::PivotNormaliser norm_;
   NonFinitePolicy policy_;
   int fd_ = -1;
   size_t esize_;
@@ -69,11 +66,6 @@ private:
   ino_t ino_;
   mutable std::atomic<uint64_t> bytes_read_{0}, max_read_end_{0}, min_read_begin_{UINT64_MAX};
 };
-
-// Converts n source elements of `dtype` (byte-swapped if `swap`) to normalised floats. Returns the
-// index of the first non-finite value, or -1.
-int64_t normalise_elements(DType dtype, bool swap, const unsigned char* src, int64_t n, const Normaliser& norm,
-                           float* out);
 
 // The whole data region of one timestep memory-mapped read-only; trilinear lookups convert and
 // normalise the 8 neighbours on the fly. The baseline the paper compares out-of-core sampling with:
@@ -91,7 +83,7 @@ public:
 
 private:
   VolumeDesc desc_;
-  Normaliser norm_;
+  detail::PivotNormaliser norm_;
   bool swap_;
   const unsigned char* base_ = nullptr;  // first voxel of the timestep
   void* map_ = nullptr;

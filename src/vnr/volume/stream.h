@@ -1,8 +1,8 @@
 #pragma once
-// Reading volumes that need not fit in memory: the value range from one streaming pass, the
-// normalised data in z-slabs, and normalised values at arbitrary voxels. Every function normalises
-// exactly as load_volume does (compat.md B.1), bit for bit, so a streamed evaluation sees the same
-// numbers as an in-memory one.
+// Streaming volumes that need not fit in memory: the value range from one pass, and the normalised
+// data in z-slabs. Both normalise exactly as load_volume does (compat.md B.1), bit for bit, so a
+// streamed evaluation sees the same numbers as an in-memory one. (Normalised values at arbitrary
+// voxels: RawVolumeFile, raw_access.h.)
 #include <cstdint>
 #include <functional>
 #include <string>
@@ -34,30 +34,5 @@ ValueRange scan_value_range(const VolumeDesc& desc, const LoadOptions& opts = {}
 // not called again from the first slab that holds one).
 void for_each_slab(const VolumeDesc& desc, double lo, double hi, const LoadOptions& opts, int64_t max_slab_voxels,
                    const std::function<void(int64_t z0, int64_t nz, const float* normalised)>& fn);
-
-// Normalised values at arbitrary voxels of an uncompressed volume, read with pread (random access;
-// nothing is loaded). Values equal load_volume's data for the same range, bit for bit. gzip data
-// cannot be read at random offsets: the constructor refuses it with a one-line error that says so
-// and what to do instead. read() is safe to call from several threads.
-class VoxelReader {
-public:
-  VoxelReader(const VolumeDesc& desc, double lo, double hi, const LoadOptions& opts = {});
-  ~VoxelReader();
-  VoxelReader(const VoxelReader&) = delete;
-  VoxelReader& operator=(const VoxelReader&) = delete;
-
-  // out[i] = normalised value of voxel voxel_index[i] (x + nx * (y + ny * z)), any order, repeats
-  // allowed. Nearby voxels are read together. NaN/Inf under NonFinitePolicy::Error: an error naming
-  // the voxel.
-  void read(const int64_t* voxel_index, int64_t n, float* out) const;
-  int64_t voxel_count() const { return n_voxels_; }
-
-private:
-  VolumeDesc desc_;
-  LoadOptions opts_;
-  int fd_ = -1;
-  int64_t n_voxels_ = 0;
-  double pivot_ = 0, shift_ = 0, inv_ = 0;
-};
 
 }  // namespace vnr
