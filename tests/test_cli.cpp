@@ -1,8 +1,6 @@
 // End-to-end tests of the `vnr` command line: the full train -> eval -> decode -> info -> convert
 // cycle on generated data, and bad input that must give one clear error line and a non-zero exit.
 #include <gtest/gtest.h>
-#include <sys/wait.h>
-#include <unistd.h>
 #include <cmath>
 #include <cstdio>
 #include <fstream>
@@ -12,58 +10,13 @@
 #include "vnr/core/json.h"
 #include "vnr/train/model_io.h"
 #include "vnr/volume/volume.h"
+#include "test_support.h"
 
 using namespace vnr;
-
-namespace {
-
-struct Result {
-  int code;
-  std::string out, err;
-};
-
-std::string dir() {
-  static std::string d = [] {
-    std::string p = testing::TempDir() + "vnr_cli_" + std::to_string(::getpid());
-    std::string cmd = "mkdir -p " + p;
-    EXPECT_EQ(std::system(cmd.c_str()), 0);
-    return p;
-  }();
-  return d;
-}
-
-Result run(const std::string& args) {
-  std::string out = dir() + "/stdout.txt", err = dir() + "/stderr.txt";
-  std::string cmd = std::string(VNR_CLI_PATH) + " " + args + " >" + out + " 2>" + err;
-  int st = std::system(cmd.c_str());
-  return Result{WIFEXITED(st) ? WEXITSTATUS(st) : -1, read_file(out), read_file(err)};
-}
-
-int count_lines(const std::string& s) {
-  int n = 0;
-  for (char c : s) n += c == '\n';
-  return n;
-}
-
-void write_bytes(const std::string& path, size_t n, unsigned char fill = 7) {
-  std::ofstream f(path, std::ios::binary);
-  std::vector<unsigned char> b(n, fill);
-  f.write(reinterpret_cast<const char*>(b.data()), std::streamsize(n));
-}
-
-// Asserts a failed run: non-zero exit, exactly one "vnr: error:" line that contains `needle`.
-void expect_error(const std::string& args, const std::string& needle) {
-  Result r = run(args);
-  EXPECT_NE(r.code, 0) << args;
-  EXPECT_EQ(count_lines(r.err), 1) << args << "\n" << r.err;
-  EXPECT_NE(r.err.find("error"), std::string::npos) << r.err;
-  EXPECT_NE(r.err.find(needle), std::string::npos) << args << "\n" << r.err;
-}
-
-}  // namespace
+using namespace vnr::test;
 
 TEST(Cli, TrainEvalDecodeInfoConvertRoundTrip) {
-  const std::string d = dir();
+  const std::string d = temp_dir("vnr_cli");
   ASSERT_EQ(run("synth marschner-lobb --dims 24,20,16 -o " + d + "/ml.json").code, 0);
   Result t = run("train " + d + "/ml.json -o " + d + "/ml.vnr --config small --steps 60 --batch 8192 --seed 3 -q --report " +
                  d + "/train.json");
@@ -122,7 +75,7 @@ TEST(Cli, TrainEvalDecodeInfoConvertRoundTrip) {
 }
 
 TEST(Cli, SameSeedSameModel) {
-  const std::string d = dir();
+  const std::string d = temp_dir("vnr_cli");
   ASSERT_EQ(run("synth noise --dims 16,16,16 -o " + d + "/n.json").code, 0);
   for (const char* out : {"/a.vnr", "/b.vnr"})
     ASSERT_EQ(run("train " + d + "/n.json -o " + d + out + " --config small --steps 20 --batch 4096 --seed 9 -q --no-ssim").code, 0);
@@ -130,7 +83,7 @@ TEST(Cli, SameSeedSameModel) {
 }
 
 TEST(Cli, ConstantVolumeTrainsAndReports) {
-  const std::string d = dir();
+  const std::string d = temp_dir("vnr_cli");
   write_bytes(d + "/const.raw", 8 * 8 * 8, 42);
   Result r = run("train " + d + "/const.raw --dims 8,8,8 --dtype uint8 -o " + d + "/c.vnr --config small --steps 30 "
                  "--batch 2048 -q --report " + d + "/c.json");
@@ -149,7 +102,7 @@ TEST(Cli, ConstantVolumeTrainsAndReports) {
 }
 
 TEST(Cli, BadInputGivesOneClearErrorLine) {
-  const std::string d = dir();
+  const std::string d = temp_dir("vnr_cli");
   write_bytes(d + "/short.raw", 1000);
   expect_error("train " + d + "/short.raw --dims 16,8,8 --dtype uint8 -o " + d + "/x.vnr", "expected 1024");
   expect_error("train " + d + "/short.raw --dims 16,8,8 --dtype uint8 -o " + d + "/x.vnr", "1000 bytes");
@@ -202,7 +155,7 @@ TEST(Cli, BadInputGivesOneClearErrorLine) {
 TEST(Cli, SharedBonsaiSidecar) {
   std::string path = std::string(VNR_SHARED_DIR) + "/data/bonsai.json";
   if (!file_exists(path)) GTEST_SKIP() << "../shared/data absent";
-  const std::string d = dir();
+  const std::string d = temp_dir("vnr_cli");
   Result r = run("train " + path + " -o " + d + "/bonsai.vnr --config small --steps 40 -q --no-ssim --report " + d +
                  "/b.json");
   ASSERT_EQ(r.code, 0) << r.err;
@@ -213,7 +166,7 @@ TEST(Cli, SharedBonsaiSidecar) {
 
 // Ctrl-C (SIGINT) during training still evaluates and saves the model trained so far.
 TEST(Cli, InterruptedTrainingSavesTheModel) {
-  const std::string d = dir();
+  const std::string d = temp_dir("vnr_cli");
   ASSERT_EQ(run("synth noise --dims 32,32,32 -o " + d + "/int.json").code, 0);
   const std::string cmd = std::string(VNR_CLI_PATH) + " train " + d + "/int.json -o " + d +
                           "/int.vnr --config small --steps 100000000 --batch 4096 --no-ssim -q --report " + d +
@@ -230,7 +183,7 @@ TEST(Cli, InterruptedTrainingSavesTheModel) {
 
 // decode and synth never silently replace existing volume files.
 TEST(Cli, OutputsAreNotOverwrittenWithoutForce) {
-  const std::string d = dir();
+  const std::string d = temp_dir("vnr_cli");
   ASSERT_EQ(run("synth noise --dims 8,8,8 -o " + d + "/ow.json").code, 0);
   const std::string original = read_file(d + "/ow.raw");
   expect_error("synth marschner-lobb --dims 8,8,8 -o " + d + "/ow.json", "--force");
@@ -245,7 +198,7 @@ TEST(Cli, OutputsAreNotOverwrittenWithoutForce) {
 }
 
 TEST(Cli, RenderModelAndVolumeWithReportsAndReference) {
-  const std::string d = dir();
+  const std::string d = temp_dir("vnr_cli");
   ASSERT_EQ(run("synth marschner-lobb --dims 24,24,24 -o " + d + "/rv.json --force").code, 0);
   ASSERT_EQ(run("train " + d + "/rv.json -o " + d + "/rv.vnr --config small --steps 40 --batch 8192 -q --macrocell-size 8").code, 0);
   // the model carries its online macro-cells
@@ -282,7 +235,7 @@ TEST(Cli, RenderModelAndVolumeWithReportsAndReference) {
 }
 
 TEST(Cli, RenderBadInputGivesOneClearErrorLine) {
-  const std::string d = dir();
+  const std::string d = temp_dir("vnr_cli");
   ASSERT_EQ(run("synth noise --dims 8,8,8 -o " + d + "/rb.json --force").code, 0);
   const std::string v = d + "/rb.json";
   {
@@ -311,7 +264,7 @@ TEST(Cli, RenderBadInputGivesOneClearErrorLine) {
 }
 
 TEST(Cli, EvalSampledAndStreamedForVolumesBeyondMemory) {
-  const std::string d = dir();
+  const std::string d = temp_dir("vnr_cli");
   ASSERT_EQ(run("synth marschner-lobb --dims 24,20,16 -o " + d + "/se.json").code, 0);
   Result t = run("train " + d + "/se.json -o " + d + "/se.vnr --config small --steps 30 --batch 4096 --seed 2 -q --no-ssim");
   ASSERT_EQ(t.code, 0) << t.err;
@@ -376,4 +329,20 @@ TEST(Cli, EvalSampledAndStreamedForVolumesBeyondMemory) {
     EXPECT_NEAR(gr["psnr"].get<double>(), fr["psnr"].get<double>(), 1e-5 * fr["psnr"].get<double>());
     expect_error(eval + d + "/se.nhdr --sample 1000", "gzip");
   }
+}
+
+// `vnr info` says whether a model carries the macro-cell ranges recorded while training.
+TEST(Cli, InfoReportsMacroCells) {
+  const std::string d = temp_dir("vnr_cli");
+  const std::string vol = d + "/info_ml.json", with = d + "/info_mc.vnr", without = d + "/info_nomc.vnr";
+  ASSERT_EQ(run("synth marschner-lobb --dims 40,24,16 --force -o " + vol).code, 0);
+  ASSERT_EQ(run("train " + vol + " -o " + with + " --config small --steps 2 --batch 1024 -q").code, 0);
+  ASSERT_EQ(run("train " + vol + " -o " + without + " --config small --steps 2 --batch 1024 -q --macrocell-size 0").code, 0);
+  Result r = run("info " + with);
+  EXPECT_NE(r.out.find("macro-cells: 3x2x1 cells of 16 voxels"), std::string::npos) << r.out;
+  Json j = Json::parse(run("info --json " + with).out);
+  EXPECT_EQ(j["macrocells"]["cells"], Json({3, 2, 1}));
+  EXPECT_GT(j["macrocells"]["occupied"].get<int>(), 0);
+  EXPECT_NE(run("info " + without).out.find("macro-cells: none stored"), std::string::npos);
+  EXPECT_TRUE(Json::parse(run("info --json " + without).out)["macrocells"].is_null());
 }

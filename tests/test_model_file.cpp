@@ -12,19 +12,12 @@
 #include "vnr/core/fileio.h"
 #include "vnr/core/half.h"
 #include "vnr/nn/model_file.h"
+#include "test_support.h"
 
 using namespace vnr;
+using namespace vnr::test;
 
 namespace {
-
-// A fresh directory per test so parallel ctest runs do not collide.
-std::string test_dir() {
-  const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-  std::string dir = ::testing::TempDir() + "vnr_model_file_" + std::to_string(::getpid()) + "_" +
-                    info->test_suite_name() + "_" + info->name();
-  ::mkdir(dir.c_str(), 0755);
-  return dir;
-}
 
 std::vector<std::string> list_dir(const std::string& dir) {
   std::vector<std::string> out;
@@ -34,11 +27,6 @@ std::vector<std::string> list_dir(const std::string& dir) {
     ::closedir(d);
   }
   return out;
-}
-
-void write_bytes(const std::string& path, const std::string& data) {
-  std::ofstream f(path, std::ios::binary | std::ios::trunc);
-  f.write(data.data(), std::streamsize(data.size()));
 }
 
 Json example_config() {
@@ -87,16 +75,6 @@ ModelFile make_model(uint32_t seed, size_t n_params, Int3 dims, bool macrocells 
   }
   m.training = Json{{"steps", 20000}, {"seconds", 12.5}, {"psnr", 41.234567890123}, {"note", "unit test"}};
   return m;
-}
-
-template <typename F>
-std::string error_of(F&& f) {
-  try {
-    f();
-  } catch (const Error& e) {
-    return e.what();
-  }
-  return "<no error>";
 }
 
 bool contains(const std::string& s, const std::string& sub) { return s.find(sub) != std::string::npos; }
@@ -158,7 +136,8 @@ void expect_same(const ModelFile& a, const ModelFile& b) {
 // ---- native .vnr ------------------------------------------------------------------------------
 
 TEST(VnrFile, RoundTripIsExact) {
-  std::string dir = test_dir(), path = dir + "/m.vnr";
+  TmpDir tmp;
+  std::string dir = tmp.str(), path = dir + "/m.vnr";
   ModelFile m = make_model(1, 5001, {37, 20, 9});
   write_vnr(path, m);
   expect_same(m, read_vnr(path));
@@ -167,7 +146,8 @@ TEST(VnrFile, RoundTripIsExact) {
 }
 
 TEST(VnrFile, RoundTripWithoutOptionalParts) {
-  std::string path = test_dir() + "/m.vnr";
+  TmpDir tmp;
+  std::string path = tmp / "m.vnr";
   ModelFile m = make_model(2, 0, {1, 1, 1}, /*macrocells=*/false);
   m.training = nullptr;
   m.source_dtype = DType::Float64;
@@ -179,7 +159,8 @@ TEST(VnrFile, RoundTripWithoutOptionalParts) {
 }
 
 TEST(VnrFile, ByteLayoutMatchesDocumentation) {
-  std::string path = test_dir() + "/m.vnr";
+  TmpDir tmp;
+  std::string path = tmp / "m.vnr";
   ModelFile m = make_model(3, 123, {40, 16, 17});
   write_vnr(path, m);
   std::string b = read_file(path);
@@ -215,7 +196,8 @@ TEST(VnrFile, ByteLayoutMatchesDocumentation) {
 }
 
 TEST(VnrFile, TruncatedFilesAreReported) {
-  std::string dir = test_dir(), path = dir + "/m.vnr", cut = dir + "/cut.vnr";
+  TmpDir tmp;
+  std::string dir = tmp.str(), path = dir + "/m.vnr", cut = dir + "/cut.vnr";
   write_vnr(path, make_model(4, 777, {33, 17, 5}));
   std::string b = read_file(path);
   uint64_t hbytes;
@@ -237,7 +219,8 @@ TEST(VnrFile, TruncatedFilesAreReported) {
 }
 
 TEST(VnrFile, FlippedParamByteIsAChecksumError) {
-  std::string path = test_dir() + "/m.vnr";
+  TmpDir tmp;
+  std::string path = tmp / "m.vnr";
   ModelFile m = make_model(5, 1000, {16, 16, 16});
   write_vnr(path, m);
   std::string b = read_file(path);
@@ -249,7 +232,8 @@ TEST(VnrFile, FlippedParamByteIsAChecksumError) {
 }
 
 TEST(VnrFile, WrongMagicAndNewerVersion) {
-  std::string dir = test_dir(), path = dir + "/m.vnr";
+  TmpDir tmp;
+  std::string dir = tmp.str(), path = dir + "/m.vnr";
   write_vnr(path, make_model(6, 10, {8, 8, 8}));
   std::string b = read_file(path);
 
@@ -276,7 +260,8 @@ TEST(VnrFile, WrongMagicAndNewerVersion) {
 }
 
 TEST(VnrFile, InvalidModelsAreRejectedOnWrite) {
-  std::string path = test_dir() + "/m.vnr";
+  TmpDir tmp;
+  std::string path = tmp / "m.vnr";
   ModelFile m = make_model(7, 10, {8, 8, 8});
   m.macrocell_ranges.pop_back();
   EXPECT_TRUE(contains(error_of([&] { write_vnr(path, m); }), "macro-cell values"));
@@ -291,7 +276,8 @@ TEST(VnrFile, InvalidModelsAreRejectedOnWrite) {
 }
 
 TEST(VnrFile, FailedWritesLeaveOldFileAndNoTemporaries) {
-  std::string dir = test_dir(), path = dir + "/m.vnr";
+  TmpDir tmp;
+  std::string dir = tmp.str(), path = dir + "/m.vnr";
   ModelFile old_model = make_model(8, 64, {8, 8, 8});
   write_vnr(path, old_model);
   std::string before = read_file(path);
@@ -328,7 +314,8 @@ TEST(VnrFile, FailedWritesLeaveOldFileAndNoTemporaries) {
 }
 
 TEST(VnrFile, FuzzedFilesAlwaysFailCleanly) {
-  std::string dir = test_dir(), path = dir + "/m.vnr", bad = dir + "/bad.vnr";
+  TmpDir tmp;
+  std::string dir = tmp.str(), path = dir + "/m.vnr", bad = dir + "/bad.vnr";
   write_vnr(path, make_model(11, 300, {20, 20, 12}));
   const std::string b = read_file(path);
   std::mt19937 rng(12345);
@@ -353,7 +340,8 @@ TEST(VnrFile, FuzzedFilesAlwaysFailCleanly) {
 // ---- instantvnr BSON --------------------------------------------------------------------------
 
 TEST(InstantVnrFile, BsonStructureMatchesInstantVnr) {
-  std::string path = test_dir() + "/params.json";
+  TmpDir tmp;
+  std::string path = tmp / "params.json";
   ModelFile m = make_model(20, 2049, {37, 20, 9});
   write_instantvnr(path, m);
   std::string raw = read_file(path);
@@ -420,7 +408,8 @@ TEST(InstantVnrFile, BsonStructureMatchesInstantVnr) {
 }
 
 TEST(InstantVnrFile, NonStandardMacrocellGridGetsEvenSpacing) {
-  std::string path = test_dir() + "/params.json";
+  TmpDir tmp;
+  std::string path = tmp / "params.json";
   ModelFile m = make_model(21, 8, {64, 64, 64});
   m.macrocell_dims = {2, 4, 8};
   m.macrocell_ranges.assign(2 * 64, 0.5f);
@@ -433,7 +422,8 @@ TEST(InstantVnrFile, NonStandardMacrocellGridGetsEvenSpacing) {
 }
 
 TEST(InstantVnrFile, RoundTrip) {
-  std::string path = test_dir() + "/params.json";
+  TmpDir tmp;
+  std::string path = tmp / "params.json";
   ModelFile m = make_model(22, 4097, {50, 33, 16}, true, /*dyadic=*/true);
   write_instantvnr(path, m);
   for (const ModelFile& r : {read_instantvnr(path), read_model(path)}) {
@@ -451,7 +441,8 @@ TEST(InstantVnrFile, RoundTrip) {
 }
 
 TEST(InstantVnrFile, NoMacrocellsMeansNoMacrocellKey) {
-  std::string path = test_dir() + "/params.json";
+  TmpDir tmp;
+  std::string path = tmp / "params.json";
   ModelFile m = make_model(23, 16, {8, 8, 8}, /*macrocells=*/false);
   write_instantvnr(path, m);
   std::string raw = read_file(path);
@@ -463,7 +454,8 @@ TEST(InstantVnrFile, NoMacrocellsMeansNoMacrocellKey) {
 }
 
 TEST(InstantVnrFile, VnrToBsonToVnrKeepsParamsAndMacrocells) {
-  std::string dir = test_dir();
+  TmpDir tmp;
+  std::string dir = tmp.str();
   for (bool dyadic : {true, false}) {
     ModelFile m = make_model(24, 3000, {70, 40, 20}, true, dyadic);
     write_vnr(dir + "/a.vnr", m);
@@ -485,7 +477,8 @@ TEST(InstantVnrFile, VnrToBsonToVnrKeepsParamsAndMacrocells) {
 }
 
 TEST(InstantVnrFile, LegacyRootLevelParameters) {
-  std::string path = test_dir() + "/old.json";
+  TmpDir tmp;
+  std::string path = tmp / "old.json";
   std::vector<uint16_t> params = {0x3c00, 0xc000, 0x0001, 0x7bff, 0x8000};
   std::vector<uint8_t> bytes(params.size() * 2);
   std::memcpy(bytes.data(), params.data(), bytes.size());
@@ -507,7 +500,8 @@ TEST(InstantVnrFile, LegacyRootLevelParameters) {
 }
 
 TEST(InstantVnrFile, FloatParamsAreConvertedToHalf) {
-  std::string path = test_dir() + "/head.json";
+  TmpDir tmp;
+  std::string path = tmp / "head.json";
   std::vector<float> f = {1.0f, -2.0f, 0.5f};
   std::vector<uint8_t> bytes(12);
   std::memcpy(bytes.data(), f.data(), 12);
@@ -521,7 +515,8 @@ TEST(InstantVnrFile, FloatParamsAreConvertedToHalf) {
 }
 
 TEST(InstantVnrFile, BadFilesGiveOneLineErrors) {
-  std::string dir = test_dir(), path = dir + "/bad.json";
+  TmpDir tmp;
+  std::string dir = tmp.str(), path = dir + "/bad.json";
   // params_binary of the wrong size
   Json root = {{"parameters", {{"n_params", 4}, {"params_binary", Json::binary(std::vector<uint8_t>(6))}}}};
   auto bson = Json::to_bson(root);
@@ -561,7 +556,8 @@ TEST(InstantVnrFile, BadFilesGiveOneLineErrors) {
 
 TEST(InstantVnrFile, FuzzedBsonNeverCrashes) {
   // BSON has no checksum, so a corrupted file may still load; it must never crash or hang.
-  std::string dir = test_dir(), path = dir + "/p.json", bad = dir + "/bad.json";
+  TmpDir tmp;
+  std::string dir = tmp.str(), path = dir + "/p.json", bad = dir + "/bad.json";
   write_instantvnr(path, make_model(25, 200, {20, 20, 12}));
   const std::string b = read_file(path);
   std::mt19937 rng(777);

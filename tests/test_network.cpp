@@ -8,8 +8,10 @@
 #include "vnr/nn/optimizer.h"
 #include "vnr/train/model_io.h"
 #include "vnr/train/trainer.h"
+#include "test_support.h"
 
 using namespace vnr;
+using namespace vnr::test;
 
 namespace {
 Json small_model(std::string enc = "HashGrid", int width = 16, int hidden = 2, std::string out_act = "None",
@@ -20,14 +22,7 @@ Json small_model(std::string enc = "HashGrid", int width = 16, int hidden = 2, s
                                    {"log2_hashmap_size", 10},
                                    {"base_resolution", 4}}
                              : Json{{"otype", enc}};
-  return Json{{"encoding", e},
-              {"network",
-               {{"otype", width % 16 == 0 ? "FullyFusedMLP" : "CutlassMLP"},
-                {"n_neurons", width},
-                {"n_hidden_layers", hidden},
-                {"activation", act},
-                {"output_activation", out_act}}},
-              {"loss", {{"otype", loss}}}};
+  return mlp_model_config(e, width, hidden, act, out_act, loss);
 }
 }  // namespace
 

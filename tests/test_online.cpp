@@ -2,9 +2,8 @@
 // over the same network and macro-cells (bit for bit, both strategies), the online macro-cells are
 // exactly the value ranges of the training samples drawn so far, loss history and frame timing, image
 // quality rising with training, accumulation restarting on every change; training previews
-// (TrainPreview) and the `vnr train --preview-*` argument checks (src/cli/preview.cpp, compiled here).
+// (TrainPreview) and `vnr train --preview-*` end to end.
 #include <gtest/gtest.h>
-#include <unistd.h>
 #include <algorithm>
 #include <cmath>
 #include <cstring>
@@ -13,34 +12,19 @@
 #include <functional>
 #include "vnr/core/error.h"
 #include "vnr/core/fileio.h"
+#include "vnr/core/json.h"
+#include "vnr/render/image.h"
 #include "vnr/online/online_loop.h"
 #include "vnr/online/preview.h"
 #include "vnr/train/sampler.h"
 #include "vnr/volume/value_range_grid.h"
 #include "vnr/volume/writer.h"
-
-// The CLI side of the previews is self-contained (CLI11 + libvnr): compiled into this test.
-#include "../src/cli/preview.cpp"
+#include "test_support.h"
 
 using namespace vnr;
+using namespace vnr::test;
 
 namespace {
-
-Volume make_volume(Int3 dims, const std::function<float(float, float, float)>& f) {
-  Volume v;
-  v.dims = dims;
-  v.data.resize(dims.count());
-  for (int64_t z = 0; z < dims.z; ++z)
-    for (int64_t y = 0; y < dims.y; ++y)
-      for (int64_t x = 0; x < dims.x; ++x)
-        v.data[x + dims.x * (y + dims.y * z)] =
-            f((x + 0.5f) / float(dims.x), (y + 0.5f) / float(dims.y), (z + 0.5f) / float(dims.z));
-  return v;
-}
-
-Volume synth(Int3 dims) {
-  return make_volume(dims, [](float x, float y, float z) { return synth_value("marschner-lobb", x, y, z); });
-}
 
 Json small_config() {
   return {{"encoding", {{"otype", "HashGrid"}, {"n_levels", 4}, {"n_features_per_level", 2},
@@ -49,8 +33,6 @@ Json small_config() {
           {"loss", {{"otype", "L2"}}},
           {"optimizer", {{"otype", "Adam"}, {"learning_rate", 1e-2}}}};
 }
-
-Vec3f box_of(Int3 d) { return Vec3f{float(d.x), float(d.y), float(d.z)}; }
 
 bool same_pixels(const Image& a, const Image& b) {
   return a.width == b.width && a.height == b.height &&
@@ -91,12 +73,6 @@ Image fresh_render(Trainer& trainer, Int3 dims, const TransferFunction& tf, cons
 bool same_table(const TransferFunction& a, const TransferFunction& b) {
   return a.table.size() == b.table.size() &&
          std::memcmp(a.table.data(), b.table.data(), a.table.size() * sizeof(Vec4f)) == 0;
-}
-
-std::string temp_dir(const std::string& name) {
-  std::string d = testing::TempDir() + "vnr_online_" + std::to_string(::getpid()) + "_" + name;
-  std::filesystem::remove_all(d);
-  return d;
 }
 
 }  // namespace
@@ -305,9 +281,10 @@ TEST(OnlineLoop, RejectsWhatCannotWork) {
 
 TEST(TrainPreview, WritesPngsEveryNSteps) {
   Training s(Int3{24, 24, 24}, 2048, 8);
+  TmpDir tmp;
   PreviewOptions o;
   o.every = 4;
-  o.dir = temp_dir("preview") + "/nested/dir";  // created with its parents
+  o.dir = tmp / "preview/nested/dir";  // created with its parents
   o.width = 48;
   o.height = 32;
   TrainPreview preview(o, s.trainer, s.vol.dims);
@@ -347,12 +324,11 @@ TEST(TrainPreview, WritesPngsEveryNSteps) {
   for (const Vec4f& p : c.pixels) lit += p.x + p.y + p.z;
   EXPECT_GT(lit, 0) << "the preview shows something";
   EXPECT_EQ(preview_path("d", 1234567), "d/step_1234567.png");
-  std::filesystem::remove_all(temp_dir("preview"));
 }
 
 TEST(TrainPreview, RejectsBadOptionsBeforeTraining) {
-  const std::string base = temp_dir("bad");
-  std::filesystem::create_directories(base);
+  TmpDir tmp;
+  const std::string base = tmp.str();
   { std::ofstream(base + "/file") << "x"; }
   PreviewOptions o;
   o.dir = base + "/ok";
@@ -377,55 +353,33 @@ TEST(TrainPreview, RejectsBadOptionsBeforeTraining) {
   EXPECT_NO_THROW(check_preview_options(o));
   EXPECT_TRUE(std::filesystem::is_directory(o.dir));
   EXPECT_TRUE(std::filesystem::is_empty(o.dir)) << "the probe is removed";
-  std::filesystem::remove_all(base);
 }
 
-TEST(TrainPreview, CommandLineFlags) {
-  const std::string base = temp_dir("flags");
-  auto parse = [](const std::string& args) {
-    cli::PreviewArgs a;
-    CLI::App app("test");
-    a.add(&app);
-    app.parse(args, false);
-    return a;
-  };
-  auto error_of = [&](const std::string& args) -> std::string {
-    try {
-      parse(args).options();
-    } catch (const Error& e) {
-      return e.what();
-    }
-    return "";
-  };
-  EXPECT_FALSE(parse("").options().has_value()) << "no preview flags: no previews";
-  auto o = parse("--preview-every 50 --preview-dir " + base + "/p").options();
-  ASSERT_TRUE(o.has_value());
-  EXPECT_EQ(o->every, 50);
-  EXPECT_EQ(o->width, 256);
-  EXPECT_EQ(o->height, 256);
-  EXPECT_EQ(o->mode, RenderMode::RayMarch);
-  EXPECT_TRUE(same_table(o->tf, tf_preset("ramp"))) << "vnr render's default transfer function";
-  EXPECT_TRUE(std::filesystem::is_directory(base + "/p"));
-  o = parse("--preview-every 3 --preview-dir " + base + "/q --preview-size 64x48 --preview-mode shadow --preview-tf hot")
-          .options();
-  ASSERT_TRUE(o.has_value());
-  EXPECT_EQ(o->width, 64);
-  EXPECT_EQ(o->height, 48);
-  EXPECT_EQ(o->mode, RenderMode::Shadow);
-  EXPECT_TRUE(same_table(o->tf, tf_preset("hot")));
-  EXPECT_NE(error_of("--preview-every 10").find("--preview-dir"), std::string::npos);
-  EXPECT_NE(error_of("--preview-dir " + base + "/r").find("--preview-every"), std::string::npos);
-  EXPECT_NE(error_of("--preview-mode shadow").find("--preview-every"), std::string::npos);
-  EXPECT_NE(error_of("--preview-every 0 --preview-dir " + base + "/r").find("positive"), std::string::npos);
-  EXPECT_NE(error_of("--preview-every -2 --preview-dir " + base + "/r").find("positive"), std::string::npos);
-  EXPECT_NE(error_of("--preview-every 2 --preview-dir " + base + "/r --preview-size 64").find("--preview-size"),
-            std::string::npos);
-  EXPECT_NE(error_of("--preview-every 2 --preview-dir " + base + "/r --preview-mode raytrace").find("--preview-mode"),
-            std::string::npos);
-  EXPECT_NE(error_of("--preview-every 2 --preview-dir " + base + "/r --preview-tf nosuch").find("--preview-tf"),
-            std::string::npos);
-  { std::ofstream(base + "/file") << "x"; }
-  EXPECT_NE(error_of("--preview-every 2 --preview-dir " + base + "/file/sub").find("preview directory"),
-            std::string::npos);
-  std::filesystem::remove_all(base);
+// `vnr train --preview-*` end to end: the PNGs appear with the right names and size, the report
+// leaves preview time out of training time, and every bad flag is one error line before training.
+TEST(TrainPreview, CommandLine) {
+  TmpDir tmp;
+  const std::string vol = tmp / "ml.json", model = tmp / "ml.vnr", prev = tmp / "prev";
+  synth_volume("marschner-lobb", Int3{24, 24, 24}, vol);
+  Result r = run("train " + vol + " -o " + model + " --config small --batch 4096 --steps 6 --preview-every 3 " +
+                 "--preview-dir " + prev + " --preview-size 40x30 --preview-mode shadow --preview-tf hot -q " +
+                 "--report " + (tmp / "r.json"));
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_NE(r.out.find("previews: 2 PNG(s)"), std::string::npos) << r.out;
+  for (const char* f : {"/step_000003.png", "/step_000006.png"}) {
+    Image im = read_image(prev + f);
+    EXPECT_EQ(im.width, 40);
+    EXPECT_EQ(im.height, 30);
+  }
+  Json rep = parse_json_file(tmp / "r.json");
+  EXPECT_GT(rep["preview_seconds"].get<double>(), 0.0);
+  const std::string base = "train " + vol + " -o " + model + " --config small --steps 2 ";
+  expect_error(base + "--preview-every 10", "--preview-dir");
+  expect_error(base + "--preview-dir " + prev, "--preview-every");
+  expect_error(base + "--preview-mode shadow", "--preview-every");
+  expect_error(base + "--preview-every 0 --preview-dir " + prev, "positive");
+  expect_error(base + "--preview-every 2 --preview-dir " + prev + " --preview-size 64", "--preview-size");
+  expect_error(base + "--preview-every 2 --preview-dir " + prev + " --preview-mode raytrace", "--preview-mode");
+  expect_error(base + "--preview-every 2 --preview-dir " + prev + " --preview-tf nosuch", "--preview-tf");
+  expect_error(base + "--preview-every 2 --preview-dir " + vol + "/sub", "preview directory");
 }

@@ -4,8 +4,6 @@
 // like in-core sampling, and a volume file that changes under a run gives a clear error (and,
 // from the CLI, keeps the model trained so far).
 #include <gtest/gtest.h>
-#include <sys/wait.h>
-#include <unistd.h>
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -24,26 +22,19 @@
 #include "vnr/train/trainer.h"
 #include "vnr/volume/stream.h"
 #include "vnr/volume/writer.h"
+#include "test_support.h"
 
 using namespace vnr;
+using namespace vnr::test;
 namespace fs = std::filesystem;
 
 namespace {
-
-std::string temp_dir() {
-  static std::string d = [] {
-    std::string p = testing::TempDir() + "vnr_ooc_" + std::to_string(::getpid());
-    fs::create_directories(p);
-    return p;
-  }();
-  return d;
-}
 
 // A uint16 volume with random values behind a `header`-byte header, `timesteps` frames one after
 // another, described by a sidecar (integers normalise exactly on every path, so equality is exact).
 std::string write_u16_volume(const std::string& name, Int3 d, uint64_t header = 0, int timesteps = 1,
                              uint32_t seed = 5) {
-  std::string raw = temp_dir() + "/" + name + ".raw", json = temp_dir() + "/" + name + ".json";
+  std::string raw = temp_dir("vnr_ooc") + "/" + name + ".raw", json = temp_dir("vnr_ooc") + "/" + name + ".json";
   std::ofstream f(raw, std::ios::binary);
   std::mt19937 rng(seed);
   std::vector<unsigned char> pad(header, 0xEE);
@@ -213,8 +204,8 @@ TEST(OutOfCore, FloatDataReadsBitIdenticalToLoadVolume) {
           if (big) std::reverse(b, b + n);
           bytes.append(reinterpret_cast<const char*>(b), n);
         }
-        write_file_atomic(temp_dir() + "/" + name + ".raw", bytes);
-        const std::string json = temp_dir() + "/" + name + ".json";
+        write_file_atomic(temp_dir("vnr_ooc") + "/" + name + ".raw", bytes);
+        const std::string json = temp_dir("vnr_ooc") + "/" + name + ".json";
         write_file_atomic(json, fmt::format(R"({{"file": "{}.raw", "dims": [{}, {}, {}], "dtype": "{}", )"
                                             R"("byte_order": "{}"{}}})",
                                             name, d.x, d.y, d.z, dtype_name(dtype), big ? "big" : "little",
@@ -279,7 +270,7 @@ TEST(OutOfCore, FloatDataReadsBitIdenticalToLoadVolume) {
 // the test allows 1.25x and 2.5 dB. (With the default refresh of blocks/64 the buffer turns over
 // too slowly for a run this short: 30.3 dB.)
 TEST(OutOfCore, LossCurveMatchesInCoreWithinTolerance) {
-  const std::string json = temp_dir() + "/noise64.json";
+  const std::string json = temp_dir("vnr_ooc") + "/noise64.json";
   synth_volume("noise", Int3{64, 64, 64}, json, 3);
   VolumeDesc desc = describe_volume(json);
   Volume vol = load_volume(desc);
@@ -363,16 +354,13 @@ TEST(OutOfCore, GzipDataIsRefusedWithAClearError) {
 // From the CLI: the volume file disappears while `vnr train --sampler outofcore` runs; the run
 // stops with one clear error line, and the model trained so far is on disk and loads.
 TEST(OutOfCoreCli, VolumeDeletedDuringTrainingKeepsTheModel) {
-  const std::string json = temp_dir() + "/vanish.json", model = temp_dir() + "/vanish.vnr";
+  const std::string json = temp_dir("vnr_ooc") + "/vanish.json", model = temp_dir("vnr_ooc") + "/vanish.vnr";
   synth_volume("noise", Int3{48, 48, 48}, json, 2);
-  const std::string err = temp_dir() + "/vanish.err";
-  const std::string cmd = std::string(VNR_CLI_PATH) + " train " + json + " -o " + model +
-                          " --config small --batch 4096 --seconds 120 --sampler outofcore --memory-budget 64KiB "
-                          "--block-dims 16,4,4 --checkpoint-every 5 -q 2>" + err;
+  Result r;
   std::thread runner([&] {
-    int st = std::system(cmd.c_str());
-    EXPECT_TRUE(WIFEXITED(st));
-    EXPECT_NE(WEXITSTATUS(st), 0);
+    r = run("train " + json + " -o " + model +
+            " --config small --batch 4096 --seconds 120 --sampler outofcore --memory-budget 64KiB "
+            "--block-dims 16,4,4 --checkpoint-every 5 -q");
   });
   // Wait for the first checkpoint (training is under way), then delete the data.
   auto t0 = std::chrono::steady_clock::now();
@@ -381,7 +369,8 @@ TEST(OutOfCoreCli, VolumeDeletedDuringTrainingKeepsTheModel) {
   ASSERT_TRUE(file_exists(model));
   fs::remove(strip_extension(json) + ".raw");
   runner.join();
-  const std::string msg = read_file(err);
+  EXPECT_GT(r.code, 0) << "exits normally, with a failure status";
+  const std::string& msg = r.err;
   EXPECT_NE(msg.find("disappeared during training"), std::string::npos) << msg;
   EXPECT_NE(msg.find("was saved to"), std::string::npos) << msg;
   EXPECT_EQ(std::count(msg.begin(), msg.end(), '\n'), 1) << msg;

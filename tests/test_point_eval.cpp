@@ -11,8 +11,10 @@
 #include "vnr/core/parallel.h"
 #include "vnr/nn/network.h"
 #include "vnr/nn/point_eval.h"
+#include "test_support.h"
 
 using namespace vnr;
+using namespace vnr::test;
 
 namespace {
 
@@ -21,17 +23,6 @@ Json hashgrid(int L, int F, int log2T, int base, double scale = 2.0, std::string
   return Json{{"otype", otype},       {"n_levels", L},         {"n_features_per_level", F},
               {"log2_hashmap_size", log2T}, {"base_resolution", base}, {"per_level_scale", scale},
               {"interpolation", interp}};
-}
-
-Json model(Json enc, int width, int hidden, std::string act = "ReLU", std::string out_act = "None") {
-  return Json{{"encoding", enc},
-              {"network",
-               {{"otype", width % 16 == 0 ? "FullyFusedMLP" : "CutlassMLP"},
-                {"n_neurons", width},
-                {"n_hidden_layers", hidden},
-                {"activation", act},
-                {"output_activation", out_act}}},
-              {"loss", {{"otype", "L2"}}}};
 }
 
 struct Case {
@@ -44,26 +35,26 @@ std::vector<Case> cases() {
       {"paper", preset_config("paper")},
       {"small", preset_config("small")},
       {"tiny", preset_config("tiny")},
-      {"hash_L16F2_w64x4", model(hashgrid(16, 2, 19, 16, 1.5), 64, 4)},
-      {"hash_L8F4_w32x3", model(hashgrid(8, 4, 15, 8, 1.6), 32, 3)},
-      {"hash_L12F1_w16x2", model(hashgrid(12, 1, 14, 4, 1.7), 16, 2)},
-      {"dense_L4F4_w32x2", model(hashgrid(4, 4, 19, 3, 1.5, "Linear", "DenseGrid"), 32, 2)},
-      {"dense_L3F2_w16x3", model(hashgrid(3, 2, 19, 5, 2.0, "Linear", "DenseGrid"), 16, 3)},
-      {"tiled_L4F2_w16x2", model(hashgrid(4, 2, 19, 3, 1.7, "Linear", "TiledGrid"), 16, 2)},
-      {"tiled_L4F8_w64x2", model(hashgrid(4, 8, 19, 4, 2.0, "Linear", "TiledGrid"), 64, 2)},
-      {"smoothstep_w32x2", model(hashgrid(6, 2, 14, 4, 2.0, "Smoothstep"), 32, 2)},
-      {"smoothstep_F8_w64x2", model(hashgrid(4, 8, 16, 4, 2.0, "Smoothstep"), 64, 2)},
-      {"nearest_w16x2", model(hashgrid(5, 2, 14, 4, 2.0, "Nearest"), 16, 2)},
-      {"hash_w128x3", model(hashgrid(16, 2, 17, 16, 1.5), 128, 3)},
-      {"cutlass_w24x2", model(hashgrid(4, 2, 14, 4), 24, 2)},
-      {"cutlass_w100x2_sigmoid", model(hashgrid(4, 4, 14, 4), 100, 2, "ReLU", "Sigmoid")},
-      {"hidden_none_w32x3", model(hashgrid(4, 2, 14, 4), 32, 3, "None")},
-      {"hidden_none_w24x2", model(hashgrid(4, 2, 14, 4), 24, 2, "None", "Softplus")},
-      {"exp_output_w16x1", model(hashgrid(4, 2, 14, 4), 16, 1, "ReLU", "Exponential")},
-      {"frequency_w64x2", model(Json{{"otype", "Frequency"}, {"n_frequencies", 6}}, 64, 2)},
-      {"frequency_w32x2_sigmoid", model(Json{{"otype", "Frequency"}, {"n_frequencies", 4}}, 32, 2, "ReLU", "Sigmoid")},
-      {"oneblob_w32x2", model(Json{{"otype", "OneBlob"}, {"n_bins", 8}}, 32, 2)},
-      {"identity_w16x2", model(Json{{"otype", "Identity"}, {"scale", 2.0}, {"offset", -0.5}}, 16, 2)},
+      {"hash_L16F2_w64x4", mlp_model_config(hashgrid(16, 2, 19, 16, 1.5), 64, 4)},
+      {"hash_L8F4_w32x3", mlp_model_config(hashgrid(8, 4, 15, 8, 1.6), 32, 3)},
+      {"hash_L12F1_w16x2", mlp_model_config(hashgrid(12, 1, 14, 4, 1.7), 16, 2)},
+      {"dense_L4F4_w32x2", mlp_model_config(hashgrid(4, 4, 19, 3, 1.5, "Linear", "DenseGrid"), 32, 2)},
+      {"dense_L3F2_w16x3", mlp_model_config(hashgrid(3, 2, 19, 5, 2.0, "Linear", "DenseGrid"), 16, 3)},
+      {"tiled_L4F2_w16x2", mlp_model_config(hashgrid(4, 2, 19, 3, 1.7, "Linear", "TiledGrid"), 16, 2)},
+      {"tiled_L4F8_w64x2", mlp_model_config(hashgrid(4, 8, 19, 4, 2.0, "Linear", "TiledGrid"), 64, 2)},
+      {"smoothstep_w32x2", mlp_model_config(hashgrid(6, 2, 14, 4, 2.0, "Smoothstep"), 32, 2)},
+      {"smoothstep_F8_w64x2", mlp_model_config(hashgrid(4, 8, 16, 4, 2.0, "Smoothstep"), 64, 2)},
+      {"nearest_w16x2", mlp_model_config(hashgrid(5, 2, 14, 4, 2.0, "Nearest"), 16, 2)},
+      {"hash_w128x3", mlp_model_config(hashgrid(16, 2, 17, 16, 1.5), 128, 3)},
+      {"cutlass_w24x2", mlp_model_config(hashgrid(4, 2, 14, 4), 24, 2)},
+      {"cutlass_w100x2_sigmoid", mlp_model_config(hashgrid(4, 4, 14, 4), 100, 2, "ReLU", "Sigmoid")},
+      {"hidden_none_w32x3", mlp_model_config(hashgrid(4, 2, 14, 4), 32, 3, "None")},
+      {"hidden_none_w24x2", mlp_model_config(hashgrid(4, 2, 14, 4), 24, 2, "None", "Softplus")},
+      {"exp_output_w16x1", mlp_model_config(hashgrid(4, 2, 14, 4), 16, 1, "ReLU", "Exponential")},
+      {"frequency_w64x2", mlp_model_config(Json{{"otype", "Frequency"}, {"n_frequencies", 6}}, 64, 2)},
+      {"frequency_w32x2_sigmoid", mlp_model_config(Json{{"otype", "Frequency"}, {"n_frequencies", 4}}, 32, 2, "ReLU", "Sigmoid")},
+      {"oneblob_w32x2", mlp_model_config(Json{{"otype", "OneBlob"}, {"n_bins", 8}}, 32, 2)},
+      {"identity_w16x2", mlp_model_config(Json{{"otype", "Identity"}, {"scale", 2.0}, {"offset", -0.5}}, 16, 2)},
   };
 }
 
@@ -190,7 +181,7 @@ TEST(PointEval, LargeAndSparseActivations) {
     randomise(net, 5, 3.0f);
     check_network(net, (std::string(name) + "_large").c_str(), true, 1000);
   }
-  Network net(model(hashgrid(8, 4, 16, 4), 64, 4));
+  Network net(mlp_model_config(hashgrid(8, 4, 16, 4), 64, 4));
   net.init_params(4);
   randomise(net, 6);
   // Negative bias-like shift: most hidden pre-activations negative, so compaction removes most inputs.
@@ -321,7 +312,7 @@ TEST(PointEval, PrefetchHintHasNoEffect) {
       ASSERT_EQ(std::memcmp(&before, &after, 4), 0);
     }
   }
-  Network net(model(Json{{"otype", "Frequency"}, {"n_frequencies", 4}}, 32, 2));
+  Network net(mlp_model_config(Json{{"otype", "Frequency"}, {"n_frequencies", 4}}, 32, 2));
   net.init_params(64);
   PointEvaluator pe(net);
   pe.prefetch(0.5f, 0.5f, 0.5f);

@@ -13,34 +13,18 @@
 #include "vnr/train/trainer.h"
 #include "vnr/volume/value_range_grid.h"
 #include "vnr/volume/writer.h"
+#include "test_support.h"
 
 using namespace vnr;
+using namespace vnr::test;
 
 namespace {
-
-Volume make_volume(Int3 dims, const std::function<float(float, float, float)>& f) {
-  Volume v;
-  v.dims = dims;
-  v.data.resize(dims.count());
-  for (int64_t z = 0; z < dims.z; ++z)
-    for (int64_t y = 0; y < dims.y; ++y)
-      for (int64_t x = 0; x < dims.x; ++x)
-        v.data[x + dims.x * (y + dims.y * z)] =
-            f((x + 0.5f) / float(dims.x), (y + 0.5f) / float(dims.y), (z + 0.5f) / float(dims.z));
-  return v;
-}
-
-Volume synth(Int3 dims) {
-  return make_volume(dims, [](float x, float y, float z) { return synth_value("marschner-lobb", x, y, z); });
-}
 
 TransferFunction constant_tf(Vec3f rgb, float alpha) {
   TransferFunction tf;
   tf.table.assign(16, Vec4f{rgb.x, rgb.y, rgb.z, alpha});
   return tf;
 }
-
-Vec3f box_of(const Volume& v) { return Vec3f{float(v.dims.x), float(v.dims.y), float(v.dims.z)}; }
 
 double image_psnr(const Image& a, const Image& b) { return compare_images(a, b).psnr; }
 

@@ -2,10 +2,8 @@
 #include <gtest/gtest.h>
 #include <png.h>
 #include <unistd.h>
-#include <atomic>
 #include <cmath>
 #include <cstring>
-#include <filesystem>
 #include <fstream>
 #include <limits>
 #include <numbers>
@@ -17,47 +15,12 @@
 #include "vnr/render/image.h"
 #include "vnr/render/scene.h"
 #include "vnr/render/transfer_function.h"
+#include "test_support.h"
 
 using namespace vnr;
-namespace fs = std::filesystem;
+using namespace vnr::test;
 
 namespace {
-
-// A fresh directory per test, removed afterwards.
-class TmpDir {
-public:
-  TmpDir() {
-    static std::atomic<int> counter{0};
-    const auto* info = testing::UnitTest::GetInstance()->current_test_info();
-    path_ = fs::path(testing::TempDir()) /
-            ("vnr_rio_" + std::to_string(::getpid()) + "_" + std::to_string(counter++) + "_" + info->name());
-    fs::remove_all(path_);
-    fs::create_directories(path_);
-  }
-  ~TmpDir() { fs::remove_all(path_); }
-  std::string operator/(const std::string& name) const { return (path_ / name).string(); }
-
-private:
-  fs::path path_;
-};
-
-void write_bytes(const std::string& path, const std::string& bytes) {
-  std::ofstream f(path, std::ios::binary);
-  f.write(bytes.data(), std::streamsize(bytes.size()));
-}
-
-// Expects `fn` to throw vnr::Error whose message contains every fragment.
-template <typename F>
-void expect_error(F&& fn, std::initializer_list<const char*> fragments) {
-  try {
-    fn();
-    ADD_FAILURE() << "expected vnr::Error containing '" << *fragments.begin() << "'";
-  } catch (const Error& e) {
-    const std::string msg = e.what();
-    for (const char* f : fragments) EXPECT_NE(msg.find(f), std::string::npos) << "message: " << msg << "\nmissing: " << f;
-    EXPECT_EQ(msg.find('\n'), std::string::npos) << "multi-line message: " << msg;
-  }
-}
 
 std::string base64_encode(const std::string& in) {
   static const char* A = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";

@@ -2,10 +2,7 @@
 // training, continuous training (fixed learning rate, switching, recovery) and `vnr train
 // --timesteps` end to end.
 #include <gtest/gtest.h>
-#include <sys/wait.h>
-#include <unistd.h>
 #include <cmath>
-#include <cstdlib>
 #include <cstring>
 #include <fstream>
 #include <limits>
@@ -19,39 +16,12 @@
 #include "vnr/train/series.h"
 #include "vnr/volume/volume.h"
 #include "vnr/volume/writer.h"
+#include "test_support.h"
 
 using namespace vnr;
+using namespace vnr::test;
 
 namespace {
-
-#define EXPECT_HAS(msg, sub) EXPECT_NE((msg).find(sub), std::string::npos) << "message: " << (msg)
-
-std::string tmpdir() {
-  static std::string d = [] {
-    std::string p = testing::TempDir() + "vnr_series_" + std::to_string(::getpid());
-    EXPECT_EQ(std::system(("rm -rf " + p + " && mkdir -p " + p).c_str()), 0);
-    return p;
-  }();
-  return d;
-}
-
-// A fresh sub-directory per test.
-std::string subdir(const std::string& name) {
-  std::string p = tmpdir() + "/" + name;
-  EXPECT_EQ(std::system(("rm -rf " + p + " && mkdir -p " + p).c_str()), 0);
-  return p;
-}
-
-template <typename F>
-std::string error_of(F&& f) {
-  try {
-    f();
-  } catch (const Error& e) {
-    return e.what();
-  }
-  ADD_FAILURE() << "expected a vnr::Error";
-  return "";
-}
 
 void write_floats(const std::string& path, const std::vector<float>& v) {
   std::ofstream f(path, std::ios::binary);
@@ -68,14 +38,6 @@ RawOptions at(int t) {
 
 Volume load_t(const std::string& json, int t) { return load_volume(describe_volume(json, at(t))); }
 
-// A volume in memory from values in [0,1].
-Volume make_volume(Int3 d, const std::vector<float>& v) {
-  Volume vol;
-  vol.dims = d;
-  vol.data.assign(v.begin(), v.end());
-  return vol;
-}
-
 Json small_config() { return preset_config("small"); }
 
 Model fresh_model(const Json& config, uint32_t seed = 7) {
@@ -85,40 +47,14 @@ Model fresh_model(const Json& config, uint32_t seed = 7) {
   return m;
 }
 
-// ---- CLI helpers ----
-struct Result {
-  int code;
-  std::string out, err;
-};
-
-Result run(const std::string& args) {
-  std::string out = tmpdir() + "/stdout.txt", err = tmpdir() + "/stderr.txt";
-  std::string cmd = std::string(VNR_CLI_PATH) + " " + args + " >" + out + " 2>" + err;
-  int st = std::system(cmd.c_str());
-  return Result{WIFEXITED(st) ? WEXITSTATUS(st) : -1, read_file(out), read_file(err)};
-}
-
-int count_lines(const std::string& s) {
-  int n = 0;
-  for (char c : s) n += c == '\n';
-  return n;
-}
-
-void expect_error(const std::string& args, const std::string& needle) {
-  Result r = run(args);
-  EXPECT_NE(r.code, 0) << args;
-  EXPECT_EQ(count_lines(r.err), 1) << args << "\n" << r.err;
-  EXPECT_HAS(r.err, "error");
-  EXPECT_HAS(r.err, needle);
-}
-
 }  // namespace
 
 // ------------------------------------------------------------------------------------------------
 // The file-list descriptor: {"file": ["a.raw", "b.raw", ...], "dims": [x, y, z], ...}.
 
 TEST(Series, FileListDescriptor) {
-  const std::string d = subdir("filelist");
+  TmpDir tmp;
+  const std::string d = tmp.str();
   const Int3 dims{4, 3, 2};
   const size_t n = dims.count();
   for (int t = 0; t < 3; ++t) {
@@ -176,7 +112,8 @@ TEST(Series, FileListDescriptor) {
 // Synthetic series.
 
 TEST(Series, SynthSeriesFramesDifferSmoothlyAndAreDeterministic) {
-  const std::string d = subdir("synth");
+  TmpDir tmp;
+  const std::string d = tmp.str();
   const Int3 dims{16, 12, 10};
   const size_t n = dims.count();
   synth_series("noise", dims, 3, d + "/a.json", 5);
@@ -252,7 +189,8 @@ TEST(Series, TimestepSelection) {
 // Per-timestep training with warm start.
 
 TEST(Series, WarmStartBeatsColdStartWithTheSameSteps) {
-  const std::string d = subdir("warm");
+  TmpDir tmp;
+  const std::string d = tmp.str();
   synth_series("noise", {32, 32, 32}, 2, d + "/s.json", 3);
   FrameLoader load = [&](int t) { return load_t(d + "/s.json", t); };
   SeriesOptions o;
@@ -297,7 +235,8 @@ TEST(Series, WarmStartBeatsColdStartWithTheSameSteps) {
 }
 
 TEST(Series, FailureMidwayKeepsFinishedModels) {
-  const std::string d = subdir("midway");
+  TmpDir tmp;
+  const std::string d = tmp.str();
   synth_series("noise", {16, 16, 16}, 3, d + "/s.json");
   FrameLoader load = [&](int t) {
     if (t == 1) fail("frame {} is unreadable", t);
@@ -484,7 +423,8 @@ TEST(Series, RecoveryCount) {
 // `vnr train SERIES --timesteps ...`
 
 TEST(SeriesCli, PerTimestepModelsThatEvalAccepts) {
-  const std::string d = subdir("cli");
+  TmpDir tmp;
+  const std::string d = tmp.str();
   ASSERT_EQ(run("synth noise --dims 24,24,24 --timesteps 3 -o " + d + "/s.json").code, 0);
   Result t = run("train " + d + "/s.json --timesteps all -o " + d + "/out --config small --steps 40 --batch 8192 -q");
   ASSERT_EQ(t.code, 0) << t.err;
@@ -529,7 +469,8 @@ TEST(SeriesCli, PerTimestepModelsThatEvalAccepts) {
 }
 
 TEST(SeriesCli, ContinuousReportsRecovery) {
-  const std::string d = subdir("cli_cont");
+  TmpDir tmp;
+  const std::string d = tmp.str();
   ASSERT_EQ(run("synth noise --dims 20,20,20 --timesteps 3 -o " + d + "/s.json").code, 0);
   Result t = run("train " + d + "/s.json --timesteps all --continuous --switch-every 20 -o " + d +
                  "/out --config small --batch 4096 -q --no-ssim");
@@ -557,7 +498,8 @@ TEST(SeriesCli, ContinuousReportsRecovery) {
 }
 
 TEST(SeriesCli, ClearErrors) {
-  const std::string d = subdir("cli_err");
+  TmpDir tmp;
+  const std::string d = tmp.str();
   ASSERT_EQ(run("synth noise --dims 8,8,8 -o " + d + "/one.json").code, 0);
   ASSERT_EQ(run("synth noise --dims 8,8,8 --timesteps 3 -o " + d + "/s.json").code, 0);
   const std::string base = "train " + d + "/s.json --config small --steps 2 --batch 256 -q ";
@@ -578,7 +520,8 @@ TEST(SeriesCli, ClearErrors) {
 }
 
 TEST(SeriesCli, FailureMidwayKeepsTheFirstModel) {
-  const std::string d = subdir("cli_mid");
+  TmpDir tmp;
+  const std::string d = tmp.str();
   const Int3 dims{12, 12, 12};
   std::vector<float> v(dims.count());
   for (size_t i = 0; i < v.size(); ++i) v[i] = float(i % 97) / 97.f;

@@ -3,15 +3,11 @@
 // reproduce load_volume exactly, streamed evaluation must reproduce evaluate(), and the sampled
 // estimate must bracket the full PSNR.
 #include <gtest/gtest.h>
-#include <unistd.h>
-#include <zlib.h>
 #include <algorithm>
-#include <atomic>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
-#include <functional>
 #include <limits>
 #include <memory>
 #include <optional>
@@ -27,76 +23,13 @@
 #include "vnr/volume/stream.h"
 #include "vnr/volume/volume.h"
 #include "vnr/volume/writer.h"
+#include "test_support.h"
 
 using namespace vnr;
+using namespace vnr::test;
 namespace fs = std::filesystem;
 
 namespace {
-
-// A fresh directory per test, removed afterwards.
-class TmpDir {
-public:
-  TmpDir() {
-    static std::atomic<int> counter{0};
-    const auto* info = testing::UnitTest::GetInstance()->current_test_info();
-    path_ = fs::path(testing::TempDir()) /
-            ("vnr_stream_" + std::to_string(::getpid()) + "_" + std::to_string(counter++) + "_" + info->name());
-    fs::remove_all(path_);
-    fs::create_directories(path_);
-  }
-  ~TmpDir() { fs::remove_all(path_); }
-  std::string operator/(const std::string& name) const { return (path_ / name).string(); }
-
-private:
-  fs::path path_;
-};
-
-void write_bytes(const std::string& path, const std::string& bytes) {
-  std::ofstream f(path, std::ios::binary);
-  f.write(bytes.data(), std::streamsize(bytes.size()));
-}
-
-void write_gzip(const std::string& path, const std::string& bytes, const char* mode) {
-  gzFile g = gzopen(path.c_str(), mode);
-  ASSERT_NE(g, nullptr);
-  ASSERT_EQ(gzwrite(g, bytes.data(), unsigned(bytes.size())), int(bytes.size()));
-  gzclose(g);
-}
-
-template <typename T>
-void append_value(std::string& out, double v, bool big) {
-  T t = T(v);
-  unsigned char b[sizeof(T)];
-  std::memcpy(b, &t, sizeof(T));
-  if (big) std::reverse(b, b + sizeof(T));
-  out.append(reinterpret_cast<const char*>(b), sizeof(T));
-}
-
-std::string encode(DType t, const std::vector<double>& values, bool big) {
-  std::string out;
-  for (double v : values) {
-    switch (t) {
-      case DType::Int8: append_value<int8_t>(out, v, big); break;
-      case DType::UInt8: append_value<uint8_t>(out, v, big); break;
-      case DType::Int16: append_value<int16_t>(out, v, big); break;
-      case DType::UInt16: append_value<uint16_t>(out, v, big); break;
-      case DType::Int32: append_value<int32_t>(out, v, big); break;
-      case DType::UInt32: append_value<uint32_t>(out, v, big); break;
-      case DType::Float32: append_value<float>(out, v, big); break;
-      case DType::Float64: append_value<double>(out, v, big); break;
-    }
-  }
-  return out;
-}
-
-std::string error_of(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const Error& e) {
-    return e.what();
-  }
-  return "(no error)";
-}
 
 // A raw volume of one dtype and byte order: values spread over most of the type's range, or for
 // floats around an offset far from zero (where the pivot in load_volume matters for the rounding).

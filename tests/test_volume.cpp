@@ -1,10 +1,7 @@
 #include <gtest/gtest.h>
 #include <hwy/targets.h>
 #include "vnr/core/rng.h"
-#include <unistd.h>
-#include <zlib.h>
 #include <algorithm>
-#include <atomic>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
@@ -17,68 +14,13 @@
 #include "vnr/core/json.h"
 #include "vnr/volume/volume.h"
 #include "vnr/volume/writer.h"
+#include "test_support.h"
 
 using namespace vnr;
+using namespace vnr::test;
 namespace fs = std::filesystem;
 
 namespace {
-
-// A fresh directory per test, removed afterwards.
-class TmpDir {
-public:
-  TmpDir() {
-    static std::atomic<int> counter{0};
-    const auto* info = testing::UnitTest::GetInstance()->current_test_info();
-    path_ = fs::path(testing::TempDir()) /
-            ("vnr_vol_" + std::to_string(::getpid()) + "_" + std::to_string(counter++) + "_" + info->name());
-    fs::remove_all(path_);
-    fs::create_directories(path_);
-  }
-  ~TmpDir() { fs::remove_all(path_); }
-  std::string operator/(const std::string& name) const { return (path_ / name).string(); }
-  std::string str() const { return path_.string(); }
-
-private:
-  fs::path path_;
-};
-
-void write_bytes(const std::string& path, const std::string& bytes) {
-  std::ofstream f(path, std::ios::binary);
-  f.write(bytes.data(), std::streamsize(bytes.size()));
-}
-
-void write_gzip(const std::string& path, const std::string& bytes, const char* mode = "wb") {
-  gzFile g = gzopen(path.c_str(), mode);
-  ASSERT_NE(g, nullptr);
-  ASSERT_EQ(gzwrite(g, bytes.data(), unsigned(bytes.size())), int(bytes.size()));
-  gzclose(g);
-}
-
-template <typename T>
-void append_value(std::string& out, double v, bool big) {
-  T t = T(v);
-  unsigned char b[sizeof(T)];
-  std::memcpy(b, &t, sizeof(T));
-  if (big) std::reverse(b, b + sizeof(T));
-  out.append(reinterpret_cast<const char*>(b), sizeof(T));
-}
-
-std::string encode(DType t, const std::vector<double>& values, bool big = false) {
-  std::string out;
-  for (double v : values) {
-    switch (t) {
-      case DType::Int8: append_value<int8_t>(out, v, big); break;
-      case DType::UInt8: append_value<uint8_t>(out, v, big); break;
-      case DType::Int16: append_value<int16_t>(out, v, big); break;
-      case DType::UInt16: append_value<uint16_t>(out, v, big); break;
-      case DType::Int32: append_value<int32_t>(out, v, big); break;
-      case DType::UInt32: append_value<uint32_t>(out, v, big); break;
-      case DType::Float32: append_value<float>(out, v, big); break;
-      case DType::Float64: append_value<double>(out, v, big); break;
-    }
-  }
-  return out;
-}
 
 // Values exercising each type's range (signed types go negative; wide types sit far from zero
 // with a narrow spread, which float storage must not wash out).
@@ -99,21 +41,6 @@ std::vector<double> test_values(DType t, size_t n) {
   }
   return v;
 }
-
-template <typename F>
-std::string error_of(F&& f) {
-  try {
-    f();
-  } catch (const Error& e) {
-    std::string m = e.what();
-    EXPECT_EQ(m.find('\n'), std::string::npos) << "message must be one line: " << m;
-    return m;
-  }
-  ADD_FAILURE() << "expected a vnr::Error";
-  return "";
-}
-
-#define EXPECT_HAS(msg, sub) EXPECT_NE((msg).find(sub), std::string::npos) << "message: " << (msg)
 
 void expect_normalised(const Volume& vol, const std::vector<double>& values, double tol = 1e-6) {
   ASSERT_EQ(vol.data.size(), values.size());
@@ -222,7 +149,7 @@ TEST(Volume, SidecarValueRangeAndFourDimsTimestep) {
   for (int bad : {3, -1}) {
     RawOptions ob;
     ob.timestep = bad;
-    std::string m = error_of([&] { describe_volume(dir / "series.json", ob); });
+    std::string m = one_line_error_of([&] { describe_volume(dir / "series.json", ob); });
     EXPECT_HAS(m, "timestep " + std::to_string(bad) + " out of range");
     EXPECT_HAS(m, "3 timesteps");
   }
@@ -298,7 +225,7 @@ TEST(Volume, SceneFractionTrapUnnormalizedKeyAndFileNameArray) {
   // None of the listed files exists.
   write_bytes(dir / "missing.json", R"({"dataSource": [{"fileName": ["nope1.raw", "/nope2.raw"],
       "dimensions": {"x": 5, "y": 7, "z": 3}, "type": "FLOAT"}]})");
-  std::string m = error_of([&] { describe_volume(dir / "missing.json"); });
+  std::string m = one_line_error_of([&] { describe_volume(dir / "missing.json"); });
   EXPECT_HAS(m, "not found");
   EXPECT_HAS(m, "nope1.raw");
   EXPECT_HAS(m, "/nope2.raw");
@@ -330,7 +257,7 @@ TEST(Volume, SceneDivaAndTimeSeries) {
   VolumeDesc ds = describe_volume(dir / "series.json", o);
   EXPECT_EQ(ds.path, dir / "b.raw");
   expect_normalised(load_volume(ds), b);
-  EXPECT_HAS(error_of([&] { write_bytes(dir / "bad.json", R"({"version": "VIDI4D", "dataSource": []})");
+  EXPECT_HAS(one_line_error_of([&] { write_bytes(dir / "bad.json", R"({"version": "VIDI4D", "dataSource": []})");
                             describe_volume(dir / "bad.json"); }),
              "VIDI4D");
 }
@@ -340,7 +267,7 @@ TEST(Volume, ShippedSceneExamplesParse) {
   // on parsing (comments, extra keys).
   const std::string ex = std::string(VNR_SHARED_DIR) + "/reference/instantvnr-formats/examples/scene_skull.json";
   if (!file_exists(ex)) GTEST_SKIP() << "../shared/reference absent";
-  std::string m = error_of([&] { describe_volume(ex); });
+  std::string m = one_line_error_of([&] { describe_volume(ex); });
   EXPECT_HAS(m, "CThead.dat");
   EXPECT_HAS(m, "not found");
 }
@@ -428,44 +355,44 @@ TEST(Volume, NrrdGzipAttachedDetachedAndTime) {
   expect_normalised(load_volume(describe_volume(dir / "one.nrrd")), values);
   write_bytes(dir / "vec.nrrd", nrrd_header("float", "3 5 7 3", "encoding: raw\nkinds: 3-vector space space space\n", 4) +
                                     "\n" + encode(DType::Float32, two));
-  EXPECT_HAS(error_of([&] { describe_volume(dir / "vec.nrrd"); }), "not supported");
+  EXPECT_HAS(one_line_error_of([&] { describe_volume(dir / "vec.nrrd"); }), "not supported");
 
   // Decompressed size checks: too short and too long, with both byte counts.
   std::string data = encode(DType::Float32, values);
   write_gzip(dir / "short.gz", data.substr(0, data.size() - 8));
   write_bytes(dir / "short.nhdr", nrrd_header("float", "5 7 3", "encoding: gzip\ndata file: short.gz\n"));
-  std::string m = error_of([&] { load_volume(describe_volume(dir / "short.nhdr")); });
+  std::string m = one_line_error_of([&] { load_volume(describe_volume(dir / "short.nhdr")); });
   EXPECT_HAS(m, "decompresses to " + std::to_string(data.size() - 8) + " bytes");
   EXPECT_HAS(m, "expected " + std::to_string(data.size()));
   write_gzip(dir / "long.gz", data + "extra");
   write_bytes(dir / "long.nhdr", nrrd_header("float", "5 7 3", "encoding: gzip\ndata file: long.gz\n"));
-  m = error_of([&] { load_volume(describe_volume(dir / "long.nhdr")); });
+  m = one_line_error_of([&] { load_volume(describe_volume(dir / "long.nhdr")); });
   EXPECT_HAS(m, "decompresses to " + std::to_string(data.size() + 5) + " bytes");
   EXPECT_HAS(m, "expected " + std::to_string(data.size()));
 
   // Labelled gzip but not compressed.
   write_bytes(dir / "fake.nrrd", hdr + data);
-  EXPECT_HAS(error_of([&] { describe_volume(dir / "fake.nrrd"); }), "not a gzip stream");
+  EXPECT_HAS(one_line_error_of([&] { describe_volume(dir / "fake.nrrd"); }), "not a gzip stream");
 }
 
 TEST(Volume, NrrdMalformedHeaders) {
   TmpDir dir;
   write_bytes(dir / "nomagic.nrrd", "NRRX0004\ntype: float\n\n");
-  EXPECT_HAS(error_of([&] { describe_volume(dir / "nomagic.nrrd"); }), "not a NRRD file");
+  EXPECT_HAS(one_line_error_of([&] { describe_volume(dir / "nomagic.nrrd"); }), "not a NRRD file");
   write_bytes(dir / "nosizes.nrrd", "NRRD0004\ntype: float\ndimension: 3\nencoding: raw\n\n");
-  EXPECT_HAS(error_of([&] { describe_volume(dir / "nosizes.nrrd"); }), "missing 'sizes'");
+  EXPECT_HAS(one_line_error_of([&] { describe_volume(dir / "nosizes.nrrd"); }), "missing 'sizes'");
   write_bytes(dir / "mismatch.nrrd", "NRRD0004\ntype: float\ndimension: 3\nsizes: 4 4\nencoding: raw\n\n");
-  EXPECT_HAS(error_of([&] { describe_volume(dir / "mismatch.nrrd"); }), "dimension 3 but 2 sizes");
+  EXPECT_HAS(one_line_error_of([&] { describe_volume(dir / "mismatch.nrrd"); }), "dimension 3 but 2 sizes");
   write_bytes(dir / "garbage.nrrd", "NRRD0004\ntype float\n\n");
-  EXPECT_HAS(error_of([&] { describe_volume(dir / "garbage.nrrd"); }), "malformed NRRD header line 2");
+  EXPECT_HAS(one_line_error_of([&] { describe_volume(dir / "garbage.nrrd"); }), "malformed NRRD header line 2");
   write_bytes(dir / "enc.nrrd", "NRRD0004\ntype: float\ndimension: 3\nsizes: 1 1 1\nencoding: bzip2\n\n");
-  EXPECT_HAS(error_of([&] { describe_volume(dir / "enc.nrrd"); }), "encoding 'bzip2' is not supported");
+  EXPECT_HAS(one_line_error_of([&] { describe_volume(dir / "enc.nrrd"); }), "encoding 'bzip2' is not supported");
   write_bytes(dir / "type.nrrd", "NRRD0004\ntype: complex\ndimension: 3\nsizes: 1 1 1\nencoding: raw\n\n");
-  EXPECT_HAS(error_of([&] { describe_volume(dir / "type.nrrd"); }), "unknown data type 'complex'");
+  EXPECT_HAS(one_line_error_of([&] { describe_volume(dir / "type.nrrd"); }), "unknown data type 'complex'");
   write_bytes(dir / "nodata.nhdr", nrrd_header("float", "5 7 3", "encoding: raw\ndata file: gone.raw\n"));
-  EXPECT_HAS(error_of([&] { describe_volume(dir / "nodata.nhdr"); }), "gone.raw");
+  EXPECT_HAS(one_line_error_of([&] { describe_volume(dir / "nodata.nhdr"); }), "gone.raw");
   write_bytes(dir / "short.nrrd", nrrd_header("uint8", "5 7 3", "encoding: raw\n") + "\n" + std::string(100, 'x'));
-  EXPECT_HAS(error_of([&] { describe_volume(dir / "short.nrrd"); }), "expected");
+  EXPECT_HAS(one_line_error_of([&] { describe_volume(dir / "short.nrrd"); }), "expected");
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -474,78 +401,78 @@ TEST(Volume, NrrdMalformedHeaders) {
 TEST(Volume, SizeMismatchNamesExpectedAndActualBytes) {
   TmpDir dir;
   write_bytes(dir / "a.raw", std::string(1000, '\0'));
-  std::string m = error_of([&] { describe_volume(dir / "a.raw", raw_opts({16, 8, 8}, "uint8")); });
+  std::string m = one_line_error_of([&] { describe_volume(dir / "a.raw", raw_opts({16, 8, 8}, "uint8")); });
   EXPECT_HAS(m, "a.raw' has 1000 bytes, expected 1024 (16x8x8 uint8 + offset 0)");
   write_bytes(dir / "b.raw", std::string(2050, '\0'));
   RawOptions o = raw_opts({16, 8, 8}, "uint16");
-  m = error_of([&] { describe_volume(dir / "b.raw", o); });
+  m = one_line_error_of([&] { describe_volume(dir / "b.raw", o); });
   EXPECT_HAS(m, "has 2050 bytes, expected 2048 (16x8x8 uint16 + offset 0)");
   o.offset = 4;
-  m = error_of([&] { describe_volume(dir / "b.raw", o); });
+  m = one_line_error_of([&] { describe_volume(dir / "b.raw", o); });
   EXPECT_HAS(m, "has 2050 bytes, expected 2052 (16x8x8 uint16 + offset 4)");
   o.offset = 2;
   EXPECT_NO_THROW(describe_volume(dir / "b.raw", o));
 
   // Sidecar with 4-D dims: the whole series must be there.
   write_bytes(dir / "s.json", R"({"file": "b.raw", "dims": [16, 8, 8, 2], "dtype": "uint8"})");
-  m = error_of([&] { describe_volume(dir / "s.json"); });
+  m = one_line_error_of([&] { describe_volume(dir / "s.json"); });
   EXPECT_HAS(m, "has 2050 bytes, expected 2048 (16x8x8x2 uint8 + offset 0)");
 }
 
 TEST(Volume, MissingFilesAndMalformedDescriptors) {
   TmpDir dir;
-  std::string m = error_of([&] { describe_volume(dir / "nope.raw", raw_opts({1, 1, 1}, "uint8")); });
+  std::string m = one_line_error_of([&] { describe_volume(dir / "nope.raw", raw_opts({1, 1, 1}, "uint8")); });
   EXPECT_HAS(m, "nope.raw");
   EXPECT_HAS(m, "No such file");
   write_bytes(dir / "s.json", R"({"file": "gone.raw", "dims": [2, 2, 2], "dtype": "uint8"})");
-  m = error_of([&] { describe_volume(dir / "s.json"); });
+  m = one_line_error_of([&] { describe_volume(dir / "s.json"); });
   EXPECT_HAS(m, dir / "gone.raw");
   EXPECT_HAS(m, "s.json");
-  EXPECT_HAS(error_of([&] { describe_volume(dir.str()); }), "is a directory");
+  EXPECT_HAS(one_line_error_of([&] { describe_volume(dir.str()); }), "is a directory");
 
   write_bytes(dir / "bad.json", R"({"file": "x.raw", "dims": [2, 2, 2], )");
-  EXPECT_HAS(error_of([&] { describe_volume(dir / "bad.json"); }), "invalid JSON");
+  EXPECT_HAS(one_line_error_of([&] { describe_volume(dir / "bad.json"); }), "invalid JSON");
   write_bytes(dir / "neither.json", R"({"hello": 1})");
-  EXPECT_HAS(error_of([&] { describe_volume(dir / "neither.json"); }), "neither a vnr sidecar");
+  EXPECT_HAS(one_line_error_of([&] { describe_volume(dir / "neither.json"); }), "neither a vnr sidecar");
   write_bytes(dir / "dims.json", R"({"file": "x.raw", "dims": [2, 2], "dtype": "uint8"})");
-  EXPECT_HAS(error_of([&] { describe_volume(dir / "dims.json"); }), "3 or 4 integers");
+  EXPECT_HAS(one_line_error_of([&] { describe_volume(dir / "dims.json"); }), "3 or 4 integers");
   write_bytes(dir / "nodtype.json", R"({"file": "x.raw", "dims": [2, 2, 2]})");
-  EXPECT_HAS(error_of([&] { describe_volume(dir / "nodtype.json"); }), "missing \"dtype\"");
+  EXPECT_HAS(one_line_error_of([&] { describe_volume(dir / "nodtype.json"); }), "missing \"dtype\"");
   write_bytes(dir / "frac.json", R"({"file": "x.raw", "dims": [2, 2.5, 2], "dtype": "uint8"})");
-  EXPECT_HAS(error_of([&] { describe_volume(dir / "frac.json"); }), "must be an integer");
+  EXPECT_HAS(one_line_error_of([&] { describe_volume(dir / "frac.json"); }), "must be an integer");
 
   write_bytes(dir / "x.raw", std::string(8, '\0'));
-  m = error_of([&] { describe_volume(dir / "x.raw"); });
+  m = one_line_error_of([&] { describe_volume(dir / "x.raw"); });
   EXPECT_HAS(m, "--dims X,Y,Z and --dtype T are required for raw file '" + dir / "x.raw" + "'");
   RawOptions only_dims;
   only_dims.dims = Int3{2, 2, 2};
-  EXPECT_HAS(error_of([&] { describe_volume(dir / "x.raw", only_dims); }), "are required for raw file");
-  m = error_of([&] { describe_volume(dir / "x.raw", raw_opts({2, 2, 2}, "complex64")); });
+  EXPECT_HAS(one_line_error_of([&] { describe_volume(dir / "x.raw", only_dims); }), "are required for raw file");
+  m = one_line_error_of([&] { describe_volume(dir / "x.raw", raw_opts({2, 2, 2}, "complex64")); });
   EXPECT_HAS(m, "unknown data type 'complex64'");
   EXPECT_HAS(m, "allowed: int8, uint8");
   RawOptions e = raw_opts({2, 2, 2}, "uint8");
   e.endian = "middle";
-  EXPECT_HAS(error_of([&] { describe_volume(dir / "x.raw", e); }), "unknown --endian 'middle'");
+  EXPECT_HAS(one_line_error_of([&] { describe_volume(dir / "x.raw", e); }), "unknown --endian 'middle'");
   RawOptions r = raw_opts({2, 2, 2}, "uint8");
   r.range_lo = 5;
   r.range_hi = 1;
-  EXPECT_HAS(error_of([&] { describe_volume(dir / "x.raw", r); }), "lo > hi");
+  EXPECT_HAS(one_line_error_of([&] { describe_volume(dir / "x.raw", r); }), "lo > hi");
 }
 
 TEST(Volume, BadDims) {
   TmpDir dir;
   write_bytes(dir / "x.raw", std::string(8, '\0'));
-  EXPECT_HAS(error_of([&] { describe_volume(dir / "x.raw", raw_opts({0, 2, 2}, "uint8")); }),
+  EXPECT_HAS(one_line_error_of([&] { describe_volume(dir / "x.raw", raw_opts({0, 2, 2}, "uint8")); }),
              "dims 0x2x2 must all be positive");
   write_bytes(dir / "neg.json", R"({"file": "x.raw", "dims": [2, -2, 2], "dtype": "uint8"})");
-  EXPECT_HAS(error_of([&] { describe_volume(dir / "neg.json"); }), "dims 2x-2x2 must all be positive");
+  EXPECT_HAS(one_line_error_of([&] { describe_volume(dir / "neg.json"); }), "dims 2x-2x2 must all be positive");
   const int64_t big = int64_t(1) << 32;
-  EXPECT_HAS(error_of([&] { describe_volume(dir / "x.raw", raw_opts({big, big, big}, "uint8")); }),
+  EXPECT_HAS(one_line_error_of([&] { describe_volume(dir / "x.raw", raw_opts({big, big, big}, "uint8")); }),
              "overflow");
-  EXPECT_HAS(error_of([&] { describe_volume(dir / "x.raw", raw_opts({1 << 20, 1 << 20, 2}, "uint8")); }),
+  EXPECT_HAS(one_line_error_of([&] { describe_volume(dir / "x.raw", raw_opts({1 << 20, 1 << 20, 2}, "uint8")); }),
              "exceed the limit of 2^40");
   write_bytes(dir / "huge.json", R"({"file": "x.raw", "dims": [2, 2, 18446744073709551615], "dtype": "uint8"})");
-  EXPECT_HAS(error_of([&] { describe_volume(dir / "huge.json"); }), "too large");
+  EXPECT_HAS(one_line_error_of([&] { describe_volume(dir / "huge.json"); }), "too large");
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -563,7 +490,7 @@ TEST(Volume, NonFinitePolicies) {
   write_bytes(dir / "nan.raw", encode(DType::Float64, values));
   VolumeDesc d = describe_volume(dir / "nan.raw", raw_opts(kDims, "float64"));
 
-  std::string m = error_of([&] { load_volume(d); });
+  std::string m = one_line_error_of([&] { load_volume(d); });
   EXPECT_HAS(m, "nan.raw' contains 3 NaN/Inf values (first at voxel (1,2,0)); use --nan zero|clamp");
 
   // Range over finite values only: 0 .. 103.
@@ -718,8 +645,8 @@ TEST(Writer, SlabsEqualOneWriteAndErrors) {
   {
     VolumeWriter c(dir / "c.raw", d, DType::Float32);
     c.write_slices(values.data(), 2);
-    EXPECT_HAS(error_of([&] { c.commit(); }), "2 of 9 z-slices");
-    EXPECT_HAS(error_of([&] { c.write_slices(values.data(), 8); }), "exceed dims.z");
+    EXPECT_HAS(one_line_error_of([&] { c.commit(); }), "2 of 9 z-slices");
+    EXPECT_HAS(one_line_error_of([&] { c.write_slices(values.data(), 8); }), "exceed dims.z");
   }
   // Nothing is left behind by an uncommitted writer, not even a temporary.
   for (auto& e : fs::directory_iterator(dir.str())) EXPECT_EQ(e.path().filename().string().find("c."), std::string::npos) << e.path();
@@ -745,7 +672,7 @@ TEST(Synth, MarschnerLobbClosedForm) {
   for (auto& p : pts)
     EXPECT_NEAR(synth_value("marschner-lobb", p[0], p[1], p[2]),
                 ml_closed_form(2.0 * p[0] - 1, 2.0 * p[1] - 1, 2.0 * p[2] - 1), 1e-6);
-  EXPECT_HAS(error_of([] { synth_value("perlin", 0, 0, 0); }), "unknown synthetic volume 'perlin'");
+  EXPECT_HAS(one_line_error_of([] { synth_value("perlin", 0, 0, 0); }), "unknown synthetic volume 'perlin'");
 }
 
 TEST(Synth, VolumesMatchPointValuesAndSidecarRange) {
@@ -805,8 +732,8 @@ TEST(Synth, NoiseIsDeterministicSeededAndMultiScale) {
 
 TEST(Synth, RejectsBadOutputs) {
   TmpDir dir;
-  EXPECT_HAS(error_of([&] { synth_volume("noise", {4, 4, 4}, dir / "x.raw"); }), ".json sidecar path");
-  EXPECT_HAS(error_of([&] { synth_volume("noise", {0, 4, 4}, dir / "x.json"); }), "invalid dims");
+  EXPECT_HAS(one_line_error_of([&] { synth_volume("noise", {4, 4, 4}, dir / "x.raw"); }), ".json sidecar path");
+  EXPECT_HAS(one_line_error_of([&] { synth_volume("noise", {0, 4, 4}, dir / "x.json"); }), "invalid dims");
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -226,6 +226,16 @@ void add_info(CLI::App& app) {
               {"compression_ratio", vol_bytes / double(bytes)},
               {"config", n.config_json()},
               {"training", m.training}};
+    int64_t occupied = 0;
+    if (m.macrocells) {
+      for (int64_t i = 0; i < m.macrocells->count(); ++i) occupied += !m.macrocells->empty(i);
+      const Int3 cells = m.macrocells->cells;
+      j["macrocells"] = {{"cell_size", m.macrocells->cell_size},
+                         {"cells", {cells.x, cells.y, cells.z}},
+                         {"occupied", occupied}};
+    } else {
+      j["macrocells"] = nullptr;
+    }
     if (a->json) {
       std::printf("%s\n", j.dump(2).c_str());
       return;
@@ -246,6 +256,12 @@ void add_info(CLI::App& app) {
     std::printf("parameters: %llu (%s in fp16); file %s; compression ratio %.2f\n",
                 (unsigned long long)n.n_params(), human_bytes(2.0 * n.n_params()).c_str(), human_bytes(double(bytes)).c_str(),
                 vol_bytes / double(bytes));
+    if (m.macrocells)
+      std::printf("macro-cells: %lldx%lldx%lld cells of %d voxels (%lld with a value range), recorded while training\n",
+                  (long long)m.macrocells->cells.x, (long long)m.macrocells->cells.y, (long long)m.macrocells->cells.z,
+                  m.macrocells->cell_size, (long long)occupied);
+    else
+      std::printf("macro-cells: none stored (vnr render uses --macrocells grid with --volume, or off)\n");
     if (m.training.is_object()) std::printf("training: %s\n", m.training.dump().c_str());
   });
 }

@@ -2,7 +2,6 @@
 // `vnr train --preview-every N --preview-dir DIR [--preview-size WxH] [--preview-mode M] [--preview-tf TF]`:
 // renders the model as it trains into DIR/step_NNNNNN.png (vnr/online/preview.h: the online
 // training-and-rendering loop without a window).
-// Self-contained (CLI11 and libvnr only): tests/test_online.cpp compiles this file's .cpp directly.
 #include <CLI/CLI.hpp>
 #include <cstdint>
 #include <optional>
