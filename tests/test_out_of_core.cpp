@@ -378,3 +378,37 @@ TEST(OutOfCoreCli, VolumeDeletedDuringTrainingKeepsTheModel) {
   EXPECT_GE(m.training["steps"].get<int64_t>(), 5);
   EXPECT_TRUE(m.training.contains("error"));
 }
+
+// A run too short for the buffer to see the whole volume says so, with a --refresh that fixes it;
+// the expected coverage matches a simulation of uniform block draws with replacement.
+TEST(OutOfCoreCli, WarnsWhenTheRunCannotCoverTheVolume) {
+  TmpDir tmp;
+  const std::string json = tmp / "cover.json";
+  synth_volume("noise", Int3{64, 64, 64}, json, 2);
+  const std::string base = "train " + json + " -o " + (tmp / "m.vnr") +
+                           " --config small --batch 1024 --sampler outofcore --memory-budget 256KiB --block-dims 16,4,4 "
+                           "--eval-samples 0 ";
+  Result r = run(base + "--steps 100");
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_NE(r.err.find("regions never loaded are not learned; --refresh"), std::string::npos) << r.err;
+  r = run(base + "--steps 400 --refresh 30");
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_EQ(r.err.find("regions never loaded"), std::string::npos) << r.err;
+
+  VolumeDesc desc = describe_volume(json);
+  auto file = std::make_shared<RawVolumeFile>(desc, 0, 1, NonFinitePolicy::Error);
+  OutOfCoreOptions o;
+  o.block_dims = Int3{16, 4, 4};
+  o.blocks = 100;
+  o.refresh = 7;
+  OutOfCoreSampler s(file, 1, o);
+  const int64_t n = s.volume_blocks(), draws = 100 + 7 * 50;
+  std::mt19937 rng(3);
+  double mean = 0;
+  for (int trial = 0; trial < 200; ++trial) {
+    std::vector<char> seen(size_t(n), 0);
+    for (int64_t d = 0; d < draws; ++d) seen[rng() % n] = 1;
+    mean += double(std::count(seen.begin(), seen.end(), 1)) / double(n) / 200;
+  }
+  EXPECT_NEAR(s.expected_coverage(50), mean, 0.01);
+}

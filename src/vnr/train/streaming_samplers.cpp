@@ -97,6 +97,10 @@ uint64_t OutOfCoreSampler::bytes_held() const {
   return b;
 }
 
+double OutOfCoreSampler::expected_coverage(int64_t steps) const {
+  return 1.0 - std::exp(-(double(R_) + double(S_) * double(steps)) / double(n_blocks_));
+}
+
 Int3 OutOfCoreSampler::block_origin(int64_t block) const {
   const int64_t bx = block % grid_.x, by = (block / grid_.x) % grid_.y, bz = block / (grid_.x * grid_.y);
   return Int3{bx * bd_.x, by * bd_.y, bz * bd_.z};

@@ -44,6 +44,10 @@ public:
               float* target) const override;
 
   int64_t blocks() const { return R_; }
+  int64_t volume_blocks() const { return n_blocks_; }  // blocks the volume is divided into
+  // Expected fraction of the volume's blocks loaded at least once after `steps` steps:
+  // 1 - exp(-(R + S * steps) / volume_blocks) (blocks are drawn uniformly with replacement).
+  double expected_coverage(int64_t steps) const;
   int64_t refresh() const { return S_; }
   Int3 block_dims() const { return bd_; }
   uint64_t bytes_held() const;     // everything this sampler allocated (≤ the budget)
