@@ -412,3 +412,15 @@ TEST(OutOfCoreCli, WarnsWhenTheRunCannotCoverTheVolume) {
   }
   EXPECT_NEAR(s.expected_coverage(50), mean, 0.01);
 }
+
+// Compressed data cannot be read at random offsets: refused before any pass over the data.
+TEST(OutOfCoreCli, CompressedDataIsRefusedUpFront) {
+  TmpDir tmp;
+  const std::string nrrd = tmp / "g.nrrd";
+  std::string header = "NRRD0004\ntype: uint8\ndimension: 3\nsizes: 8 8 8\nencoding: gzip\n\n";
+  write_gzip(tmp / "body.gz", std::string(512, '\x05'));
+  write_bytes(nrrd, header + read_file(tmp / "body.gz"));
+  for (const char* s : {"outofcore", "mmap"})
+    expect_error("train " + nrrd + " -o " + (tmp / "m.vnr") + " --sampler " + s,
+                 std::string("--sampler ") + s + " reads voxels at random offsets");
+}

@@ -67,6 +67,11 @@ TrainingData open_training_data(const TrainArgs& a, const VolumeDesc& desc, uint
     return t;
   }
   if (t.kind != "outofcore" && t.kind != "mmap") fail("unknown --sampler '{}' (allowed: incore, outofcore, mmap)", t.kind);
+  // Before any pass over the data: these samplers read at random offsets.
+  if (desc.encoding != "raw")
+    fail("'{}' is {}-encoded, and --sampler {} reads voxels at random offsets, which needs uncompressed data (raw, "
+         "or NRRD with 'encoding: raw')",
+         desc.path, desc.encoding, t.kind);
   // The value range: the descriptor's, or one streaming pass (the volume is never loaded).
   const bool known_range = desc.range_lo && desc.range_hi;
   Progress scan_bar("value range", 1.0, a.quiet || known_range);

@@ -48,10 +48,10 @@ OutOfCoreSampler::OutOfCoreSampler(std::shared_ptr<const RawVolumeFile> file, ui
     }
   }
   if (R_ < 1 || R_ + S_ > fit)
-    fail("the out-of-core buffer does not fit the memory budget of {:.1f} MiB: {} blocks of {}x{}x{} voxels "
-         "(+{} being loaded) need {:.1f} MiB; raise --memory-budget or lower --blocks/--refresh",
-         double(opts.memory_budget) / (1 << 20), std::max<int64_t>(R_, 1), bd_.x, bd_.y, bd_.z, S_,
-         double(uint64_t(std::max<int64_t>(R_, 1) + S_) * block_bytes + fixed) / (1 << 20));
+    fail("the out-of-core buffer does not fit the memory budget of {:.1f} KiB: {} blocks of {}x{}x{} voxels "
+         "(+{} being loaded) need {:.1f} KiB; raise --memory-budget or lower --blocks/--refresh/--block-dims",
+         double(opts.memory_budget) / 1024, std::max<int64_t>(R_, 1), bd_.x, bd_.y, bd_.z, S_,
+         double(uint64_t(std::max<int64_t>(R_, 1) + S_) * block_bytes + fixed) / 1024);
   if (S_ > R_) fail("--refresh ({}) cannot exceed the number of blocks ({})", S_, R_);
   if (R_ + S_ > INT32_MAX) fail("too many blocks ({})", R_ + S_);
 
