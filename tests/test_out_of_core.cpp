@@ -424,3 +424,29 @@ TEST(OutOfCoreCli, CompressedDataIsRefusedUpFront) {
     expect_error("train " + nrrd + " -o " + (tmp / "m.vnr") + " --sampler " + s,
                  std::string("--sampler ") + s + " reads voxels at random offsets");
 }
+
+// --grid-lr-scale: the configured rate by default, the buffer's share of the volume (at least 0.1)
+// with auto, or a given factor; the model records the rate it was trained with.
+TEST(OutOfCoreCli, GridLearningRateScale) {
+  TmpDir tmp;
+  const std::string json = tmp / "lr.json", model = tmp / "lr.vnr";
+  synth_volume("noise", Int3{64, 64, 64}, json, 2);
+  const std::string base = "train " + json + " -o " + model +
+                           " --config small --batch 1024 --steps 2 --sampler outofcore --block-dims 16,4,4 "
+                           "--eval-samples 0 -q ";
+  auto factor = [&]() {
+    Json j = Json::parse(run("info --json " + model).out);
+    return j["config"]["optimizer"]["nested"]["non_matrix_learning_rate_factor"].get<double>();
+  };
+  ASSERT_EQ(run(base + "--memory-budget 512KiB").code, 0);
+  EXPECT_NEAR(factor(), 1.0, 1e-6);
+  // 512 KiB holds 195 blocks of 16x4x4 (18x6x6 stored): 195 * 256 / 64^3 = 0.19 of the volume.
+  ASSERT_EQ(run(base + "--memory-budget 512KiB --grid-lr-scale auto").code, 0);
+  EXPECT_NEAR(factor(), 195.0 * 256 / (64 * 64 * 64), 0.01);
+  ASSERT_EQ(run(base + "--memory-budget 128KiB --grid-lr-scale auto").code, 0);  // 0.05: the floor
+  EXPECT_NEAR(factor(), 0.1, 1e-6);
+  ASSERT_EQ(run(base + "--memory-budget 512KiB --grid-lr-scale 0.5").code, 0);
+  EXPECT_NEAR(factor(), 0.5, 1e-6);
+  expect_error(base + "--memory-budget 512KiB --grid-lr-scale fast", "--grid-lr-scale");
+  expect_error("train " + json + " -o " + model + " --grid-lr-scale 0.5", "--sampler outofcore");
+}

@@ -21,6 +21,7 @@ struct TrainArgs {
   // Samplers (issue 4): incore | outofcore | mmap; "" = incore when the volume fits the budget.
   std::string sampler, memory_budget, block_dims;
   int64_t blocks = 0, refresh = 0;  // 0 = defaults scaled to the budget
+  std::string grid_lr_scale = "1";  // outofcore: factor on the grid's learning rate ("auto" or a number)
   int64_t eval_samples = int64_t(1) << 20;  // voxels of the final PSNR estimate when the volume is not in memory
   int64_t checkpoint_every = 0;     // steps between atomic model writes (0: only at the end)
   // Time series: "" = one volume; "all", "A-B" or "A,B,C" = those timesteps.

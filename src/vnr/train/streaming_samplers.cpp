@@ -97,6 +97,10 @@ uint64_t OutOfCoreSampler::bytes_held() const {
   return b;
 }
 
+double OutOfCoreSampler::resident_fraction() const {
+  return std::min(1.0, double(R_) * double(bd_.count()) / double(dims_.count()));
+}
+
 double OutOfCoreSampler::expected_coverage(int64_t steps) const {
   return 1.0 - std::exp(-(double(R_) + double(S_) * double(steps)) / double(n_blocks_));
 }

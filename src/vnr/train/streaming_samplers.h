@@ -45,6 +45,8 @@ public:
 
   int64_t blocks() const { return R_; }
   int64_t volume_blocks() const { return n_blocks_; }  // blocks the volume is divided into
+  // Fraction of the volume's voxels the buffer holds at a time (block interiors, within the volume).
+  double resident_fraction() const;
   // Expected fraction of the volume's blocks loaded at least once after `steps` steps:
   // 1 - exp(-(R + S * steps) / volume_blocks) (blocks are drawn uniformly with replacement).
   double expected_coverage(int64_t steps) const;
