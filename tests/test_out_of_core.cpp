@@ -57,6 +57,16 @@ Samples draw(const Sampler& s, uint64_t seed, uint64_t step, int n) {
   return o;
 }
 
+// Options for a buffer of `blocks` blocks of `bd` voxels, `refresh` replaced per step.
+OutOfCoreOptions buffer_of(Int3 bd, int64_t blocks, int64_t refresh, int io_threads = 16) {
+  OutOfCoreOptions o;
+  o.block_dims = bd;
+  o.blocks = blocks;
+  o.refresh = refresh;
+  o.io_threads = io_threads;
+  return o;
+}
+
 }  // namespace
 
 TEST(OutOfCore, DefaultBlockShapeHoldsAbout64KiB) {
@@ -81,11 +91,7 @@ TEST(OutOfCore, BlockLookupEqualsFullVolumeIncludingGhostVoxels) {
   VolumeDesc desc = describe_volume(json);
   Volume vol = load_volume(desc);
   auto file = std::make_shared<RawVolumeFile>(desc, vol.lo, vol.hi, NonFinitePolicy::Error);
-  OutOfCoreOptions o;
-  o.block_dims = Int3{8, 5, 4};
-  o.blocks = 40;
-  o.refresh = 6;
-  o.io_threads = 3;
+  OutOfCoreOptions o = buffer_of(Int3{8, 5, 4}, 40, 6, 3);
   OutOfCoreSampler s(file, 9, o);
   const GridView g = view_of(vol);
   int64_t near_face = 0, total = 0;
@@ -116,11 +122,7 @@ TEST(OutOfCore, ReadsStayInsideTheTimestepsBytesAndSamplesAreDeterministic) {
     ro.timestep = t;
     VolumeDesc desc = describe_volume(json, ro);
     auto file = std::make_shared<RawVolumeFile>(desc, 0, 65535, NonFinitePolicy::Error);
-    OutOfCoreOptions o;
-    o.block_dims = Int3{16, 4, 4};
-    o.blocks = 30;
-    o.refresh = 5;
-    o.io_threads = 1;
+    OutOfCoreOptions o = buffer_of(Int3{16, 4, 4}, 30, 5, 1);
     OutOfCoreSampler a(file, 3, o);
     o.io_threads = 7;
     OutOfCoreSampler b(file, 3, o);
@@ -308,10 +310,7 @@ TEST(OutOfCore, FileThatChangesOrDisappearsIsAClearError) {
     const std::string json = write_u16_volume("change_" + what, d);
     VolumeDesc desc = describe_volume(json);
     auto file = std::make_shared<RawVolumeFile>(desc, 0, 65535, NonFinitePolicy::Error);
-    OutOfCoreOptions o;
-    o.block_dims = Int3{16, 4, 4};
-    o.blocks = 8;
-    o.refresh = 2;
+    OutOfCoreOptions o = buffer_of(Int3{16, 4, 4}, 8, 2);
     OutOfCoreSampler s(file, 1, o);
     MmapSampler m(std::make_shared<MappedVolume>(desc, 0, 65535, NonFinitePolicy::Error));
     s.begin_step(0);
@@ -397,10 +396,7 @@ TEST(OutOfCoreCli, WarnsWhenTheRunCannotCoverTheVolume) {
 
   VolumeDesc desc = describe_volume(json);
   auto file = std::make_shared<RawVolumeFile>(desc, 0, 1, NonFinitePolicy::Error);
-  OutOfCoreOptions o;
-  o.block_dims = Int3{16, 4, 4};
-  o.blocks = 100;
-  o.refresh = 7;
+  OutOfCoreOptions o = buffer_of(Int3{16, 4, 4}, 100, 7);
   OutOfCoreSampler s(file, 1, o);
   const int64_t n = s.volume_blocks(), draws = 100 + 7 * 50;
   std::mt19937 rng(3);
