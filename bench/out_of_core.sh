@@ -15,9 +15,9 @@ BUDGET=${4:-256MiB}
 VNR=${VNR:-$(dirname "$0")/../build/vnr}
 mkdir -p "$DIR"
 VOL="$DIR/big.json"
-if [ ! -f "$VOL" ]; then
+if [ ! -f "$VOL" ] || [ ! -f "$DIR/big.raw" ]; then
   echo "generating $DIMS float32 noise volume in $DIR ..."
-  "$VNR" synth noise --dims "$DIMS" -o "$VOL"
+  "$VNR" synth noise --dims "$DIMS" -o "$VOL" --force
 fi
 drop_caches() {
   sync
