@@ -16,6 +16,7 @@
 #include "vnr/train/model_io.h"
 #include "vnr/train/streaming_samplers.h"
 #include "vnr/train/trainer.h"
+#include "vnr/volume/raw_access.h"
 #include "vnr/volume/stream.h"
 
 namespace vnr::cli {
@@ -69,10 +70,7 @@ TrainingData open_training_data(const TrainArgs& a, const VolumeDesc& desc, uint
   }
   if (t.kind != "outofcore" && t.kind != "mmap") fail("unknown --sampler '{}' (allowed: incore, outofcore, mmap)", t.kind);
   // Before any pass over the data: these samplers read at random offsets.
-  if (desc.encoding != "raw")
-    fail("'{}' is {}-encoded, and --sampler {} reads voxels at random offsets, which needs uncompressed data (raw, "
-         "or NRRD with 'encoding: raw')",
-         desc.path, desc.encoding, t.kind);
+  require_random_access(desc, "--sampler " + t.kind);
   // The value range: the descriptor's, or one streaming pass (the volume is never loaded).
   const bool known_range = desc.range_lo && desc.range_hi;
   Progress scan_bar("value range", 1.0, a.quiet || known_range);
@@ -149,16 +147,14 @@ Json scale_grid_learning_rate(Json config, const TrainArgs& a, const OutOfCoreSa
       fail("--grid-lr-scale expects auto or a positive number, got '{}'", a.grid_lr_scale);
   }
   if (scale == 1.0) return config;
-  Json c = ModelConfig::from_json(config).to_json();
-  Json& adam = c["optimizer"].contains("nested") ? c["optimizer"]["nested"] : c["optimizer"];
-  const double factor = adam["non_matrix_learning_rate_factor"].get<double>() * scale;
-  adam["non_matrix_learning_rate_factor"] = factor;
+  ModelConfig c = ModelConfig::from_json(config);
+  c.adam.non_matrix_learning_rate_factor *= float(scale);
   if (!a.quiet)
     std::fprintf(stderr,
                  "out-of-core: the buffer holds %.1f%% of the volume; grid learning rate scaled by %.3g "
                  "(--grid-lr-scale %s)\n",
                  100 * s.resident_fraction(), scale, a.grid_lr_scale.c_str());
-  return c;
+  return c.to_json();
 }
 
 void run_train(const TrainArgs& a) {
@@ -204,12 +200,12 @@ void run_train(const TrainArgs& a) {
   if (preview_opts) preview = std::make_unique<TrainPreview>(*preview_opts, trainer, data.dims);
   double preview_seconds = 0;  // left out of the training time and samples/s
   std::vector<double> step_seconds;
-  auto training_summary = [&](int64_t done, double seconds, float loss) {
-    Json j = {{"steps", done},          {"seconds", seconds}, {"interrupted", bool(g_interrupted)},
-              {"batch", a.batch},       {"seed", a.seed},     {"final_loss", loss},
-              {"threads", num_threads()}, {"sampler", data.kind}};
+  // What a saved model records of its training so far (checkpoints, an aborted run, the end).
+  auto record_training = [&](int64_t done, double seconds, float loss) {
+    model.training = {{"steps", done},          {"seconds", seconds}, {"interrupted", bool(g_interrupted)},
+                      {"batch", a.batch},       {"seed", a.seed},     {"final_loss", loss},
+                      {"threads", num_threads()}, {"sampler", data.kind}};
     if (trainer.has_online_ranges()) model.macrocells = trainer.online_ranges();
-    return j;
   };
   const bool by_time = a.seconds > 0 && a.steps < 0;
   Progress bar("train", by_time ? a.seconds : double(steps), a.quiet);
@@ -231,7 +227,7 @@ void run_train(const TrainArgs& a) {
       if (data.out_of_core) extra += fmt::format(" io wait {:.1f}s", data.out_of_core->io_wait_seconds());
       bar.update(by_time ? el : double(done), extra);
       if (a.checkpoint_every > 0 && done % a.checkpoint_every == 0 && done < steps) {
-        model.training = training_summary(done, seconds_since(t0), loss);
+        record_training(done, el, loss);
         model.training["checkpoint"] = true;
         save_model(a.output, model);
       }
@@ -242,7 +238,7 @@ void run_train(const TrainArgs& a) {
     std::signal(SIGINT, previous == SIG_ERR ? SIG_DFL : previous);
     bar.finish();
     if (done == 0) throw;
-    model.training = training_summary(done, seconds_since(t0), loss);
+    record_training(done, seconds_since(t0) - preview_seconds, loss);
     model.training["error"] = e.what();
     save_model(a.output, model);
     fail("{}; the model after {} steps was saved to {} (not evaluated)", e.what(), done, a.output);
@@ -257,7 +253,7 @@ void run_train(const TrainArgs& a) {
 
   // Evaluation: exact over the volume in memory; a volume that is not in memory gets a PSNR
   // estimate from random voxels (a full pass can take longer than the training did).
-  model.training = training_summary(done, train_seconds, loss);
+  record_training(done, train_seconds, loss);
   Json eval_json;
   double psnr, max_err, max_err_orig;
   std::optional<double> ssim;

@@ -15,6 +15,13 @@
 
 namespace vnr {
 
+void require_random_access(const VolumeDesc& desc, const std::string& what, const std::string& alternative) {
+  if (desc.encoding != "raw")
+    fail("'{}' is {}-encoded, and {} reads voxels at random offsets, which needs uncompressed data (raw, or NRRD "
+         "with 'encoding: raw'){}{}",
+         desc.path, desc.encoding, what, alternative.empty() ? "" : "; ", alternative);
+}
+
 using namespace detail;
 
 namespace {
@@ -74,10 +81,7 @@ struct DataFile {
 
 DataFile open_data(const VolumeDesc& desc, double lo, double hi, const std::string& what,
                    const std::string& alternative) {
-  if (desc.encoding != "raw")
-    fail("'{}' is {}-encoded, and {} reads voxels at random offsets, which needs uncompressed data (raw, or NRRD "
-         "with 'encoding: raw'){}{}",
-         desc.path, desc.encoding, what, alternative.empty() ? "" : "; ", alternative);
+  require_random_access(desc, what, alternative);
   check_dims(desc);
   check_range(desc, lo, hi);
   DataFile f;

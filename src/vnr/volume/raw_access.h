@@ -13,6 +13,10 @@
 
 namespace vnr {
 
+// Fails unless desc can be read at random offsets (raw encoding); `what` names the reader in the
+// message, `alternative` (optional) says what to do instead. The readers below check this first.
+void require_random_access(const VolumeDesc& desc, const std::string& what, const std::string& alternative = "");
+
 // pread access to the voxels of one timestep of a raw-encoded volume. Thread-safe: any number of
 // threads may read at once. Reads never leave [offset, offset + frame), and a file that shrinks
 // gives a clear error instead of garbage.
