@@ -183,32 +183,14 @@ PsnrProbe::PsnrProbe(Int3 dims, int64_t n_voxels, uint64_t seed) : dims_(dims) {
       v = int64_t(r % n);
     }
   }
-  const int64_t nx = dims.x, ny = dims.y, nz = dims.z;
-  x_.resize(index_.size());
-  y_.resize(index_.size());
-  z_.resize(index_.size());
   out_.resize(index_.size());
-  for (size_t i = 0; i < index_.size(); ++i) {
-    int64_t v = index_[i];
-    int64_t ix = v % nx, iy = (v / nx) % ny, iz = v / (nx * ny);
-    x_[i] = (float(ix) + 0.5f) / float(nx);  // decode_slices' voxel centres
-    y_[i] = (float(iy) + 0.5f) / float(ny);
-    z_[i] = (float(iz) + 0.5f) / float(nz);
-  }
 }
 
 double PsnrProbe::psnr(const Network& net, const Volume& vol) const {
   if (!(vol.dims == dims_))
     fail("PsnrProbe: volume dims {}x{}x{} differ from the probe's {}x{}x{}", vol.dims.x, vol.dims.y, vol.dims.z,
          dims_.x, dims_.y, dims_.z);
-  net.infer_fn(
-      int64_t(index_.size()),
-      [&](int64_t i, float* x, float* y, float* z) {
-        *x = x_[size_t(i)];
-        *y = y_[size_t(i)];
-        *z = z_[size_t(i)];
-      },
-      out_.data());
+  decode_voxels(net, dims_, index_.data(), int64_t(index_.size()), out_.data());
   double se = 0;
   for (size_t i = 0; i < index_.size(); ++i) {
     double d = double(out_[i]) - double(vol.data[size_t(index_[i])]);

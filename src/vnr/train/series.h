@@ -127,7 +127,6 @@ public:
 private:
   Int3 dims_;
   std::vector<int64_t> index_;
-  std::vector<float> x_, y_, z_;
   mutable std::vector<float> out_;
 };
 
