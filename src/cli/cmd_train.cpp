@@ -371,7 +371,7 @@ void add_train(CLI::App& app) {
   c->add_option("--memory-budget", a->memory_budget,
                 "memory for the training data, e.g. 16MiB, 2GiB (default: half of the available memory)");
   c->add_option("--blocks", a->blocks, "outofcore: blocks in the buffer (default 65536, scaled down to the budget)");
-  c->add_option("--refresh", a->refresh, "outofcore: blocks replaced per step (default blocks/64)");
+  c->add_option("--refresh", a->refresh, "outofcore: blocks replaced per step (default blocks/4, at most 1024; the paper used 1024 of 65536)");
   c->add_option("--grid-lr-scale", a->grid_lr_scale,
                 "outofcore: factor on the hash grid's learning rate, or auto = the fraction of the volume in the "
                 "buffer (at least 0.1); try auto or 0.1-0.3 when the loss spikes (see README)")

@@ -16,7 +16,7 @@ namespace vnr {
 struct OutOfCoreOptions {
   uint64_t memory_budget = uint64_t(1) << 30;  // bytes: blocks in use + blocks being loaded + buffers
   int64_t blocks = 0;   // R, blocks in the buffer; 0 = the paper's 65,536, scaled down to the budget
-  int64_t refresh = 0;  // S, blocks replaced per step; 0 = the paper's R/64 (1,024 of 65,536)
+  int64_t refresh = 0;  // S, blocks replaced per step; 0 = default_refresh(R): R/4, at most 1,024
   Int3 block_dims{0, 0, 0};  // interior voxels of a block; 0 = default_block_dims()
   int io_threads = 16;       // reader threads (each blocks in pread; many keep the disk queue full)
   std::function<void(double fraction)> fill_progress;  // during the initial fill
@@ -42,6 +42,9 @@ public:
   void begin_step(uint64_t step) override;
   void sample(uint64_t seed, uint64_t step, uint64_t chunk, int n, float* x, float* y, float* z,
               float* target) const override;
+
+  static constexpr int64_t kMaxDefaultRefresh = 1024;  // the paper's S
+  static int64_t default_refresh(int64_t blocks);     // S when --refresh is not given
 
   int64_t blocks() const { return R_; }
   int64_t volume_blocks() const { return n_blocks_; }  // blocks the volume is divided into
