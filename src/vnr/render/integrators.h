@@ -59,6 +59,9 @@ struct StepState {
   DdaState dda;
   float t;       // start of the next step
   float jitter;  // sample offset within a step, in [0,1)
+  // The non-empty cell being marched: where it ends and the step length in it (seg_end = -1: none
+  // yet). Cached so that the samples after a cell's first need no DDA or opacity lookups.
+  float seg_end, seg_len;
 };
 
 VNR_HD VNR_INLINE bool step_begin(const RenderParams& p, Vec3f org, Vec3f dir, float t_min, float jitter,
@@ -71,6 +74,8 @@ VNR_HD VNR_INLINE bool step_begin(const RenderParams& p, Vec3f org, Vec3f dir, f
   s.dir = dir;
   s.t = t0;
   s.jitter = jitter;
+  s.seg_end = -1;
+  s.seg_len = 0;
   dda_init(p.mc, org, dir, t0, t1, s.dda);
   return true;
 }
@@ -80,26 +85,37 @@ VNR_HD VNR_INLINE bool step_begin(const RenderParams& p, Vec3f org, Vec3f dir, f
 // and the last step in a cell ends at the cell boundary. Writes the sample position and step length.
 VNR_HD VNR_INLINE bool step_next(const RenderParams& p, StepState& s, bool adaptive, float fixed_step, Vec3f* pos,
                                  float* dt) {
-  for (;;) {
-    float t_exit = dda_cell_exit(s.dda);
-    if (t_exit - s.t > 1e-5f * fixed_step) {
-      float mu = p.mc.max_opacity[dda_cell_index(p.mc, s.dda)];
-      if (mu > p.empty_mu) {
-        float len = fixed_step;
-        if (adaptive) {
-          float m = mu < p.min_mu ? p.min_mu : (mu > 1 ? 1 : mu);
-          len = p.step + (p.step_max - p.step) * (1 - m) * (1 - m);
-        }
-        float ta = s.t, tb = ta + len < t_exit ? ta + len : t_exit;
-        s.t = tb;
-        *pos = ray_at(s.org, s.dir, ta + s.jitter * (tb - ta));
-        *dt = tb - ta;
-        return true;
-      }
+  const float eps = 1e-5f * fixed_step;
+  if (!(s.seg_end - s.t > eps)) {  // the cached cell is used up, or there is none: find the next one
+    if (s.seg_end >= 0) {
+      s.t = s.seg_end > s.t ? s.seg_end : s.t;
+      s.seg_end = -1;
+      if (!dda_advance(p.mc, s.dda)) return false;
     }
-    s.t = t_exit > s.t ? t_exit : s.t;
-    if (!dda_advance(p.mc, s.dda)) return false;
+    for (;;) {
+      float t_exit = dda_cell_exit(s.dda);
+      if (t_exit - s.t > eps) {
+        float mu = p.mc.max_opacity[dda_cell_index(p.mc, s.dda)];
+        if (mu > p.empty_mu) {
+          float len = fixed_step;
+          if (adaptive) {
+            float m = mu < p.min_mu ? p.min_mu : (mu > 1 ? 1 : mu);
+            len = p.step + (p.step_max - p.step) * (1 - m) * (1 - m);
+          }
+          s.seg_end = t_exit;
+          s.seg_len = len;
+          break;
+        }
+      }
+      s.t = t_exit > s.t ? t_exit : s.t;
+      if (!dda_advance(p.mc, s.dda)) return false;
+    }
   }
+  float ta = s.t, tb = ta + s.seg_len < s.seg_end ? ta + s.seg_len : s.seg_end;
+  s.t = tb;
+  *pos = ray_at(s.org, s.dir, ta + s.jitter * (tb - ta));
+  *dt = tb - ta;
+  return true;
 }
 
 // Opacity of a step of length dt from the per-voxel table opacity (B.5).

@@ -107,12 +107,22 @@ void Renderer::inshader(const PointFn& f, Image& img, RenderStats& st) {
         const int m = march_points_per_sample(p);
         Vec3f pos;
         float dt;
-        while (march_next(p, s, &pos, &dt)) {
-          float x[7], y[7], z[7], v[7];
-          march_sample_points(p, pos, x, y, z);
-          for (int k = 0; k < m; ++k) v[k] = f(x[k], y[k], z[k]);
-          my_samples += m;
-          if (!march_shade(p, s, pos, dt, v)) break;
+        if (m == 1) {  // unshaded: one point per sample, without the neighbour arrays
+          while (march_next(p, s, &pos, &dt)) {
+            float x, y, z, v;
+            march_sample_points(p, pos, &x, &y, &z);
+            v = f(x, y, z);
+            ++my_samples;
+            if (!march_shade(p, s, pos, dt, &v)) break;
+          }
+        } else {
+          while (march_next(p, s, &pos, &dt)) {
+            float x[7], y[7], z[7], v[7];
+            march_sample_points(p, pos, x, y, z);
+            for (int k = 0; k < m; ++k) v[k] = f(x[k], y[k], z[k]);
+            my_samples += m;
+            if (!march_shade(p, s, pos, dt, v)) break;
+          }
         }
         if (mode == RenderMode::Shadow) {
           ShadowState sh;

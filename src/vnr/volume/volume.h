@@ -77,35 +77,48 @@ inline GridView view_of(const Volume& v) {
 // voxel accessor at(x, y, z) with global indices: p = u*N - 0.5 clamped to [0, N-1] per axis;
 // trilinear between floor(p) and min(floor(p)+1, N-1). The in-memory grid, out-of-core blocks and
 // memory-mapped files all go through this one function, so they agree bit for bit.
+// One axis of it: the two voxel indices and the weight of the upper one.
+struct CellAxis {
+  int32_t i0, i1;
+  float t;
+};
+VNR_HD VNR_INLINE CellAxis cell_axis(float u, int32_t n) {
+  const float p = u * float(n) - 0.5f, hi = float(n - 1);
+  const float q = !(p >= 0.f) ? 0.f : (p > hi ? hi : p);  // NaN -> 0
+  const int32_t i0 = int32_t(q);  // q >= 0: truncation is floor, and far cheaper than floorf without SSE4.1
+  return CellAxis{i0, i0 + 1 < n ? i0 + 1 : n - 1, q - float(i0)};
+}
+// Written out per axis (no arrays) so the compiler keeps everything in registers: the lookup is the
+// innermost work of grid rendering (about half the instructions of a grid ray-marching sample).
+// The interpolation itself, over the 8 corner values v[x + 2y + 4z] (x = 0: i0, 1: i1).
+VNR_HD VNR_INLINE float trilinear_corners(const CellAxis& x, const CellAxis& y, const CellAxis& z, const float* v) {
+  float c00 = v[0] * (1 - x.t) + v[1] * x.t;
+  float c10 = v[2] * (1 - x.t) + v[3] * x.t;
+  float c01 = v[4] * (1 - x.t) + v[5] * x.t;
+  float c11 = v[6] * (1 - x.t) + v[7] * x.t;
+  float c0 = c00 * (1 - y.t) + c10 * y.t;
+  float c1 = c01 * (1 - y.t) + c11 * y.t;
+  return c0 * (1 - z.t) + c1 * z.t;
+}
 template <typename At>
 VNR_HD VNR_INLINE float cell_centred_trilinear(int32_t nx, int32_t ny, int32_t nz, float ux, float uy, float uz,
                                                const At& at) {
-  float p[3] = {ux * float(nx) - 0.5f, uy * float(ny) - 0.5f, uz * float(nz) - 0.5f};
-  int32_t n[3] = {nx, ny, nz};
-  int32_t i0[3], i1[3];
-  float t[3];
-  for (int d = 0; d < 3; ++d) {
-    float hi = float(n[d] - 1);
-    float q = p[d] < 0.f ? 0.f : (p[d] > hi ? hi : p[d]);
-    float fl = floorf(q);
-    i0[d] = int32_t(fl);
-    i1[d] = i0[d] + 1 < n[d] ? i0[d] + 1 : n[d] - 1;
-    t[d] = q - fl;
-  }
-  float c00 = at(i0[0], i0[1], i0[2]) * (1 - t[0]) + at(i1[0], i0[1], i0[2]) * t[0];
-  float c10 = at(i0[0], i1[1], i0[2]) * (1 - t[0]) + at(i1[0], i1[1], i0[2]) * t[0];
-  float c01 = at(i0[0], i0[1], i1[2]) * (1 - t[0]) + at(i1[0], i0[1], i1[2]) * t[0];
-  float c11 = at(i0[0], i1[1], i1[2]) * (1 - t[0]) + at(i1[0], i1[1], i1[2]) * t[0];
-  float c0 = c00 * (1 - t[1]) + c10 * t[1];
-  float c1 = c01 * (1 - t[1]) + c11 * t[1];
-  return c0 * (1 - t[2]) + c1 * t[2];
+  const CellAxis x = cell_axis(ux, nx), y = cell_axis(uy, ny), z = cell_axis(uz, nz);
+  const float v[8] = {at(x.i0, y.i0, z.i0), at(x.i1, y.i0, z.i0), at(x.i0, y.i1, z.i0), at(x.i1, y.i1, z.i0),
+                      at(x.i0, y.i0, z.i1), at(x.i1, y.i0, z.i1), at(x.i0, y.i1, z.i1), at(x.i1, y.i1, z.i1)};
+  return trilinear_corners(x, y, z, v);
 }
 
 // The lookup on an in-memory normalised grid.
+// Same arithmetic as cell_centred_trilinear; the corners are addressed from one base offset (a
+// third fewer instructions per grid-rendering sample than eight independent index computations).
 VNR_HD VNR_INLINE float grid_lookup(const GridView& g, float ux, float uy, float uz) {
+  const CellAxis x = cell_axis(ux, g.nx), y = cell_axis(uy, g.ny), z = cell_axis(uz, g.nz);
   const int64_t sy = g.nx, sz = int64_t(g.nx) * g.ny;
-  return cell_centred_trilinear(g.nx, g.ny, g.nz, ux, uy, uz,
-                                [&](int32_t x, int32_t y, int32_t z) { return g.data[x + y * sy + z * sz]; });
+  const float* b = g.data + (x.i0 + y.i0 * sy + z.i0 * sz);
+  const int64_t dx = x.i1 - x.i0, dy = (y.i1 - y.i0) * sy, dz = (z.i1 - z.i0) * sz;
+  const float v[8] = {b[0], b[dx], b[dy], b[dx + dy], b[dz], b[dx + dz], b[dy + dz], b[dx + dy + dz]};
+  return trilinear_corners(x, y, z, v);
 }
 
 // The same lookup for n points (SoA), vectorised with gathers; bit-identical to grid_lookup.
