@@ -16,6 +16,7 @@ ROOT=$(cd "$(dirname "$0")/.." && pwd)
 VNR=${VNR:-$ROOT/build/vnr}
 PEER=${VNR_VTK_PEER:-$ROOT/../shared/peers/vtk_raycast.py}
 OUT=${OUT:-$(mktemp -d)}
+mkdir -p "$OUT"
 THREADS=${THREADS:-$(nproc)}
 [ -x "$VNR" ] || { echo "build vnr first (scripts/build.sh)" >&2; exit 1; }
 [ -f "$PEER" ] || { echo "VTK peer not found at $PEER" >&2; exit 1; }
