@@ -39,7 +39,7 @@ OutOfCoreSampler::OutOfCoreSampler(std::shared_ptr<const RawVolumeFile> file, ui
 
   const int threads = std::max(1, opts.io_threads);
   const uint64_t block_bytes = uint64_t(block_floats_) * sizeof(float);
-  const uint64_t fixed = uint64_t(threads) * file_->scratch_bytes(stored_.x);
+  const uint64_t fixed = uint64_t(threads) * file_->scratch_bytes(stored_);
   const int64_t fit = opts.memory_budget > fixed ? int64_t((opts.memory_budget - fixed) / block_bytes) : 0;
   if (opts.blocks > 0) {
     R_ = opts.blocks;
@@ -70,7 +70,7 @@ OutOfCoreSampler::OutOfCoreSampler(std::shared_ptr<const RawVolumeFile> file, ui
   spare_.resize(size_t(S_));
   for (int64_t s = 0; s < S_; ++s) spare_[size_t(s)] = int32_t(R_ + s);
 
-  scratch_.assign(size_t(threads), std::vector<unsigned char>(file_->scratch_bytes(stored_.x)));
+  scratch_.assign(size_t(threads), std::vector<unsigned char>(file_->scratch_bytes(stored_)));
   for (int t = 0; t < threads; ++t) readers_.emplace_back([this, t] { reader_loop(t); });
 
   // Initial fill: R random blocks, read in file order (kinder to disks than random order).

@@ -23,7 +23,7 @@ struct OutOfCoreOptions {
 };
 
 // Interior size of a block when none is given: 256 voxels along x (rows are contiguous in the
-// file and a block costs one read per row, so long rows mean few reads) and equal y/z extents
+// file, so long rows mean few reads; short file rows are read several at a time) and equal y/z extents
 // such that a block holds about 64 KiB of source data, as in the paper; clamped to the volume.
 Int3 default_block_dims(Int3 volume_dims, DType dtype);
 

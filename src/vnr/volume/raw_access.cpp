@@ -139,6 +139,20 @@ void RawVolumeFile::read_bytes(unsigned char* dst, size_t bytes, uint64_t file_o
   }
 }
 
+int64_t RawVolumeFile::rows_per_read(int64_t box_ny) const {
+  // One pread covers several rows of a z-slice when the bytes between them are few: a disk pays per
+  // request far more than per byte (cold 256x10 blocks of a 512^3 float file, 10 rows per slice:
+  // 2.6-2.8x faster than one read per row). At most ~1 MiB per read.
+  const int64_t row_bytes = int64_t(desc_.dims.x) * int64_t(esize_);
+  if (row_bytes > (16 << 10) || box_ny <= 1) return 1;
+  return std::clamp<int64_t>((int64_t(1) << 20) / row_bytes, 1, std::min<int64_t>(box_ny, desc_.dims.y));
+}
+
+size_t RawVolumeFile::scratch_bytes(Int3 box) const {
+  const int64_t in_row = std::min<int64_t>(box.x, desc_.dims.x);
+  return size_t((rows_per_read(box.y) - 1) * int64_t(desc_.dims.x) + in_row) * esize_;
+}
+
 void RawVolumeFile::read_box(Int3 origin, Int3 size, float* out, unsigned char* scratch) const {
   const Int3 d = desc_.dims;
   auto clamp = [](int64_t v, int64_t n) { return v < 0 ? 0 : (v >= n ? n - 1 : v); };
@@ -148,33 +162,45 @@ void RawVolumeFile::read_box(Int3 origin, Int3 size, float* out, unsigned char* 
   if (in_row <= 0) fail("read_box: box x range [{}, {}) misses the volume", origin.x, origin.x + size.x);
   const int64_t lead = x_lo - origin.x;
   const bool strict = policy_ == NonFinitePolicy::Error;
+  const int64_t max_rows = rows_per_read(size.y), file_row = int64_t(d.x) * int64_t(esize_);
+  const int64_t slice_floats = size.x * size.y;
   for (int64_t k = 0; k < size.z; ++k) {
     const int64_t z = clamp(origin.z + k, d.z);
-    for (int64_t j = 0; j < size.y; ++j) {
+    float* slice = out + k * slice_floats;
+    // Slices repeated by the clamp (ghost layers on the border) are copied, not read again.
+    if (k > 0 && z == clamp(origin.z + k - 1, d.z)) {
+      std::memcpy(slice, slice - slice_floats, sizeof(float) * size_t(slice_floats));
+      continue;
+    }
+    for (int64_t j = 0; j < size.y;) {
       const int64_t y = clamp(origin.y + j, d.y);
-      float* row = out + (k * size.y + j) * size.x;
-      // Rows repeated by the clamp (ghost layers on the border) are copied, not read again.
-      if (j > 0 && y == clamp(origin.y + j - 1, d.y)) {
-        std::memcpy(row, row - size.x, sizeof(float) * size_t(size.x));
+      if (j > 0 && y == clamp(origin.y + j - 1, d.y)) {  // a repeated row: copy it
+        std::memcpy(slice + j * size.x, slice + (j - 1) * size.x, sizeof(float) * size_t(size.x));
+        ++j;
         continue;
       }
-      if (k > 0 && z == clamp(origin.z + k - 1, d.z)) {
-        std::memcpy(row, row - size.x * size.y, sizeof(float) * size_t(size.x));
-        continue;
-      }
+      // A run of consecutive file rows y, y+1, ... read with one pread.
+      int64_t rows = 1;
+      while (rows < max_rows && j + rows < size.y && clamp(origin.y + j + rows, d.y) == y + rows) ++rows;
       const uint64_t voxel = (uint64_t(z) * uint64_t(d.y) + uint64_t(y)) * uint64_t(d.x) + uint64_t(x_lo);
-      read_bytes(scratch, size_t(in_row) * esize_, desc_.offset + voxel * esize_);
-      with_sample_type(desc_.dtype, [&](auto tag) {
-        using T = typename decltype(tag)::type;
-        const PivotNormaliser norm = norm_;
-        for (int64_t i = 0; i < in_row; ++i) {
-          double v = element<T>(scratch + i * int64_t(sizeof(T)), swap_);
-          if (std::is_floating_point_v<T> && strict && !std::isfinite(v)) nonfinite_voxel_error(desc_, x_lo + i, y, z);
-          row[lead + i] = norm(v);
-        }
-      });
-      for (int64_t i = 0; i < lead; ++i) row[i] = row[lead];
-      for (int64_t i = lead + in_row; i < size.x; ++i) row[i] = row[lead + in_row - 1];
+      read_bytes(scratch, size_t((rows - 1) * file_row) + size_t(in_row) * esize_, desc_.offset + voxel * esize_);
+      for (int64_t r = 0; r < rows; ++r) {
+        float* row = slice + (j + r) * size.x;
+        const unsigned char* src = scratch + r * file_row;
+        with_sample_type(desc_.dtype, [&](auto tag) {
+          using T = typename decltype(tag)::type;
+          const PivotNormaliser norm = norm_;
+          for (int64_t i = 0; i < in_row; ++i) {
+            double v = element<T>(src + i * int64_t(sizeof(T)), swap_);
+            if (std::is_floating_point_v<T> && strict && !std::isfinite(v))
+              nonfinite_voxel_error(desc_, x_lo + i, y + r, z);
+            row[lead + i] = norm(v);
+          }
+        });
+        for (int64_t i = 0; i < lead; ++i) row[i] = row[lead];
+        for (int64_t i = lead + in_row; i < size.x; ++i) row[i] = row[lead + in_row - 1];
+      }
+      j += rows;
     }
   }
 }

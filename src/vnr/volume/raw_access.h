@@ -38,9 +38,11 @@ public:
   // Normalised voxels of the box [origin, origin + size) (x fastest) into out. Indices outside the
   // volume read the nearest edge voxel (clamp-to-edge, as the trilinear lookup does), which is
   // how ghost layers at the volume's border are filled. `scratch` holds at least
-  // scratch_bytes(size.x) bytes. NaN/Inf under NonFinitePolicy::Error: an error naming the voxel.
+  // scratch_bytes(size) bytes. NaN/Inf under NonFinitePolicy::Error: an error naming the voxel.
+  // Consecutive rows of a z-slice are read together when the file's rows are short (rows_per_read).
   void read_box(Int3 origin, Int3 size, float* out, unsigned char* scratch) const;
-  size_t scratch_bytes(int64_t nx) const { return size_t(nx) * esize_; }
+  size_t scratch_bytes(Int3 box) const;
+  int64_t rows_per_read(int64_t box_ny) const;
 
   // out[i] = normalised value of voxel voxel_index[i] (x + nx * (y + ny * z)), any order, repeats
   // allowed; an index outside the volume is an error. Nearby voxels are read together. NaN/Inf
