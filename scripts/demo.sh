@@ -22,6 +22,6 @@ $VNR render out/demo/marschner_lobb.vnr -o out/demo/neural_pathtraced.png --size
 # The same volume trained out of core: a 2 MiB block buffer (1/4 of the volume), refreshed from disk
 # while it trains, with PNG previews of the model every 100 steps.
 $VNR train out/demo/marschner_lobb.json -o out/demo/out_of_core.vnr --target-ratio 20 --steps 500 \
-  --sampler outofcore --memory-budget 2MiB --block-dims 32,4,4 --refresh 32 \
+  --sampler outofcore --memory-budget 2MiB --block-dims 32,4,4 \
   --preview-every 100 --preview-dir out/demo/previews
 echo "images in out/demo: ground_truth.png, neural.png, neural_pathtraced.png, previews/step_*.png"
