@@ -260,6 +260,11 @@ TEST(StreamVolume, NonFiniteValuesFollowLoadVolumesPolicy) {
   std::string msg = error_of([&] { strict.read_voxels(&bad, 1, &out); });
   EXPECT_NE(msg.find("voxel (2,3,1)"), std::string::npos) << msg;
   EXPECT_NO_THROW(strict.read_voxels(&good, 1, &out));
+  // A block read (two rows in one pread) names the same voxel.
+  std::vector<float> box(3 * 2);
+  std::vector<unsigned char> scratch(strict.scratch_bytes(Int3{3, 2, 1}));
+  msg = error_of([&] { strict.read_box(Int3{1, 2, 1}, Int3{3, 2, 1}, box.data(), scratch.data()); });
+  EXPECT_NE(msg.find("voxel (2,3,1)"), std::string::npos) << msg;
 
   for (NonFinitePolicy p : {NonFinitePolicy::Zero, NonFinitePolicy::Clamp}) {
     LoadOptions o;

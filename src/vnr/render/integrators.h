@@ -163,13 +163,15 @@ VNR_HD VNR_INLINE Vec3f shade_phong(Vec3f rgb, Vec3f grad, Vec3f view_dir) {
   return rgb * (0.2f + 0.7f * nl) + Vec3f{0.2f, 0.2f, 0.2f} * spec;
 }
 
-// values: the field at the sample (and, when p.shade, at the six central-difference neighbours
-// +x, -x, +y, -y, +z, -z). Returns false once the ray is opaque.
-VNR_HD VNR_INLINE bool march_shade(const RenderParams& p, MarchState& s, Vec3f pos, float dt, const float* values) {
+// values: the n = march_points_per_sample(p) field values of march_sample_points: the sample (and,
+// with shading, its six central-difference neighbours +x, -x, +y, -y, +z, -z). Returns false once
+// the ray is opaque.
+VNR_HD VNR_INLINE bool march_shade(const RenderParams& p, MarchState& s, Vec3f pos, float dt, const float* values,
+                                   int n) {
   Vec4f c = tf_lookup(p.tf, values[0]);
   float a = corrected_alpha(c.w, dt);
   Vec3f rgb = c.rgb();
-  if (p.shade) {
+  if (n > 1) {
     Vec3f grad{values[1] - values[2], values[3] - values[4], values[5] - values[6]};
     rgb = shade_phong(rgb, grad, s.st.dir);
   }
@@ -191,12 +193,14 @@ VNR_HD VNR_INLINE Vec4f march_pixel(const RenderParams& p, const MarchState& s) 
   return Vec4f{s.acc.x + t * p.background.x, s.acc.y + t * p.background.y, s.acc.z + t * p.background.z, s.acc.w};
 }
 
-// The n points a sample needs: the sample itself, then (shading) its six neighbours.
+// The n points a sample needs: the sample itself, then (shading) its six neighbours. Callers pass
+// n = march_points_per_sample(p) here and to march_shade, so one with a compile-time n = 1 drops
+// the neighbour code and its arrays.
 VNR_HD VNR_INLINE int march_points_per_sample(const RenderParams& p) { return p.shade ? 7 : 1; }
-VNR_HD VNR_INLINE void march_sample_points(const RenderParams& p, Vec3f pos, float* x, float* y, float* z) {
+VNR_HD VNR_INLINE void march_sample_points(const RenderParams& p, Vec3f pos, int n, float* x, float* y, float* z) {
   Vec3f u = pos * p.inv_box;
   x[0] = u.x, y[0] = u.y, z[0] = u.z;
-  if (!p.shade) return;
+  if (n == 1) return;
   const float h[3] = {p.grad_h.x, p.grad_h.y, p.grad_h.z};
   for (int a = 0; a < 3; ++a)
     for (int sgn = 0; sgn < 2; ++sgn) {

@@ -51,8 +51,10 @@ OutOfCoreSampler::OutOfCoreSampler(std::shared_ptr<const RawVolumeFile> file, ui
       S_ = opts.refresh;
       R_ = std::min<int64_t>({65536, fit - S_, n_blocks_});
     } else {
-      R_ = std::min<int64_t>({65536, fit * 4 / 5 / 4 > kMaxDefaultRefresh ? fit - kMaxDefaultRefresh : fit * 4 / 5,
-                              n_blocks_});
+      // R : S = 4 : 1 of the blocks that fit, or all but the capped S once S reaches the cap.
+      const int64_t four_fifths = fit * 4 / 5;
+      const int64_t r = four_fifths / 4 > kMaxDefaultRefresh ? fit - kMaxDefaultRefresh : four_fifths;
+      R_ = std::min<int64_t>({65536, r, n_blocks_});
       S_ = default_refresh(R_);
     }
   }

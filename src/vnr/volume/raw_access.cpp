@@ -105,6 +105,19 @@ DataFile open_data(const VolumeDesc& desc, double lo, double hi, const std::stri
   fail("'{}' contains NaN/Inf values (voxel ({},{},{}) is one); use --nan zero|clamp", desc.path, x, y, z);
 }
 
+// The normalised value of the stored sample at p (a T); NaN/Inf under NonFinitePolicy::Error is an
+// error naming the voxel at `index` (x + nx * (y + ny * z)).
+template <typename T>
+float normalised_sample(const unsigned char* p, bool swap, bool strict, const PivotNormaliser& norm,
+                        const VolumeDesc& desc, int64_t index) {
+  const double v = element<T>(p, swap);
+  if (std::is_floating_point_v<T> && strict && !std::isfinite(v)) {
+    const int64_t nx = desc.dims.x, ny = desc.dims.y;
+    nonfinite_voxel_error(desc, index % nx, (index / nx) % ny, index / (nx * ny));
+  }
+  return norm(v);
+}
+
 }  // namespace
 
 // ---------------------------------------------------------------------------------------------
@@ -164,45 +177,43 @@ void RawVolumeFile::read_box(Int3 origin, Int3 size, float* out, unsigned char* 
   const bool strict = policy_ == NonFinitePolicy::Error;
   const int64_t max_rows = rows_per_read(size.y), file_row = int64_t(d.x) * int64_t(esize_);
   const int64_t slice_floats = size.x * size.y;
-  for (int64_t k = 0; k < size.z; ++k) {
-    const int64_t z = clamp(origin.z + k, d.z);
-    float* slice = out + k * slice_floats;
-    // Slices repeated by the clamp (ghost layers on the border) are copied, not read again.
-    if (k > 0 && z == clamp(origin.z + k - 1, d.z)) {
-      std::memcpy(slice, slice - slice_floats, sizeof(float) * size_t(slice_floats));
-      continue;
-    }
-    for (int64_t j = 0; j < size.y;) {
-      const int64_t y = clamp(origin.y + j, d.y);
-      if (j > 0 && y == clamp(origin.y + j - 1, d.y)) {  // a repeated row: copy it
-        std::memcpy(slice + j * size.x, slice + (j - 1) * size.x, sizeof(float) * size_t(size.x));
-        ++j;
+  const PivotNormaliser norm = norm_;  // a local copy: the float stores below cannot touch it
+  with_sample_type(desc_.dtype, [&](auto tag) {
+    using T = typename decltype(tag)::type;
+    for (int64_t k = 0; k < size.z; ++k) {
+      const int64_t z = clamp(origin.z + k, d.z);
+      float* slice = out + k * slice_floats;
+      // Slices repeated by the clamp (ghost layers on the border) are copied, not read again.
+      if (k > 0 && z == clamp(origin.z + k - 1, d.z)) {
+        std::memcpy(slice, slice - slice_floats, sizeof(float) * size_t(slice_floats));
         continue;
       }
-      // A run of consecutive file rows y, y+1, ... read with one pread.
-      int64_t rows = 1;
-      while (rows < max_rows && j + rows < size.y && clamp(origin.y + j + rows, d.y) == y + rows) ++rows;
-      const uint64_t voxel = (uint64_t(z) * uint64_t(d.y) + uint64_t(y)) * uint64_t(d.x) + uint64_t(x_lo);
-      read_bytes(scratch, size_t((rows - 1) * file_row) + size_t(in_row) * esize_, desc_.offset + voxel * esize_);
-      for (int64_t r = 0; r < rows; ++r) {
-        float* row = slice + (j + r) * size.x;
-        const unsigned char* src = scratch + r * file_row;
-        with_sample_type(desc_.dtype, [&](auto tag) {
-          using T = typename decltype(tag)::type;
-          const PivotNormaliser norm = norm_;
-          for (int64_t i = 0; i < in_row; ++i) {
-            double v = element<T>(src + i * int64_t(sizeof(T)), swap_);
-            if (std::is_floating_point_v<T> && strict && !std::isfinite(v))
-              nonfinite_voxel_error(desc_, x_lo + i, y + r, z);
-            row[lead + i] = norm(v);
-          }
-        });
-        for (int64_t i = 0; i < lead; ++i) row[i] = row[lead];
-        for (int64_t i = lead + in_row; i < size.x; ++i) row[i] = row[lead + in_row - 1];
+      for (int64_t j = 0; j < size.y;) {
+        const int64_t y = clamp(origin.y + j, d.y);
+        if (j > 0 && y == clamp(origin.y + j - 1, d.y)) {  // a repeated row: copy it
+          std::memcpy(slice + j * size.x, slice + (j - 1) * size.x, sizeof(float) * size_t(size.x));
+          ++j;
+          continue;
+        }
+        // A run of consecutive file rows y, y+1, ... read with one pread.
+        int64_t rows = 1;
+        while (rows < max_rows && j + rows < size.y && clamp(origin.y + j + rows, d.y) == y + rows) ++rows;
+        const int64_t first = (z * d.y + y) * d.x + x_lo;  // voxel index of the run's first sample
+        read_bytes(scratch, size_t((rows - 1) * file_row) + size_t(in_row) * esize_,
+                   desc_.offset + uint64_t(first) * esize_);
+        for (int64_t r = 0; r < rows; ++r) {
+          float* row = slice + (j + r) * size.x;
+          const unsigned char* src = scratch + r * file_row;
+          for (int64_t i = 0; i < in_row; ++i)
+            row[lead + i] = normalised_sample<T>(src + i * int64_t(sizeof(T)), swap_, strict, norm, desc_,
+                                                 first + r * d.x + i);
+          for (int64_t i = 0; i < lead; ++i) row[i] = row[lead];
+          for (int64_t i = lead + in_row; i < size.x; ++i) row[i] = row[lead + in_row - 1];
+        }
+        j += rows;
       }
-      j += rows;
     }
-  }
+  });
 }
 
 void RawVolumeFile::read_voxels(const int64_t* voxel_index, int64_t n, float* out) const {
@@ -233,12 +244,8 @@ void RawVolumeFile::read_voxels(const int64_t* voxel_index, int64_t n, float* ou
       using T = typename decltype(tag)::type;
       for (int64_t k = s; k < e; ++k) {
         const int64_t idx = voxel_index[order[size_t(k)]];
-        double v = element<T>(buf.data() + (idx - first) * esize, swap_);
-        if (!std::isfinite(v) && policy_ == NonFinitePolicy::Error) {
-          const int64_t nx = desc_.dims.x, ny = desc_.dims.y;
-          nonfinite_voxel_error(desc_, idx % nx, (idx / nx) % ny, idx / (nx * ny));
-        }
-        out[order[size_t(k)]] = norm_(v);
+        out[order[size_t(k)]] = normalised_sample<T>(buf.data() + (idx - first) * esize, swap_,
+                                                     policy_ == NonFinitePolicy::Error, norm_, desc_, idx);
       }
     });
     s = e;
