@@ -27,6 +27,9 @@ xvfb-run -a -s "-screen 0 1024x768x24" /usr/bin/python3 "$PEER" "$VOL" --mapper 
 echo "== vnr, ground-truth grid"
 "$VNR" bench render "$VOL" --size 512x512 --frames "$FRAMES" --warmup 3 --modes raymarch --step 1 --step-max 1 --macrocell-size 8 \
   --threads "$THREADS" --report "$OUT/vnr_grid.json"
+echo "== vnr, ground-truth grid, in-shader with the per-ray loop (--ray-packets off, the portable reference)"
+"$VNR" bench render "$VOL" --size 512x512 --frames "$FRAMES" --warmup 3 --modes raymarch --strategies inshader --step 1 \
+  --step-max 1 --macrocell-size 8 --ray-packets off --threads "$THREADS" --report "$OUT/vnr_grid_per_ray.json"
 if [ -n "$MODEL" ]; then
   echo "== vnr, neural model (its ground truth for the grid macro-cells: $VOL)"
   "$VNR" bench render "$MODEL" --volume "$VOL" --size 512x512 --frames "${MODEL_FRAMES:-6}" --warmup 1 --modes raymarch --macrocell-size 8 \

@@ -754,25 +754,28 @@ TEST(RealData, BonsaiLoads) {
 }
 
 TEST(Lookup, BatchIsBitIdenticalToPointLookup) {
-  // Non-cubic, odd sizes; points inside, on the border and outside [0,1] (clamped).
-  const int nx = 7, ny = 5, nz = 3;
-  std::vector<float> data(nx * ny * nz);
-  for (size_t i = 0; i < data.size(); ++i) data[i] = float((i * 7919) % 101) / 100.0f;
-  vnr::GridView g{data.data(), nx, ny, nz};
-  std::vector<float> x, y, z;
-  vnr::Pcg32 rng(5);
-  for (int i = 0; i < 1000; ++i) {
-    x.push_back(rng.next_float() * 1.2f - 0.1f);
-    y.push_back(rng.next_float());
-    z.push_back(i % 17 == 0 ? 1.0f : rng.next_float());
+  // Non-cubic, odd sizes, 1 and 2 voxels wide in x (the SIMD lookup loads x-neighbours as pairs from
+  // 2 voxels up); points inside, on the border and outside [0,1] (clamped); values of both signs.
+  for (const vnr::Int3 dims : {vnr::Int3{7, 5, 3}, vnr::Int3{2, 3, 4}, vnr::Int3{1, 4, 2}}) {
+    const int nx = int(dims.x), ny = int(dims.y), nz = int(dims.z);
+    std::vector<float> data(size_t(nx) * ny * nz);
+    for (size_t i = 0; i < data.size(); ++i) data[i] = float((i * 7919) % 101) / 100.0f - (i % 5 == 0 ? 0.3f : 0.f);
+    vnr::GridView g{data.data(), nx, ny, nz};
+    std::vector<float> x, y, z;
+    vnr::Pcg32 rng(5);
+    for (int i = 0; i < 1000; ++i) {
+      x.push_back(i % 13 == 0 ? 1.0f : rng.next_float() * 1.2f - 0.1f);
+      y.push_back(rng.next_float());
+      z.push_back(i % 17 == 0 ? 1.0f : rng.next_float());
+    }
+    std::vector<float> out(x.size());
+    for (int64_t t : hwy::SupportedAndGeneratedTargets()) {  // every SIMD target this machine has
+      hwy::SetSupportedTargetsForTest(t);
+      vnr::grid_lookup_batch(g, x.data(), y.data(), z.data(), int64_t(x.size()), out.data());
+      for (size_t i = 0; i < x.size(); ++i)
+        ASSERT_EQ(out[i], vnr::grid_lookup(g, x[i], y[i], z[i])) << hwy::TargetName(t) << " " << i << " nx " << nx;
+    }
+    hwy::SetSupportedTargetsForTest(0);
   }
-  std::vector<float> out(x.size());
-  for (int64_t t : hwy::SupportedAndGeneratedTargets()) {  // every SIMD target this machine has
-    hwy::SetSupportedTargetsForTest(t);
-    vnr::grid_lookup_batch(g, x.data(), y.data(), z.data(), int64_t(x.size()), out.data());
-    for (size_t i = 0; i < x.size(); ++i)
-      ASSERT_EQ(out[i], vnr::grid_lookup(g, x[i], y[i], z[i])) << hwy::TargetName(t) << " " << i;
-  }
-  hwy::SetSupportedTargetsForTest(0);
 }
 

@@ -55,6 +55,11 @@ void RenderArgs::add(CLI::App* c) {
   c->add_option("--light", light, "direction toward the directional light X,Y,Z");
   c->add_option("--background", background, "background colour R,G,B");
   c->add_option("--density", density, "path tracing: extinction per voxel = opacity x density")->capture_default_str();
+  c->add_option("--ray-packets", ray_packets,
+                "on|off: in-shader ray marching of a volume runs rays in SIMD packets (off: the per-ray "
+                "reference loop; same image)")
+      ->check(CLI::IsMember({"on", "off"}))
+      ->capture_default_str();
   c->add_flag("--shade", shade, "gradient (Phong, headlight) shading for ray marching");
   c->add_option("--volume", volume, "ground-truth volume of a model (for --macrocells grid)");
   c->add_option("--threads", threads, "CPU threads (default: all cores)");
@@ -71,6 +76,7 @@ RenderSetup make_render_setup(const RenderArgs& a, const RenderSource& src) {
   o.seed = a.seed;
   o.samples_per_iteration = a.k > 0 ? a.k : kDefaultSamplesPerIteration;
   o.shade = a.shade;
+  o.ray_packets = a.ray_packets == "on";
   o.density_scale = a.density;
   Scene scene = src.scene;
   if (!a.scene.empty()) scene = load_scene(a.scene);

@@ -80,41 +80,53 @@ VNR_HD VNR_INLINE bool step_begin(const RenderParams& p, Vec3f org, Vec3f dir, f
   return true;
 }
 
-// Next sample of a ray: transparent cells are skipped; inside a cell with max opacity mu the step is
-// s1 + (s2 - s1) * |min(max(mu, min_mu), 1) - 1|^2 (B.7; uniform = false forces s1 = s2 = fixed_step)
-// and the last step in a cell ends at the cell boundary. Writes the sample position and step length.
-VNR_HD VNR_INLINE bool step_next(const RenderParams& p, StepState& s, bool adaptive, float fixed_step, Vec3f* pos,
-                                 float* dt) {
+// Makes sure the ray has a non-empty macro-cell to step in: transparent cells are skipped; inside a
+// cell with max opacity mu the step is s1 + (s2 - s1) * |min(max(mu, min_mu), 1) - 1|^2 (B.7;
+// adaptive = false forces s1 = s2 = fixed_step). False once the ray has left the volume.
+VNR_HD VNR_INLINE bool step_segment(const RenderParams& p, StepState& s, bool adaptive, float fixed_step) {
   const float eps = 1e-5f * fixed_step;
-  if (!(s.seg_end - s.t > eps)) {  // the cached cell is used up, or there is none: find the next one
-    if (s.seg_end >= 0) {
-      s.t = s.seg_end > s.t ? s.seg_end : s.t;
-      s.seg_end = -1;
-      if (!dda_advance(p.mc, s.dda)) return false;
-    }
-    for (;;) {
-      float t_exit = dda_cell_exit(s.dda);
-      if (t_exit - s.t > eps) {
-        float mu = p.mc.max_opacity[dda_cell_index(p.mc, s.dda)];
-        if (mu > p.empty_mu) {
-          float len = fixed_step;
-          if (adaptive) {
-            float m = mu < p.min_mu ? p.min_mu : (mu > 1 ? 1 : mu);
-            len = p.step + (p.step_max - p.step) * (1 - m) * (1 - m);
-          }
-          s.seg_end = t_exit;
-          s.seg_len = len;
-          break;
-        }
-      }
-      s.t = t_exit > s.t ? t_exit : s.t;
-      if (!dda_advance(p.mc, s.dda)) return false;
-    }
+  if (s.seg_end - s.t > eps) return true;  // still inside the cached cell
+  if (s.seg_end >= 0) {                    // it is used up: on to the next one
+    s.t = s.seg_end > s.t ? s.seg_end : s.t;
+    s.seg_end = -1;
+    if (!dda_advance(p.mc, s.dda)) return false;
   }
+  for (;;) {
+    float t_exit = dda_cell_exit(s.dda);
+    if (t_exit - s.t > eps) {
+      float mu = p.mc.max_opacity[dda_cell_index(p.mc, s.dda)];
+      if (mu > p.empty_mu) {
+        float len = fixed_step;
+        if (adaptive) {
+          float m = mu < p.min_mu ? p.min_mu : (mu > 1 ? 1 : mu);
+          len = p.step + (p.step_max - p.step) * (1 - m) * (1 - m);
+        }
+        s.seg_end = t_exit;
+        s.seg_len = len;
+        return true;
+      }
+    }
+    s.t = t_exit > s.t ? t_exit : s.t;
+    if (!dda_advance(p.mc, s.dda)) return false;
+  }
+}
+
+// The step [ta, tb] after s.t inside the current cell (step_segment first): the last step in a cell
+// ends at the cell boundary. Returns the length; *t_sample = ta + jitter * (tb - ta).
+VNR_HD VNR_INLINE float step_take(StepState& s, float* t_sample) {
   float ta = s.t, tb = ta + s.seg_len < s.seg_end ? ta + s.seg_len : s.seg_end;
   s.t = tb;
-  *pos = ray_at(s.org, s.dir, ta + s.jitter * (tb - ta));
-  *dt = tb - ta;
+  *t_sample = ta + s.jitter * (tb - ta);
+  return tb - ta;
+}
+
+// Next sample of a ray: its position and step length; false when the ray has left the volume.
+VNR_HD VNR_INLINE bool step_next(const RenderParams& p, StepState& s, bool adaptive, float fixed_step, Vec3f* pos,
+                                 float* dt) {
+  if (!step_segment(p, s, adaptive, fixed_step)) return false;
+  float ts;
+  *dt = step_take(s, &ts);
+  *pos = ray_at(s.org, s.dir, ts);
   return true;
 }
 

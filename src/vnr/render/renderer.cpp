@@ -5,6 +5,7 @@
 #include "vnr/core/error.h"
 #include "vnr/core/json.h"
 #include "vnr/core/parallel.h"
+#include "vnr/render/grid_packets.h"
 
 namespace vnr {
 
@@ -80,6 +81,15 @@ void Renderer::inshader(const PointFn& f, Image& img, RenderStats& st) {
   const int64_t n_tiles = int64_t(tiles_x) * tiles_y;
   std::atomic<int64_t> samples{0};
   const RenderMode mode = opt_.mode;
+  if constexpr (std::is_same_v<PointFn, GridPointFn>) {
+    if (opt_.ray_packets && mode == RenderMode::RayMarch && grid_packets_apply(p, f.g)) {
+      parallel_threads([&](int t, int nt) {
+        samples += march_grid_packets(p, f.g, TileCursor{W, H, kTile, t, nt}, img.pixels.data());
+      });
+      st.field_samples += samples.load();
+      return;
+    }
+  }
   parallel_threads([&](int t, int nt) {
     int64_t my_samples = 0;
     for (int64_t tile = t; tile < n_tiles; tile += nt) {

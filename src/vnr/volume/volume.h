@@ -121,6 +121,10 @@ VNR_HD VNR_INLINE float grid_lookup(const GridView& g, float ux, float uy, float
   return trilinear_corners(x, y, z, v);
 }
 
+// SIMD versions of the lookup gather with 32-bit indices: volumes below 2^31 voxels.
+inline bool grid_fits_gather_indices(const GridView& g) {
+  return uint64_t(g.nx) * uint64_t(g.ny) * uint64_t(g.nz) < (uint64_t(1) << 31);
+}
 // The same lookup for n points (SoA), vectorised with gathers; bit-identical to grid_lookup.
 void grid_lookup_batch(const GridView& g, const float* x, const float* y, const float* z, int64_t n, float* out);
 

@@ -1,0 +1,176 @@
+// Packet ray marching of the grid (see grid_packets.h), compiled per SIMD target.
+#undef HWY_TARGET_INCLUDE
+#define HWY_TARGET_INCLUDE "vnr/render/grid_packets.cpp"
+#include <hwy/foreach_target.h>  // IWYU pragma: keep
+#include <hwy/highway.h>
+
+#include <cmath>
+#include <cstring>
+#include <vector>
+#include "vnr/render/grid_packets.h"
+#include "vnr/volume/lookup-inl.h"
+
+HWY_BEFORE_NAMESPACE();
+namespace vnr {
+namespace HWY_NAMESPACE {
+namespace hn = hwy::HWY_NAMESPACE;
+
+namespace {
+template <class D, class M>
+HWY_INLINE uint64_t lane_bits(D d, M m) {
+  uint8_t bytes[8] = {};
+  hn::StoreMaskBits(d, m, bytes);
+  uint64_t b;
+  std::memcpy(&b, bytes, 8);
+  return b;
+}
+}  // namespace
+
+int64_t MarchGridPackets(const RenderParams& p, const GridView& g, TileCursor cursor, Vec4f* pixels) {
+  const hn::ScalableTag<float> df;
+  const hn::RebindToSigned<decltype(df)> di;
+  using VF = hn::Vec<decltype(df)>;
+  constexpr size_t kMaxLanes = HWY_MAX_BYTES / sizeof(float);
+  const size_t L = hn::Lanes(df);
+  const int W = cursor.width;
+
+  // Lane state: the vector part in structure-of-arrays form, the scalar DDA state per lane.
+  alignas(HWY_MAX_BYTES) float t[kMaxLanes] = {}, seg_end[kMaxLanes] = {}, seg_len[kMaxLanes] = {},
+                               jit[kMaxLanes] = {}, ox[kMaxLanes] = {}, oy[kMaxLanes] = {}, oz[kMaxLanes] = {},
+                               dx[kMaxLanes] = {}, dy[kMaxLanes] = {}, dz[kMaxLanes] = {}, ar[kMaxLanes] = {},
+                               ag[kMaxLanes] = {}, ab[kMaxLanes] = {}, aw[kMaxLanes] = {}, alpha[kMaxLanes] = {},
+                               dts[kMaxLanes] = {};
+  StepState st[kMaxLanes];
+  int64_t pix[kMaxLanes] = {};
+  uint64_t active = 0;
+
+  // Puts the next ray that enters a non-empty cell into lane l (rays that do not are written at
+  // once); false when the cursor has no pixels left.
+  auto start = [&](size_t l) {
+    int ix, iy;
+    while (cursor.next(&ix, &iy)) {
+      const int64_t i = int64_t(iy) * W + ix;
+      MarchState s;
+      if (march_begin(p, ix, iy, s) && step_segment(p, s.st, true, p.step)) {
+        st[l] = s.st;
+        pix[l] = i;
+        t[l] = s.st.t, seg_end[l] = s.st.seg_end, seg_len[l] = s.st.seg_len, jit[l] = s.st.jitter;
+        ox[l] = s.st.org.x, oy[l] = s.st.org.y, oz[l] = s.st.org.z;
+        dx[l] = s.st.dir.x, dy[l] = s.st.dir.y, dz[l] = s.st.dir.z;
+        ar[l] = ag[l] = ab[l] = aw[l] = 0;
+        return true;
+      }
+      pixels[i] = march_pixel(p, s);
+    }
+    return false;
+  };
+  // Writes lane l's pixel and refills the lane (or retires it).
+  auto finish = [&](size_t l) {
+    MarchState s;
+    s.acc = Vec4f{ar[l], ag[l], ab[l], aw[l]};
+    pixels[pix[l]] = march_pixel(p, s);
+    if (!start(l)) active &= ~(uint64_t(1) << l);
+  };
+  for (size_t l = 0; l < L && start(l); ++l) active |= uint64_t(1) << l;
+
+  // The table by channel, so that the two entries a lookup blends are neighbours (GatherPairs).
+  std::vector<float> tf_soa(size_t(p.tf.n) * 4);
+  for (int e = 0; e < p.tf.n; ++e) {
+    const Vec4f c = p.tf.table[e];
+    tf_soa[size_t(e)] = c.x, tf_soa[size_t(p.tf.n + e)] = c.y, tf_soa[size_t(2 * p.tf.n + e)] = c.z;
+    tf_soa[size_t(3 * p.tf.n + e)] = c.w;
+  }
+  const auto zero = hn::Zero(df), one = hn::Set(df, 1.0f);
+  const auto eps = hn::Set(df, 1e-5f * p.step);  // step_segment's, with march_next's fixed step
+  const auto ibx = hn::Set(df, p.inv_box.x), iby = hn::Set(df, p.inv_box.y), ibz = hn::Set(df, p.inv_box.z);
+  const auto tf_lo = hn::Set(df, p.tf.lo), tf_scale = hn::Set(df, p.tf.scale);
+  const auto tf_last = hn::Set(df, float(p.tf.n - 1));
+  const auto tf_imax = hn::Set(di, p.tf.n - 2);
+  const auto alpha_stop = hn::Set(df, p.alpha_stop);
+  int64_t samples = 0;
+  while (active) {
+    // Lanes whose cell is used up get the next non-empty one (scalar DDA); rays that leave end.
+    for (uint64_t need = lane_bits(df, hn::Not(hn::Gt(hn::Sub(hn::Load(df, seg_end), hn::Load(df, t)), eps))) & active;
+         need; need &= need - 1) {
+      const size_t l = size_t(__builtin_ctzll(need));
+      st[l].t = t[l], st[l].seg_end = seg_end[l];
+      if (step_segment(p, st[l], true, p.step)) {
+        t[l] = st[l].t, seg_end[l] = st[l].seg_end, seg_len[l] = st[l].seg_len;
+      } else {
+        finish(l);
+      }
+    }
+    if (!active) break;
+    samples += __builtin_popcountll(active);
+
+    // step_take + ray_at + march_sample_points
+    const VF ta = hn::Load(df, t), end = hn::Load(df, seg_end), next = hn::Add(ta, hn::Load(df, seg_len));
+    const VF tb = hn::IfThenElse(hn::Lt(next, end), next, end);
+    hn::Store(tb, df, t);
+    const VF dt = hn::Sub(tb, ta);
+    const VF ts = hn::Add(ta, hn::Mul(hn::Load(df, jit), dt));
+    const VF ux = hn::Mul(hn::Add(hn::Load(df, ox), hn::Mul(hn::Load(df, dx), ts)), ibx);
+    const VF uy = hn::Mul(hn::Add(hn::Load(df, oy), hn::Mul(hn::Load(df, dy), ts)), iby);
+    const VF uz = hn::Mul(hn::Add(hn::Load(df, oz), hn::Mul(hn::Load(df, dz), ts)), ibz);
+    // The next sample's rows, one step ahead (about 10% more frames/s on bonsai).
+    const VF tn = hn::Add(ts, hn::Load(df, seg_len));
+    GridPrefetchVec(df, g, hn::Mul(hn::Add(hn::Load(df, ox), hn::Mul(hn::Load(df, dx), tn)), ibx),
+                    hn::Mul(hn::Add(hn::Load(df, oy), hn::Mul(hn::Load(df, dy), tn)), iby),
+                    hn::Mul(hn::Add(hn::Load(df, oz), hn::Mul(hn::Load(df, dz), tn)), ibz));
+    const VF v = GridLookupPairsVec(df, g, ux, uy, uz);
+
+    // tf_lookup (clampf written as its compare-and-select, so every target matches the scalar code)
+    const VF y = hn::Mul(hn::Sub(v, tf_lo), tf_scale);
+    const VF yc = hn::IfThenElse(hn::Lt(y, zero), zero, hn::IfThenElse(hn::Gt(y, one), one, y));
+    const VF x = hn::Mul(yc, tf_last);
+    const auto i = hn::Min(hn::ConvertTo(di, x), tf_imax);
+    const VF f = hn::Sub(x, hn::ConvertTo(df, i));
+    auto channel = [&](int c) {
+      VF a, b;
+      GatherPairs(df, tf_soa.data() + size_t(c) * size_t(p.tf.n), i, &a, &b);
+      return hn::Add(a, hn::Mul(hn::Sub(b, a), f));
+    };
+    const VF ca = channel(3);
+
+    // corrected_alpha: the clamp, then 1 - (1 - alpha)^dt for the steps that are not one voxel long
+    VF a = hn::IfThenElse(hn::Lt(ca, zero), zero, hn::IfThenElse(hn::Gt(ca, one), one, ca));
+    // Where no lane is visible the compositing adds exact zeros: skip it and the colour lookups.
+    if (!(lane_bits(df, hn::Ne(a, zero)) & active)) continue;
+    if (uint64_t partial = lane_bits(df, hn::Ne(dt, one)) & active) {
+      hn::Store(a, df, alpha);
+      hn::Store(dt, df, dts);
+      for (; partial; partial &= partial - 1) {
+        const size_t l = size_t(__builtin_ctzll(partial));
+        alpha[l] = corrected_alpha(alpha[l], dts[l]);
+      }
+      a = hn::Load(df, alpha);
+    }
+    const VF cr = channel(0), cg = channel(1), cb = channel(2);
+
+    // march_shade's compositing
+    const VF acc_w = hn::Load(df, aw);
+    const VF w = hn::Mul(hn::Sub(one, acc_w), a);
+    hn::Store(hn::Add(hn::Load(df, ar), hn::Mul(w, cr)), df, ar);
+    hn::Store(hn::Add(hn::Load(df, ag), hn::Mul(w, cg)), df, ag);
+    hn::Store(hn::Add(hn::Load(df, ab), hn::Mul(w, cb)), df, ab);
+    const VF acc_w2 = hn::Add(acc_w, w);
+    hn::Store(acc_w2, df, aw);
+    for (uint64_t opaque = lane_bits(df, hn::Not(hn::Lt(acc_w2, alpha_stop))) & active; opaque;
+         opaque &= opaque - 1)
+      finish(size_t(__builtin_ctzll(opaque)));
+  }
+  return samples;
+}
+
+}  // namespace HWY_NAMESPACE
+}  // namespace vnr
+HWY_AFTER_NAMESPACE();
+
+#if HWY_ONCE
+namespace vnr {
+HWY_EXPORT(MarchGridPackets);
+int64_t march_grid_packets(const RenderParams& p, const GridView& g, TileCursor cursor, Vec4f* pixels) {
+  return HWY_DYNAMIC_DISPATCH(MarchGridPackets)(p, g, cursor, pixels);
+}
+}  // namespace vnr
+#endif

@@ -1,0 +1,50 @@
+#pragma once
+// In-shader ray marching of the ground-truth grid with rays in SIMD packets: the CPU counterpart of a
+// GPU warp running the in-shader loop. Each lane is one ray; every lane executes exactly the scalar
+// operations of integrators.h (step_segment / step_take, grid_lookup, tf_lookup, corrected_alpha,
+// the compositing of march_shade), so the image equals the per-ray loop's bit for bit. A lane whose
+// ray ends takes the next pixel at once, so lanes stay busy. Macro-cell traversal stays scalar per lane.
+#include <cstdint>
+#include "vnr/core/hd.h"
+#include "vnr/render/integrators.h"
+#include "vnr/volume/volume.h"
+
+namespace vnr {
+
+// The pixels of tiles first, first + stride, ... of a W x H image cut into size x size tiles, each
+// tile in row order (the order in which the per-ray loop visits them).
+struct TileCursor {
+  int width = 0, height = 0, size = 8;
+  int64_t tile = 0, stride = 1;
+  int k = 0;  // next pixel within the current tile
+  VNR_HD bool next(int* ix, int* iy) {
+    const int tiles_x = (width + size - 1) / size;
+    const int64_t n_tiles = int64_t(tiles_x) * ((height + size - 1) / size);
+    while (tile < n_tiles) {
+      const int x0 = int(tile % tiles_x) * size, y0 = int(tile / tiles_x) * size;
+      while (k < size * size) {
+        const int x = x0 + k % size, y = y0 + k / size;
+        ++k;
+        if (x < width && y < height) {
+          *ix = x, *iy = y;
+          return true;
+        }
+      }
+      k = 0;
+      tile += stride;
+    }
+    return false;
+  }
+};
+
+// Whether march_grid_packets can render this frame: unshaded ray marching of a volume below 2^31
+// voxels (32-bit gather indices) and at least 2 voxels wide in x (x-neighbours load as pairs).
+inline bool grid_packets_apply(const RenderParams& p, const GridView& g) {
+  return !p.shade && g.nx >= 2 && grid_fits_gather_indices(g);
+}
+
+// Ray marches (RenderMode::RayMarch, unshaded) the cursor's pixels into pixels[y * width + x];
+// returns the number of field samples taken.
+int64_t march_grid_packets(const RenderParams& p, const GridView& g, TileCursor cursor, Vec4f* pixels);
+
+}  // namespace vnr

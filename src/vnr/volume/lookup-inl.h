@@ -1,0 +1,159 @@
+// grid_lookup() of volume.h for a vector of points, per SIMD target (Highway's -inl.h convention:
+// include it after <hwy/highway.h> inside a foreach_target translation unit). Each lane performs
+// exactly the scalar operations in the same order, so the result agrees with grid_lookup bit for bit.
+// Needs a volume below 2^31 voxels (32-bit gather indices): check grid_fits_gather_indices().
+#if defined(VNR_VOLUME_LOOKUP_INL_H_) == defined(HWY_TARGET_TOGGLE)
+#ifdef VNR_VOLUME_LOOKUP_INL_H_
+#undef VNR_VOLUME_LOOKUP_INL_H_
+#else
+#define VNR_VOLUME_LOOKUP_INL_H_
+#endif
+
+#include <hwy/highway.h>
+#include "vnr/volume/volume.h"
+
+HWY_BEFORE_NAMESPACE();
+namespace vnr {
+namespace HWY_NAMESPACE {
+
+template <class DF>
+HWY_INLINE hwy::HWY_NAMESPACE::Vec<DF> GridLookupVec(DF df, const GridView& g, hwy::HWY_NAMESPACE::Vec<DF> ux,
+                                                     hwy::HWY_NAMESPACE::Vec<DF> uy, hwy::HWY_NAMESPACE::Vec<DF> uz) {
+  namespace hn = hwy::HWY_NAMESPACE;
+  const hn::RebindToSigned<DF> di;
+  using VI = hn::Vec<decltype(di)>;
+  const auto half = hn::Set(df, 0.5f), zero = hn::Zero(df), one = hn::Set(df, 1.0f);
+  const auto sy = hn::Set(di, g.nx), sz = hn::Set(di, g.nx * g.ny), ione = hn::Set(di, 1);
+  const hn::Vec<DF> u[3] = {ux, uy, uz};
+  const int32_t dims[3] = {g.nx, g.ny, g.nz};
+  VI i0[3], i1[3];
+  hn::Vec<DF> t[3];
+  for (int d = 0; d < 3; ++d) {
+    // cell_axis(): p = u*N - 0.5 clamped to [0, N-1] (x86 max returns its second operand for a NaN
+    // lane: NaN -> 0, as the scalar code); q >= 0, so floor = truncation.
+    const auto p = hn::Sub(hn::Mul(u[d], hn::Set(df, float(dims[d]))), half);
+    const auto q = hn::Min(hn::Max(p, zero), hn::Set(df, float(dims[d] - 1)));
+    const auto fl = hn::Floor(q);
+    i0[d] = hn::ConvertTo(di, fl);
+    i1[d] = hn::Min(hn::Add(i0[d], ione), hn::Set(di, dims[d] - 1));
+    t[d] = hn::Sub(q, fl);
+  }
+  auto at = [&](const VI& cx, const VI& cy, const VI& cz) {
+    return hn::GatherIndex(df, g.data, hn::Add(cx, hn::Add(hn::Mul(cy, sy), hn::Mul(cz, sz))));
+  };
+  // trilinear_corners()
+  const auto u0 = hn::Sub(one, t[0]), u1 = hn::Sub(one, t[1]), u2 = hn::Sub(one, t[2]);
+  const auto c00 = hn::Add(hn::Mul(at(i0[0], i0[1], i0[2]), u0), hn::Mul(at(i1[0], i0[1], i0[2]), t[0]));
+  const auto c10 = hn::Add(hn::Mul(at(i0[0], i1[1], i0[2]), u0), hn::Mul(at(i1[0], i1[1], i0[2]), t[0]));
+  const auto c01 = hn::Add(hn::Mul(at(i0[0], i0[1], i1[2]), u0), hn::Mul(at(i1[0], i0[1], i1[2]), t[0]));
+  const auto c11 = hn::Add(hn::Mul(at(i0[0], i1[1], i1[2]), u0), hn::Mul(at(i1[0], i1[1], i1[2]), t[0]));
+  const auto c0 = hn::Add(hn::Mul(c00, u1), hn::Mul(c10, t[1]));
+  const auto c1 = hn::Add(hn::Mul(c01, u1), hn::Mul(c11, t[1]));
+  return hn::Add(hn::Mul(c0, u2), hn::Mul(c1, t[2]));
+}
+
+// Prefetches (into L2, prefetcht1) the four x-rows that the lookups at (ux, uy, uz) will read:
+// the gathers are latency-bound, and Zen's gathers stall until all lanes arrive.
+template <class DF>
+HWY_INLINE void GridPrefetchVec(DF df, const GridView& g, hwy::HWY_NAMESPACE::Vec<DF> ux,
+                                hwy::HWY_NAMESPACE::Vec<DF> uy, hwy::HWY_NAMESPACE::Vec<DF> uz) {
+  namespace hn = hwy::HWY_NAMESPACE;
+  const hn::RebindToSigned<DF> di;
+  constexpr size_t kMaxLanes = HWY_MAX_BYTES / sizeof(float);
+  const hn::Vec<DF> u[3] = {ux, uy, uz};
+  const int32_t dims[3] = {g.nx, g.ny, g.nz};
+  hn::Vec<decltype(di)> c[3];
+  for (int d = 0; d < 3; ++d) {
+    const auto p = hn::Sub(hn::Mul(u[d], hn::Set(df, float(dims[d]))), hn::Set(df, 0.5f));
+    c[d] = hn::ConvertTo(di, hn::Min(hn::Max(p, hn::Zero(df)), hn::Set(df, float(dims[d] - 1))));
+  }
+  alignas(HWY_MAX_BYTES) int32_t base[kMaxLanes];
+  hn::Store(hn::Add(c[0], hn::Add(hn::Mul(c[1], hn::Set(di, g.nx)), hn::Mul(c[2], hn::Set(di, g.nx * g.ny)))), di,
+            base);
+  const int64_t ry = g.nx, rz = int64_t(g.nx) * g.ny;
+  for (size_t l = 0; l < hn::Lanes(df); ++l) {
+    const float* p0 = g.data + base[l];
+    __builtin_prefetch(p0, 0, 2);
+    __builtin_prefetch(p0 + ry, 0, 2);
+    __builtin_prefetch(p0 + rz, 0, 2);
+    __builtin_prefetch(p0 + ry + rz, 0, 2);
+  }
+}
+
+// base[idx[k]] into lane k of *a and base[idx[k] + 1] into lane k of *b, each pair gathered as one
+// 64-bit element (at byte offset 4 * idx: pairs start at any float, not at 8-byte multiples).
+// Gathers cost per element, so this halves their cost for neighbouring values.
+template <class DF>
+HWY_INLINE void GatherPairs(DF df, const float* base, hwy::HWY_NAMESPACE::Vec<hwy::HWY_NAMESPACE::RebindToSigned<DF>> idx,
+                            hwy::HWY_NAMESPACE::Vec<DF>* a, hwy::HWY_NAMESPACE::Vec<DF>* b) {
+  namespace hn = hwy::HWY_NAMESPACE;
+#if HWY_TARGET == HWY_SCALAR
+  *a = hn::GatherIndex(df, base, idx);
+  *b = hn::GatherIndex(df, base + 1, idx);
+#else
+  const hn::Half<hn::RebindToSigned<DF>> dih;
+  const hn::Repartition<int64_t, DF> di64;
+  const hn::Repartition<uint64_t, DF> du64;
+  const uint64_t* base64 = reinterpret_cast<const uint64_t*>(base);
+  const auto lo = hn::BitCast(df, hn::GatherOffset(du64, base64, hn::ShiftLeft<2>(hn::PromoteTo(di64, hn::LowerHalf(dih, idx)))));
+  const auto hi = hn::BitCast(df, hn::GatherOffset(du64, base64, hn::ShiftLeft<2>(hn::PromoteTo(di64, hn::UpperHalf(dih, idx)))));
+  *a = hn::ConcatEven(df, hi, lo);
+  *b = hn::ConcatOdd(df, hi, lo);
+#endif
+}
+
+// The same value for volumes at least 2 voxels wide in x, with each pair of x-neighbours loaded as
+// one 64-bit element: half the gathered elements, and gathers cost per element. The lower x corner
+// is clamped to N-2, so at q = N-1 the pair is (N-2, N-1) with weight 1 on the last voxel, where the
+// scalar code takes (N-1, N-1) with weight 0: v*0 + V*1 and V*1 + V*0 are both exactly V for finite
+// values (up to the sign of a zero V), so the result matches grid_lookup.
+template <class DF>
+HWY_INLINE hwy::HWY_NAMESPACE::Vec<DF> GridLookupPairsVec(DF df, const GridView& g, hwy::HWY_NAMESPACE::Vec<DF> ux,
+                                                          hwy::HWY_NAMESPACE::Vec<DF> uy,
+                                                          hwy::HWY_NAMESPACE::Vec<DF> uz) {
+  namespace hn = hwy::HWY_NAMESPACE;
+  const hn::RebindToSigned<DF> di;
+  using VI = hn::Vec<decltype(di)>;
+  const auto half = hn::Set(df, 0.5f), zero = hn::Zero(df), one = hn::Set(df, 1.0f);
+  const auto sy = hn::Set(di, g.nx), sz = hn::Set(di, g.nx * g.ny), ione = hn::Set(di, 1);
+  const hn::Vec<DF> u[3] = {ux, uy, uz};
+  const int32_t dims[3] = {g.nx, g.ny, g.nz};
+  VI i0[3], i1[3];
+  hn::Vec<DF> t[3];
+  for (int d = 0; d < 3; ++d) {
+    const auto p = hn::Sub(hn::Mul(u[d], hn::Set(df, float(dims[d]))), half);
+    const auto q = hn::Min(hn::Max(p, zero), hn::Set(df, float(dims[d] - 1)));
+    if (d == 0) {
+      i0[0] = hn::Min(hn::ConvertTo(di, hn::Floor(q)), hn::Set(di, dims[0] - 2));
+      t[0] = hn::Sub(q, hn::ConvertTo(df, i0[0]));
+    } else {
+      const auto fl = hn::Floor(q);
+      i0[d] = hn::ConvertTo(di, fl);
+      i1[d] = hn::Min(hn::Add(i0[d], ione), hn::Set(di, dims[d] - 1));
+      t[d] = hn::Sub(q, fl);
+    }
+  }
+  auto pair = [&](const VI& cy, const VI& cz, hn::Vec<DF>* a, hn::Vec<DF>* b) {
+    GatherPairs(df, g.data, hn::Add(i0[0], hn::Add(hn::Mul(cy, sy), hn::Mul(cz, sz))), a, b);
+  };
+  hn::Vec<DF> v[8];
+  pair(i0[1], i0[2], &v[0], &v[1]);
+  pair(i1[1], i0[2], &v[2], &v[3]);
+  pair(i0[1], i1[2], &v[4], &v[5]);
+  pair(i1[1], i1[2], &v[6], &v[7]);
+  // trilinear_corners()
+  const auto u0 = hn::Sub(one, t[0]), u1 = hn::Sub(one, t[1]), u2 = hn::Sub(one, t[2]);
+  const auto c00 = hn::Add(hn::Mul(v[0], u0), hn::Mul(v[1], t[0]));
+  const auto c10 = hn::Add(hn::Mul(v[2], u0), hn::Mul(v[3], t[0]));
+  const auto c01 = hn::Add(hn::Mul(v[4], u0), hn::Mul(v[5], t[0]));
+  const auto c11 = hn::Add(hn::Mul(v[6], u0), hn::Mul(v[7], t[0]));
+  const auto c0 = hn::Add(hn::Mul(c00, u1), hn::Mul(c10, t[1]));
+  const auto c1 = hn::Add(hn::Mul(c01, u1), hn::Mul(c11, t[1]));
+  return hn::Add(hn::Mul(c0, u2), hn::Mul(c1, t[2]));
+}
+
+}  // namespace HWY_NAMESPACE
+}  // namespace vnr
+HWY_AFTER_NAMESPACE();
+
+#endif  // per-target include guard
