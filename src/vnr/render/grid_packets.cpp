@@ -84,7 +84,7 @@ int64_t MarchGridPackets(const RenderParams& p, const GridView& g, TileCursor cu
     tf_soa[size_t(3 * p.tf.n + e)] = c.w;
   }
   const auto zero = hn::Zero(df), one = hn::Set(df, 1.0f);
-  const auto eps = hn::Set(df, 1e-5f * p.step);  // step_segment's, with march_next's fixed step
+  const auto eps = hn::Set(df, step_eps(p.step));  // step_segment's, with march_next's fixed step
   const auto ibx = hn::Set(df, p.inv_box.x), iby = hn::Set(df, p.inv_box.y), ibz = hn::Set(df, p.inv_box.z);
   const auto tf_lo = hn::Set(df, p.tf.lo), tf_scale = hn::Set(df, p.tf.scale);
   const auto tf_last = hn::Set(df, float(p.tf.n - 1));
@@ -124,7 +124,7 @@ int64_t MarchGridPackets(const RenderParams& p, const GridView& g, TileCursor cu
     const VF tn = hn::Add(ts, hn::Load(df, r.seg_len));
     GridPrefetchVec(df, g, hn::Mul(hn::Add(ox, hn::Mul(dx, tn)), ibx), hn::Mul(hn::Add(oy, hn::Mul(dy, tn)), iby),
                     hn::Mul(hn::Add(oz, hn::Mul(dz, tn)), ibz));
-    const VF v = GridLookupPairsVec(df, g, ux, uy, uz);
+    const VF v = GridLookupVec<true>(df, g, ux, uy, uz);
 
     // tf_lookup (clampf written as its compare-and-select, so every target matches the scalar code)
     const VF y = hn::Mul(hn::Sub(v, tf_lo), tf_scale);

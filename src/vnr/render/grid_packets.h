@@ -7,35 +7,10 @@
 #include <cstdint>
 #include "vnr/core/hd.h"
 #include "vnr/render/integrators.h"
+#include "vnr/render/tiles.h"
 #include "vnr/volume/volume.h"
 
 namespace vnr {
-
-// The pixels of tiles first, first + stride, ... of a W x H image cut into size x size tiles, each
-// tile in row order (the order in which the per-ray loop visits them).
-struct TileCursor {
-  int width = 0, height = 0, size = 8;
-  int64_t tile = 0, stride = 1;
-  int k = 0;  // next pixel within the current tile
-  VNR_HD bool next(int* ix, int* iy) {
-    const int tiles_x = (width + size - 1) / size;
-    const int64_t n_tiles = int64_t(tiles_x) * ((height + size - 1) / size);
-    while (tile < n_tiles) {
-      const int x0 = int(tile % tiles_x) * size, y0 = int(tile / tiles_x) * size;
-      while (k < size * size) {
-        const int x = x0 + k % size, y = y0 + k / size;
-        ++k;
-        if (x < width && y < height) {
-          *ix = x, *iy = y;
-          return true;
-        }
-      }
-      k = 0;
-      tile += stride;
-    }
-    return false;
-  }
-};
 
 // Whether march_grid_packets can render this frame: unshaded ray marching of a volume below 2^31
 // voxels (32-bit gather indices) and at least 2 voxels wide in x (x-neighbours load as pairs).

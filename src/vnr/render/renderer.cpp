@@ -6,6 +6,7 @@
 #include "vnr/core/json.h"
 #include "vnr/core/parallel.h"
 #include "vnr/render/grid_packets.h"
+#include "vnr/render/tiles.h"
 
 namespace vnr {
 
@@ -77,8 +78,6 @@ void Renderer::inshader(const PointFn& f, Image& img, RenderStats& st) {
   const RenderParams& p = params_;
   const int W = opt_.width, H = opt_.height;
   // 8x8 pixel tiles dealt round-robin to threads: neighbouring rays read neighbouring voxels.
-  const int tiles_x = (W + kTile - 1) / kTile, tiles_y = (H + kTile - 1) / kTile;
-  const int64_t n_tiles = int64_t(tiles_x) * tiles_y;
   std::atomic<int64_t> samples{0};
   const RenderMode mode = opt_.mode;
   if constexpr (std::is_same_v<PointFn, GridPointFn>) {
@@ -92,60 +91,57 @@ void Renderer::inshader(const PointFn& f, Image& img, RenderStats& st) {
   }
   parallel_threads([&](int t, int nt) {
     int64_t my_samples = 0;
-    for (int64_t tile = t; tile < n_tiles; tile += nt) {
-      const int x0 = int(tile % tiles_x) * kTile, y0 = int(tile / tiles_x) * kTile;
-      for (int iy = y0; iy < std::min(H, y0 + kTile); ++iy)
-        for (int ix = x0; ix < std::min(W, x0 + kTile); ++ix) {
-        const int64_t i = int64_t(iy) * W + ix;
-        if (mode == RenderMode::PathTrace) {
-          PathState s;
-          if (pt_begin(p, ix, iy, s) && pt_sample(p, s)) {
-            for (;;) {
-              Vec3f u = s.pos * p.inv_box;
-              float v = f(u.x, u.y, u.z);
-              ++my_samples;
-              if (!(pt_shade(p, s, v) && pt_sample(p, s))) break;
-            }
+    TileCursor pixels{W, H, kTile, t, nt};
+    for (int ix, iy; pixels.next(&ix, &iy);) {
+      const int64_t i = int64_t(iy) * W + ix;
+      if (mode == RenderMode::PathTrace) {
+        PathState s;
+        if (pt_begin(p, ix, iy, s) && pt_sample(p, s)) {
+          for (;;) {
+            Vec3f u = s.pos * p.inv_box;
+            float v = f(u.x, u.y, u.z);
+            ++my_samples;
+            if (!(pt_shade(p, s, v) && pt_sample(p, s))) break;
           }
-          img.pixels[i] = pt_pixel(s);
-          continue;
         }
-        MarchState s;
-        if (!march_begin(p, ix, iy, s)) {
-          img.pixels[i] = march_pixel(p, s);
-          continue;
+        img.pixels[i] = pt_pixel(s);
+        continue;
+      }
+      MarchState s;
+      if (!march_begin(p, ix, iy, s)) {
+        img.pixels[i] = march_pixel(p, s);
+        continue;
+      }
+      Vec3f pos;
+      float dt;
+      // M points per sample (1, or 7 with shading); a compile-time M keeps an unshaded sample out of
+      // the 7-point arrays (a fifth of a grid sample's instructions otherwise).
+      auto march = [&](auto points) {
+        constexpr int M = decltype(points)::value;
+        while (march_next(p, s, &pos, &dt)) {
+          float x[M], y[M], z[M], v[M];
+          march_sample_points(p, pos, M, x, y, z);
+          for (int k = 0; k < M; ++k) v[k] = f(x[k], y[k], z[k]);
+          my_samples += M;
+          if (!march_shade(p, s, pos, dt, v, M)) break;
         }
-        Vec3f pos;
-        float dt;
-        // M points per sample (1, or 7 with shading); a compile-time M keeps an unshaded sample out of
-        // the 7-point arrays (a fifth of a grid sample's instructions otherwise).
-        auto march = [&](auto points) {
-          constexpr int M = decltype(points)::value;
-          while (march_next(p, s, &pos, &dt)) {
-            float x[M], y[M], z[M], v[M];
-            march_sample_points(p, pos, M, x, y, z);
-            for (int k = 0; k < M; ++k) v[k] = f(x[k], y[k], z[k]);
-            my_samples += M;
-            if (!march_shade(p, s, pos, dt, v, M)) break;
+      };
+      if (march_points_per_sample(p) == 1) march(std::integral_constant<int, 1>{});
+      else march(std::integral_constant<int, 7>{});
+      if (mode == RenderMode::Shadow) {
+        ShadowState sh;
+        if (shadow_begin(p, s, sh)) {
+          while (shadow_next(p, sh, &pos, &dt)) {
+            Vec3f u = pos * p.inv_box;
+            float v = f(u.x, u.y, u.z);
+            ++my_samples;
+            if (!shadow_shade(p, sh, v, dt)) break;
           }
-        };
-        if (march_points_per_sample(p) == 1) march(std::integral_constant<int, 1>{});
-        else march(std::integral_constant<int, 7>{});
-        if (mode == RenderMode::Shadow) {
-          ShadowState sh;
-          if (shadow_begin(p, s, sh)) {
-            while (shadow_next(p, sh, &pos, &dt)) {
-              Vec3f u = pos * p.inv_box;
-              float v = f(u.x, u.y, u.z);
-              ++my_samples;
-              if (!shadow_shade(p, sh, v, dt)) break;
-            }
-          }
-          img.pixels[i] = shadow_pixel(p, s, sh.T);
-        } else {
-          img.pixels[i] = march_pixel(p, s);
         }
-        }
+        img.pixels[i] = shadow_pixel(p, s, sh.T);
+      } else {
+        img.pixels[i] = march_pixel(p, s);
+      }
     }
     samples += my_samples;
   });
@@ -164,10 +160,8 @@ namespace {
 // that neighbouring queue entries are neighbouring rays).
 void tiled_pixel_order(int W, int H, std::vector<int32_t>& out) {
   out.clear();
-  for (int y0 = 0; y0 < H; y0 += kTile)
-    for (int x0 = 0; x0 < W; x0 += kTile)
-      for (int y = y0; y < std::min(H, y0 + kTile); ++y)
-        for (int x = x0; x < std::min(W, x0 + kTile); ++x) out.push_back(int32_t(y) * W + x);
+  TileCursor pixels{W, H, kTile, 0, 1};
+  for (int x, y; pixels.next(&x, &y);) out.push_back(int32_t(y) * W + x);
 }
 // Keeps the live rays whose keep flag is set, in order.
 void compact(std::vector<int32_t>& live, const std::vector<uint8_t>& keep, std::vector<int32_t>& scratch) {

@@ -16,40 +16,13 @@ HWY_BEFORE_NAMESPACE();
 namespace vnr {
 namespace HWY_NAMESPACE {
 
+// cell_axis()'s clamped position along one axis: q = u*N - 0.5 clamped to [0, N-1] (x86 max returns
+// its second operand for a NaN lane: NaN -> 0, as the scalar code). q >= 0, so floor = truncation.
 template <class DF>
-HWY_INLINE hwy::HWY_NAMESPACE::Vec<DF> GridLookupVec(DF df, const GridView& g, hwy::HWY_NAMESPACE::Vec<DF> ux,
-                                                     hwy::HWY_NAMESPACE::Vec<DF> uy, hwy::HWY_NAMESPACE::Vec<DF> uz) {
+HWY_INLINE hwy::HWY_NAMESPACE::Vec<DF> CellAxisPos(DF df, hwy::HWY_NAMESPACE::Vec<DF> u, int32_t n) {
   namespace hn = hwy::HWY_NAMESPACE;
-  const hn::RebindToSigned<DF> di;
-  using VI = hn::Vec<decltype(di)>;
-  const auto half = hn::Set(df, 0.5f), zero = hn::Zero(df), one = hn::Set(df, 1.0f);
-  const auto sy = hn::Set(di, g.nx), sz = hn::Set(di, g.nx * g.ny), ione = hn::Set(di, 1);
-  const hn::Vec<DF> u[3] = {ux, uy, uz};
-  const int32_t dims[3] = {g.nx, g.ny, g.nz};
-  VI i0[3], i1[3];
-  hn::Vec<DF> t[3];
-  for (int d = 0; d < 3; ++d) {
-    // cell_axis(): p = u*N - 0.5 clamped to [0, N-1] (x86 max returns its second operand for a NaN
-    // lane: NaN -> 0, as the scalar code); q >= 0, so floor = truncation.
-    const auto p = hn::Sub(hn::Mul(u[d], hn::Set(df, float(dims[d]))), half);
-    const auto q = hn::Min(hn::Max(p, zero), hn::Set(df, float(dims[d] - 1)));
-    const auto fl = hn::Floor(q);
-    i0[d] = hn::ConvertTo(di, fl);
-    i1[d] = hn::Min(hn::Add(i0[d], ione), hn::Set(di, dims[d] - 1));
-    t[d] = hn::Sub(q, fl);
-  }
-  auto at = [&](const VI& cx, const VI& cy, const VI& cz) {
-    return hn::GatherIndex(df, g.data, hn::Add(cx, hn::Add(hn::Mul(cy, sy), hn::Mul(cz, sz))));
-  };
-  // trilinear_corners()
-  const auto u0 = hn::Sub(one, t[0]), u1 = hn::Sub(one, t[1]), u2 = hn::Sub(one, t[2]);
-  const auto c00 = hn::Add(hn::Mul(at(i0[0], i0[1], i0[2]), u0), hn::Mul(at(i1[0], i0[1], i0[2]), t[0]));
-  const auto c10 = hn::Add(hn::Mul(at(i0[0], i1[1], i0[2]), u0), hn::Mul(at(i1[0], i1[1], i0[2]), t[0]));
-  const auto c01 = hn::Add(hn::Mul(at(i0[0], i0[1], i1[2]), u0), hn::Mul(at(i1[0], i0[1], i1[2]), t[0]));
-  const auto c11 = hn::Add(hn::Mul(at(i0[0], i1[1], i1[2]), u0), hn::Mul(at(i1[0], i1[1], i1[2]), t[0]));
-  const auto c0 = hn::Add(hn::Mul(c00, u1), hn::Mul(c10, t[1]));
-  const auto c1 = hn::Add(hn::Mul(c01, u1), hn::Mul(c11, t[1]));
-  return hn::Add(hn::Mul(c0, u2), hn::Mul(c1, t[2]));
+  const auto p = hn::Sub(hn::Mul(u, hn::Set(df, float(n))), hn::Set(df, 0.5f));
+  return hn::Min(hn::Max(p, hn::Zero(df)), hn::Set(df, float(n - 1)));
 }
 
 // Prefetches (into L2, prefetcht1) the four x-rows that the lookups at (ux, uy, uz) will read:
@@ -60,16 +33,10 @@ HWY_INLINE void GridPrefetchVec(DF df, const GridView& g, hwy::HWY_NAMESPACE::Ve
   namespace hn = hwy::HWY_NAMESPACE;
   const hn::RebindToSigned<DF> di;
   constexpr size_t kMaxLanes = HWY_MAX_BYTES / sizeof(float);
-  const hn::Vec<DF> u[3] = {ux, uy, uz};
-  const int32_t dims[3] = {g.nx, g.ny, g.nz};
-  hn::Vec<decltype(di)> c[3];
-  for (int d = 0; d < 3; ++d) {
-    const auto p = hn::Sub(hn::Mul(u[d], hn::Set(df, float(dims[d]))), hn::Set(df, 0.5f));
-    c[d] = hn::ConvertTo(di, hn::Min(hn::Max(p, hn::Zero(df)), hn::Set(df, float(dims[d] - 1))));
-  }
+  const auto cx = hn::ConvertTo(di, CellAxisPos(df, ux, g.nx)), cy = hn::ConvertTo(di, CellAxisPos(df, uy, g.ny)),
+             cz = hn::ConvertTo(di, CellAxisPos(df, uz, g.nz));
   alignas(HWY_MAX_BYTES) int32_t base[kMaxLanes];
-  hn::Store(hn::Add(c[0], hn::Add(hn::Mul(c[1], hn::Set(di, g.nx)), hn::Mul(c[2], hn::Set(di, g.nx * g.ny)))), di,
-            base);
+  hn::Store(hn::Add(cx, hn::Add(hn::Mul(cy, hn::Set(di, g.nx)), hn::Mul(cz, hn::Set(di, g.nx * g.ny)))), di, base);
   const int64_t ry = g.nx, rz = int64_t(g.nx) * g.ny;
   for (size_t l = 0; l < hn::Lanes(df); ++l) {
     const float* p0 = g.data + base[l];
@@ -102,28 +69,26 @@ HWY_INLINE void GatherPairs(DF df, const float* base, hwy::HWY_NAMESPACE::Vec<hw
 #endif
 }
 
-// The same value for volumes at least 2 voxels wide in x, with each pair of x-neighbours loaded as
-// one 64-bit element: half the gathered elements, and gathers cost per element. The lower x corner
-// is clamped to N-2, so at q = N-1 the pair is (N-2, N-1) with weight 1 on the last voxel, where the
-// scalar code takes (N-1, N-1) with weight 0: v*0 + V*1 and V*1 + V*0 are both exactly V for finite
-// values (up to the sign of a zero V), so the result matches grid_lookup.
-template <class DF>
-HWY_INLINE hwy::HWY_NAMESPACE::Vec<DF> GridLookupPairsVec(DF df, const GridView& g, hwy::HWY_NAMESPACE::Vec<DF> ux,
-                                                          hwy::HWY_NAMESPACE::Vec<DF> uy,
-                                                          hwy::HWY_NAMESPACE::Vec<DF> uz) {
+// grid_lookup() for a vector of points. kPairs (volumes at least 2 voxels wide in x): each pair of
+// x-neighbours loads as one 64-bit element (GatherPairs), half the gathered elements. The lower x
+// corner is then clamped to N-2, so at q = N-1 the pair is (N-2, N-1) with weight 1 on the last
+// voxel where the scalar code takes (N-1, N-1) with weight 0: v*0 + V*1 and V*1 + V*0 are both
+// exactly V for finite values (up to the sign of a zero V), so the result still matches.
+template <bool kPairs, class DF>
+HWY_INLINE hwy::HWY_NAMESPACE::Vec<DF> GridLookupVec(DF df, const GridView& g, hwy::HWY_NAMESPACE::Vec<DF> ux,
+                                                     hwy::HWY_NAMESPACE::Vec<DF> uy, hwy::HWY_NAMESPACE::Vec<DF> uz) {
   namespace hn = hwy::HWY_NAMESPACE;
   const hn::RebindToSigned<DF> di;
   using VI = hn::Vec<decltype(di)>;
-  const auto half = hn::Set(df, 0.5f), zero = hn::Zero(df), one = hn::Set(df, 1.0f);
+  const auto one = hn::Set(df, 1.0f);
   const auto sy = hn::Set(di, g.nx), sz = hn::Set(di, g.nx * g.ny), ione = hn::Set(di, 1);
   const hn::Vec<DF> u[3] = {ux, uy, uz};
   const int32_t dims[3] = {g.nx, g.ny, g.nz};
   VI i0[3], i1[3];
   hn::Vec<DF> t[3];
   for (int d = 0; d < 3; ++d) {
-    const auto p = hn::Sub(hn::Mul(u[d], hn::Set(df, float(dims[d]))), half);
-    const auto q = hn::Min(hn::Max(p, zero), hn::Set(df, float(dims[d] - 1)));
-    if (d == 0) {
+    const auto q = CellAxisPos(df, u[d], dims[d]);
+    if (kPairs && d == 0) {
       i0[0] = hn::Min(hn::ConvertTo(di, hn::Floor(q)), hn::Set(di, dims[0] - 2));
       t[0] = hn::Sub(q, hn::ConvertTo(df, i0[0]));
     } else {
@@ -133,14 +98,17 @@ HWY_INLINE hwy::HWY_NAMESPACE::Vec<DF> GridLookupPairsVec(DF df, const GridView&
       t[d] = hn::Sub(q, fl);
     }
   }
-  auto pair = [&](const VI& cy, const VI& cz, hn::Vec<DF>* a, hn::Vec<DF>* b) {
-    GatherPairs(df, g.data, hn::Add(i0[0], hn::Add(hn::Mul(cy, sy), hn::Mul(cz, sz))), a, b);
-  };
+  // The 8 corners v[x + 2y + 4z] (x = 0: i0, 1: i1), a row pair at a time.
   hn::Vec<DF> v[8];
-  pair(i0[1], i0[2], &v[0], &v[1]);
-  pair(i1[1], i0[2], &v[2], &v[3]);
-  pair(i0[1], i1[2], &v[4], &v[5]);
-  pair(i1[1], i1[2], &v[6], &v[7]);
+  for (int k = 0; k < 4; ++k) {
+    const VI row = hn::Add(hn::Mul(k & 1 ? i1[1] : i0[1], sy), hn::Mul(k & 2 ? i1[2] : i0[2], sz));
+    if constexpr (kPairs) {
+      GatherPairs(df, g.data, hn::Add(i0[0], row), &v[2 * k], &v[2 * k + 1]);
+    } else {
+      v[2 * k] = hn::GatherIndex(df, g.data, hn::Add(i0[0], row));
+      v[2 * k + 1] = hn::GatherIndex(df, g.data, hn::Add(i1[0], row));
+    }
+  }
   // trilinear_corners()
   const auto u0 = hn::Sub(one, t[0]), u1 = hn::Sub(one, t[1]), u2 = hn::Sub(one, t[2]);
   const auto c00 = hn::Add(hn::Mul(v[0], u0), hn::Mul(v[1], t[0]));
