@@ -18,6 +18,9 @@ struct VolumeArgs {
   LoadOptions load() const;
 };
 
+// --device auto|cpu|cuda on train, eval, decode and bench (auto: cuda when a device is visible).
+void add_device_option(CLI::App* app, std::string& device);
+
 Int3 parse_dims(const std::string& s);
 void write_report(const std::string& path, const Json& report);  // atomic; "" = no report
 // Refuses to replace existing volume files (a decoded or generated volume must never silently

@@ -8,6 +8,7 @@
 #include "vnr/core/parallel.h"
 #include "vnr/core/progress.h"
 #include "vnr/core/rng.h"
+#include "vnr/cuda/cuda.h"
 #include "vnr/nn/config.h"
 #include "vnr/nn/mlp_kernels.h"
 #include "vnr/train/trainer.h"
@@ -16,7 +17,7 @@ namespace vnr::cli {
 namespace {
 
 struct BenchArgs {
-  std::string what, volume, config = "paper", report;
+  std::string what, volume, config = "paper", report, device = "auto", mlp = "auto";
   double seconds = 10;
   int64_t batch = 65536;
   int threads = 0;
@@ -49,11 +50,97 @@ double mlp_gflops(const Network& net, bool training, double seconds) {
   return el / 1e9;
 }
 
+// The same measurements on the GPU: per-step times from groups of steps between synchronisations
+// (training issues no synchronisation of its own), inference both with host transfers (the batch comes
+// from and goes back to host memory) and resident on the GPU (CUDA events, no transfers).
+void run_bench_cuda(const BenchArgs& a, const Volume& vol, Network& net) {
+  cuda::check_supported(net);
+  const bool training = a.what == "train";
+  const cuda::MlpPath asked = cuda::parse_mlp_path(a.mlp);
+  const double flops = net.flops_forward_per_sample() * (training ? 3.0 : 1.0);
+  std::vector<double> times;
+  Json report = {{"mode", a.what}, {"device", "cuda"}, {"config", a.config}, {"batch", a.batch},
+                 {"n_params", net.n_params()}, {"gpu", cuda::devices().at(0).name}};
+  Progress bar(std::string("bench ") + a.what + " (cuda)", a.seconds, false);
+  const char* path = "";
+  double mlp_seconds = 0, resident_sps = 0;
+  uint64_t peak = 0;
+  if (training) {
+    cuda::GpuTrainer tr(net, view_of(vol), cuda::GpuTrainOptions{a.batch, 1337, net.chunk(), asked});
+    tr.run(5);  // warm-up
+    tr.synchronize();
+    auto t0 = std::chrono::steady_clock::now();
+    int group = 8;
+    while (seconds_since(t0) < a.seconds || times.size() < 3) {
+      auto s0 = std::chrono::steady_clock::now();
+      tr.run(group);
+      tr.synchronize();
+      const double per = seconds_since(s0) / group;
+      for (int i = 0; i < group; ++i) times.push_back(per);
+      if (per * group < 0.1 && group < 1024) group *= 2;
+      bar.update(seconds_since(t0));
+    }
+    tr.set_profiling(true);
+    tr.run(1);
+    std::vector<double> ph = tr.phase_seconds();
+    mlp_seconds = ph.at(1);
+    report["phase_ms"] = {{"sample_encode", ph[0] * 1e3}, {"mlp_forward_loss_backward", ph[1] * 1e3},
+                          {"grid_backward", ph[2] * 1e3}, {"optimizer", ph[3] * 1e3}};
+    std::printf("phases of one step (ms, CUDA events): sample+encode %.3f, MLP fwd+loss+bwd %.3f, grid backward "
+                "%.3f, Adam %.3f\n",
+                ph[0] * 1e3, ph[1] * 1e3, ph[2] * 1e3, ph[3] * 1e3);
+    path = cuda::mlp_path_name(tr.mlp_path());
+    peak = tr.peak_memory_bytes();
+  } else {
+    cuda::GpuNetwork gn(net, asked);
+    std::vector<float> coords(3 * a.batch), out(a.batch);
+    Pcg32 rng(7);
+    for (auto& c : coords) c = rng.next_float();
+    gn.infer(coords.data(), a.batch, out.data());
+    auto t0 = std::chrono::steady_clock::now();
+    while (seconds_since(t0) < a.seconds || times.size() < 3) {
+      auto s0 = std::chrono::steady_clock::now();
+      gn.infer(coords.data(), a.batch, out.data());
+      times.push_back(seconds_since(s0));
+      bar.update(seconds_since(t0));
+    }
+    const cuda::GpuNetwork::ResidentTiming rt = gn.time_resident(std::max<int64_t>(a.batch, int64_t(1) << 22), 20);
+    const double n_res = double(std::max<int64_t>(a.batch, int64_t(1) << 22));
+    resident_sps = n_res / rt.seconds;
+    mlp_seconds = rt.mlp_seconds * double(a.batch) / n_res;
+    report["resident_samples_per_second"] = resident_sps;
+    report["resident_batch"] = n_res;
+    path = cuda::mlp_path_name(gn.mlp_path());
+    peak = gn.peak_memory_bytes();
+  }
+  bar.finish();
+  const double med = median(times), sps = a.batch / med;
+  const double mlp_tflops = net.flops_forward_per_sample() * (training ? 3.0 : 1.0) * a.batch / mlp_seconds / 1e12;
+  std::printf("%s %s on %s: %.1f M samples/s (median of %zu batches of %lld, %.3f ms each)%s\n", a.what.c_str(),
+              a.config.c_str(), cuda::devices().at(0).name.c_str(), sps / 1e6, times.size(), (long long)a.batch,
+              med * 1e3, training ? "" : " with host transfers");
+  if (!training) std::printf("resident on the GPU: %.1f M samples/s\n", resident_sps / 1e6);
+  std::printf("MLP (%s path): %.1f kFLOP/sample, %.2f TFLOP/s in its kernels; %.2f TFLOP/s end to end; peak GPU "
+              "memory %s\n",
+              path, flops / 1e3, mlp_tflops, flops * sps / 1e12, human_bytes(double(peak)).c_str());
+  report.update({{"samples_per_second", sps},
+                 {"batches", times.size()},
+                 {"ms_median", med * 1e3},
+                 {"mlp_path", path},
+                 {"mlp_flops_per_sample", flops},
+                 {"mlp_tflops", mlp_tflops},
+                 {"tflops_end_to_end", flops * sps / 1e12},
+                 {"peak_gpu_memory_bytes", peak}});
+  write_report(a.report, report);
+}
+
 void run_bench(const BenchArgs& a) {
   set_num_threads(a.threads);
+  const Device dev = cuda::resolve_device(a.device);
   Volume vol = load_volume(describe_volume(a.volume, a.vol.raw()), a.vol.load());
   Network net(load_config(a.config));
   net.init_params(1337);
+  if (dev == Device::Cuda) return run_bench_cuda(a, vol, net);
   const bool training = a.what == "train";
   std::vector<double> times;
   double phases[3] = {0, 0, 0};
@@ -99,6 +186,7 @@ void run_bench(const BenchArgs& a) {
     std::printf("phases (median ms): sample+encode+MLP %.2f, grid backward %.2f, optimizer %.2f\n", phases[0] * 1e3,
                 phases[1] * 1e3, phases[2] * 1e3);
   Json report = {{"mode", a.what},
+                 {"device", "cpu"},
                  {"config", a.config},
                  {"samples_per_second", sps},
                  {"batch", a.batch},
@@ -134,6 +222,10 @@ void add_bench(CLI::App& app) {
     c->add_option("--batch", a->batch, "samples per batch")->capture_default_str();
     c->add_option("--threads", a->threads, "CPU threads (default: all cores)");
     c->add_option("--report", a->report, "write a JSON report");
+    add_device_option(c, a->device);
+    c->add_option("--mlp", a->mlp, "cuda: MLP implementation, auto, fused or cublas")
+        ->check(CLI::IsMember({"auto", "fused", "cublas"}))
+        ->capture_default_str();
     a->vol.add(c);
     c->callback([a]() { run_bench(*a); });
   }

@@ -9,11 +9,16 @@
 #include "vnr/core/parallel.h"
 #include "vnr/core/progress.h"
 #include "vnr/core/units.h"
+#include "vnr/cuda/cuda.h"
+#include "vnr/nn/mlp_kernels.h"
 #include "vnr/train/model_io.h"
 #include "vnr/volume/stream.h"
 #include "vnr/volume/writer.h"
 
 namespace vnr::cli {
+namespace {
+void print_system_info(bool json);
+}  // namespace
 
 void add_eval(CLI::App& app) {
   struct Args {
@@ -22,6 +27,7 @@ void add_eval(CLI::App& app) {
     int64_t sample = 0;
     uint64_t seed = 0;
     bool no_ssim = false, quiet = false;
+    std::string device = "auto";
     VolumeArgs vol;
   };
   auto a = std::make_shared<Args>();
@@ -39,10 +45,13 @@ void add_eval(CLI::App& app) {
                 "memory for the volume and the decoded copy, e.g. 8GiB (default: half the available memory); "
                 "a larger volume is evaluated in streamed z-slabs");
   c->add_flag("-q,--quiet", a->quiet, "no progress output");
+  add_device_option(c, a->device);
   a->vol.add(c);
   c->callback([a, c]() {
     set_num_threads(a->threads);
     Model m = load_model(a->model);
+    const Device dev = cuda::resolve_device(a->device);
+    if (dev == Device::Cuda) cuda::check_supported(*m.net);
     const VolumeDesc desc = describe_volume(a->volume, a->vol.raw());
     const LoadOptions load_opts = a->vol.load();
     const Int3 dims = desc.dims;
@@ -85,13 +94,14 @@ void add_eval(CLI::App& app) {
     };
 
     Json report = {{"method", method},
+                   {"device", device_name(dev)},
                    {"compression_ratio", ratio},
                    {"model_bytes", model_bytes},
                    {"volume_bytes", volume_bytes}};
     if (method == "full") {  // unchanged: load, then decode every voxel
       Volume vol = load_volume(desc, load_opts);
       report.update({{"value_range", {vol.lo, vol.hi}}, {"value_range_source", "volume"}});
-      print_whole(evaluate(*m.net, vol, !a->no_ssim), report);
+      print_whole(evaluate(*m.net, vol, !a->no_ssim, dev), report);
       return;
     }
 
@@ -115,7 +125,7 @@ void add_eval(CLI::App& app) {
     report["value_range_source"] = range_source;
 
     if (method == "sampled") {
-      SampledEval ev = evaluate_sampled(*m.net, desc, range.lo, range.hi, a->sample, a->seed, load_opts);
+      SampledEval ev = evaluate_sampled(*m.net, desc, range.lo, range.hi, a->sample, a->seed, load_opts, dev);
       std::printf("PSNR %.2f dB (95%% interval %.2f to %.2f dB, from %lld sampled voxels), max |error| seen %.4g "
                   "(%.4g in data units), compression ratio %.2f, decoded in %.2fs\n",
                   ev.psnr, ev.psnr_ci95_lo, ev.psnr_ci95_hi, (long long)ev.samples, ev.max_abs_error,
@@ -148,7 +158,7 @@ void add_eval(CLI::App& app) {
                  (long long)slab_slices, human_bytes(double(full_bytes)).c_str(), human_bytes(double(budget)).c_str());
     Progress bar("eval", 1.0, a->quiet);
     EvalResult ev = evaluate_streamed(*m.net, desc, range.lo, range.hi, load_opts, !a->no_ssim,
-                                      [&](double f) { bar.update(f); }, slab_slices * slice);
+                                      [&](double f) { bar.update(f); }, slab_slices * slice, dev);
     bar.finish();
     print_whole(ev, report);
   });
@@ -156,7 +166,7 @@ void add_eval(CLI::App& app) {
 
 void add_decode(CLI::App& app) {
   struct Args {
-    std::string model, output, dims, dtype = "float32";
+    std::string model, output, dims, dtype = "float32", device = "auto";
     int threads = 0;
     bool quiet = false, force = false;
   };
@@ -169,10 +179,14 @@ void add_decode(CLI::App& app) {
   c->add_option("--threads", a->threads, "CPU threads (default: all cores)");
   c->add_flag("-q,--quiet", a->quiet, "no progress output");
   c->add_flag("--force", a->force, "replace existing output files");
+  add_device_option(c, a->device);
   c->callback([a]() {
     set_num_threads(a->threads);
     check_no_overwrite(volume_output_files(a->output), a->force);
     Model m = load_model(a->model);
+    const Device dev = cuda::resolve_device(a->device);
+    if (dev == Device::Cuda) cuda::check_supported(*m.net);
+    Decoder decoder(*m.net, dev);
     Int3 dims = a->dims.empty() ? m.dims : parse_dims(a->dims);
     DType out_t = a->dtype == "source" ? m.source_dtype : parse_dtype(a->dtype);
     // Slabs of ~16 M voxels: memory stays bounded whatever the output size.
@@ -186,7 +200,7 @@ void add_decode(CLI::App& app) {
     const double span = m.hi - m.lo;
     for (int64_t z0 = 0; z0 < dims.z; z0 += slab) {
       int64_t z1 = std::min(dims.z, z0 + slab);
-      decode_slices(*m.net, dims, z0, z1, buf.data());
+      decoder.slices(dims, z0, z1, buf.data());
       const size_t cnt = size_t(dims.x * dims.y * (z1 - z0));
       for (size_t i = 0; i < cnt; ++i) buf[i] = float(m.lo + double(buf[i]) * span);
       w.write_slices(buf.data(), z1 - z0);
@@ -194,10 +208,37 @@ void add_decode(CLI::App& app) {
     }
     w.commit();
     bar.finish();
-    std::printf("decoded %lldx%lldx%lld %s to %s in %.2fs\n", (long long)dims.x, (long long)dims.y,
-                (long long)dims.z, dtype_name(out_t), a->output.c_str(), seconds_since(t0));
+    std::printf("decoded %lldx%lldx%lld %s to %s in %.2fs (%s)\n", (long long)dims.x, (long long)dims.y,
+                (long long)dims.z, dtype_name(out_t), a->output.c_str(), seconds_since(t0), device_name(dev));
   });
 }
+
+namespace {
+// What this vnr can run on: the CPU's SIMD target and threads, the CUDA backend and its devices.
+void print_system_info(bool json) {
+  std::vector<cuda::DeviceInfo> devs = cuda::devices();
+  Json jd = Json::array();
+  for (const cuda::DeviceInfo& d : devs)
+    jd.push_back({{"index", d.index},
+                  {"name", d.name},
+                  {"compute_capability", fmt::format("{}.{}", d.cc_major, d.cc_minor)},
+                  {"memory_bytes", d.memory_bytes},
+                  {"multiprocessors", d.sm_count}});
+  Json j = {{"version", VNR_VERSION},
+            {"cpu", {{"simd", kernels::simd_target_name()}, {"threads", num_threads()}}},
+            {"cuda", {{"built", cuda::built()}, {"devices", jd}}},
+            {"default_device", devs.empty() ? "cpu" : "cuda"}};
+  if (devs.empty()) j["cuda"]["no_device_reason"] = cuda::no_device_reason();
+  if (json) {
+    std::printf("%s\n", j.dump(2).c_str());
+    return;
+  }
+  std::printf("vnr %s\n", VNR_VERSION);
+  std::printf("cpu: %s, %d threads\n", kernels::simd_target_name(), num_threads());
+  std::printf("%s\n", cuda::backend_summary().c_str());
+  std::printf("default --device: %s\n", devs.empty() ? "cpu" : "cuda");
+}
+}  // namespace
 
 void add_info(CLI::App& app) {
   struct Args {
@@ -205,10 +246,11 @@ void add_info(CLI::App& app) {
     bool json = false;
   };
   auto a = std::make_shared<Args>();
-  CLI::App* c = app.add_subcommand("info", "describe a model file");
-  c->add_option("model", a->model, "model file")->required();
+  CLI::App* c = app.add_subcommand("info", "describe a model file, or (without one) this vnr's backends and devices");
+  c->add_option("model", a->model, "model file");
   c->add_flag("--json", a->json, "print JSON");
   c->callback([a]() {
+    if (a->model.empty()) return print_system_info(a->json);
     Model m = load_model(a->model);
     const Network& n = *m.net;
     uint64_t bytes = file_size(a->model);

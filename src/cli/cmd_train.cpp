@@ -15,6 +15,7 @@
 #include "vnr/online/preview.h"
 #include "vnr/train/model_io.h"
 #include "vnr/train/streaming_samplers.h"
+#include "vnr/cuda/cuda.h"
 #include "vnr/train/trainer.h"
 #include "vnr/volume/raw_access.h"
 #include "vnr/volume/stream.h"
@@ -157,10 +158,33 @@ Json scale_grid_learning_rate(Json config, const TrainArgs& a, const OutOfCoreSa
   return c.to_json();
 }
 
+// --device: "cuda" where the run can train on the GPU (the volume in memory, a grid encoding with ReLU
+// layers, no live previews), else one clear error; "auto" takes the GPU when there is one and the run
+// allows it, and says why not when it does not.
+Device choose_device(const TrainArgs& a, const TrainingData& data, const Network& net, bool preview) {
+  const Device asked = cuda::resolve_device(a.device);
+  if (asked == Device::Cpu) return Device::Cpu;
+  std::string why_not;
+  if (!data.vol) why_not = "--device cuda trains volumes held in memory (--sampler incore); this run samples " + data.kind;
+  if (preview) why_not = "--preview-* options run on the CPU trainer";
+  if (why_not.empty()) {
+    try {
+      cuda::check_supported(net);
+    } catch (const Error& e) {
+      why_not = e.what();
+    }
+  }
+  if (why_not.empty()) return Device::Cuda;
+  if (a.device == "cuda") fail("{}; use --device cpu", why_not);
+  if (!a.quiet) std::fprintf(stderr, "note: training on the CPU: %s\n", why_not.c_str());
+  return Device::Cpu;
+}
+
 void run_train(const TrainArgs& a) {
   set_num_threads(a.threads);
   if (!a.timesteps.empty()) {
     if (a.preview.enabled()) fail("--preview-* options are not supported with --timesteps");
+    if (a.device == "cuda") fail("--timesteps trains on the CPU; --device cuda is not supported for time series yet");
     return run_train_series(a);
   }
   // Everything that can be checked without the data is checked first, so mistakes fail fast.
@@ -171,6 +195,7 @@ void run_train(const TrainArgs& a) {
   if (a.checkpoint_every < 0) fail("--checkpoint-every must be non-negative, got {}", a.checkpoint_every);
   if (a.blocks < 0 || a.refresh < 0) fail("--blocks and --refresh must be positive");
   if (a.continuous || a.switch_every) fail("--continuous and --switch-every need --timesteps");
+  if (a.device == "cuda") cuda::require_device();
   const std::optional<PreviewOptions> preview_opts = a.preview.options();  // checks the flags, creates the dir
   const uint64_t budget =
       a.memory_budget.empty() ? available_memory_bytes() / 2 : parse_byte_size(a.memory_budget);
@@ -194,18 +219,36 @@ void run_train(const TrainArgs& a) {
                  human_bytes(double(model.param_bytes())).c_str(), human_bytes(double(data.source_bytes())).c_str());
 
   const int64_t steps = a.steps >= 0 ? a.steps : (a.seconds > 0 ? INT64_MAX : 1000);
-  Trainer trainer(net, data.sampler, TrainOptions{a.batch, a.seed});
-  if (a.macrocell_size > 0) trainer.enable_online_ranges(data.dims, a.macrocell_size);
+  const Device dev = choose_device(a, data, net, preview_opts.has_value());
+  std::unique_ptr<Trainer> cpu;
+  std::unique_ptr<cuda::GpuTrainer> gpu;
+  if (dev == Device::Cuda) {
+    gpu = std::make_unique<cuda::GpuTrainer>(
+        net, view_of(*data.vol),
+        cuda::GpuTrainOptions{a.batch, a.seed, Trainer::chunk_for(net, a.batch), cuda::parse_mlp_path(a.mlp)});
+    if (!a.quiet)
+      std::fprintf(stderr, "training on %s (MLP: %s)\n", cuda::devices().at(0).name.c_str(),
+                   cuda::mlp_path_name(gpu->mlp_path()));
+  } else {
+    cpu = std::make_unique<Trainer>(net, data.sampler, TrainOptions{a.batch, a.seed});
+    if (a.macrocell_size > 0) cpu->enable_online_ranges(data.dims, a.macrocell_size);
+  }
   std::unique_ptr<TrainPreview> preview;
-  if (preview_opts) preview = std::make_unique<TrainPreview>(*preview_opts, trainer, data.dims);
+  if (preview_opts) preview = std::make_unique<TrainPreview>(*preview_opts, *cpu, data.dims);
   double preview_seconds = 0;  // left out of the training time and samples/s
   std::vector<double> step_seconds;
   // What a saved model records of its training so far (checkpoints, an aborted run, the end).
   auto record_training = [&](int64_t done, double seconds, float loss) {
     model.training = {{"steps", done},          {"seconds", seconds}, {"interrupted", bool(g_interrupted)},
                       {"batch", a.batch},       {"seed", a.seed},     {"final_loss", loss},
-                      {"threads", num_threads()}, {"sampler", data.kind}};
-    if (trainer.has_online_ranges()) model.macrocells = trainer.online_ranges();
+                      {"threads", num_threads()}, {"sampler", data.kind}, {"device", device_name(dev)}};
+    if (gpu) {
+      gpu->download();  // the model file is written from net.params
+      // The GPU trainer records no online ranges; the volume is in memory, so store the exact ones.
+      if (a.macrocell_size > 0) model.macrocells = value_ranges_from_grid(view_of(*data.vol), a.macrocell_size);
+    } else if (cpu->has_online_ranges()) {
+      model.macrocells = cpu->online_ranges();
+    }
   };
   const bool by_time = a.seconds > 0 && a.steps < 0;
   Progress bar("train", by_time ? a.seconds : double(steps), a.quiet);
@@ -215,11 +258,24 @@ void run_train(const TrainArgs& a) {
   g_interrupted = 0;
   auto previous = std::signal(SIGINT, on_sigint);
   try {
+    int group = 1;  // GPU: steps enqueued between synchronisations, grown to ~0.1 s
     while (done < steps && !g_interrupted) {
       auto t_step = std::chrono::steady_clock::now();
-      loss = trainer.step();
-      step_seconds.push_back(seconds_since(t_step));
-      ++done;
+      if (gpu) {
+        int64_t k = std::min<int64_t>(group, steps - done);
+        if (a.checkpoint_every > 0) k = std::min<int64_t>(k, a.checkpoint_every - done % a.checkpoint_every);
+        gpu->run(int(k));
+        const std::vector<float> losses = gpu->losses();  // synchronises
+        loss = losses.back();
+        const double per = seconds_since(t_step) / double(k);
+        for (int64_t i = 0; i < k; ++i) step_seconds.push_back(per);
+        done += k;
+        if (per * double(group) < 0.1 && group < 1024) group *= 2;
+      } else {
+        loss = cpu->step();
+        step_seconds.push_back(seconds_since(t_step));
+        ++done;
+      }
       if (preview) preview_seconds += preview->after_step(done);
       double el = seconds_since(t0) - preview_seconds;
       if (!std::isfinite(loss)) fail("training diverged at step {} (loss {}); try a smaller learning rate", done, loss);
@@ -259,7 +315,7 @@ void run_train(const TrainArgs& a) {
   std::optional<double> ssim;
   std::string psnr_note;
   if (data.vol) {
-    EvalResult ev = evaluate(net, *data.vol, !a.no_ssim);
+    EvalResult ev = evaluate(net, *data.vol, !a.no_ssim, dev);
     psnr = ev.psnr;
     max_err = ev.max_abs_error;
     max_err_orig = ev.max_abs_error_original;
@@ -267,7 +323,7 @@ void run_train(const TrainArgs& a) {
     eval_json = {{"method", "full"}};
   } else if (a.eval_samples > 0) {
     const int64_t n = std::min<int64_t>(a.eval_samples, int64_t(data.dims.count()));
-    SampledEval ev = evaluate_sampled(net, desc, data.lo, data.hi, n, a.seed + 1, a.vol.load());
+    SampledEval ev = evaluate_sampled(net, desc, data.lo, data.hi, n, a.seed + 1, a.vol.load(), dev);
     psnr = ev.psnr;
     max_err = ev.max_abs_error;
     max_err_orig = ev.max_abs_error_original;
@@ -316,7 +372,8 @@ void run_train(const TrainArgs& a) {
                  {"threads", num_threads()},
                  {"sampler", data.kind},
                  {"memory_budget", budget},
-                 {"loss_history", trainer.loss_history()},
+                 {"loss_history", gpu ? gpu->losses() : cpu->loss_history()},
+                 {"device", device_name(dev)},
                  {"preview_seconds", preview_seconds},
                  {"config", net.config_json()}};
   if (data.out_of_core) {
@@ -359,6 +416,10 @@ void add_train(CLI::App& app) {
   c->add_option("--batch", a->batch, "samples per step (multiple of 256)")->capture_default_str();
   c->add_option("--seed", a->seed, "seed for initialisation and sampling")->capture_default_str();
   c->add_option("--threads", a->threads, "CPU threads (default: all cores)");
+  add_device_option(c, a->device);
+  c->add_option("--mlp", a->mlp, "cuda: MLP implementation, auto (fused when the width allows), fused or cublas")
+      ->check(CLI::IsMember({"auto", "fused", "cublas"}))
+      ->capture_default_str();
   c->add_option("--report", a->report, "write a JSON report");
   c->add_option("--macrocell-size", a->macrocell_size,
                  "voxels per macro-cell of the value ranges recorded from the training samples for rendering (0: none)")

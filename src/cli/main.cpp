@@ -1,5 +1,6 @@
 // vnr: command-line front end of libvnr. Each subcommand lives in its own file; errors from the
 // library arrive as vnr::Error and are printed as one line with a non-zero exit status.
+#include "vnr/cuda/cuda.h"
 #include <algorithm>
 #include <cstdio>
 #include <cstdlib>
@@ -52,6 +53,12 @@ double median(std::vector<double> v) {
   return v.empty() ? 0 : v[v.size() / 2];
 }
 
+void add_device_option(CLI::App* app, std::string& device) {
+  app->add_option("--device", device, "auto (cuda when a CUDA device is visible, else cpu), cpu or cuda")
+      ->check(CLI::IsMember({"auto", "cpu", "cuda"}))
+      ->capture_default_str();
+}
+
 Int3 parse_dims(const std::string& s) {
   long long v[3];
   char tail;
@@ -86,8 +93,10 @@ int main(int argc, char** argv) {
   using namespace vnr::cli;
   CLI::App app{"vnr: volumetric neural representations - compress volumes into neural networks and evaluate them"};
   app.require_subcommand(1);
-  app.set_version_flag("--version", std::string("vnr ") + VNR_VERSION + " (backends: cpu [" +
-                                        vnr::kernels::simd_target_name() + "]; cuda: not built)");
+  app.set_version_flag("--version", []() {  // lazily: querying CUDA devices takes a moment
+    return std::string("vnr ") + VNR_VERSION + " (backends: cpu [" + vnr::kernels::simd_target_name() + "]; " +
+           vnr::cuda::backend_summary() + ")";
+  });
   add_train(app);
   add_eval(app);
   add_decode(app);

@@ -16,6 +16,7 @@ struct TrainArgs {
   int threads = 0;
   int macrocell_size = 16;
   bool quiet = false, no_ssim = false;
+  std::string device = "auto", mlp = "auto";  // backend; MLP path on the GPU
   VolumeArgs vol;
   PreviewArgs preview;  // --preview-every N --preview-dir DIR [--preview-size/-mode/-tf]
   // Samplers (issue 4): incore | outofcore | mmap; "" = incore when the volume fits the budget.

@@ -47,6 +47,28 @@ struct Pcg32 {
   }
 };
 
+// The RNG of one chunk of one training step (every backend's samplers draw from it).
+VNR_HD inline Pcg32 chunk_rng(uint64_t seed, uint64_t step, uint64_t chunk) {
+  return Pcg32(seed * 0x9E3779B97F4A7C15ULL + step * 0xD1B54A32D192ED03ULL + 1, chunk);
+}
+
+// Uniform training coordinates: sample i of an n-sample chunk draws x, y, z from stream i % 4 of
+// the chunk (4 streams, so the CPU's LCG chains run side by side), the last n % 4 samples from
+// stream 0. One sample at a time (GPU threads) with advance(); the CPU's uniform_coordinates()
+// draws the same numbers stream by stream (tested equal).
+constexpr int kCoordinateStreams = 4;
+VNR_HD inline void uniform_sample_coordinate(uint64_t seed, uint64_t step, uint64_t chunk, int n, int i, float* x,
+                                             float* y, float* z) {
+  const int n4 = n / kCoordinateStreams * kCoordinateStreams;
+  const int stream = i < n4 ? i % kCoordinateStreams : 0;
+  const uint64_t skip = i < n4 ? uint64_t(i / kCoordinateStreams) : uint64_t(n4 / kCoordinateStreams + (i - n4));
+  Pcg32 rng = chunk_rng(seed, step, chunk * kCoordinateStreams + uint64_t(stream));
+  rng.advance(3 * skip);
+  *x = rng.next_float();
+  *y = rng.next_float();
+  *z = rng.next_float();
+}
+
 // tiny-cuda-nn seeds its trainer RNG with std::seed_seq{seed}.generate(2 words)[0].
 uint32_t seed_seq_first_word(uint32_t seed);
 

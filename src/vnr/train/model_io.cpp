@@ -60,25 +60,51 @@ Model load_model(const std::string& path) {
   return m;
 }
 
-void decode_slices(const Network& net, Int3 dims, int64_t z0, int64_t z1, float* out) {
-  const int64_t nx = dims.x, ny = dims.y, nz = dims.z;
-  const int64_t n = nx * ny * (z1 - z0);
-  net.infer_fn(
-      n,
-      [&](int64_t i, float* x, float* y, float* z) {
-        int64_t ix = i % nx, iy = (i / nx) % ny, iz = z0 + i / (nx * ny);
-        *x = (float(ix) + 0.5f) / float(nx);
-        *y = (float(iy) + 0.5f) / float(ny);
-        *z = (float(iz) + 0.5f) / float(nz);
-      },
+Decoder::Decoder(const Network& net, Device device) : net_(net), device_(device) {
+  if (device == Device::Cuda) gpu_ = std::make_unique<cuda::GpuNetwork>(net);
+}
+Decoder::~Decoder() = default;
+
+namespace {
+// Voxel centre of index v of dims: the one expression both backends and both decode forms use.
+inline void voxel_centre(Int3 dims, int64_t v, float* x, float* y, float* z) {
+  const int64_t ix = v % dims.x, iy = (v / dims.x) % dims.y, iz = v / (dims.x * dims.y);
+  *x = (float(ix) + 0.5f) / float(dims.x);
+  *y = (float(iy) + 0.5f) / float(dims.y);
+  *z = (float(iz) + 0.5f) / float(dims.z);
+}
+}  // namespace
+
+void Decoder::slices(Int3 dims, int64_t z0, int64_t z1, float* out) {
+  if (gpu_) return gpu_->decode_slices(dims, z0, z1, out);  // the same expressions in kernels.cu
+  const int64_t first = dims.x * dims.y * z0;
+  net_.infer_fn(
+      dims.x * dims.y * (z1 - z0), [&](int64_t i, float* x, float* y, float* z) { voxel_centre(dims, first + i, x, y, z); },
       out);
 }
 
-EvalResult evaluate(const Network& net, const Volume& vol, bool with_ssim) {
+void Decoder::voxels(Int3 dims, const int64_t* voxel_index, int64_t n, float* out) {
+  if (gpu_) {
+    std::vector<float> xyz(size_t(3 * n));
+    for (int64_t i = 0; i < n; ++i) voxel_centre(dims, voxel_index[i], &xyz[3 * i], &xyz[3 * i + 1], &xyz[3 * i + 2]);
+    return gpu_->infer(xyz.data(), n, out);
+  }
+  net_.infer_fn(
+      n, [&](int64_t i, float* x, float* y, float* z) { voxel_centre(dims, voxel_index[i], x, y, z); }, out);
+}
+
+void decode_slices(const Network& net, Int3 dims, int64_t z0, int64_t z1, float* out) {
+  Decoder(net, Device::Cpu).slices(dims, z0, z1, out);
+}
+void decode_voxels(const Network& net, Int3 dims, const int64_t* voxel_index, int64_t n, float* out) {
+  Decoder(net, Device::Cpu).voxels(dims, voxel_index, n, out);
+}
+
+EvalResult evaluate(const Network& net, const Volume& vol, bool with_ssim, Device device) {
   EvalResult r;
   std::vector<float> dec(vol.data.size());
   auto t0 = std::chrono::steady_clock::now();
-  decode_slices(net, vol.dims, 0, vol.dims.z, dec.data());
+  Decoder(net, device).slices(vol.dims, 0, vol.dims.z, dec.data());
   r.decode_seconds = seconds_since(t0);
   ErrorStats e = error_stats(vol.data.data(), dec.data(), vol.dims);
   r.psnr = e.psnr;
@@ -87,20 +113,6 @@ EvalResult evaluate(const Network& net, const Volume& vol, bool with_ssim) {
   r.max_abs_error_original = e.max_abs_error * (vol.hi - vol.lo);
   if (with_ssim) r.ssim = ssim3d(vol.data.data(), dec.data(), vol.dims);
   return r;
-}
-
-void decode_voxels(const Network& net, Int3 dims, const int64_t* voxel_index, int64_t n, float* out) {
-  const int64_t nx = dims.x, ny = dims.y, nz = dims.z;
-  net.infer_fn(
-      n,
-      [&](int64_t i, float* x, float* y, float* z) {
-        int64_t v = voxel_index[i];
-        int64_t ix = v % nx, iy = (v / nx) % ny, iz = v / (nx * ny);
-        *x = (float(ix) + 0.5f) / float(nx);  // decode_slices' voxel centres, expression for expression
-        *y = (float(iy) + 0.5f) / float(ny);
-        *z = (float(iz) + 0.5f) / float(nz);
-      },
-      out);
 }
 
 bool model_file_has_value_range(const std::string& path) {
@@ -119,8 +131,9 @@ double psnr_of_mse(double mse) { return mse > 0 ? 10 * std::log10(1 / mse) : 999
 
 EvalResult evaluate_streamed(const Network& net, const VolumeDesc& desc, double lo, double hi,
                              const LoadOptions& opts, bool with_ssim, const std::function<void(double)>& progress,
-                             int64_t slab_voxels) {
+                             int64_t slab_voxels, Device device) {
   const Int3 d = desc.dims;
+  Decoder decoder(net, device);
   if (d.x <= 0 || d.y <= 0 || d.z <= 0) fail("'{}': invalid dims", desc.path);
   const int64_t slice = d.x * d.y, nz = d.z;
   if (slab_voxels <= 0) slab_voxels = int64_t(1) << 24;
@@ -152,7 +165,7 @@ EvalResult evaluate_streamed(const Network& net, const VolumeDesc& desc, double 
     const float* reference = with_ssim ? rs : values;
     float* decoded = dec.data() + held * slice;
     auto t0 = std::chrono::steady_clock::now();
-    decode_slices(net, d, z0, z0 + k, decoded);
+    decoder.slices(d, z0, z0 + k, decoded);
     r.decode_seconds += seconds_since(t0);
     ErrorStats e = error_stats(reference, decoded, Int3{d.x, d.y, k});
     se += e.mse * double(k * slice);
@@ -176,7 +189,8 @@ EvalResult evaluate_streamed(const Network& net, const VolumeDesc& desc, double 
 }
 
 SampledEval evaluate_sampled(const Network& net, const VolumeDesc& desc, double lo, double hi, int64_t n_samples,
-                             uint64_t seed, const LoadOptions& opts) {
+                             uint64_t seed, const LoadOptions& opts, Device device) {
+  Decoder decoder(net, device);
   if (n_samples <= 0) fail("the number of samples must be positive, got {}", n_samples);
   const RawVolumeFile file(desc, lo, hi, opts.non_finite, "sampled evaluation",
                            "evaluating without --sample streams gzip data");
@@ -196,7 +210,7 @@ SampledEval evaluate_sampled(const Network& net, const VolumeDesc& desc, double 
     }
     file.read_voxels(idx.data(), m, truth.data());
     auto t0 = std::chrono::steady_clock::now();
-    decode_voxels(net, desc.dims, idx.data(), m, decoded.data());
+    decoder.voxels(desc.dims, idx.data(), m, decoded.data());
     s.decode_seconds += seconds_since(t0);
     for (int64_t i = 0; i < m; ++i) {
       double diff = double(decoded[size_t(i)]) - double(truth[size_t(i)]);

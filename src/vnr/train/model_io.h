@@ -4,6 +4,8 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include "vnr/core/device.h"
+#include "vnr/cuda/cuda.h"
 #include "vnr/nn/model_file.h"
 #include "vnr/nn/network.h"
 #include "vnr/volume/value_range_grid.h"
@@ -36,12 +38,29 @@ struct EvalResult {
   double max_abs_error_original = 0;  // original units
   double decode_seconds = 0;
 };
-EvalResult evaluate(const Network& net, const Volume& vol, bool with_ssim = true);
+EvalResult evaluate(const Network& net, const Volume& vol, bool with_ssim = true, Device device = Device::Cpu);
 
-// Decodes the network at voxel centres of `dims` for z-slices [z0, z1) into out (normalised units).
+// Decodes a network at voxel centres ((i + 0.5) / n per axis) on one backend; a GPU decoder keeps its
+// copy of the network between calls. On the GPU the network runs in half precision (tcnn's inference),
+// so values differ from the CPU's by about 1e-3 relative.
+class Decoder {
+public:
+  Decoder(const Network& net, Device device);
+  ~Decoder();
+  // z-slices [z0, z1) of `dims` into out (normalised units), x fastest.
+  void slices(Int3 dims, int64_t z0, int64_t z1, float* out);
+  // n voxels given by index (x + dims.x * (y + dims.y * z)): bit-identical to what slices() gives them.
+  void voxels(Int3 dims, const int64_t* voxel_index, int64_t n, float* out);
+  Device device() const { return device_; }
+
+private:
+  const Network& net_;
+  Device device_;
+  std::unique_ptr<cuda::GpuNetwork> gpu_;
+};
+
+// Decoder(net, Device::Cpu).slices / .voxels.
 void decode_slices(const Network& net, Int3 dims, int64_t z0, int64_t z1, float* out);
-// The same for n voxels given by index (x + dims.x * (y + dims.y * z)): bit-identical to the
-// values decode_slices gives those voxels.
 void decode_voxels(const Network& net, Int3 dims, const int64_t* voxel_index, int64_t n, float* out);
 
 // Whether the model file records the value range of the volume it was trained on: .vnr files do,
@@ -58,7 +77,8 @@ bool model_file_has_value_range(const std::string& path);
 // `progress` gets the fraction of slices done.
 EvalResult evaluate_streamed(const Network& net, const VolumeDesc& desc, double lo, double hi,
                              const LoadOptions& opts, bool with_ssim = true,
-                             const std::function<void(double fraction)>& progress = {}, int64_t slab_voxels = 0);
+                             const std::function<void(double fraction)>& progress = {}, int64_t slab_voxels = 0,
+                             Device device = Device::Cpu);
 
 // PSNR estimated from n_samples voxels drawn uniformly (with replacement; deterministic for a
 // seed), read with RawVolumeFile (uncompressed data only) and decoded as evaluate() decodes them.
@@ -75,7 +95,7 @@ struct SampledEval {
   double decode_seconds = 0;
 };
 SampledEval evaluate_sampled(const Network& net, const VolumeDesc& desc, double lo, double hi, int64_t n_samples,
-                             uint64_t seed, const LoadOptions& opts = {});
+                             uint64_t seed, const LoadOptions& opts = {}, Device device = Device::Cpu);
 
 // Sizes the grid of `config` (log2_hashmap_size, and n_levels if needed) so the fp16 model is about
 // volume_bytes / ratio. Returns the adjusted config; `note` describes the choice.

@@ -5,7 +5,7 @@ namespace vnr {
 void uniform_coordinates(uint64_t seed, uint64_t step, uint64_t chunk, int n, float* x, float* y, float* z) {
   // Four independent pcg32 streams (x, y, z of every 4th sample each) so the LCG multiply chains
   // run in parallel instead of one after another.
-  constexpr int kStreams = 4;
+  constexpr int kStreams = kCoordinateStreams;  // uniform_sample_coordinate() is the per-sample form
   Pcg32 rng[kStreams];
   for (int j = 0; j < kStreams; ++j) rng[j] = chunk_rng(seed, step, chunk * kStreams + uint64_t(j));
   int i = 0;

@@ -18,11 +18,6 @@ public:
                       float* target) const = 0;
 };
 
-// The RNG of one chunk of one step.
-inline Pcg32 chunk_rng(uint64_t seed, uint64_t step, uint64_t chunk) {
-  return Pcg32(seed * 0x9E3779B97F4A7C15ULL + step * 0xD1B54A32D192ED03ULL + 1, chunk);
-}
-
 // An integer in [0, n) from one draw (multiply-shift; the bias is below n / 2^32).
 VNR_HD inline uint32_t rng_below(Pcg32& rng, uint32_t n) { return uint32_t((uint64_t(rng.next_uint()) * n) >> 32); }
 

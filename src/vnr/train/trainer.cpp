@@ -16,10 +16,8 @@ Trainer::Trainer(Network& net, std::shared_ptr<Sampler> sampler, TrainOptions op
   const MlpLayout& m = net.mlp();
   grads_.assign(net.n_params(), 0.0f);
   dW_.assign(n_threads_, std::vector<float>(m.n_params, 0.0f));
-  // Chunks of the network's preferred size, halved until they divide the batch (so every chunk
-  // is full and the encoding-gradient rows all have the same stride).
-  int C = net.chunk();
-  while (opts_.batch % C) C /= 2;
+  // Every chunk full, and the encoding-gradient rows all have the same stride.
+  const int C = chunk_for(net, opts_.batch);
   chunk_ = C;
   // workspace per thread: target, X0, acts, out_pre, out, dout, scratch
   size_t ws = C + size_t(m.in_pad) * C + net.acts_floats(C) + 3 * size_t(m.n_out) * C + 2 * size_t(m.width) * C;
@@ -30,6 +28,12 @@ Trainer::Trainer(Network& net, std::shared_ptr<Sampler> sampler, TrainOptions op
   const int64_t n_chunks = opts_.batch / C;
   if (net.has_grid()) dEnc_.resize(size_t(n_chunks) * C * m.in_pad);
   chunk_loss_.resize(n_chunks);
+}
+
+int Trainer::chunk_for(const Network& net, int64_t batch) {
+  int C = net.chunk();
+  while (C > 1 && batch % C) C /= 2;
+  return C;
 }
 
 float Trainer::step() {

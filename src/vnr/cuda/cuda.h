@@ -1,0 +1,133 @@
+#pragma once
+// The CUDA backend's host API. Plain C++ (no CUDA types), so every layer above can call it whether or
+// not vnr was built with CUDA: without it (VNR_CUDA=OFF) devices() is empty and everything else fails
+// with one clear line. CI has the toolkit but no GPU or driver: cudaGetDeviceCount then returns an
+// error, which means "no device", never a failure.
+//
+// Semantics are tiny-cuda-nn's (compat.md): half weights and activations, binary32 accumulation, loss
+// scale 128 on the half gradients, Adam on a binary32 master copy with the zero-gradient skip of grid
+// parameters. The per-sample code (sampling, trilinear targets, grid corners, losses) is the same
+// VNR_HD source the CPU runs; only the hot kernels (grid gather/scatter, the MLP, Adam) are CUDA's own.
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+#include "vnr/core/device.h"
+#include "vnr/core/math.h"
+#include "vnr/nn/network.h"
+#include "vnr/volume/volume.h"
+
+namespace vnr::cuda {
+
+bool built();  // compiled with the CUDA backend
+
+struct DeviceInfo {
+  int index = 0;
+  std::string name;
+  int cc_major = 0, cc_minor = 0;
+  uint64_t memory_bytes = 0;
+  int sm_count = 0;
+};
+// Visible CUDA devices; empty when built without CUDA, with no driver, or with no device.
+std::vector<DeviceInfo> devices();
+// Why devices() is empty, in words.
+std::string no_device_reason();
+// Fails with one line (the reason) when there is no device.
+void require_device();
+// "cpu", "cuda" (fails without a device) or "auto" (cuda when a device is visible, else cpu).
+Device resolve_device(const std::string& name);
+// One line for --version / vnr info: "cuda (NVIDIA H100 80GB HBM3, sm_90, 79.1 GiB)", "cuda: built, no CUDA
+// device (...)" or "cuda: not built".
+std::string backend_summary();
+
+// The MLP implementation: the fully fused tensor-core kernels (widths 16/32/64/128, activations and the
+// current layer's weights in shared memory), or one cuBLAS GEMM per layer (any width; also the fallback
+// when a fused kernel's shared memory does not fit the device).
+enum class MlpPath { Auto, Fused, Cublas };
+const char* mlp_path_name(MlpPath p);
+MlpPath parse_mlp_path(const std::string& s);  // auto | fused | cublas
+
+// Fails unless the network can run on the GPU (grid encoding, ReLU hidden layers).
+void check_supported(const Network& net);
+
+struct GpuTrainOptions {
+  int64_t batch = 65536;  // samples per step, a multiple of 256
+  uint32_t seed = 1337;   // sampling seed (initialisation is the Network's)
+  int chunk = 256;        // the CPU trainer's chunk: samples are drawn per (step, chunk) exactly as on the CPU
+  MlpPath mlp = MlpPath::Auto;
+};
+
+// Trains a Network on the GPU from a normalised volume held in GPU memory (the in-core sampler of
+// compat.md B.3, bit-identical coordinates and targets to the CPU's for the same seed and chunk).
+class GpuTrainer {
+public:
+  GpuTrainer(Network& net, GridView volume, GpuTrainOptions opts);
+  ~GpuTrainer();
+  GpuTrainer(const GpuTrainer&) = delete;
+  GpuTrainer& operator=(const GpuTrainer&) = delete;
+
+  // Enqueues n training steps; no host synchronisation (the learning-rate schedule is host arithmetic).
+  void run(int n_steps);
+  void synchronize();
+  // Mean loss of every step so far (synchronises).
+  std::vector<float> losses();
+  uint64_t steps_done() const;
+  float current_learning_rate() const;
+  // Copies the binary32 master parameters back into the Network (and refreshes its half grid).
+  void download();
+  MlpPath mlp_path() const;
+  // Most bytes of GPU memory the backend's buffers held at once (the volume included; cuBLAS's own
+  // workspace not).
+  uint64_t peak_memory_bytes() const;
+  // With profiling on, every step records CUDA events between its phases; phase_seconds() then gives
+  // the last step's {sampling + encoding, MLP forward + loss + backward, grid backward, Adam} (synchronises).
+  void set_profiling(bool on);
+  std::vector<double> phase_seconds();
+
+private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+// A Network resident on the GPU, for batched queries. Inputs and outputs are host arrays; work is
+// streamed through the GPU in slabs, so outputs of any size fit.
+class GpuNetwork {
+public:
+  explicit GpuNetwork(const Network& net, MlpPath mlp = MlpPath::Auto);
+  ~GpuNetwork();
+  GpuNetwork(const GpuNetwork&) = delete;
+  GpuNetwork& operator=(const GpuNetwork&) = delete;
+
+  // out[i] = first network output (after the output activation) at coords[3i..3i+2].
+  void infer(const float* coords, int64_t n, float* out);
+  // decode_slices() of model_io on the GPU: voxel centres ((i + 0.5) / n per axis, the same expressions)
+  // of slices [z0, z1) of a dims-sized grid, x fastest.
+  void decode_slices(Int3 dims, int64_t z0, int64_t z1, float* out);
+  // Samples per slab (default 4M); for tests and memory limits.
+  void set_slab(int64_t samples);
+  MlpPath mlp_path() const;
+  uint64_t peak_memory_bytes() const;
+  // Throughput with everything resident on the GPU (no transfers): n random points, encoding + MLP,
+  // timed with CUDA events over `repeats` batches. Seconds per batch, total and MLP alone.
+  struct ResidentTiming {
+    double seconds = 0, mlp_seconds = 0;
+  };
+  ResidentTiming time_resident(int64_t n, int repeats);
+
+private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+// Kernel-level entry points for the gpu tests: each runs one kernel family on the GPU for n points
+// (interleaved xyz) and returns host arrays, so tests compare them with the CPU reference.
+namespace testing {
+// The padded encoding, sample-major: n x in_pad values (rounded to half, as the MLP reads them).
+std::vector<float> encode(const Network& net, const float* coords, int n);
+// The unscaled loss gradient of every parameter (tcnn order) for one batch with the given targets, and
+// the batch's mean loss; grads are binary32 (the half working copy drives forward and backward).
+std::vector<float> gradient(const Network& net, const float* coords, const float* targets, int n, MlpPath mlp,
+                            float* loss);
+}  // namespace testing
+
+}  // namespace vnr::cuda

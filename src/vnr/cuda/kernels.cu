@@ -1,0 +1,194 @@
+#include "vnr/core/rng.h"
+#include "vnr/cuda/kernels.cuh"
+#include "vnr/nn/loss.h"
+
+namespace vnr::cuda {
+namespace {
+
+constexpr int kThreads = 256;
+
+// One thread per (point, level), level-major: neighbouring threads read the same level's table.
+template <int F>
+__global__ void encode_kernel(GridLayout g, const uint16_t* __restrict__ table, Coords c, int64_t n, int in_pad,
+                              __half* __restrict__ X0) {
+  const int64_t i = int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
+  if (i >= n * g.n_levels) return;
+  const int level = int(i / n);
+  const int64_t s = i % n;
+  const float x = c.x[s * c.stride], y = c.y[s * c.stride], z = c.z[s * c.stride];
+  float out[F];
+  grid_level_forward<F>(g.levels[level], g.interpolation, table, x, y, z, out, 1);
+  __half* row = X0 + s * in_pad;
+  for (int f = 0; f < F; ++f) row[level * F + f] = __float2half_rn(out[f]);
+  if (level == 0)
+    for (int k = int(g.n_levels * F); k < in_pad; ++k) row[k] = __float2half_rn(0.0f);
+}
+
+template <int F>
+__global__ void grid_backward_kernel(GridLayout g, Coords c, int64_t n, int in_pad, const __half* __restrict__ dX0,
+                                     float inv_scale, float* __restrict__ grad) {
+  const int64_t i = int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
+  if (i >= n * g.n_levels) return;
+  const int level = int(i / n);
+  const int64_t s = i % n;
+  float dy[F];
+  bool any = false;
+  for (int f = 0; f < F; ++f) {
+    dy[f] = __half2float(dX0[s * in_pad + level * F + f]) * inv_scale;
+    any |= dy[f] != 0.0f;
+  }
+  if (!any) return;
+  const GridLevel& L = g.levels[level];
+  GridCorners cr;
+  grid_corners(L, g.interpolation, c.x[s * c.stride], c.y[s * c.stride], c.z[s * c.stride], cr);
+  const int kn = g.interpolation == Interpolation::Nearest ? 1 : 8;
+  for (int k = 0; k < kn; ++k) {
+    float* gr = grad + (uint64_t(L.offset) + cr.entry[k]) * F;
+    for (int f = 0; f < F; ++f) atomicAdd(gr + f, cr.weight[k] * dy[f]);
+  }
+}
+
+__global__ void sample_kernel(GridView vol, uint64_t seed, uint64_t step, int chunk, int64_t batch, float* x,
+                              float* y, float* z, float* target) {
+  const int64_t i = int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
+  if (i >= batch) return;
+  float px, py, pz;
+  uniform_sample_coordinate(seed, step, uint64_t(i / chunk), chunk, int(i % chunk), &px, &py, &pz);
+  x[i] = px;
+  y[i] = py;
+  z[i] = pz;
+  target[i] = grid_lookup(vol, px, py, pz);
+}
+
+__global__ void loss_kernel(LossType t, Activation out_act, const float* __restrict__ out_pre,
+                            const float* __restrict__ target, int64_t n, int n_out, int out_pad, float inv_n,
+                            __half* __restrict__ dOut, float* loss_slot) {
+  const int64_t i = int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
+  float l = 0.0f;
+  if (i < n) {
+    for (int o = 0; o < out_pad; ++o) {
+      float g = 0.0f;
+      if (o < n_out) {
+        const float pre = out_pre[i * n_out + o];
+        l += loss_value_and_grad(t, activate(out_act, pre), target[i], inv_n, &g);
+        g = g * kLossScale * activate_derivative(out_act, pre);
+      }
+      dOut[i * out_pad + o] = __float2half_rn(g);
+    }
+  }
+  for (int off = 16; off > 0; off /= 2) l += __shfl_down_sync(0xffffffffu, l, off);
+  __shared__ float warp_sums[kThreads / 32];
+  if (threadIdx.x % 32 == 0) warp_sums[threadIdx.x / 32] = l;
+  __syncthreads();
+  if (threadIdx.x == 0) {
+    float sum = 0.0f;
+    for (int w = 0; w < int(blockDim.x / 32); ++w) sum += warp_sums[w];
+    atomicAdd(loss_slot, sum);
+  }
+}
+
+// The CPU's AdamRange formula operation for operation (this file is built without FMA contraction).
+__global__ void adam_kernel(AdamArgs a, float* __restrict__ w, float* __restrict__ grads, float* __restrict__ m,
+                            float* __restrict__ v, uint32_t* __restrict__ c, __half* __restrict__ half_out, int64_t n,
+                            const float* __restrict__ bias_sqrt, const float* __restrict__ bias_den) {
+  const int64_t i = int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
+  if (i >= n) return;
+  float g = grads[i];
+  grads[i] = 0.0f;
+  if (!a.matrix && g == 0.0f) return;
+  const float wi = w[i];
+  if (a.matrix) g = g + a.l2 * wi;
+  const float mi = a.beta1 * m[i] + (1.0f - a.beta1) * g;
+  const float vi = a.beta2 * v[i] + ((1.0f - a.beta2) * g) * g;
+  const uint32_t ci = c[i] + 1;
+  const float lr_t = (a.lr * bias_sqrt[ci]) / bias_den[ci];
+  float eff = lr_t / (sqrtf(vi) + a.eps);
+  eff = fminf(fmaxf(eff, a.lo), a.hi);
+  const float wd = (1.0f - a.rel * lr_t) * wi - copysignf(a.abs_decay * lr_t, wi);
+  const float wn = wd - eff * mi;
+  w[i] = wn;
+  m[i] = mi;
+  v[i] = vi;
+  c[i] = ci;
+  half_out[i] = __float2half_rn(wn);
+}
+
+__global__ void to_half_kernel(const float* __restrict__ in, int64_t n, __half* __restrict__ out) {
+  const int64_t i = int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
+  if (i < n) out[i] = __float2half_rn(in[i]);
+}
+
+__global__ void voxel_centres_kernel(Int3 dims, int64_t first, int64_t count, int64_t padded, float* xyz) {
+  const int64_t i = int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
+  if (i >= padded) return;
+  const int64_t v = first + (i < count ? i : count - 1);
+  const int64_t ix = v % dims.x, iy = (v / dims.x) % dims.y, iz = v / (dims.x * dims.y);
+  xyz[3 * i + 0] = (float(ix) + 0.5f) / float(dims.x);  // model_io's decode_slices, expression for expression
+  xyz[3 * i + 1] = (float(iy) + 0.5f) / float(dims.y);
+  xyz[3 * i + 2] = (float(iz) + 0.5f) / float(dims.z);
+}
+
+}  // namespace
+
+void encode(const GridLayout& g, const __half* table, Coords c, int64_t n, int in_pad, __half* X0, cudaStream_t s) {
+  const int64_t total = n * g.n_levels;
+  if (total <= 0) return;
+  const uint16_t* t = reinterpret_cast<const uint16_t*>(table);
+  switch (g.n_features) {
+    case 1: encode_kernel<1><<<blocks_for(total, kThreads), kThreads, 0, s>>>(g, t, c, n, in_pad, X0); break;
+    case 2: encode_kernel<2><<<blocks_for(total, kThreads), kThreads, 0, s>>>(g, t, c, n, in_pad, X0); break;
+    case 4: encode_kernel<4><<<blocks_for(total, kThreads), kThreads, 0, s>>>(g, t, c, n, in_pad, X0); break;
+    case 8: encode_kernel<8><<<blocks_for(total, kThreads), kThreads, 0, s>>>(g, t, c, n, in_pad, X0); break;
+    default: cuda_fail_message("grid encoding: n_features_per_level must be 1, 2, 4 or 8");
+  }
+  VNR_CUDA_LAUNCHED();
+}
+
+void grid_backward(const GridLayout& g, Coords c, int64_t n, int in_pad, const __half* dX0, float* grad,
+                   cudaStream_t s) {
+  const int64_t total = n * g.n_levels;
+  if (total <= 0) return;
+  const float inv = 1.0f / kLossScale;
+  switch (g.n_features) {
+    case 1: grid_backward_kernel<1><<<blocks_for(total, kThreads), kThreads, 0, s>>>(g, c, n, in_pad, dX0, inv, grad); break;
+    case 2: grid_backward_kernel<2><<<blocks_for(total, kThreads), kThreads, 0, s>>>(g, c, n, in_pad, dX0, inv, grad); break;
+    case 4: grid_backward_kernel<4><<<blocks_for(total, kThreads), kThreads, 0, s>>>(g, c, n, in_pad, dX0, inv, grad); break;
+    case 8: grid_backward_kernel<8><<<blocks_for(total, kThreads), kThreads, 0, s>>>(g, c, n, in_pad, dX0, inv, grad); break;
+    default: cuda_fail_message("grid encoding: n_features_per_level must be 1, 2, 4 or 8");
+  }
+  VNR_CUDA_LAUNCHED();
+}
+
+void sample_in_core(GridView volume, uint64_t seed, uint64_t step, int chunk, int64_t batch, float* x, float* y,
+                    float* z, float* target, cudaStream_t s) {
+  sample_kernel<<<blocks_for(batch, kThreads), kThreads, 0, s>>>(volume, seed, step, chunk, batch, x, y, z, target);
+  VNR_CUDA_LAUNCHED();
+}
+
+void loss_and_grad(LossType t, Activation out_act, const float* out_pre, const float* target, int64_t n, int n_out,
+                   int out_pad, float inv_n, __half* dOut, float* loss_slot, cudaStream_t s) {
+  loss_kernel<<<blocks_for(n, kThreads), kThreads, 0, s>>>(t, out_act, out_pre, target, n, n_out, out_pad, inv_n,
+                                                           dOut, loss_slot);
+  VNR_CUDA_LAUNCHED();
+}
+
+void adam(const AdamArgs& a, float* w, float* grads, float* m, float* v, uint32_t* c, __half* half_out, int64_t n,
+          const float* bias_sqrt, const float* bias_den, cudaStream_t s) {
+  if (n <= 0) return;
+  adam_kernel<<<blocks_for(n, kThreads), kThreads, 0, s>>>(a, w, grads, m, v, c, half_out, n, bias_sqrt, bias_den);
+  VNR_CUDA_LAUNCHED();
+}
+
+void to_half(const float* in, int64_t n, __half* half_out, cudaStream_t s) {
+  if (n <= 0) return;
+  to_half_kernel<<<blocks_for(n, kThreads), kThreads, 0, s>>>(in, n, half_out);
+  VNR_CUDA_LAUNCHED();
+}
+
+void voxel_centres(Int3 dims, int64_t first, int64_t count, int64_t padded, float* xyz, cudaStream_t s) {
+  if (padded <= 0) return;
+  voxel_centres_kernel<<<blocks_for(padded, kThreads), kThreads, 0, s>>>(dims, first, count, padded, xyz);
+  VNR_CUDA_LAUNCHED();
+}
+
+}  // namespace vnr::cuda

@@ -1,0 +1,47 @@
+#pragma once
+// The CUDA backend's per-sample kernels (CUDA-only header): grid encoding forward/backward, the in-core
+// sampler, the loss and Adam. The work inside each thread is the VNR_HD code the CPU runs.
+#include <cuda_fp16.h>
+#include <cuda_runtime.h>
+#include "vnr/cuda/common.h"
+#include "vnr/cuda/mlp.cuh"
+#include "vnr/nn/grid_encoding.h"
+#include "vnr/volume/volume.h"
+
+namespace vnr::cuda {
+
+// Points as three strided float arrays: point i is (x[i*stride], y[i*stride], z[i*stride]).
+struct Coords {
+  const float *x, *y, *z;
+  int stride;
+};
+inline Coords interleaved(const float* xyz) { return Coords{xyz, xyz + 1, xyz + 2, 3}; }
+
+// X0 (n x in_pad half, sample-major) = the grid encoding of n points from the half table; pad columns 0.
+void encode(const GridLayout& g, const __half* table, Coords c, int64_t n, int in_pad, __half* X0, cudaStream_t s);
+// grad (binary32, the grid block) += dL/dtheta for n points, dX0 the loss-scaled half dL/dX0. Atomic adds:
+// correct under hash collisions and between levels.
+void grid_backward(const GridLayout& g, Coords c, int64_t n, int in_pad, const __half* dX0, float* grad,
+                   cudaStream_t s);
+// Uniform coordinates of compat.md B.3 (bit-identical to the CPU's for the same seed/step/chunk) and their
+// cell-centred trilinear targets from the volume in GPU memory.
+void sample_in_core(GridView volume, uint64_t seed, uint64_t step, int chunk, int64_t batch, float* x, float* y,
+                    float* z, float* target, cudaStream_t s);
+// dOut (n x out_pad half) = S * dL/d(output pre-activation); *loss_slot += the batch's mean loss.
+void loss_and_grad(LossType t, Activation out_act, const float* out_pre, const float* target, int64_t n, int n_out,
+                   int out_pad, float inv_n, __half* dOut, float* loss_slot, cudaStream_t s);
+
+struct AdamArgs {
+  float lr, beta1, beta2, eps, l2, rel, abs_decay, lo, hi;
+  int matrix;  // 1: l2 applies, never skipped; 0: skipped where the gradient is exactly 0
+};
+// compat.md A.7.1 on [0, n): reads and zeroes grads, updates w/m/v/c and writes half(w).
+void adam(const AdamArgs& a, float* w, float* grads, float* m, float* v, uint32_t* c, __half* half_out, int64_t n,
+          const float* bias_sqrt, const float* bias_den, cudaStream_t s);
+// half_out[i] = half(in[i]) (round to nearest even).
+void to_half(const float* in, int64_t n, __half* half_out, cudaStream_t s);
+// Voxel centres of slices [z0, z0 + count / (nx*ny)) as interleaved xyz, the first `count` points then
+// copies of the last up to `padded`.
+void voxel_centres(Int3 dims, int64_t first, int64_t count, int64_t padded, float* xyz, cudaStream_t s);
+
+}  // namespace vnr::cuda

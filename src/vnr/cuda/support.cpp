@@ -1,0 +1,55 @@
+// Parts of the CUDA backend's API that need no CUDA: built with or without the backend.
+#include "vnr/core/error.h"
+#include "vnr/cuda/cuda.h"
+
+namespace vnr::cuda {
+
+const char* mlp_path_name(MlpPath p) {
+  switch (p) {
+    case MlpPath::Auto: return "auto";
+    case MlpPath::Fused: return "fused";
+    case MlpPath::Cublas: return "cublas";
+  }
+  return "?";
+}
+
+MlpPath parse_mlp_path(const std::string& s) {
+  if (s == "auto") return MlpPath::Auto;
+  if (s == "fused") return MlpPath::Fused;
+  if (s == "cublas") return MlpPath::Cublas;
+  fail("unknown MLP path '{}' (allowed: auto, fused, cublas)", s);
+}
+
+Device resolve_device(const std::string& name) {
+  if (name == "cpu") return Device::Cpu;
+  if (name == "cuda") {
+    require_device();
+    return Device::Cuda;
+  }
+  if (name == "auto") return devices().empty() ? Device::Cpu : Device::Cuda;
+  fail("unknown --device '{}' (allowed: auto, cpu, cuda)", name);
+}
+
+std::string backend_summary() {
+  if (!built()) return "cuda: not built";
+  std::vector<DeviceInfo> ds = devices();
+  if (ds.empty()) return "cuda: built, " + no_device_reason();
+  std::string s = "cuda:";
+  for (const DeviceInfo& d : ds)
+    s += fmt::format(" [{}] {} (sm_{}{}, {:.1f} GiB, {} SMs)", d.index, d.name, d.cc_major, d.cc_minor,
+                     double(d.memory_bytes) / double(1ull << 30), d.sm_count);
+  return s;
+}
+
+void check_supported(const Network& net) {
+  const ModelConfig& c = net.config();
+  if (!net.has_grid())
+    fail("--device cuda runs grid encodings (HashGrid, DenseGrid, TiledGrid); this model's encoding is not a grid: "
+         "use --device cpu");
+  if (c.network.activation != Activation::ReLU)
+    fail("--device cuda runs ReLU hidden layers; this model uses {}: use --device cpu",
+         activation_name(c.network.activation));
+  if (net.mlp().n_out > 16) fail("--device cuda runs models with at most 16 outputs");
+}
+
+}  // namespace vnr::cuda
