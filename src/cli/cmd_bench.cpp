@@ -66,7 +66,7 @@ void run_bench_cuda(const BenchArgs& a, const Volume& vol, Network& net) {
   double mlp_seconds = 0, resident_sps = 0;
   uint64_t peak = 0;
   if (training) {
-    cuda::GpuTrainer tr(net, view_of(vol), cuda::GpuTrainOptions{a.batch, 1337, net.chunk(), asked});
+    cuda::GpuTrainer tr(net, view_of(vol), cuda::GpuTrainOptions{a.batch, 1337, Trainer::chunk_for(net, a.batch), asked});
     tr.run(5);  // warm-up
     tr.synchronize();
     auto t0 = std::chrono::steady_clock::now();

@@ -10,7 +10,7 @@ struct Pcg32 {
   uint64_t state = 0x853c49e6748fea9bULL;
   uint64_t inc = 0xda3e39cb94b95bdbULL;
 
-  VNR_HD Pcg32() = default;
+  Pcg32() = default;  // (defaulted: host and device alike)
   VNR_HD explicit Pcg32(uint64_t initstate, uint64_t initseq = 1u) { seed(initstate, initseq); }
   VNR_HD void seed(uint64_t initstate, uint64_t initseq = 1u) {
     state = 0u;

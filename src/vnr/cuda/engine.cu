@@ -1,4 +1,5 @@
 // Device query, the GPU trainer and the GPU network (host orchestration of kernels.cu and mlp.cu).
+#include <algorithm>
 #include <cfloat>
 #include <cmath>
 #include <vector>
@@ -58,7 +59,9 @@ struct StreamAndBlas {
   cublasHandle_t blas = nullptr;
   StreamAndBlas() {
     require_device();
-    VNR_CUDA_CHECK(cudaStreamCreateWithFlags(&stream, cudaStreamNonBlocking));
+    // A blocking stream: ordered after the synchronous copies and memsets (legacy default stream) that
+    // upload volumes, parameters and coordinates; a pageable cudaMemcpy may return before its DMA ends.
+    VNR_CUDA_CHECK(cudaStreamCreate(&stream));
     VNR_CUBLAS_CHECK(cublasCreate(&blas));
     VNR_CUBLAS_CHECK(cublasSetStream(blas, stream));
   }
@@ -363,7 +366,10 @@ void GpuNetwork::decode_slices(Int3 dims, int64_t z0, int64_t z1, float* out) {
   }
 }
 
-void GpuNetwork::set_slab(int64_t samples) { impl_->slab = std::max<int64_t>(16, round_up(samples, 16)); }
+// At most 2^30 samples per slab: cuBLAS takes the sample count as an int.
+void GpuNetwork::set_slab(int64_t samples) {
+  impl_->slab = std::clamp<int64_t>(round_up(samples, 16), 16, int64_t(1) << 30);
+}
 MlpPath GpuNetwork::mlp_path() const { return impl_->path; }
 uint64_t GpuNetwork::peak_memory_bytes() const { return device_bytes_peak(); }
 

@@ -237,7 +237,11 @@ MlpPath resolve_mlp_path(const Network& net, MlpPath asked) {
   const MlpDims d = mlp_dims(net.mlp());
   const bool width_ok = d.width == 16 || d.width == 32 || d.width == 64 || d.width == 128;
   const bool fits = fused_smem_bytes(d) <= device_smem_optin();
+  // The fused tiles are 16 wide: CutlassMLP configs pad inputs and outputs to 8 (compat.md A.4.3).
+  const bool pads_ok = d.in_pad % 16 == 0 && d.out_pad == 16;
   if (asked == MlpPath::Fused) {
+    if (!pads_ok) cuda_fail_message("the fused MLP needs inputs and outputs padded to 16 (FullyFusedMLP); this "
+                                    "model's are padded to 8 (use the cublas path)");
     if (!width_ok) cuda_fail_message("the fused MLP runs widths 16, 32, 64 and 128; this model's width is " +
                                      std::to_string(d.width) + " (use the cublas path)");
     if (!fits) cuda_fail_message("the fused MLP needs " + std::to_string(fused_smem_bytes(d)) +
@@ -245,7 +249,7 @@ MlpPath resolve_mlp_path(const Network& net, MlpPath asked) {
     return MlpPath::Fused;
   }
   if (asked == MlpPath::Cublas) return MlpPath::Cublas;
-  return width_ok && fits && net.config().network.fully_fused ? MlpPath::Fused : MlpPath::Cublas;
+  return width_ok && fits && pads_ok && net.config().network.fully_fused ? MlpPath::Fused : MlpPath::Cublas;
 }
 
 void mlp_forward(MlpPath path, const MlpDims& d, const __half* weights, const __half* X0, int64_t n, __half* acts,
