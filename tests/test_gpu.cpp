@@ -152,14 +152,15 @@ TEST(GpuGradient, MatchesTheCpuPerMatrixAndForTheGrid) {
     EXPECT_NEAR(lb, lf, 1e-3 * lf) << preset;
     const MlpLayout& m = net->mlp();
     // Relative L2 error per block. L1 loss gradients are signs: a prediction within half precision of
-    // its target may flip one, hence a few percent rather than 2^-11.
+    // its target may flip one, so the GPU/CPU bound is 10% (a transposed or misindexed kernel gives
+    // ~100%); fused and cuBLAS share every rounding to half and differ in summation order only.
     for (uint32_t k = 0; k < m.n_matrices; ++k) {
       const size_t off = m.offset[k], cnt = m.rows[k] * m.cols[k];
-      EXPECT_LT(relative_l2(fused.data() + off, cpu.data() + off, cnt), 0.05) << preset << " matrix " << k;
+      EXPECT_LT(relative_l2(fused.data() + off, cpu.data() + off, cnt), 0.1) << preset << " matrix " << k;
       EXPECT_LT(relative_l2(fused.data() + off, blas.data() + off, cnt), 0.01) << preset << " matrix " << k;
     }
     const size_t g0 = m.n_params, gn = net->grid_params();
-    EXPECT_LT(relative_l2(fused.data() + g0, cpu.data() + g0, gn), 0.05) << preset << " grid";
+    EXPECT_LT(relative_l2(fused.data() + g0, cpu.data() + g0, gn), 0.1) << preset << " grid";
     EXPECT_LT(relative_l2(fused.data() + g0, blas.data() + g0, gn), 0.01) << preset << " grid";
   }
 }

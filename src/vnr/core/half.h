@@ -3,6 +3,9 @@
 #include <cstdint>
 #include <cstring>
 #include "vnr/core/hd.h"
+#if defined(__CUDACC__)
+#include <cuda_fp16.h>
+#endif
 
 namespace vnr {
 
@@ -31,6 +34,9 @@ VNR_HD inline uint16_t float_to_half(float f) {
 }
 
 VNR_HD inline float half_to_float(uint16_t h) {
+#if defined(__CUDA_ARCH__)
+  return __half2float(__ushort_as_half(h));  // the hardware conversion: exact, as the code below
+#else
   uint32_t sign = uint32_t(h & 0x8000u) << 16;
   uint32_t exp = (h >> 10) & 0x1fu;
   uint32_t mant = h & 0x3ffu;
@@ -51,6 +57,7 @@ VNR_HD inline float half_to_float(uint16_t h) {
   float f;
   memcpy(&f, &x, 4);
   return f;
+#endif
 }
 
 void floats_to_halves(const float* in, uint16_t* out, size_t n);
