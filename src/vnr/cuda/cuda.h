@@ -34,6 +34,8 @@ std::vector<DeviceInfo> devices();
 std::string no_device_reason();
 // Fails with one line (the reason) when there is no device.
 void require_device();
+// Free memory of the current device in bytes (0 without one).
+uint64_t free_memory_bytes();
 // "cpu", "cuda" (fails without a device) or "auto" (cuda when a device is visible, else cpu).
 Device resolve_device(const std::string& name);
 // One line for --version / vnr info: "cuda (NVIDIA H100 80GB HBM3, sm_90, 79.1 GiB)", "cuda: built, no CUDA

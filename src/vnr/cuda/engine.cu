@@ -47,6 +47,16 @@ std::string no_device_reason() {
   return n == 0 ? "no CUDA device" : "";
 }
 
+uint64_t free_memory_bytes() {
+  if (devices().empty()) return 0;
+  size_t free_b = 0, total_b = 0;
+  if (cudaMemGetInfo(&free_b, &total_b) != cudaSuccess) {
+    cudaGetLastError();
+    return 0;
+  }
+  return free_b;
+}
+
 void require_device() {
   if (devices().empty()) cuda_fail_message("--device cuda: " + no_device_reason());
 }

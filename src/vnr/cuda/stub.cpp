@@ -15,6 +15,7 @@ bool built() { return false; }
 std::vector<DeviceInfo> devices() { return {}; }
 std::string no_device_reason() { return "built without the CUDA backend"; }
 void require_device() { not_built(); }
+uint64_t free_memory_bytes() { return 0; }
 
 struct GpuTrainer::Impl {};
 GpuTrainer::GpuTrainer(Network&, GridView, GpuTrainOptions) { not_built(); }
