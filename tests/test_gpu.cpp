@@ -102,11 +102,8 @@ TEST(GpuMlp, InferenceMatchesTheCpuWithinHalfPrecision) {
     // decode_slices on the GPU is infer() at the voxel centres
     Int3 dims{9, 7, 5};
     std::vector<float> dec(dims.count()), centres(3 * dims.count()), ref(dims.count());
-    for (int64_t v = 0; v < int64_t(dims.count()); ++v) {
-      centres[3 * v] = (float(v % 9) + 0.5f) / 9.0f;
-      centres[3 * v + 1] = (float((v / 9) % 7) + 0.5f) / 7.0f;
-      centres[3 * v + 2] = (float(v / 63) + 0.5f) / 5.0f;
-    }
+    for (int64_t v = 0; v < int64_t(dims.count()); ++v)
+      voxel_centre(dims, v, &centres[3 * v], &centres[3 * v + 1], &centres[3 * v + 2]);
     gf.decode_slices(dims, 0, 5, dec.data());
     gf.infer(centres.data(), int64_t(dims.count()), ref.data());
     EXPECT_EQ(dec, ref) << preset;

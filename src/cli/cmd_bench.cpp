@@ -54,7 +54,6 @@ double mlp_gflops(const Network& net, bool training, double seconds) {
 // (training issues no synchronisation of its own), inference both with host transfers (the batch comes
 // from and goes back to host memory) and resident on the GPU (CUDA events, no transfers).
 void run_bench_cuda(const BenchArgs& a, const Volume& vol, Network& net) {
-  cuda::check_supported(net);
   const bool training = a.what == "train";
   const cuda::MlpPath asked = cuda::parse_mlp_path(a.mlp);
   const double flops = net.flops_forward_per_sample() * (training ? 3.0 : 1.0);
@@ -104,10 +103,10 @@ void run_bench_cuda(const BenchArgs& a, const Volume& vol, Network& net) {
       times.push_back(seconds_since(s0));
       bar.update(seconds_since(t0));
     }
-    const cuda::GpuNetwork::ResidentTiming rt = gn.time_resident(std::max<int64_t>(a.batch, int64_t(1) << 22), 20);
-    const double n_res = double(std::max<int64_t>(a.batch, int64_t(1) << 22));
-    resident_sps = n_res / rt.seconds;
-    mlp_seconds = rt.mlp_seconds * double(a.batch) / n_res;
+    const int64_t n_res = std::max<int64_t>(a.batch, int64_t(1) << 22);  // enough work to fill the GPU
+    const cuda::GpuNetwork::ResidentTiming rt = gn.time_resident(n_res, 20);
+    resident_sps = double(n_res) / rt.seconds;
+    mlp_seconds = rt.mlp_seconds * double(a.batch) / double(n_res);
     report["resident_samples_per_second"] = resident_sps;
     report["resident_batch"] = n_res;
     path = cuda::mlp_path_name(gn.mlp_path());
@@ -115,7 +114,7 @@ void run_bench_cuda(const BenchArgs& a, const Volume& vol, Network& net) {
   }
   bar.finish();
   const double med = median(times), sps = a.batch / med;
-  const double mlp_tflops = net.flops_forward_per_sample() * (training ? 3.0 : 1.0) * a.batch / mlp_seconds / 1e12;
+  const double mlp_tflops = flops * double(a.batch) / mlp_seconds / 1e12;
   std::printf("%s %s on %s: %.1f M samples/s (median of %zu batches of %lld, %.3f ms each)%s\n", a.what.c_str(),
               a.config.c_str(), cuda::devices().at(0).name.c_str(), sps / 1e6, times.size(), (long long)a.batch,
               med * 1e3, training ? "" : " with host transfers");

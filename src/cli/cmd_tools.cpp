@@ -16,9 +16,6 @@
 #include "vnr/volume/writer.h"
 
 namespace vnr::cli {
-namespace {
-void print_system_info(bool json);
-}  // namespace
 
 void add_eval(CLI::App& app) {
   struct Args {
@@ -51,7 +48,7 @@ void add_eval(CLI::App& app) {
     set_num_threads(a->threads);
     Model m = load_model(a->model);
     const Device dev = cuda::resolve_device(a->device);
-    if (dev == Device::Cuda) cuda::check_supported(*m.net);
+    if (dev == Device::Cuda) cuda::check_supported(*m.net);  // before reading the volume
     const VolumeDesc desc = describe_volume(a->volume, a->vol.raw());
     const LoadOptions load_opts = a->vol.load();
     const Int3 dims = desc.dims;
@@ -184,9 +181,8 @@ void add_decode(CLI::App& app) {
     set_num_threads(a->threads);
     check_no_overwrite(volume_output_files(a->output), a->force);
     Model m = load_model(a->model);
-    const Device dev = cuda::resolve_device(a->device);
-    if (dev == Device::Cuda) cuda::check_supported(*m.net);
-    Decoder decoder(*m.net, dev);
+    Decoder decoder(*m.net, cuda::resolve_device(a->device));
+    const Device dev = decoder.device();
     Int3 dims = a->dims.empty() ? m.dims : parse_dims(a->dims);
     DType out_t = a->dtype == "source" ? m.source_dtype : parse_dtype(a->dtype);
     // Slabs of ~16 M voxels: memory stays bounded whatever the output size.

@@ -167,15 +167,9 @@ Device choose_device(const TrainArgs& a, const TrainingData& data, const Network
   std::string why_not;
   if (!data.vol) why_not = "--device cuda trains volumes held in memory (--sampler incore); this run samples " + data.kind;
   if (preview) why_not = "--preview-* options run on the CPU trainer";
-  // What the GPU trainer holds: the volume (binary32); per sample of the batch X0 and dX0, the hidden
-  // activations and their gradients, dOut (half), coordinates, target, output and the cuBLAS path's
-  // binary32 scratch; per parameter master, gradient, two moments, count (binary32) and the half copy.
-  const MlpLayout& m = net.mlp();
-  const uint64_t per_sample = 2 * (2 * m.in_pad + 2 * uint64_t(m.n_hidden) * m.width + m.out_pad) +
-                              4 * (4 + m.n_out) + 4 * std::max(m.in_pad, m.width);
-  const uint64_t need = data.dims.count() * 4 + uint64_t(a.batch) * per_sample + net.n_params() * 22;
+  const uint64_t need = cuda::GpuTrainer::bytes_needed(net, data.dims.count(), a.batch);
   if (why_not.empty() && cuda::free_memory_bytes() < need)
-    why_not = fmt::format("the GPU has {} free, the GPU trainer needs about {} for this volume and batch",
+    why_not = fmt::format("the GPU has {} free, training needs about {} for this volume and batch",
                           human_bytes(double(cuda::free_memory_bytes())), human_bytes(double(need)));
   if (why_not.empty()) {
     try {
@@ -275,8 +269,7 @@ void run_train(const TrainArgs& a) {
         int64_t k = std::min<int64_t>(group, steps - done);
         if (a.checkpoint_every > 0) k = std::min<int64_t>(k, a.checkpoint_every - done % a.checkpoint_every);
         gpu->run(int(k));
-        const std::vector<float> losses = gpu->losses();  // synchronises
-        loss = losses.back();
+        loss = gpu->last_loss();  // synchronises
         const double per = seconds_since(t_step) / double(k);
         for (int64_t i = 0; i < k; ++i) step_seconds.push_back(per);
         done += k;

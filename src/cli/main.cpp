@@ -1,6 +1,5 @@
 // vnr: command-line front end of libvnr. Each subcommand lives in its own file; errors from the
 // library arrive as vnr::Error and are printed as one line with a non-zero exit status.
-#include "vnr/cuda/cuda.h"
 #include <algorithm>
 #include <cstdio>
 #include <cstdlib>
@@ -8,6 +7,7 @@
 #include "vnr/core/error.h"
 #include "vnr/core/fileio.h"
 #include "vnr/core/parallel.h"
+#include "vnr/cuda/cuda.h"
 #include "vnr/nn/mlp_kernels.h"
 
 namespace vnr::cli {

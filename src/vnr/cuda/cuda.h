@@ -65,14 +65,18 @@ class GpuTrainer {
 public:
   GpuTrainer(Network& net, GridView volume, GpuTrainOptions opts);
   ~GpuTrainer();
+  // GPU memory a trainer needs for this network, volume and batch (the constructor refuses to start
+  // with less free): the volume, the per-sample buffers of a step, the per-parameter optimizer state.
+  static uint64_t bytes_needed(const Network& net, uint64_t voxels, int64_t batch);
   GpuTrainer(const GpuTrainer&) = delete;
   GpuTrainer& operator=(const GpuTrainer&) = delete;
 
   // Enqueues n training steps; no host synchronisation (the learning-rate schedule is host arithmetic).
   void run(int n_steps);
   void synchronize();
-  // Mean loss of every step so far (synchronises).
+  // Mean loss of every step so far, and of the last one (both synchronise).
   std::vector<float> losses();
+  float last_loss();
   uint64_t steps_done() const;
   float current_learning_rate() const;
   // Copies the binary32 master parameters back into the Network (and refreshes its half grid).

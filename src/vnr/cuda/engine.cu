@@ -108,6 +108,39 @@ struct PassBuffers {
   }
 };
 
+// Encoding, MLP forward, loss, MLP backward and grid backward for n points with their targets: the
+// loss-scaled work of one training step (grads: binary32, the MLP part overwritten, the grid part
+// accumulated). mark(i) records the phase boundaries 1 (after encoding) and 2 (after the MLP).
+template <typename Mark>
+void gradient_pass(const Network& net, const MlpDims& d, MlpPath path, const __half* half, Coords pts,
+                   const float* target, int64_t n, PassBuffers& pass, float* grads, float* loss_slot,
+                   const StreamAndBlas& sb, Mark&& mark) {
+  const cudaStream_t st = sb.stream;
+  const uint64_t n_mlp = net.mlp().n_params;
+  const ModelConfig& cfg = net.config();
+  encode(net.grid(), half + n_mlp, pts, n, d.in_pad, pass.X0.data(), st);
+  mark(1);
+  mlp_forward(path, d, half, pass.X0.data(), n, pass.acts.data(), pass.out.data(), -1, pass.tmp.data(), sb.blas, st);
+  loss_and_grad(cfg.loss, cfg.network.output_activation, pass.out.data(), target, n, d.n_out, d.out_pad,
+                1.0f / float(n * d.n_out), pass.dOut.data(), loss_slot, st);
+  mlp_backward(path, d, half, pass.X0.data(), pass.acts.data(), pass.dOut.data(), n, pass.dY.data(), pass.dX0.data(),
+               grads, pass.tmp.data(), sb.blas, st);
+  mark(2);
+  grid_backward(net.grid(), pts, n, d.in_pad, pass.dX0.data(), grads + n_mlp, st);
+}
+
+// The forward pass of inference for n points (interleaved xyz in GPU memory); mark(1) after encoding.
+template <typename Mark>
+void infer_pass(const Network& net, const MlpDims& d, MlpPath path, const __half* half, const float* xyz, int64_t n,
+                PassBuffers& pass, const StreamAndBlas& sb, Mark&& mark) {
+  encode(net.grid(), half + net.mlp().n_params, interleaved(xyz), n, d.in_pad, pass.X0.data(), sb.stream);
+  mark(1);
+  mlp_forward(path, d, half, pass.X0.data(), n, pass.acts.data(), pass.out.data(),
+              int(net.config().network.output_activation), pass.tmp.data(), sb.blas, sb.stream);
+}
+
+inline void no_mark(int) {}
+
 }  // namespace
 
 // ------------------------------------------------------------------------------------------------
@@ -117,7 +150,6 @@ struct GpuTrainer::Impl {
   Network& net;
   GpuTrainOptions opts;
   MlpDims d;
-  GridLayout grid;
   MlpPath path;
   StreamAndBlas sb;
   DeviceBuffer<float> volume;
@@ -130,7 +162,7 @@ struct GpuTrainer::Impl {
   DeviceBuffer<float> loss_slots, bias_sqrt, bias_den;
   std::vector<float> h_bias_sqrt, h_bias_den;
   uint64_t step = 0;
-  float base_lr, factor = 1.0f;
+  float factor = 1.0f;  // ExponentialDecay's
   bool profiling = false;
   cudaEvent_t events[5] = {};
 
@@ -141,15 +173,12 @@ struct GpuTrainer::Impl {
                         std::to_string(opts.batch));
     if (opts.chunk <= 0 || opts.batch % opts.chunk != 0) cuda_fail_message("the sampling chunk must divide the batch");
     d = mlp_dims(net.mlp());
-    grid = net.grid();
     path = resolve_mlp_path(net, opts.mlp);
-    base_lr = net.config().adam.learning_rate;
     const uint64_t voxels = uint64_t(vol.nx) * vol.ny * vol.nz;
-    size_t free_b = 0, total_b = 0;
-    VNR_CUDA_CHECK(cudaMemGetInfo(&free_b, &total_b));
-    if (voxels * 4 > free_b)
-      cuda_fail_message("the volume needs " + std::to_string((voxels * 4) >> 20) + " MiB of GPU memory, " +
-                        std::to_string(free_b >> 20) + " MiB are free: train it with --device cpu (out of core)");
+    const uint64_t need = GpuTrainer::bytes_needed(net, voxels, opts.batch), free_b = free_memory_bytes();
+    if (need > free_b)
+      cuda_fail_message("training this volume on the GPU needs about " + std::to_string(need >> 20) + " MiB, " +
+                        std::to_string(free_b >> 20) + " MiB are free: use --device cpu");
     volume.resize(voxels);
     volume.upload(vol.data, voxels);
     dvol = GridView{volume.data(), vol.nx, vol.ny, vol.nz};
@@ -177,13 +206,8 @@ struct GpuTrainer::Impl {
   // loss slot per step; grown by doubling, the only synchronising copies of a run.
   void grow_tables(uint64_t need) {
     if (need <= h_bias_sqrt.size()) return;
-    uint64_t cap = std::max<uint64_t>(need, 2 * h_bias_sqrt.size());
-    const AdamConfig& a = net.config().adam;
-    while (h_bias_sqrt.size() < cap) {
-      float cc = float(h_bias_sqrt.size());
-      h_bias_sqrt.push_back(h_bias_sqrt.empty() ? 0.0f : std::sqrt(1.0f - std::pow(a.beta2, cc)));
-      h_bias_den.push_back(h_bias_den.empty() ? 0.0f : 1.0f - std::pow(a.beta1, cc));
-    }
+    const uint64_t cap = std::max<uint64_t>(need, 2 * h_bias_sqrt.size());
+    extend_adam_bias_tables(net.config().adam, cap, h_bias_sqrt, h_bias_den);
     VNR_CUDA_CHECK(cudaStreamSynchronize(sb.stream));
     bias_sqrt.resize(cap);
     bias_den.resize(cap);
@@ -208,39 +232,16 @@ struct GpuTrainer::Impl {
   void one_step() {
     const cudaStream_t st = sb.stream;
     mark(0);
-    const int64_t B = opts.batch;
-    const ModelConfig& cfg = net.config();
-    const DecayConfig& dec = cfg.decay;
-    // ExponentialDecay (compat.md A.7.2), as the CPU Adam.
-    if (dec.enabled) {
-      if (step == 0) factor = 1.0f;
-      if (step >= dec.decay_start && (step - dec.decay_start) % dec.decay_interval == 0 && step <= dec.decay_end)
-        factor *= dec.decay_base;
-    }
+    const AdamConfig& a = net.config().adam;
+    const AdamStepScalars sc = adam_step_scalars(a, net.config().decay, step, &factor);
     grow_tables(step + 2);
-    sample_in_core(dvol, opts.seed, step, opts.chunk, B, xs.data(), ys.data(), zs.data(), target.data(), st);
-    const Coords pts{xs.data(), ys.data(), zs.data(), 1};
-    const uint64_t n_mlp = net.mlp().n_params;
-    encode(grid, half.data() + n_mlp, pts, B, d.in_pad, pass.X0.data(), st);
-    mark(1);
-    mlp_forward(path, d, half.data(), pass.X0.data(), B, pass.acts.data(), pass.out.data(), -1, pass.tmp.data(),
-                sb.blas, st);
-    loss_and_grad(cfg.loss, cfg.network.output_activation, pass.out.data(), target.data(), B, d.n_out, d.out_pad,
-                  1.0f / float(B * d.n_out), pass.dOut.data(), loss_slots.data() + step, st);
-    mlp_backward(path, d, half.data(), pass.X0.data(), pass.acts.data(), pass.dOut.data(), B, pass.dY.data(),
-                 pass.dX0.data(), grads.data(), pass.tmp.data(), sb.blas, st);
-    mark(2);
-    grid_backward(grid, pts, B, d.in_pad, pass.dX0.data(), grads.data() + n_mlp, st);
+    sample_in_core(dvol, opts.seed, step, opts.chunk, opts.batch, xs.data(), ys.data(), zs.data(), target.data(), st);
+    gradient_pass(net, d, path, half.data(), Coords{xs.data(), ys.data(), zs.data(), 1}, target.data(), opts.batch,
+                  pass, grads.data(), loss_slots.data() + step, sb, [&](int i) { mark(i); });
     mark(3);
     ++step;
-    const AdamConfig& a = cfg.adam;
-    AdamArgs args{base_lr * factor, a.beta1, a.beta2, a.epsilon, a.l2_reg, a.relative_decay, a.absolute_decay,
-                  0.0f, FLT_MAX, 1};
-    if (a.adabound) {
-      const float s = float(step);
-      args.lo = 0.1f - 0.1f / ((1.0f - a.beta2) * s + 1.0f);
-      args.hi = 0.1f + 0.1f / ((1.0f - a.beta2) * s);
-    }
+    AdamArgs args{sc.lr, a.beta1, a.beta2, a.epsilon, a.l2_reg, a.relative_decay, a.absolute_decay, sc.lo, sc.hi, 1};
+    const uint64_t n_mlp = net.mlp().n_params;
     const uint64_t P = net.n_params();
     if (a.optimize_matrix_params)
       adam(args, master.data(), grads.data(), m.data(), v.data(), c.data(), half.data(), int64_t(n_mlp),
@@ -274,7 +275,16 @@ std::vector<float> GpuTrainer::losses() {
   return out;
 }
 uint64_t GpuTrainer::steps_done() const { return impl_->step; }
-float GpuTrainer::current_learning_rate() const { return impl_->base_lr * impl_->factor; }
+float GpuTrainer::last_loss() {
+  if (impl_->step == 0) return 0.0f;
+  synchronize();
+  float l = 0;
+  impl_->loss_slots.download(&l, 1, impl_->step - 1);
+  return l;
+}
+float GpuTrainer::current_learning_rate() const {
+  return impl_->net.config().adam.learning_rate * impl_->factor;
+}
 
 void GpuTrainer::download() {
   synchronize();
@@ -308,7 +318,6 @@ std::vector<double> GpuTrainer::phase_seconds() {
 struct GpuNetwork::Impl {
   const Network& net;
   MlpDims d;
-  GridLayout grid;
   MlpPath path;
   StreamAndBlas sb;
   DeviceBuffer<__half> half;
@@ -320,7 +329,6 @@ struct GpuNetwork::Impl {
   Impl(const Network& n, MlpPath asked) : net(n) {
     check_supported(net);
     d = mlp_dims(net.mlp());
-    grid = net.grid();
     path = resolve_mlp_path(net, asked);
     upload_half_params(net, half);
   }
@@ -333,9 +341,7 @@ struct GpuNetwork::Impl {
   // Runs the padded points in `coords` [0, np) and copies the first m outputs to out.
   void run(int64_t m, int64_t np, float* out) {
     const cudaStream_t st = sb.stream;
-    encode(grid, half.data() + net.mlp().n_params, interleaved(coords.data()), np, d.in_pad, pass.X0.data(), st);
-    mlp_forward(path, d, half.data(), pass.X0.data(), np, pass.acts.data(), pass.out.data(),
-                int(net.config().network.output_activation), pass.tmp.data(), sb.blas, st);
+    infer_pass(net, d, path, half.data(), coords.data(), np, pass, sb, no_mark);
     if (d.n_out == 1) {
       VNR_CUDA_CHECK(cudaMemcpyAsync(out, pass.out.data(), m * sizeof(float), cudaMemcpyDeviceToHost, st));
     } else {  // first output of each sample
@@ -397,11 +403,8 @@ GpuNetwork::ResidentTiming GpuNetwork::time_resident(int64_t n, int repeats) {
   double total = 0, mlp = 0;
   for (int r = -1; r < repeats; ++r) {  // r = -1: warm-up
     VNR_CUDA_CHECK(cudaEventRecord(ev[0], st));
-    encode(I.grid, I.half.data() + I.net.mlp().n_params, interleaved(I.coords.data()), np, I.d.in_pad,
-           I.pass.X0.data(), st);
-    VNR_CUDA_CHECK(cudaEventRecord(ev[1], st));
-    mlp_forward(I.path, I.d, I.half.data(), I.pass.X0.data(), np, I.pass.acts.data(), I.pass.out.data(),
-                int(I.net.config().network.output_activation), I.pass.tmp.data(), I.sb.blas, st);
+    infer_pass(I.net, I.d, I.path, I.half.data(), I.coords.data(), np, I.pass, I.sb,
+               [&](int) { VNR_CUDA_CHECK(cudaEventRecord(ev[1], st)); });
     VNR_CUDA_CHECK(cudaEventRecord(ev[2], st));
     VNR_CUDA_CHECK(cudaEventSynchronize(ev[2]));
     float a = 0, b = 0;
@@ -456,16 +459,8 @@ std::vector<float> gradient(const Network& net, const float* coords, const float
   slot.zero_async(st);
   PassBuffers pass;
   pass.allocate(d, n, true, path);
-  const uint64_t n_mlp = net.mlp().n_params;
-  const Coords c = interleaved(pts.data());
-  vnr::cuda::encode(net.grid(), half.data() + n_mlp, c, n, d.in_pad, pass.X0.data(), st);
-  mlp_forward(path, d, half.data(), pass.X0.data(), n, pass.acts.data(), pass.out.data(), -1, pass.tmp.data(),
-              sb.blas, st);
-  loss_and_grad(net.config().loss, net.config().network.output_activation, pass.out.data(), tgt.data(), n, d.n_out,
-                d.out_pad, 1.0f / float(n * d.n_out), pass.dOut.data(), slot.data(), st);
-  mlp_backward(path, d, half.data(), pass.X0.data(), pass.acts.data(), pass.dOut.data(), n, pass.dY.data(),
-               pass.dX0.data(), grads.data(), pass.tmp.data(), sb.blas, st);
-  grid_backward(net.grid(), c, n, d.in_pad, pass.dX0.data(), grads.data() + n_mlp, st);
+  gradient_pass(net, d, path, half.data(), interleaved(pts.data()), tgt.data(), n, pass, grads.data(), slot.data(), sb,
+                no_mark);
   VNR_CUDA_CHECK(cudaStreamSynchronize(st));
   std::vector<float> out(net.n_params());
   grads.download(out.data(), out.size());

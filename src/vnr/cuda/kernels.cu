@@ -121,11 +121,7 @@ __global__ void to_half_kernel(const float* __restrict__ in, int64_t n, __half* 
 __global__ void voxel_centres_kernel(Int3 dims, int64_t first, int64_t count, int64_t padded, float* xyz) {
   const int64_t i = int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
   if (i >= padded) return;
-  const int64_t v = first + (i < count ? i : count - 1);
-  const int64_t ix = v % dims.x, iy = (v / dims.x) % dims.y, iz = v / (dims.x * dims.y);
-  xyz[3 * i + 0] = (float(ix) + 0.5f) / float(dims.x);  // model_io's decode_slices, expression for expression
-  xyz[3 * i + 1] = (float(iy) + 0.5f) / float(dims.y);
-  xyz[3 * i + 2] = (float(iz) + 0.5f) / float(dims.z);
+  voxel_centre(dims, first + (i < count ? i : count - 1), &xyz[3 * i], &xyz[3 * i + 1], &xyz[3 * i + 2]);
 }
 
 }  // namespace

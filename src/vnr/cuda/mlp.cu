@@ -46,23 +46,6 @@ size_t fused_smem_bytes(const MlpDims& d) {
   return size_t(d.width) * ld * 2 + size_t(kWarps) * 2 * 16 * ld * 2 + size_t(kWarps) * 256 * 4;
 }
 
-struct FusedSmem {
-  __half* w;
-  __half* a_in;
-  __half* a_out;
-  float* f;
-};
-
-__device__ inline FusedSmem fused_smem(unsigned char* smem, const MlpDims& d, int warp) {
-  const int ld = fused_ld(d);
-  FusedSmem s;
-  s.w = reinterpret_cast<__half*>(smem);
-  __half* acts = s.w + size_t(d.width) * ld;
-  s.a_in = acts + size_t(warp) * 2 * 16 * ld;
-  s.a_out = s.a_in + 16 * ld;
-  s.f = reinterpret_cast<float*>(acts + size_t(kWarps) * 2 * 16 * ld) + warp * 256;
-  return s;
-}
 
 // Copies a rows x cols row-major half matrix into shared memory with row stride ld (16-byte vectors).
 __device__ inline void load_rows(__half* dst, int ld, const __half* src, int rows, int cols, int tid, int nthreads) {
@@ -73,23 +56,62 @@ __device__ inline void load_rows(__half* dst, int ld, const __half* src, int row
   }
 }
 
+// One warp's view of a fused kernel: its 16 samples [s0, s0 + 16), the shared weight matrix, its
+// activation tiles (a_in read, a_out written, swapped per layer) and its binary32 scratch tile.
+struct FusedTile {
+  __half* w;
+  __half* a_in;
+  __half* a_out;
+  float* f;
+  int ld, lane;
+  int64_t s0;
+  bool active;  // the warp has samples (n is a multiple of 16, the grid's last block may have fewer)
+};
+
+// Lays out shared memory and loads the warp's first tile: 16 rows of `cols` halves from src (row stride cols).
+__device__ inline FusedTile fused_begin(unsigned char* smem, const MlpDims& d, int64_t n, const __half* src,
+                                        int cols) {
+  FusedTile t;
+  const int warp = threadIdx.x / 32;
+  t.lane = threadIdx.x % 32;
+  t.ld = fused_ld(d);
+  t.w = reinterpret_cast<__half*>(smem);
+  __half* acts = t.w + size_t(d.width) * t.ld;
+  t.a_in = acts + size_t(warp) * 2 * 16 * t.ld;
+  t.a_out = t.a_in + 16 * t.ld;
+  t.f = reinterpret_cast<float*>(acts + size_t(kWarps) * 2 * 16 * t.ld) + warp * 256;
+  t.s0 = (int64_t(blockIdx.x) * kWarps + warp) * 16;
+  t.active = t.s0 < n;
+  if (t.active) load_rows(t.a_in, t.ld, src + t.s0 * cols, 16, cols, t.lane, 32);
+  return t;
+}
+
+// The whole block loads matrix m into shared memory; every thread reaches both barriers.
+__device__ inline void fused_load_matrix(const FusedTile& t, const MlpDims& d, const __half* weights, int m) {
+  __syncthreads();  // every warp is done with the previous matrix
+  load_rows(t.w, t.ld, weights + d.offset[m], d.rows[m], d.cols[m], threadIdx.x, blockDim.x);
+  __syncthreads();
+}
+
+__device__ inline void fused_next_layer(FusedTile& t) {
+  __half* a = t.a_in;
+  t.a_in = t.a_out;
+  t.a_out = a;
+}
+
 template <int W>
 __global__ void __launch_bounds__(kWarps * 32)
     fused_forward(MlpDims d, const __half* __restrict__ weights, const __half* __restrict__ X0, int64_t n,
                   __half* __restrict__ acts, float* __restrict__ out, int out_act) {
   extern __shared__ __align__(128) unsigned char smem[];
-  const int warp = threadIdx.x / 32, lane = threadIdx.x % 32, ld = fused_ld(d);
-  FusedSmem s = fused_smem(smem, d, warp);
-  const int64_t s0 = (int64_t(blockIdx.x) * kWarps + warp) * 16;
-  const bool active = s0 < n;
-  if (active) load_rows(s.a_in, ld, X0 + s0 * d.in_pad, 16, d.in_pad, lane, 32);
+  FusedTile s = fused_begin(smem, d, n, X0, d.in_pad);
+  const int ld = s.ld, lane = s.lane;
+  const int64_t s0 = s.s0;
   for (int m = 0; m < d.n_matrices; ++m) {
     const int rows = d.rows[m], cols = d.cols[m];
     const bool last = m == d.n_matrices - 1;
-    __syncthreads();  // every warp is done with the previous matrix
-    load_rows(s.w, ld, weights + d.offset[m], rows, cols, threadIdx.x, blockDim.x);
-    __syncthreads();
-    if (!active) continue;
+    fused_load_matrix(s, d, weights, m);
+    if (!s.active) continue;
     __syncwarp();
     for (int nb = 0; nb < rows / 16; ++nb) {
       wmma::fragment<wmma::accumulator, 16, 16, 16, float> acc;
@@ -120,9 +142,7 @@ __global__ void __launch_bounds__(kWarps * 32)
       }
       __syncwarp();
     }
-    __half* t = s.a_in;
-    s.a_in = s.a_out;
-    s.a_out = t;
+    fused_next_layer(s);
   }
 }
 
@@ -131,18 +151,14 @@ __global__ void __launch_bounds__(kWarps * 32)
     fused_backward(MlpDims d, const __half* __restrict__ weights, const __half* __restrict__ acts,
                    const __half* __restrict__ dOut, int64_t n, __half* __restrict__ dY, __half* __restrict__ dX0) {
   extern __shared__ __align__(128) unsigned char smem[];
-  const int warp = threadIdx.x / 32, lane = threadIdx.x % 32, ld = fused_ld(d);
-  FusedSmem s = fused_smem(smem, d, warp);
-  const int64_t s0 = (int64_t(blockIdx.x) * kWarps + warp) * 16;
-  const bool active = s0 < n;
-  if (active) load_rows(s.a_in, ld, dOut + s0 * d.out_pad, 16, d.out_pad, lane, 32);
+  FusedTile s = fused_begin(smem, d, n, dOut, d.out_pad);
+  const int ld = s.ld, lane = s.lane;
+  const int64_t s0 = s.s0;
   const int first = dX0 ? 0 : 1;
   for (int m = d.n_matrices - 1; m >= first; --m) {
     const int rows = d.rows[m], cols = d.cols[m];
-    __syncthreads();
-    load_rows(s.w, ld, weights + d.offset[m], rows, cols, threadIdx.x, blockDim.x);
-    __syncthreads();
-    if (!active) continue;
+    fused_load_matrix(s, d, weights, m);
+    if (!s.active) continue;
     __syncwarp();
     for (int nb = 0; nb < cols / 16; ++nb) {
       wmma::fragment<wmma::accumulator, 16, 16, 16, float> acc;
@@ -170,9 +186,7 @@ __global__ void __launch_bounds__(kWarps * 32)
       }
       __syncwarp();
     }
-    __half* t = s.a_in;
-    s.a_in = s.a_out;
-    s.a_out = t;
+    fused_next_layer(s);
   }
 }
 

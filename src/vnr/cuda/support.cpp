@@ -1,4 +1,5 @@
 // Parts of the CUDA backend's API that need no CUDA: built with or without the backend.
+#include <algorithm>
 #include "vnr/core/error.h"
 #include "vnr/cuda/cuda.h"
 
@@ -39,6 +40,16 @@ std::string backend_summary() {
     s += fmt::format(" [{}] {} (sm_{}{}, {:.1f} GiB, {} SMs)", d.index, d.name, d.cc_major, d.cc_minor,
                      double(d.memory_bytes) / double(1ull << 30), d.sm_count);
   return s;
+}
+
+uint64_t GpuTrainer::bytes_needed(const Network& net, uint64_t voxels, int64_t batch) {
+  // Mirrors the trainer's buffers (engine.cu, PassBuffers::allocate and GpuTrainer::Impl): per sample X0
+  // and dX0, hidden activations and their gradients, dOut (half); coordinates, target, output and the
+  // cuBLAS path's scratch (binary32). Per parameter: master, gradient, two moments, count, half copy.
+  const MlpLayout& m = net.mlp();
+  const uint64_t per_sample = 2 * (2 * uint64_t(m.in_pad) + 2 * uint64_t(m.n_hidden) * m.width + m.out_pad) +
+                              4 * (4 + uint64_t(m.n_out)) + 4 * uint64_t(std::max(m.in_pad, m.width));
+  return voxels * sizeof(float) + uint64_t(batch) * per_sample + net.n_params() * (5 * 4 + 2);
 }
 
 void check_supported(const Network& net) {

@@ -9,10 +9,7 @@ namespace vnr {
 
 Adam::Adam(const AdamConfig& adam, const DecayConfig& decay, uint64_t n_params, uint64_t n_matrix)
     : m(n_params, 0.0f), v(n_params, 0.0f), c(n_params, 0u), cfg_(adam), decay_(decay), n_params_(n_params),
-      n_matrix_(n_matrix), base_lr_(adam.learning_rate) {
-  bias_sqrt_.push_back(0.0f);
-  bias_den_.push_back(0.0f);
-}
+      n_matrix_(n_matrix), base_lr_(adam.learning_rate) {}
 
 float Adam::learning_rate_at(const AdamConfig& a, const DecayConfig& d, uint64_t t) {
   float f = 1.0f;
@@ -22,29 +19,37 @@ float Adam::learning_rate_at(const AdamConfig& a, const DecayConfig& d, uint64_t
 }
 
 
+AdamStepScalars adam_step_scalars(const AdamConfig& a, const DecayConfig& d, uint64_t t, float* factor) {
+  if (d.enabled) {
+    if (t == 0) *factor = 1.0f;
+    if (t >= d.decay_start && (t - d.decay_start) % d.decay_interval == 0 && t <= d.decay_end) *factor *= d.decay_base;
+  }
+  AdamStepScalars s{a.learning_rate * *factor, 0.0f, FLT_MAX};
+  if (a.adabound) {
+    const float c = float(t + 1);
+    s.lo = 0.1f - 0.1f / ((1.0f - a.beta2) * c + 1.0f);
+    s.hi = 0.1f + 0.1f / ((1.0f - a.beta2) * c);
+  }
+  return s;
+}
+
+void extend_adam_bias_tables(const AdamConfig& a, size_t n, std::vector<float>& bias_sqrt,
+                             std::vector<float>& bias_den) {
+  while (bias_sqrt.size() < n) {
+    const float c = float(bias_sqrt.size());
+    bias_sqrt.push_back(bias_sqrt.empty() ? 0.0f : std::sqrt(1.0f - std::pow(a.beta2, c)));
+    bias_den.push_back(bias_den.empty() ? 0.0f : 1.0f - std::pow(a.beta1, c));
+  }
+}
+
 void Adam::step(float* params, float* grads, uint16_t* non_matrix_half) {
-  // ExponentialDecay: t = steps completed so far.
-  const uint64_t t = step_;
-  if (decay_.enabled) {
-    if (t == 0) factor_ = 1.0f;
-    if (t >= decay_.decay_start && (t - decay_.decay_start) % decay_.decay_interval == 0 && t <= decay_.decay_end)
-      factor_ *= decay_.decay_base;
-  }
+  const AdamStepScalars sc = adam_step_scalars(cfg_, decay_, step_, &factor_);
   ++step_;
-  // Extend the bias-correction tables to c = step_ (a parameter's count never exceeds the global step).
-  while (bias_sqrt_.size() <= step_) {
-    float cc = float(bias_sqrt_.size());
-    bias_sqrt_.push_back(std::sqrt(1.0f - std::pow(cfg_.beta2, cc)));
-    bias_den_.push_back(1.0f - std::pow(cfg_.beta1, cc));
-  }
+  // Bias corrections up to c = step_ (a parameter's count never exceeds the global step).
+  extend_adam_bias_tables(cfg_, step_ + 1, bias_sqrt_, bias_den_);
   // Matrix (MLP) parameters first: l2 applies and they are never skipped.
-  kernels::AdamStep ks{base_lr_ * factor_, cfg_.beta1, cfg_.beta2, cfg_.epsilon, cfg_.l2_reg, cfg_.relative_decay,
-                       cfg_.absolute_decay, 0.0f, FLT_MAX, true, bias_sqrt_.data(), bias_den_.data()};
-  if (cfg_.adabound) {
-    float s = float(step_);
-    ks.lo = 0.1f - 0.1f / ((1.0f - cfg_.beta2) * s + 1.0f);
-    ks.hi = 0.1f + 0.1f / ((1.0f - cfg_.beta2) * s);
-  }
+  kernels::AdamStep ks{sc.lr, cfg_.beta1, cfg_.beta2, cfg_.epsilon, cfg_.l2_reg, cfg_.relative_decay,
+                       cfg_.absolute_decay, sc.lo, sc.hi, true, bias_sqrt_.data(), bias_den_.data()};
   if (cfg_.optimize_matrix_params)
     kernels::adam_range(ks, params, grads, m.data(), v.data(), c.data(), nullptr, int64_t(n_matrix_));
   else

@@ -10,6 +10,18 @@ namespace vnr {
 // weights, loss scale 1. Parameters [0, n_matrix) are "matrix" params (MLP weights, l2_reg applies);
 // the rest are "non-matrix" (grid) params, skipped when their gradient is exactly zero (lazy Adam:
 // moments, per-parameter step counter and weight stay as they are).
+// The host arithmetic of one optimizer step, shared by every backend's Adam.
+struct AdamStepScalars {
+  float lr, lo, hi;  // learning rate of this step (before the non-matrix factor); AdaBound's clamp
+};
+// For the step after t completed steps: updates the ExponentialDecay factor in place (compat.md A.7.2)
+// and returns the step's learning rate and clamp (lo = 0, hi = FLT_MAX unless AdaBound).
+AdamStepScalars adam_step_scalars(const AdamConfig& a, const DecayConfig& d, uint64_t t, float* factor);
+// Appends sqrtf(1 - beta2^c) and 1 - beta1^c for c = size() .. n-1 (entry 0 is 0): the bias corrections
+// by per-parameter step count.
+void extend_adam_bias_tables(const AdamConfig& a, size_t n, std::vector<float>& bias_sqrt,
+                             std::vector<float>& bias_den);
+
 class Adam {
 public:
   Adam(const AdamConfig& adam, const DecayConfig& decay, uint64_t n_params, uint64_t n_matrix);

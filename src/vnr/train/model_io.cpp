@@ -65,18 +65,8 @@ Decoder::Decoder(const Network& net, Device device) : net_(net), device_(device)
 }
 Decoder::~Decoder() = default;
 
-namespace {
-// Voxel centre of index v of dims: the one expression both backends and both decode forms use.
-inline void voxel_centre(Int3 dims, int64_t v, float* x, float* y, float* z) {
-  const int64_t ix = v % dims.x, iy = (v / dims.x) % dims.y, iz = v / (dims.x * dims.y);
-  *x = (float(ix) + 0.5f) / float(dims.x);
-  *y = (float(iy) + 0.5f) / float(dims.y);
-  *z = (float(iz) + 0.5f) / float(dims.z);
-}
-}  // namespace
-
 void Decoder::slices(Int3 dims, int64_t z0, int64_t z1, float* out) {
-  if (gpu_) return gpu_->decode_slices(dims, z0, z1, out);  // the same expressions in kernels.cu
+  if (gpu_) return gpu_->decode_slices(dims, z0, z1, out);  // voxel_centre() in kernels.cu
   const int64_t first = dims.x * dims.y * z0;
   net_.infer_fn(
       dims.x * dims.y * (z1 - z0), [&](int64_t i, float* x, float* y, float* z) { voxel_centre(dims, first + i, x, y, z); },

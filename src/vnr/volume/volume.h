@@ -121,6 +121,15 @@ VNR_HD VNR_INLINE float grid_lookup(const GridView& g, float ux, float uy, float
   return trilinear_corners(x, y, z, v);
 }
 
+// Normalised coordinates of the centre of voxel v (x + dims.x * (y + dims.y * z)): (i + 0.5) / n per
+// axis, the one expression every decoder (CPU, GPU, whole slices or chosen voxels) uses.
+VNR_HD VNR_INLINE void voxel_centre(Int3 dims, int64_t v, float* x, float* y, float* z) {
+  const int64_t ix = v % dims.x, iy = (v / dims.x) % dims.y, iz = v / (dims.x * dims.y);
+  *x = (float(ix) + 0.5f) / float(dims.x);
+  *y = (float(iy) + 0.5f) / float(dims.y);
+  *z = (float(iz) + 0.5f) / float(dims.z);
+}
+
 // SIMD versions of the lookup gather with 32-bit indices: volumes below 2^31 voxels.
 inline bool grid_fits_gather_indices(const GridView& g) {
   return uint64_t(g.nx) * uint64_t(g.ny) * uint64_t(g.nz) < (uint64_t(1) << 31);
