@@ -7,6 +7,7 @@
 #include "test_support.h"
 #include "vnr/core/rng.h"
 #include "vnr/cuda/cuda.h"
+#include "vnr/render_cuda/gpu_renderer.h"
 #include "vnr/nn/loss.h"
 #include "vnr/nn/network.h"
 #include "vnr/train/model_io.h"
@@ -89,6 +90,28 @@ TEST(CudaCli, DeviceCudaWithoutAGpuIsOneErrorLine) {
                              dir / "r.json");
   ASSERT_EQ(t.code, 0) << t.err;
   EXPECT_EQ(Json::parse(read_file(dir / "r.json"))["device"], "cpu");
+}
+
+// GPU rendering without a GPU: render and bench render with --device cuda say why in one line; auto
+// renders on the CPU and the report says so; the library's GpuRenderer fails the same way.
+TEST(CudaCli, RenderOnCudaWithoutAGpuIsOneErrorLineAndAutoUsesTheCpu) {
+  if (!cuda::devices().empty()) GTEST_SKIP() << "a CUDA device is present";
+  test::TmpDir dir;
+  const std::string why = cuda::built() ? "no CUDA device" : "built without the CUDA backend";
+  ASSERT_EQ(test::run("synth marschner-lobb --dims 16,16,16 -o " + dir / "v.json").code, 0);
+  test::expect_error("render " + dir / "v.json" + " -o " + dir / "a.png --size 8x8 --device cuda", why);
+  test::expect_error("bench render " + dir / "v.json" + " --size 8x8 --frames 1 --device cuda", why);
+  test::expect_error("render " + dir / "v.json" + " -o " + dir / "a.png --mlp tensor", "--mlp");
+  test::Result r = test::run("render " + dir / "v.json" + " -o " + dir / "a.png --size 8x8 --report " + dir / "r.json");
+  ASSERT_EQ(r.code, 0) << r.err;
+  const Json rep = Json::parse(read_file(dir / "r.json"));
+  EXPECT_EQ(rep["device"], "cpu");
+  EXPECT_EQ(rep["host_syncs"], 0);
+  Volume vol = test::synth(Int3{8, 8, 8});
+  GridField field(view_of(vol));
+  MacroCells mc = MacroCells::single(vol.dims, test::box_of(vol));
+  test::expect_error([&] { GpuRenderer(field, test::box_of(vol), mc, tf_preset("ramp"), Camera{}, RenderOptions{}); },
+                     {why.c_str()});
 }
 
 }  // namespace

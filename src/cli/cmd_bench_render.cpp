@@ -86,28 +86,38 @@ void add_bench_render(CLI::App& bench) {
     if (with == MacroCellMode::Off) with = src.volume ? MacroCellMode::Grid : MacroCellMode::Off;
     if (with == MacroCellMode::Off)
       fail("no macro-cells to compare with: give a model trained by vnr (online ranges) or --volume");
-    MacroCells mc_off = make_macrocells(src, MacroCellMode::Off, a->r.macrocell_size);
-    MacroCells mc_on = make_macrocells(src, with, a->r.macrocell_size);
+    MacroCells mc_off = make_macrocells(src, MacroCellMode::Off, a->r.macrocell_size, setup.device);
+    MacroCells mc_on = make_macrocells(src, with, a->r.macrocell_size, setup.device);
     mc_off.update(setup.tf);
     mc_on.update(setup.tf);
 
-    const double raw = raw_query_rate(*src.field, 2.0);
+    // The raw rate: the CPU's batched query, or on the GPU the network's resident encoding + MLP (what
+    // `vnr bench infer --device cuda` reports as resident); 0 = not measured (the grid on the GPU).
+    double raw = 0;
+    if (setup.device == Device::Cpu) {
+      raw = raw_query_rate(*src.field, 2.0);
+    } else if (src.model) {
+      cuda::GpuNetwork gn(*src.model->net, setup.mlp);
+      const int64_t n = int64_t(1) << 22;
+      raw = double(n) / gn.time_resident(n, 10).seconds;
+    }
     // The orbit: frame i of n looks from azimuth 360 i / n (elevation from --orbit, or 0).
     auto camera_of = [&](int i) {
       return orbit_camera(src.box, 360.0f * float(i) / float(a->frames), setup.orbit_elevation, a->r.fovy);
     };
 
     auto run_cell = [&](const RenderOptions& o, const MacroCells& mc, RenderStats* total) {
-      Renderer r(*src.field, src.box, mc, setup.tf, camera_of(0), o);
-      Image img(o.width, o.height);
-      for (int i = 0; i < a->warmup; ++i) r.render_frame(uint32_t(i), img);
+      std::unique_ptr<FrameRenderer> r = make_setup_renderer(setup, src, mc, camera_of(0), o);
+      for (int i = 0; i < a->warmup; ++i) r->render_frame_resident(uint32_t(i));
       std::vector<double> times;
       for (int i = 0; i < a->frames; ++i) {
-        r.set_camera(camera_of(i));
+        r->set_camera(camera_of(i));
         RenderStats st;
-        r.render_frame(uint32_t(i), img, &st);
+        r->render_frame_resident(uint32_t(i), &st);
         times.push_back(st.seconds);
         total->field_samples += st.field_samples;
+        total->host_syncs += st.host_syncs;
+        total->iterations += st.iterations;
         total->seconds += st.seconds;
         total->frames += 1;
       }
@@ -119,10 +129,14 @@ void add_bench_render(CLI::App& bench) {
     report["field"] = src.field->kind();
     report["size"] = {setup.options.width, setup.options.height};
     report["threads"] = num_threads();
+    report["device"] = device_name(setup.device);
+    if (setup.device == Device::Cuda) report["gpu"] = cuda::devices().at(0).name;
     report["raw_field_samples_per_second"] = raw;
-    std::printf("%s (%s field), %dx%d, %d threads; raw batched field query: %.2f M samples/s\n\n",
-                src.description.c_str(), src.field->kind(), setup.options.width, setup.options.height, num_threads(),
-                raw / 1e6);
+    const std::string where = setup.device == Device::Cuda ? cuda::devices().at(0).name
+                                                           : fmt::format("{} threads", num_threads());
+    std::printf("%s (%s field), %dx%d, %s; raw batched field query: %s\n\n", src.description.c_str(),
+                src.field->kind(), setup.options.width, setup.options.height, where.c_str(),
+                raw > 0 ? fmt::format("{:.2f} M samples/s", raw / 1e6).c_str() : "not measured");
 
     if (!a->tune_k.empty()) {
       std::printf("| K | frames/s | field samples/s (M) | samples/frame (M) |\n|---|---|---|---|\n");
@@ -150,8 +164,8 @@ void add_bench_render(CLI::App& bench) {
       for (const std::string& s : split_list(a->strategies))
         for (MacroCellMode mc : {MacroCellMode::Off, with})
           cells.push_back(Cell{parse_render_mode(m), parse_render_strategy(s), mc});
-    std::printf("| mode | strategy | macro-cells | frames/s | field samples/s (M) | of raw query rate |\n"
-                "|---|---|---|---|---|---|\n");
+    std::printf("| mode | strategy | macro-cells | frames/s | field samples/s (M) | of raw query rate | host syncs/frame |\n"
+                "|---|---|---|---|---|---|---|\n");
     Json rows = Json::array();
     for (const Cell& cell : cells) {
       RenderOptions o = setup.options;
@@ -160,14 +174,18 @@ void add_bench_render(CLI::App& bench) {
       RenderStats tot;
       double fps = run_cell(o, cell.mc == MacroCellMode::Off ? mc_off : mc_on, &tot);
       double sps = double(tot.field_samples) / tot.seconds;
-      std::printf("| %s | %s | %s | %.2f | %.2f | %.0f%% |\n", render_mode_name(cell.mode),
-                  render_strategy_name(cell.strategy), macrocell_mode_name(cell.mc), fps, sps / 1e6, 100 * sps / raw);
+      const double syncs = double(tot.host_syncs) / tot.frames;
+      std::printf("| %s | %s | %s | %.2f | %.2f | %s | %.0f |\n", render_mode_name(cell.mode),
+                  render_strategy_name(cell.strategy), macrocell_mode_name(cell.mc), fps, sps / 1e6,
+                  raw > 0 ? fmt::format("{:.0f}%", 100 * sps / raw).c_str() : "-", syncs);
       std::fflush(stdout);
       rows.push_back({{"mode", render_mode_name(cell.mode)},
                       {"strategy", render_strategy_name(cell.strategy)},
                       {"macrocells", macrocell_mode_name(cell.mc)},
                       {"fps", fps},
-                      {"field_samples_per_second", sps}});
+                      {"field_samples_per_second", sps},
+                      {"host_syncs_per_frame", syncs},
+                      {"iterations_per_frame", double(tot.iterations) / tot.frames}});
     }
     report["rows"] = rows;
     write_report(a->report, report);

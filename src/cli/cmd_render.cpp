@@ -63,7 +63,30 @@ void RenderArgs::add(CLI::App* c) {
   c->add_flag("--shade", shade, "gradient (Phong, headlight) shading for ray marching");
   c->add_option("--volume", volume, "ground-truth volume of a model (for --macrocells grid)");
   c->add_option("--threads", threads, "CPU threads (default: all cores)");
+  add_device_option(c, device);
+  c->add_option("--mlp", mlp, "cuda: MLP of streaming inference, auto, fused or cublas")
+      ->check(CLI::IsMember({"auto", "fused", "cublas"}))
+      ->capture_default_str();
 }
+
+namespace {
+// --device: auto renders on a visible GPU when the field can go there (a grid, or a network with a grid
+// encoding and ReLU layers), else on the CPU with a note; an explicit cuda fails with one line.
+Device choose_render_device(const RenderArgs& a, const RenderSource& src) {
+  const Device asked = cuda::resolve_device(a.device);
+  if (asked == Device::Cpu) return Device::Cpu;
+  if (src.model) {
+    try {
+      cuda::check_supported(*src.model->net);
+    } catch (const Error& e) {
+      if (a.device == "cuda") throw;
+      std::fprintf(stderr, "note: rendering on the CPU: %s\n", e.what());
+      return Device::Cpu;
+    }
+  }
+  return Device::Cuda;
+}
+}  // namespace
 
 RenderSetup make_render_setup(const RenderArgs& a, const RenderSource& src) {
   RenderSetup r;
@@ -106,6 +129,8 @@ RenderSetup make_render_setup(const RenderArgs& a, const RenderSource& src) {
   if (scene.background) o.background = *scene.background;
   if (!a.background.empty()) o.background = parse_vec3(a.background, "--background");
   r.macrocell_mode = a.macrocells.empty() ? default_macrocell_mode(src) : parse_macrocell_mode(a.macrocells);
+  r.device = choose_render_device(a, src);
+  r.mlp = cuda::parse_mlp_path(a.mlp);
   if (a.macrocell_size < 1) fail("--macrocell-size must be at least 1, got {}", a.macrocell_size);
   return r;
 }
@@ -137,14 +162,14 @@ void add_render(CLI::App& app) {
     RenderSetup setup = make_render_setup(a->r, src);
     std::optional<Image> reference;
     if (!a->reference.empty()) reference = read_image(a->reference);
-    MacroCells mc = make_macrocells(src, setup.macrocell_mode, a->r.macrocell_size);
+    MacroCells mc = make_macrocells(src, setup.macrocell_mode, a->r.macrocell_size, setup.device);
     mc.update(setup.tf);
-    Renderer renderer(*src.field, src.box, mc, setup.tf, setup.camera, setup.options);
+    std::unique_ptr<FrameRenderer> renderer = make_setup_renderer(setup, src, mc, setup.camera, setup.options);
     RenderStats st;
     Progress bar("render", a->spp, a->quiet || a->spp < 2);
     Image acc(setup.options.width, setup.options.height), frame(setup.options.width, setup.options.height);
     for (int f = 0; f < a->spp; ++f) {
-      renderer.render_frame(uint32_t(f), frame, &st);
+      renderer->render_frame(uint32_t(f), frame, &st);
       accumulate_frame(acc, frame, f);
       bar.update(f + 1, fmt::format("{:.3f} s/frame", st.seconds / st.frames));
     }
@@ -161,7 +186,9 @@ void add_render(CLI::App& app) {
                    {"macrocells", macrocell_mode_name(setup.macrocell_mode)},
                    {"field", src.field->kind()},
                    {"size", {setup.options.width, setup.options.height}},
-                   {"threads", num_threads()}};
+                   {"threads", num_threads()},
+                   {"device", device_name(setup.device)},
+                   {"host_syncs", st.host_syncs}};
     std::string cmp;
     if (reference) {
       ImageMetrics im = compare_images(acc, *reference);
@@ -170,8 +197,8 @@ void add_render(CLI::App& app) {
       cmp = fmt::format(", vs reference: PSNR {:.2f} dB, SSIM {:.4f}", im.psnr, im.ssim);
     }
     if (!a->quiet)
-      std::printf("%s: %s %s %dx%d, %d frame(s), %.3f s/frame (%.2f frames/s), %.1f M field samples/s%s -> %s\n",
-                  src.description.c_str(), render_mode_name(setup.options.mode),
+      std::printf("%s: %s %s %s %dx%d, %d frame(s), %.3f s/frame (%.2f frames/s), %.1f M field samples/s%s -> %s\n",
+                  src.description.c_str(), device_name(setup.device), render_mode_name(setup.options.mode),
                   render_strategy_name(setup.options.strategy), setup.options.width, setup.options.height, st.frames,
                   st.seconds / st.frames, st.frames / st.seconds, double(st.field_samples) / st.seconds / 1e6,
                   cmp.c_str(), a->output.c_str());

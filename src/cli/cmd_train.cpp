@@ -230,6 +230,7 @@ void run_train(const TrainArgs& a) {
     gpu = std::make_unique<cuda::GpuTrainer>(
         net, view_of(*data.vol),
         cuda::GpuTrainOptions{a.batch, a.seed, Trainer::chunk_for(net, a.batch), cuda::parse_mlp_path(a.mlp)});
+    if (a.macrocell_size > 0) gpu->enable_online_ranges(data.dims, a.macrocell_size);
     if (!a.quiet)
       std::fprintf(stderr, "training on %s (MLP: %s)\n", cuda::devices().at(0).name.c_str(),
                    cuda::mlp_path_name(gpu->mlp_path()));
@@ -248,8 +249,7 @@ void run_train(const TrainArgs& a) {
                       {"threads", num_threads()}, {"sampler", data.kind}, {"device", device_name(dev)}};
     if (gpu) {
       gpu->download();  // the model file is written from net.params
-      // The GPU trainer records no online ranges; the volume is in memory, so store the exact ones.
-      if (a.macrocell_size > 0) model.macrocells = value_ranges_from_grid(view_of(*data.vol), a.macrocell_size);
+      if (gpu->has_online_ranges()) model.macrocells = gpu->online_ranges();
     } else if (cpu->has_online_ranges()) {
       model.macrocells = cpu->online_ranges();
     }

@@ -61,11 +61,12 @@ MacroCellMode default_macrocell_mode(const RenderSource& src) {
   return MacroCellMode::Off;
 }
 
-MacroCells make_macrocells(const RenderSource& src, MacroCellMode mode, int cell_size) {
+MacroCells make_macrocells(const RenderSource& src, MacroCellMode mode, int cell_size, Device device) {
   switch (mode) {
     case MacroCellMode::Grid:
       if (!src.volume)
         fail("--macrocells grid needs the ground-truth volume: pass it with --volume (or use online/off)");
+      if (device == Device::Cuda) return MacroCells(gpu_value_ranges_from_grid(view_of(*src.volume), cell_size), src.box);
       return MacroCells(value_ranges_from_grid(view_of(*src.volume), cell_size), src.box);
     case MacroCellMode::Online:
       if (!src.model || !src.model->macrocells)
@@ -76,6 +77,12 @@ MacroCells make_macrocells(const RenderSource& src, MacroCellMode mode, int cell
     default:
       return MacroCells::single(src.dims, src.box);
   }
+}
+
+std::unique_ptr<FrameRenderer> make_setup_renderer(const RenderSetup& setup, const RenderSource& src,
+                                                   const MacroCells& mc, const Camera& cam,
+                                                   const RenderOptions& options) {
+  return make_renderer(setup.device, *src.field, src.box, mc, setup.tf, cam, options, setup.mlp);
 }
 
 }  // namespace vnr::cli

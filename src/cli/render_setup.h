@@ -9,6 +9,7 @@
 #include "vnr/render/macrocell.h"
 #include "vnr/render/renderer.h"
 #include "vnr/render/scene.h"
+#include "vnr/render_cuda/gpu_renderer.h"
 #include "vnr/train/model_io.h"
 
 namespace vnr::cli {
@@ -32,8 +33,9 @@ bool is_model_path(const std::string& path);
 RenderSource open_render_source(const std::string& input, const std::string& ground_truth, const VolumeArgs& va);
 
 // Macro-cells of a mode for a source: grid needs a volume, online needs a model trained by vnr (its
-// recorded value ranges), off is one cell. `cell_size` applies to grid.
-MacroCells make_macrocells(const RenderSource& src, MacroCellMode mode, int cell_size);
+// recorded value ranges), off is one cell. `cell_size` applies to grid, whose ranges are computed on the
+// device that renders.
+MacroCells make_macrocells(const RenderSource& src, MacroCellMode mode, int cell_size, Device device = Device::Cpu);
 // The default mode: online for a model that carries ranges, grid when a volume is at hand, else off.
 MacroCellMode default_macrocell_mode(const RenderSource& src);
 
@@ -43,8 +45,14 @@ struct RenderSetup {
   TransferFunction tf;
   Camera camera;
   MacroCellMode macrocell_mode = MacroCellMode::Off;
+  Device device = Device::Cpu;  // --device resolved: auto renders on a visible GPU the model can run on
+  cuda::MlpPath mlp = cuda::MlpPath::Auto;
   float orbit_elevation = 0;  // degrees, from --orbit
 };
 RenderSetup make_render_setup(const RenderArgs& a, const RenderSource& src);
+// The renderer for a setup (CPU or GPU) over the source's field.
+std::unique_ptr<FrameRenderer> make_setup_renderer(const RenderSetup& setup, const RenderSource& src,
+                                                   const MacroCells& mc, const Camera& cam,
+                                                   const RenderOptions& options);
 
 }  // namespace vnr::cli

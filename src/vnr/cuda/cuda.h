@@ -15,6 +15,7 @@
 #include "vnr/core/device.h"
 #include "vnr/core/math.h"
 #include "vnr/nn/network.h"
+#include "vnr/volume/value_range_grid.h"
 #include "vnr/volume/volume.h"
 
 namespace vnr::cuda {
@@ -79,6 +80,11 @@ public:
   float last_loss();
   uint64_t steps_done() const;
   float current_learning_rate() const;
+  // Online macro-cells (paper "Macro-Cell Optimization"): from now on every batch widens the value
+  // ranges of the cells around its samples, on the GPU (the CPU Trainer's cells, exactly).
+  void enable_online_ranges(Int3 dims, int cell_size = 16);
+  bool has_online_ranges() const;
+  ValueRangeGrid online_ranges();  // synchronises
   // Copies the binary32 master parameters back into the Network (and refreshes its half grid).
   void download();
   MlpPath mlp_path() const;

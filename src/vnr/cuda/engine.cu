@@ -7,6 +7,7 @@
 #include "vnr/cuda/cuda.h"
 #include "vnr/cuda/kernels.cuh"
 #include "vnr/cuda/mlp.cuh"
+#include "vnr/cuda/network.cuh"
 #include "vnr/nn/optimizer.h"
 
 namespace vnr::cuda {
@@ -61,52 +62,56 @@ void require_device() {
   if (devices().empty()) cuda_fail_message("--device cuda: " + no_device_reason());
 }
 
-namespace {
+StreamAndBlas::StreamAndBlas() {
+  require_device();
+  VNR_CUDA_CHECK(cudaStreamCreate(&stream));
+  VNR_CUBLAS_CHECK(cublasCreate(&blas));
+  VNR_CUBLAS_CHECK(cublasSetStream(blas, stream));
+}
+StreamAndBlas::~StreamAndBlas() {
+  if (blas) cublasDestroy(blas);
+  if (stream) cudaStreamDestroy(stream);
+}
 
-// One CUDA stream and cuBLAS handle per GPU object.
-struct StreamAndBlas {
-  cudaStream_t stream = nullptr;
-  cublasHandle_t blas = nullptr;
-  StreamAndBlas() {
-    require_device();
-    // A blocking stream: ordered after the synchronous copies and memsets (legacy default stream) that
-    // upload volumes, parameters and coordinates; a pageable cudaMemcpy may return before its DMA ends.
-    VNR_CUDA_CHECK(cudaStreamCreate(&stream));
-    VNR_CUBLAS_CHECK(cublasCreate(&blas));
-    VNR_CUBLAS_CHECK(cublasSetStream(blas, stream));
+void PassBuffers::allocate(const MlpDims& d, int64_t n, bool training, MlpPath path) {
+  const int H = d.n_matrices - 1;
+  X0.resize(size_t(n) * d.in_pad);
+  out.resize(size_t(n) * d.n_out);
+  if (training || path == MlpPath::Cublas) acts.resize(size_t(H) * n * d.width);
+  if (path == MlpPath::Cublas) tmp.resize(size_t(n) * std::max(d.in_pad, d.width));
+  if (training) {
+    dOut.resize(size_t(n) * d.out_pad);
+    dY.resize(size_t(H) * n * d.width);
+    dX0.resize(size_t(n) * d.in_pad);
   }
-  ~StreamAndBlas() {
-    if (blas) cublasDestroy(blas);
-    if (stream) cudaStreamDestroy(stream);
-  }
-};
+}
 
-// The network's parameters as the half working copy (tcnn order), uploaded.
 void upload_half_params(const Network& net, DeviceBuffer<__half>& half) {
   std::vector<uint16_t> h = net.params_half();
   half.resize(h.size());
   VNR_CUDA_CHECK(cudaMemcpy(half.data(), h.data(), h.size() * sizeof(uint16_t), cudaMemcpyHostToDevice));
 }
 
-int64_t round_up(int64_t v, int64_t m) { return (v + m - 1) / m * m; }
+DeviceNetwork::DeviceNetwork(const Network& net, MlpPath asked) : net_(net) {
+  check_supported(net);
+  d_ = mlp_dims(net.mlp());
+  path_ = resolve_mlp_path(net, asked);
+  upload_half_params(net, half_);
+}
 
-// Buffers of one forward/backward pass over n samples.
-struct PassBuffers {
-  DeviceBuffer<__half> X0, acts, dOut, dY, dX0;
-  DeviceBuffer<float> out, tmp;
-  void allocate(const MlpDims& d, int64_t n, bool training, MlpPath path) {
-    const int H = d.n_matrices - 1;
-    X0.resize(size_t(n) * d.in_pad);
-    out.resize(size_t(n) * d.n_out);
-    if (training || path == MlpPath::Cublas) acts.resize(size_t(H) * n * d.width);
-    if (path == MlpPath::Cublas) tmp.resize(size_t(n) * std::max(d.in_pad, d.width));
-    if (training) {
-      dOut.resize(size_t(n) * d.out_pad);
-      dY.resize(size_t(H) * n * d.width);
-      dX0.resize(size_t(n) * d.in_pad);
-    }
+const float* DeviceNetwork::infer(const float* xyz, int64_t n, const StreamAndBlas& sb, cudaEvent_t after_encoding) {
+  if (n > allocated_) {
+    pass_.allocate(d_, n, false, path_);
+    allocated_ = n;
   }
-};
+  encode(net_.grid(), half_.data() + net_.mlp().n_params, interleaved(xyz), n, d_.in_pad, pass_.X0.data(), sb.stream);
+  if (after_encoding) VNR_CUDA_CHECK(cudaEventRecord(after_encoding, sb.stream));
+  mlp_forward(path_, d_, half_.data(), pass_.X0.data(), n, pass_.acts.data(), pass_.out.data(),
+              int(net_.config().network.output_activation), pass_.tmp.data(), sb.blas, sb.stream);
+  return pass_.out.data();
+}
+
+namespace {
 
 // Encoding, MLP forward, loss, MLP backward and grid backward for n points with their targets: the
 // loss-scaled work of one training step (grads: binary32, the MLP part overwritten, the grid part
@@ -127,16 +132,6 @@ void gradient_pass(const Network& net, const MlpDims& d, MlpPath path, const __h
                grads, pass.tmp.data(), sb.blas, st);
   mark(2);
   grid_backward(net.grid(), pts, n, d.in_pad, pass.dX0.data(), grads + n_mlp, st);
-}
-
-// The forward pass of inference for n points (interleaved xyz in GPU memory); mark(1) after encoding.
-template <typename Mark>
-void infer_pass(const Network& net, const MlpDims& d, MlpPath path, const __half* half, const float* xyz, int64_t n,
-                PassBuffers& pass, const StreamAndBlas& sb, Mark&& mark) {
-  encode(net.grid(), half + net.mlp().n_params, interleaved(xyz), n, d.in_pad, pass.X0.data(), sb.stream);
-  mark(1);
-  mlp_forward(path, d, half, pass.X0.data(), n, pass.acts.data(), pass.out.data(),
-              int(net.config().network.output_activation), pass.tmp.data(), sb.blas, sb.stream);
 }
 
 inline void no_mark(int) {}
@@ -165,6 +160,9 @@ struct GpuTrainer::Impl {
   float factor = 1.0f;  // ExponentialDecay's
   bool profiling = false;
   cudaEvent_t events[5] = {};
+  ValueRangeGrid ranges;  // shape of the online ranges (empty grid: off)
+  RangeGridDims rdims;
+  DeviceBuffer<float> range_lo, range_hi;
 
   Impl(Network& n, GridView vol, GpuTrainOptions o) : net(n), opts(o) {
     check_supported(net);
@@ -236,6 +234,9 @@ struct GpuTrainer::Impl {
     const AdamStepScalars sc = adam_step_scalars(a, net.config().decay, step, &factor);
     grow_tables(step + 2);
     sample_in_core(dvol, opts.seed, step, opts.chunk, opts.batch, xs.data(), ys.data(), zs.data(), target.data(), st);
+    if (range_lo.size())
+      ranges_add_samples(rdims, xs.data(), ys.data(), zs.data(), target.data(), opts.batch, range_lo.data(),
+                         range_hi.data(), st);
     gradient_pass(net, d, path, half.data(), Coords{xs.data(), ys.data(), zs.data(), 1}, target.data(), opts.batch,
                   pass, grads.data(), loss_slots.data() + step, sb, [&](int i) { mark(i); });
     mark(3);
@@ -286,6 +287,25 @@ float GpuTrainer::current_learning_rate() const {
   return impl_->net.config().adam.learning_rate * impl_->factor;
 }
 
+void GpuTrainer::enable_online_ranges(Int3 dims, int cell_size) {
+  Impl& I = *impl_;
+  I.ranges = ValueRangeGrid(dims, cell_size);
+  I.rdims = range_grid_dims(I.ranges);
+  I.range_lo.resize(size_t(I.ranges.count()));
+  I.range_hi.resize(size_t(I.ranges.count()));
+  ranges_clear(I.rdims, I.range_lo.data(), I.range_hi.data(), I.sb.stream);
+}
+bool GpuTrainer::has_online_ranges() const { return impl_->range_lo.size() > 0; }
+ValueRangeGrid GpuTrainer::online_ranges() {
+  Impl& I = *impl_;
+  if (!has_online_ranges()) cuda_fail_message("online macro-cells were not enabled for this training run");
+  synchronize();
+  ValueRangeGrid g = I.ranges;
+  I.range_lo.download(g.lo.data(), g.lo.size());
+  I.range_hi.download(g.hi.data(), g.hi.size());
+  return g;
+}
+
 void GpuTrainer::download() {
   synchronize();
   impl_->master.download(impl_->net.params.data(), impl_->net.n_params());
@@ -316,37 +336,28 @@ std::vector<double> GpuTrainer::phase_seconds() {
 // GpuNetwork
 
 struct GpuNetwork::Impl {
-  const Network& net;
-  MlpDims d;
-  MlpPath path;
-  StreamAndBlas sb;
-  DeviceBuffer<__half> half;
+  StreamAndBlas sb;  // first: fails with one line when there is no device
+  DeviceNetwork dnet;
   DeviceBuffer<float> coords;
-  PassBuffers pass;
   std::vector<float> pad;
   int64_t slab = int64_t(1) << 22, allocated = 0;
 
-  Impl(const Network& n, MlpPath asked) : net(n) {
-    check_supported(net);
-    d = mlp_dims(net.mlp());
-    path = resolve_mlp_path(net, asked);
-    upload_half_params(net, half);
-  }
+  Impl(const Network& n, MlpPath asked) : dnet(n, asked) {}
   void ensure(int64_t n) {
     if (n <= allocated) return;
     coords.resize(size_t(n) * 3);
-    pass.allocate(d, n, false, path);
     allocated = n;
   }
   // Runs the padded points in `coords` [0, np) and copies the first m outputs to out.
   void run(int64_t m, int64_t np, float* out) {
     const cudaStream_t st = sb.stream;
-    infer_pass(net, d, path, half.data(), coords.data(), np, pass, sb, no_mark);
-    if (d.n_out == 1) {
-      VNR_CUDA_CHECK(cudaMemcpyAsync(out, pass.out.data(), m * sizeof(float), cudaMemcpyDeviceToHost, st));
+    const float* res = dnet.infer(coords.data(), np, sb);
+    const int n_out = dnet.dims().n_out;
+    if (n_out == 1) {
+      VNR_CUDA_CHECK(cudaMemcpyAsync(out, res, m * sizeof(float), cudaMemcpyDeviceToHost, st));
     } else {  // first output of each sample
-      VNR_CUDA_CHECK(cudaMemcpy2DAsync(out, sizeof(float), pass.out.data(), d.n_out * sizeof(float), sizeof(float),
-                                       size_t(m), cudaMemcpyDeviceToHost, st));
+      VNR_CUDA_CHECK(cudaMemcpy2DAsync(out, sizeof(float), res, n_out * sizeof(float), sizeof(float), size_t(m),
+                                       cudaMemcpyDeviceToHost, st));
     }
     VNR_CUDA_CHECK(cudaStreamSynchronize(st));
   }
@@ -386,7 +397,7 @@ void GpuNetwork::decode_slices(Int3 dims, int64_t z0, int64_t z1, float* out) {
 void GpuNetwork::set_slab(int64_t samples) {
   impl_->slab = std::clamp<int64_t>(round_up(samples, 16), 16, int64_t(1) << 30);
 }
-MlpPath GpuNetwork::mlp_path() const { return impl_->path; }
+MlpPath GpuNetwork::mlp_path() const { return impl_->dnet.path(); }
 uint64_t GpuNetwork::peak_memory_bytes() const { return device_bytes_peak(); }
 
 GpuNetwork::ResidentTiming GpuNetwork::time_resident(int64_t n, int repeats) {
@@ -403,8 +414,7 @@ GpuNetwork::ResidentTiming GpuNetwork::time_resident(int64_t n, int repeats) {
   double total = 0, mlp = 0;
   for (int r = -1; r < repeats; ++r) {  // r = -1: warm-up
     VNR_CUDA_CHECK(cudaEventRecord(ev[0], st));
-    infer_pass(I.net, I.d, I.path, I.half.data(), I.coords.data(), np, I.pass, I.sb,
-               [&](int) { VNR_CUDA_CHECK(cudaEventRecord(ev[1], st)); });
+    I.dnet.infer(I.coords.data(), np, I.sb, ev[1]);
     VNR_CUDA_CHECK(cudaEventRecord(ev[2], st));
     VNR_CUDA_CHECK(cudaEventSynchronize(ev[2]));
     float a = 0, b = 0;

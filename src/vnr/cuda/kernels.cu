@@ -187,4 +187,83 @@ void voxel_centres(Int3 dims, int64_t first, int64_t count, int64_t padded, floa
   VNR_CUDA_LAUNCHED();
 }
 
+// ------------------------------------------------------------------------------------------------
+// Macro-cell value ranges
+
+RangeGridDims range_grid_dims(const ValueRangeGrid& g) {
+  return RangeGridDims{int32_t(g.cells.x),       int32_t(g.cells.y),       int32_t(g.cells.z),
+                       g.cell_size,              float(g.volume_dims.x),   float(g.volume_dims.y),
+                       float(g.volume_dims.z)};
+}
+
+namespace {
+
+__global__ void ranges_from_grid_kernel(GridView vol, RangeGridDims r, float* __restrict__ lo,
+                                        float* __restrict__ hi) {
+  const int64_t c = int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
+  if (c >= int64_t(r.nx) * r.ny * r.nz) return;
+  const int32_t cx = int32_t(c % r.nx), cy = int32_t((c / r.nx) % r.ny), cz = int32_t(c / (int64_t(r.nx) * r.ny));
+  cell_value_range(vol, r.cell_size, cx, cy, cz, &lo[c], &hi[c]);
+}
+
+// Float min/max through the integer order of the bit patterns (non-negative floats order as ints,
+// negative ones reversed as unsigned). -0 is made +0 first: the patterns of the two zeros do not order.
+__device__ inline void atomic_min_float(float* a, float v) {
+  if (v >= 0.0f) atomicMin(reinterpret_cast<int*>(a), __float_as_int(v));
+  else atomicMax(reinterpret_cast<unsigned*>(a), __float_as_uint(v));
+}
+__device__ inline void atomic_max_float(float* a, float v) {
+  if (v >= 0.0f) atomicMax(reinterpret_cast<int*>(a), __float_as_int(v));
+  else atomicMin(reinterpret_cast<unsigned*>(a), __float_as_uint(v));
+}
+
+__global__ void ranges_add_kernel(RangeGridDims r, const float* __restrict__ x, const float* __restrict__ y,
+                                  const float* __restrict__ z, const float* __restrict__ v, int64_t n,
+                                  float* __restrict__ lo, float* __restrict__ hi) {
+  const int64_t i = int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
+  if (i >= n) return;
+  const float inv = 1.0f / float(r.cell_size);
+  int32_t c0[3], c1[3];
+  value_range_cells(x[i] * r.sx, inv, r.nx, &c0[0], &c1[0]);
+  value_range_cells(y[i] * r.sy, inv, r.ny, &c0[1], &c1[1]);
+  value_range_cells(z[i] * r.sz, inv, r.nz, &c0[2], &c1[2]);
+  const float val = v[i] + 0.0f;  // -0 -> +0
+  if (val != val) return;         // NaN: ignored (the CPU's min/max keep the old value too)
+  for (int32_t cz = c0[2]; cz <= c1[2]; ++cz)
+    for (int32_t cy = c0[1]; cy <= c1[1]; ++cy)
+      for (int32_t cx = c0[0]; cx <= c1[0]; ++cx) {
+        const int64_t c = cx + int64_t(r.nx) * (cy + int64_t(r.ny) * cz);
+        atomic_min_float(&lo[c], val);
+        atomic_max_float(&hi[c], val);
+      }
+}
+
+__global__ void ranges_clear_kernel(int64_t n, float* __restrict__ lo, float* __restrict__ hi) {
+  const int64_t c = int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
+  if (c >= n) return;
+  lo[c] = INFINITY;
+  hi[c] = -INFINITY;
+}
+
+}  // namespace
+
+void ranges_from_grid(GridView volume, const RangeGridDims& r, float* lo, float* hi, cudaStream_t s) {
+  const int64_t n = int64_t(r.nx) * r.ny * r.nz;
+  ranges_from_grid_kernel<<<blocks_for(n, 64), 64, 0, s>>>(volume, r, lo, hi);
+  VNR_CUDA_LAUNCHED();
+}
+
+void ranges_add_samples(const RangeGridDims& r, const float* x, const float* y, const float* z, const float* v,
+                        int64_t n, float* lo, float* hi, cudaStream_t s) {
+  if (n <= 0) return;
+  ranges_add_kernel<<<blocks_for(n, kThreads), kThreads, 0, s>>>(r, x, y, z, v, n, lo, hi);
+  VNR_CUDA_LAUNCHED();
+}
+
+void ranges_clear(const RangeGridDims& r, float* lo, float* hi, cudaStream_t s) {
+  const int64_t n = int64_t(r.nx) * r.ny * r.nz;
+  ranges_clear_kernel<<<blocks_for(n, kThreads), kThreads, 0, s>>>(n, lo, hi);
+  VNR_CUDA_LAUNCHED();
+}
+
 }  // namespace vnr::cuda

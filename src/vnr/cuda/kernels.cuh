@@ -6,6 +6,7 @@
 #include "vnr/cuda/common.h"
 #include "vnr/cuda/mlp.cuh"
 #include "vnr/nn/grid_encoding.h"
+#include "vnr/volume/value_range_grid.h"
 #include "vnr/volume/volume.h"
 
 namespace vnr::cuda {
@@ -43,5 +44,22 @@ void to_half(const float* in, int64_t n, __half* half_out, cudaStream_t s);
 // Voxel centres of slices [z0, z0 + count / (nx*ny)) as interleaved xyz, the first `count` points then
 // copies of the last up to `padded`.
 void voxel_centres(Int3 dims, int64_t first, int64_t count, int64_t padded, float* xyz, cudaStream_t s);
+
+// Macro-cell value ranges (compat.md B.6) in GPU memory, the cells of a ValueRangeGrid (x fastest); empty
+// cells hold lo = +inf, hi = -inf.
+struct RangeGridDims {
+  int32_t nx = 0, ny = 0, nz = 0;  // cells
+  int32_t cell_size = 16;          // voxels per cell per axis
+  float sx = 1, sy = 1, sz = 1;    // volume dims: world position = u * dims
+};
+RangeGridDims range_grid_dims(const ValueRangeGrid& g);
+// lo/hi of every cell of a grid in GPU memory: value_ranges_from_grid's reduction (cell_value_range).
+void ranges_from_grid(GridView volume, const RangeGridDims& r, float* lo, float* hi, cudaStream_t s);
+// Widens the cells around n samples (normalised coordinates, values): the online ranges of training
+// batches (ValueRangeGrid::add's cells), by atomic min/max, so the result is the CPU's exactly.
+void ranges_add_samples(const RangeGridDims& r, const float* x, const float* y, const float* z, const float* v,
+                        int64_t n, float* lo, float* hi, cudaStream_t s);
+// lo = +inf, hi = -inf in every cell.
+void ranges_clear(const RangeGridDims& r, float* lo, float* hi, cudaStream_t s);
 
 }  // namespace vnr::cuda

@@ -33,6 +33,7 @@ public:
   const char* kind() const override { return "grid"; }
   void query(const float* x, const float* y, const float* z, int64_t n, float* out) const override;
   GridPointFn point_fn() const { return GridPointFn{g_}; }
+  const GridView& view() const { return g_; }
 
 private:
   GridView g_;
@@ -50,6 +51,7 @@ public:
   const char* kind() const override { return "network"; }
   void query(const float* x, const float* y, const float* z, int64_t n, float* out) const override;
   NetworkPointFn point_fn() const { return NetworkPointFn{&point_}; }
+  const Network& network() const { return net_; }
 
 private:
   const Network& net_;

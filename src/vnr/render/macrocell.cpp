@@ -36,20 +36,8 @@ MacroCells MacroCells::single(Int3 dims, Vec3f box, float lo, float hi) {
 void MacroCells::update(const TransferFunction& tf) {
   const int n = int(tf.table.size());
   const float w = tf.hi - tf.lo;
-  auto entry = [&](float u) {  // nearest table entry of a normalised value
-    float x = w > 0 ? std::clamp((u - tf.lo) / w, 0.0f, 1.0f) : 0.0f;
-    return int(std::floor(x * float(n - 1) + 0.5f));
-  };
-  for (int64_t c = 0; c < ranges_.count(); ++c) {
-    if (ranges_.empty(c)) {
-      max_opacity_[c] = 0;
-      continue;
-    }
-    int a = std::max(0, entry(ranges_.lo[c]) - 1), b = std::min(n - 1, entry(ranges_.hi[c]) + 1);
-    float m = 0;
-    for (int i = a; i <= b; ++i) m = std::max(m, tf.table[i].w);
-    max_opacity_[c] = m;
-  }
+  for (int64_t c = 0; c < ranges_.count(); ++c)
+    max_opacity_[c] = macrocell_max_opacity(tf.table.data(), n, tf.lo, w, ranges_.lo[c], ranges_.hi[c]);
 }
 
 MacroCellView MacroCells::view() const {

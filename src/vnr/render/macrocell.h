@@ -25,6 +25,24 @@ struct MacroCellView {
   Vec3f inv_cell_world{1.0f / 16, 1.0f / 16, 1.0f / 16};
 };
 
+// The largest opacity a transfer function (table of n entries over the window [tf_lo, tf_lo + tf_w])
+// gives to values in [lo, hi] (B.6: table entries floor(lo*(N-1)+0.5)-1 .. floor(hi*(N-1)+0.5)+1,
+// clamped); 0 for an empty range (lo > hi). Single-source: MacroCells::update and the GPU's recompute.
+// The nearest table entry of a normalised value.
+VNR_HD VNR_INLINE int tf_nearest_entry(int n, float tf_lo, float tf_w, float u) {
+  const float x = tf_w > 0 ? clampf((u - tf_lo) / tf_w, 0.0f, 1.0f) : 0.0f;
+  return int(floorf(x * float(n - 1) + 0.5f));
+}
+VNR_HD VNR_INLINE float macrocell_max_opacity(const Vec4f* table, int n, float tf_lo, float tf_w, float lo, float hi) {
+  if (lo > hi) return 0.0f;
+  int a = tf_nearest_entry(n, tf_lo, tf_w, lo) - 1, b = tf_nearest_entry(n, tf_lo, tf_w, hi) + 1;
+  a = a < 0 ? 0 : a;
+  b = b > n - 1 ? n - 1 : b;
+  float m = 0;
+  for (int i = a; i <= b; ++i) m = m < table[i].w ? table[i].w : m;
+  return m;
+}
+
 class MacroCells {
 public:
   // `ranges` = per-cell value ranges; `box` = world size of the volume box (dims * spacing).
@@ -94,15 +112,21 @@ VNR_HD VNR_INLINE float dda_cell_exit(const DdaState& s) {
   return t < s.t_end ? t : s.t_end;
 }
 
-// Steps into the next cell; returns false when the ray has left the grid or the box.
-VNR_HD VNR_INLINE bool dda_advance(const MacroCellView& mc, DdaState& s) {
-  int a = s.t_next[0] < s.t_next[1] ? (s.t_next[0] < s.t_next[2] ? 0 : 2) : (s.t_next[1] < s.t_next[2] ? 1 : 2);
-  if (s.t_next[a] >= s.t_end) return false;
-  s.cell[a] += s.step[a];
-  const int32_t n = a == 0 ? mc.nx : (a == 1 ? mc.ny : mc.nz);
-  if (s.cell[a] < 0 || s.cell[a] >= n) return false;
-  s.t_next[a] += s.t_delta[a];
+// Steps into the next cell; returns false when the ray has left the grid or the box. The axis is picked
+// by branches rather than an array index: a GPU thread then keeps the whole state in registers.
+VNR_HD VNR_INLINE bool dda_step_axis(int32_t& cell, int32_t step, float& t_next, float t_delta, float t_end,
+                                     int32_t n) {
+  if (t_next >= t_end) return false;
+  cell += step;
+  if (cell < 0 || cell >= n) return false;
+  t_next += t_delta;
   return true;
+}
+VNR_HD VNR_INLINE bool dda_advance(const MacroCellView& mc, DdaState& s) {
+  const float t0 = s.t_next[0], t1 = s.t_next[1], t2 = s.t_next[2];
+  if (t0 < t1 && t0 < t2) return dda_step_axis(s.cell[0], s.step[0], s.t_next[0], s.t_delta[0], s.t_end, mc.nx);
+  if (!(t0 < t1) && t1 < t2) return dda_step_axis(s.cell[1], s.step[1], s.t_next[1], s.t_delta[1], s.t_end, mc.ny);
+  return dda_step_axis(s.cell[2], s.step[2], s.t_next[2], s.t_delta[2], s.t_end, mc.nz);
 }
 
 // Ray / axis-aligned box [0, box] intersection; false when the ray misses it.

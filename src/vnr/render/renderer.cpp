@@ -32,9 +32,8 @@ const char* render_mode_name(RenderMode m) {
 }
 const char* render_strategy_name(RenderStrategy s) { return s == RenderStrategy::InShader ? "inshader" : "streaming"; }
 
-Renderer::Renderer(const Field& field, Vec3f box, const MacroCells& mc, const TransferFunction& tf, const Camera& cam,
-                   const RenderOptions& opt)
-    : field_(field), opt_(opt) {
+RenderParams make_render_params(Int3 dims, Vec3f box, const MacroCells& mc, const TransferFunction& tf,
+                                const RenderOptions& opt) {
   if (opt.width < 1 || opt.height < 1 || int64_t(opt.width) * opt.height > (int64_t(1) << 30))
     fail("invalid image size {}x{}", opt.width, opt.height);
   if (!(opt.step > 0) || !std::isfinite(opt.step)) fail("the step must be a positive number (got {})", opt.step);
@@ -45,7 +44,8 @@ Renderer::Renderer(const Field& field, Vec3f box, const MacroCells& mc, const Tr
   if (opt.samples_per_iteration < 1 || opt.samples_per_iteration > 1024)
     fail("samples per iteration must be in [1, 1024] (got {})", opt.samples_per_iteration);
   if (tf.table.size() < 2) fail("the transfer function needs at least 2 entries");
-  RenderParams& p = params_;
+  if (!(length(opt.light.direction) > 0)) fail("the light direction must not be zero");
+  RenderParams p;
   p.box = box;
   p.inv_box = Vec3f{1 / box.x, 1 / box.y, 1 / box.z};
   p.tf = view_of(tf);
@@ -54,23 +54,44 @@ Renderer::Renderer(const Field& field, Vec3f box, const MacroCells& mc, const Tr
   p.step_max = opt.step_max > 0 ? opt.step_max : 16 * opt.step;
   p.shadow_step = 2 * opt.step;
   p.shade = opt.shade;
-  Int3 d = field.dims();
   // one voxel, in normalised coordinates
-  p.grad_h = Vec3f{1.0f / float(d.x), 1.0f / float(d.y), 1.0f / float(d.z)};
-  if (!(length(opt.light.direction) > 0)) fail("the light direction must not be zero");
-  set_camera(cam);
+  p.grad_h = Vec3f{1.0f / float(dims.x), 1.0f / float(dims.y), 1.0f / float(dims.z)};
+  p.light_dir = normalize(opt.light.direction);
   p.light_color = opt.light.color;
   p.background = opt.background;
   p.density_scale = opt.density_scale;
   p.seed = opt.seed;
+  return p;
+}
+
+void set_render_camera(RenderParams& p, const Camera& cam, const RenderOptions& opt) {
+  p.cam = make_camera_frame(cam, opt.width, opt.height);
+  p.light_dir = normalize(opt.light.direction);
+  if (dot(p.light_dir, cam.eye - cam.center) < 0) p.light_dir = -p.light_dir;
+}
+
+void FrameRenderer::render_frame_resident(uint32_t frame, RenderStats* stats) { render_frame(frame, resident_, stats); }
+
+Image FrameRenderer::render(int frames, RenderStats* stats) {
+  if (frames < 1) fail("the number of frames (samples per pixel) must be at least 1 (got {})", frames);
+  Image acc, frame_img;
+  for (int f = 0; f < frames; ++f) {
+    render_frame(uint32_t(f), frame_img, stats);
+    if (f == 0) acc = Image(frame_img.width, frame_img.height);
+    accumulate_frame(acc, frame_img, f);
+  }
+  return acc;
+}
+
+Renderer::Renderer(const Field& field, Vec3f box, const MacroCells& mc, const TransferFunction& tf, const Camera& cam,
+                   const RenderOptions& opt)
+    : field_(field), opt_(opt), params_(make_render_params(field.dims(), box, mc, tf, opt)) {
+  set_camera(cam);
 }
 
 void Renderer::set_camera(const Camera& cam) {
   camera_ = cam;
-  params_.cam = make_camera_frame(cam, opt_.width, opt_.height);
-  params_.light_dir = normalize(opt_.light.direction);
-  // The original flips the light to the viewer's side when it points away from the camera (B.8).
-  if (dot(params_.light_dir, cam.eye - cam.center) < 0) params_.light_dir = -params_.light_dir;
+  set_render_camera(params_, cam, opt_);
 }
 
 template <class PointFn>
@@ -343,16 +364,6 @@ void accumulate_frame(Image& acc, const Image& frame, int index) {
     const Vec4f& b = frame.pixels[i];
     a = Vec4f{a.x + (b.x - a.x) * w, a.y + (b.y - a.y) * w, a.z + (b.z - a.z) * w, a.w + (b.w - a.w) * w};
   });
-}
-
-Image Renderer::render(int frames, RenderStats* stats) {
-  if (frames < 1) fail("the number of frames (samples per pixel) must be at least 1 (got {})", frames);
-  Image acc(opt_.width, opt_.height), frame_img(opt_.width, opt_.height);
-  for (int f = 0; f < frames; ++f) {
-    render_frame(uint32_t(f), frame_img, stats);
-    accumulate_frame(acc, frame_img, f);
-  }
-  return acc;
 }
 
 }  // namespace vnr

@@ -11,6 +11,7 @@
 #include <cstdint>
 #include <string>
 #include <vector>
+#include "vnr/core/device.h"
 #include "vnr/render/camera.h"
 #include "vnr/render/field.h"
 #include "vnr/render/image.h"
@@ -54,23 +55,48 @@ struct RenderStats {
   int64_t rays = 0;           // primary rays (pixels x frames)
   int64_t field_samples = 0;  // field evaluations (including gradient neighbours)
   int64_t iterations = 0;     // streaming iterations
+  int64_t host_syncs = 0;     // GPU: times the host waited for the device (streaming: one per iteration)
   double seconds = 0;
 };
 
 // Progressive accumulation: acc becomes the mean of frames 0..index (acc held the mean of 0..index-1).
 void accumulate_frame(Image& acc, const Image& frame, int index);
 
-class Renderer {
+// Validates the options and fills the per-ray parameters (pointers into tf and mc: host memory) for a
+// field of `dims` voxels in a box of world size `box`; the camera with set_render_camera.
+RenderParams make_render_params(Int3 dims, Vec3f box, const MacroCells& mc, const TransferFunction& tf,
+                                const RenderOptions& opt);
+// The camera frame for the image size of opt, and the light flip of B.8 (the original turns the light
+// to the viewer's side when it points away from the camera).
+void set_render_camera(RenderParams& p, const Camera& cam, const RenderOptions& opt);
+
+// A renderer on some backend: the CPU's Renderer below, or the GPU's (render_cuda/gpu_renderer.h).
+class FrameRenderer {
+public:
+  virtual ~FrameRenderer() = default;
+  // Renders frame number `frame` (its jitter and random numbers) into img (overwritten).
+  virtual void render_frame(uint32_t frame, Image& img, RenderStats* stats = nullptr) = 0;
+  // The same frame left where it was rendered (a GPU frame stays in GPU memory, as a viewer displays
+  // it): what benchmarks time.
+  virtual void render_frame_resident(uint32_t frame, RenderStats* stats = nullptr);
+  // A new view for the next frames (e.g. an orbit); the light flip of B.8 follows the camera.
+  virtual void set_camera(const Camera& cam) = 0;
+  virtual Device device() const = 0;
+  // Renders `frames` frames (0, 1, ...) and returns their average (progressive accumulation).
+  Image render(int frames, RenderStats* stats = nullptr);
+
+private:
+  Image resident_;
+};
+
+class Renderer final : public FrameRenderer {
 public:
   // field, macro-cells and tf must outlive the renderer; box = world size of the volume box.
   Renderer(const Field& field, Vec3f box, const MacroCells& mc, const TransferFunction& tf, const Camera& cam,
            const RenderOptions& opt);
-  // Renders frame number `frame` (its jitter and random numbers) into img (overwritten).
-  void render_frame(uint32_t frame, Image& img, RenderStats* stats = nullptr);
-  // Renders `frames` frames (0, 1, ...) and returns their average (progressive accumulation).
-  Image render(int frames, RenderStats* stats = nullptr);
-  // A new view for the next frames (e.g. an orbit); the light flip of B.8 follows the camera.
-  void set_camera(const Camera& cam);
+  void render_frame(uint32_t frame, Image& img, RenderStats* stats = nullptr) override;
+  void set_camera(const Camera& cam) override;
+  Device device() const override { return Device::Cpu; }
   const RenderParams& params() const { return params_; }
 
 private:

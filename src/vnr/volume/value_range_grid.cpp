@@ -27,13 +27,9 @@ void ValueRangeGrid::clear() {
 
 void ValueRangeGrid::add(float px, float py, float pz, float v) {
   const float p[3] = {px, py, pz};
-  int64_t c0[3], c1[3];
+  int32_t c0[3], c1[3];
   const float inv = 1.0f / float(cell_size);
-  for (int a = 0; a < 3; ++a) {
-    int64_t n = cells[a];
-    c0[a] = std::clamp<int64_t>(int64_t(std::floor((p[a] - 1.0f) * inv)), 0, n - 1);
-    c1[a] = std::clamp<int64_t>(int64_t(std::floor((p[a] + 1.0f) * inv)), 0, n - 1);
-  }
+  for (int a = 0; a < 3; ++a) value_range_cells(p[a], inv, int32_t(cells[a]), &c0[a], &c1[a]);
   for (int64_t z = c0[2]; z <= c1[2]; ++z)
     for (int64_t y = c0[1]; y <= c1[1]; ++y)
       for (int64_t x = c0[0]; x <= c1[0]; ++x) {
@@ -92,29 +88,10 @@ ValueRangeGrid ValueRangeGrid::from_pairs(Int3 dims, Int3 cells, const std::vect
 
 ValueRangeGrid value_ranges_from_grid(const GridView& g, int cell_size) {
   ValueRangeGrid out(Int3{g.nx, g.ny, g.nz}, cell_size);
-  // A voxel at centre q reaches [q - 1, q + 1]: cell c gets voxels [c*cs - 1, (c+1)*cs] (clamped), so each
-  // cell is reduced on its own (parallel over cells, no write sharing).
-  const int64_t cs = cell_size;
+  // Each cell is reduced on its own (parallel over cells, no write sharing).
   parallel_for(out.count(), [&](int64_t c) {
-    int64_t cx = c % out.cells.x, cy = (c / out.cells.x) % out.cells.y, cz = c / (out.cells.x * out.cells.y);
-    const int64_t n[3] = {g.nx, g.ny, g.nz}, ci[3] = {cx, cy, cz};
-    int64_t b[3], e[3];
-    for (int a = 0; a < 3; ++a) {
-      // voxel i (centre i + 0.5) overlaps cell [c*cs, (c+1)*cs] when i + 1.5 >= c*cs and i - 0.5 <= (c+1)*cs
-      b[a] = std::max<int64_t>(0, ci[a] * cs - 1);
-      e[a] = std::min<int64_t>(n[a] - 1, (ci[a] + 1) * cs);
-    }
-    float lo = kInf, hi = -kInf;
-    for (int64_t z = b[2]; z <= e[2]; ++z)
-      for (int64_t y = b[1]; y <= e[1]; ++y) {
-        const float* row = g.data + (z * n[1] + y) * n[0];
-        for (int64_t x = b[0]; x <= e[0]; ++x) {
-          lo = std::min(lo, row[x]);
-          hi = std::max(hi, row[x]);
-        }
-      }
-    out.lo[c] = lo;
-    out.hi[c] = hi;
+    const int64_t cx = c % out.cells.x, cy = (c / out.cells.x) % out.cells.y, cz = c / (out.cells.x * out.cells.y);
+    cell_value_range(g, cell_size, int32_t(cx), int32_t(cy), int32_t(cz), &out.lo[c], &out.hi[c]);
   });
   return out;
 }
