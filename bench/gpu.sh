@@ -1,7 +1,9 @@
 #!/bin/sh
-# Re-checks the GPU claims of README ("CUDA backend") in one go on a fresh GPU machine: builds with every
-# core, runs the gpu tests, compute-sanitizer (memcheck and racecheck) over them, then the benchmarks, and
-# writes the logs, the JSON reports and a markdown table (OUTDIR/table.md) to OUTDIR.
+# Re-checks the GPU claims of README ("CUDA backend", "GPU rendering") in one go on a fresh GPU machine:
+# builds with every core, runs the gpu tests, compute-sanitizer (memcheck and racecheck) over them, then
+# the training/inference benchmarks and the rendering table (the paper's frame-rate table: bonsai, engine
+# and chris_t1 at 768x768, neural and grid), and writes the logs, the JSON reports and markdown tables
+# (OUTDIR/table.md, OUTDIR/render_table.md) to OUTDIR.
 #
 #   sh bench/gpu.sh OUTDIR
 #
@@ -10,6 +12,8 @@
 #                256^3 Marschner-Lobb volume)
 #   VNR_PEERS    folder holding torch_vnr.py (default ../shared/peers): the PyTorch peer, same GPU
 #   VNR_SECONDS  seconds per benchmark (default 5)
+#   VNR_RENDER   0 skips the rendering benchmarks; VNR_RENDER_STEPS training steps of their models
+#                (default 20000), VNR_RENDER_FRAMES timed frames per cell (default 12)
 # Without the Debian development packages installed, a folder .debs made by scripts/gpu_debs.sh is
 # unpacked under /tmp/vnr-deps and used instead (GPU machines may reach no package registry).
 set -eu
@@ -44,8 +48,10 @@ ctest --test-dir build-gpu -L gpu --output-on-failure > "$OUT/gpu_tests.log" 2>&
 tail -5 "$OUT/gpu_tests.log"
 echo "== compute-sanitizer"
 for tool in memcheck racecheck; do
-  compute-sanitizer --tool $tool --error-exitcode 9 build-gpu/test_gpu > "$OUT/sanitizer_$tool.log" 2>&1 || status=1
-  tail -2 "$OUT/sanitizer_$tool.log"
+  for t in test_gpu test_gpu_render; do
+    compute-sanitizer --tool $tool --error-exitcode 9 build-gpu/$t > "$OUT/sanitizer_${tool}_$t.log" 2>&1 || status=1
+    tail -2 "$OUT/sanitizer_${tool}_$t.log"
+  done
 done
 
 echo "== benchmarks"
@@ -80,6 +86,74 @@ if [ -f "$PEERS/torch_vnr.py" ]; then
       --report "$OUT/$tag.json" > "$OUT/$tag.log" 2>&1 || true
     tail -2 "$OUT/$tag.log"
   done
+fi
+
+if [ "${VNR_RENDER:-1}" != 0 ]; then
+  echo "== rendering (768x768, paper config models with online macro-cells, and the grids)"
+  STEPS=${VNR_RENDER_STEPS:-20000}
+  FRAMES=${VNR_RENDER_FRAMES:-12}
+  NAMES=""
+  for name in bonsai engine chris_t1; do
+    if [ -f "../shared/data/$name.json" ]; then NAMES="$NAMES $name"; fi
+  done
+  if [ -z "$NAMES" ]; then
+    cp "$VOL" "$OUT/synthetic.json" 2>/dev/null || true
+    NAMES=synthetic
+  fi
+  for name in $NAMES; do
+    V=../shared/data/$name.json
+    [ -f "$V" ] || V=$VOL
+    $VNR train "$V" -o "$OUT/render_$name.vnr" --config paper --steps "$STEPS" --device cuda --macrocell-size 16 \
+      --no-ssim --report "$OUT/render_train_$name.json" > "$OUT/render_train_$name.log" 2>&1 || status=1
+    tail -1 "$OUT/render_train_$name.log"
+    $VNR bench render "$OUT/render_$name.vnr" --device cuda --size 768x768 --frames "$FRAMES" \
+      --report "$OUT/render_neural_$name.json" > "$OUT/render_neural_$name.log" 2>&1 || status=1
+    cat "$OUT/render_neural_$name.log"
+    $VNR bench render "$V" --device cuda --size 768x768 --frames "$FRAMES" \
+      --report "$OUT/render_grid_$name.json" > "$OUT/render_grid_$name.log" 2>&1 || status=1
+    cat "$OUT/render_grid_$name.log"
+  done
+  first=$(echo $NAMES | cut -d' ' -f1)
+  $VNR bench render "$OUT/render_$first.vnr" --device cuda --size 768x768 --frames "$FRAMES" \
+    --tune-k 1,2,4,8,16,32,64 --report "$OUT/render_tune_k.json" > "$OUT/render_tune_k.log" 2>&1 || status=1
+  cat "$OUT/render_tune_k.log"
+  # the same model on the CPU (this machine's cores), for the GPU/CPU ratio
+  $VNR bench render "$OUT/render_$first.vnr" --device cpu --size 768x768 --frames 2 --modes raymarch \
+    --report "$OUT/render_cpu_$first.json" > "$OUT/render_cpu_$first.log" 2>&1 || true
+  python3 - "$OUT" <<'PY'
+import glob, json, os, sys
+out = sys.argv[1]
+lines = []
+for path in sorted(glob.glob(os.path.join(out, "render_neural_*.json"))) + sorted(glob.glob(os.path.join(out, "render_grid_*.json"))):
+    r = json.load(open(path))
+    name = os.path.basename(path)[len("render_"):-len(".json")]
+    raw = r.get("raw_field_samples_per_second", 0)
+    lines.append(f"### {name} ({r['field']} field, {r['size'][0]}x{r['size'][1]}, {r.get('gpu', r['device'])})")
+    lines.append("")
+    lines.append("| mode | strategy | macro-cells | frames/s | M samples/s | of raw query | host syncs/frame |")
+    lines.append("|---|---|---|---|---|---|---|")
+    fps = {}
+    for row in r["rows"]:
+        fps[(row["mode"], row["strategy"], row["macrocells"])] = row["fps"]
+        share = f"{100 * row['field_samples_per_second'] / raw:.0f}%" if raw else "-"
+        lines.append(f"| {row['mode']} | {row['strategy']} | {row['macrocells']} | {row['fps']:.1f} | "
+                     f"{row['field_samples_per_second'] / 1e6:.0f} | {share} | {row['host_syncs_per_frame']:.0f} |")
+    ratios = []
+    for mode in ("raymarch", "shadow", "pathtrace"):
+        on = [v for (m, s, c), v in fps.items() if m == mode and s == "streaming" and c != "off"]
+        ins = [v for (m, s, c), v in fps.items() if m == mode and s == "inshader" and c != "off"]
+        off = [v for (m, s, c), v in fps.items() if m == mode and s == "streaming" and c == "off"]
+        if on and ins and off:
+            ratios.append(f"{mode}: streaming/in-shader {on[0] / ins[0]:.2f}x, macro-cells on/off {on[0] / off[0]:.1f}x")
+    lines += ["", "; ".join(ratios), ""]
+k = os.path.join(out, "render_tune_k.json")
+if os.path.exists(k):
+    rows = json.load(open(k))["tune_k"]
+    lines.append("K (samples per live ray per iteration), streaming ray marching: " +
+                 ", ".join(f"K={x['k']}: {x['fps']:.1f} fps" for x in rows))
+open(os.path.join(out, "render_table.md"), "w").write("\n".join(lines) + "\n")
+print("\n".join(lines))
+PY
 fi
 
 python3 - "$OUT" <<'PY'
