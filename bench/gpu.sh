@@ -8,9 +8,14 @@
 #   sh bench/gpu.sh OUTDIR
 #
 # Environment (all optional):
-#   VNR_VOLUME   volume to benchmark on (default: ../shared/data/bonsai.json if present, else a generated
+#   VNR_STAGES   which stages to run, of "tests sanitize bench render" (default: all; the build always
+#                runs, incrementally), so the work can be split over several calls of a time-limited
+#                machine that keeps build-gpu between them
+#   VNR_DATA     folder with the real volumes (default ../shared/data, else .data: a copy carried to a
+#                machine that has no ../shared)
+#   VNR_VOLUME   volume to benchmark on (default: DATA/bonsai.json if present, else a generated
 #                256^3 Marschner-Lobb volume)
-#   VNR_PEERS    folder holding torch_vnr.py (default ../shared/peers): the PyTorch peer, same GPU
+#   VNR_PEERS    folder holding torch_vnr.py (default ../shared/peers, else .peers): the PyTorch peer
 #   VNR_SECONDS  seconds per benchmark (default 5)
 #   VNR_RENDER   0 skips the rendering benchmarks; VNR_RENDER_STEPS training steps of their models
 #                (default 20000), VNR_RENDER_FRAMES timed frames per cell (default 12)
@@ -22,6 +27,10 @@ mkdir -p "$OUT"
 OUT=$(cd "$OUT" && pwd)
 cd "$(dirname "$0")/.."
 SECONDS_EACH=${VNR_SECONDS:-5}
+STAGES=" ${VNR_STAGES:-tests sanitize bench render} "
+want() { case "$STAGES" in *" $1 "*) return 0 ;; esac; return 1; }
+DATA=${VNR_DATA:-../shared/data}
+if [ ! -d "$DATA" ] && [ -d .data ]; then DATA=.data; fi
 CMAKE_EXTRA=""
 if [ ! -f /usr/include/nlohmann/json.hpp ] && [ -d .debs ]; then
   mkdir -p /tmp/vnr-deps
@@ -42,25 +51,30 @@ echo "built in $(( $(date +%s) - start ))s"
 VNR=build-gpu/vnr
 $VNR info | tee "$OUT/info.txt"
 
-echo "== gpu tests"
 status=0
-ctest --test-dir build-gpu -L gpu --output-on-failure > "$OUT/gpu_tests.log" 2>&1 || status=1
-tail -5 "$OUT/gpu_tests.log"
-echo "== compute-sanitizer"
-for tool in memcheck racecheck; do
-  for t in test_gpu test_gpu_render; do
-    compute-sanitizer --tool $tool --error-exitcode 9 build-gpu/$t > "$OUT/sanitizer_${tool}_$t.log" 2>&1 || status=1
-    tail -2 "$OUT/sanitizer_${tool}_$t.log"
+if want tests; then
+  echo "== gpu tests"
+  ctest --test-dir build-gpu -L gpu --output-on-failure > "$OUT/gpu_tests.log" 2>&1 || status=1
+  tail -5 "$OUT/gpu_tests.log"
+fi
+if want sanitize; then
+  echo "== compute-sanitizer"
+  for tool in memcheck racecheck; do
+    for t in test_gpu test_gpu_render; do
+      compute-sanitizer --tool $tool --error-exitcode 9 build-gpu/$t > "$OUT/sanitizer_${tool}_$t.log" 2>&1 || status=1
+      tail -2 "$OUT/sanitizer_${tool}_$t.log"
+    done
   done
-done
+fi
 
-echo "== benchmarks"
 VOL=${VNR_VOLUME:-}
-if [ -z "$VOL" ] && [ -f ../shared/data/bonsai.json ]; then VOL=../shared/data/bonsai.json; fi
+if [ -z "$VOL" ] && [ -f "$DATA/bonsai.json" ]; then VOL=$DATA/bonsai.json; fi
 if [ -z "$VOL" ]; then
   VOL="$OUT/ml256.json"
   $VNR synth marschner-lobb --dims 256,256,256 -o "$VOL" > /dev/null
 fi
+if want bench; then
+echo "== benchmarks"
 for cfg in paper small; do
   for what in train infer; do
     for mlp in fused cublas; do
@@ -78,6 +92,7 @@ $VNR train "$VOL" -o "$OUT/paper20k.vnr" --config paper --steps 20000 --device c
 tail -3 "$OUT/train20k.log"
 
 PEERS=${VNR_PEERS:-../shared/peers}
+if [ ! -d "$PEERS" ] && [ -d .peers ]; then PEERS=.peers; fi
 if [ -f "$PEERS/torch_vnr.py" ]; then
   echo "== PyTorch peer on the same GPU"
   for extra in "" "--compile"; do
@@ -87,21 +102,22 @@ if [ -f "$PEERS/torch_vnr.py" ]; then
     tail -2 "$OUT/$tag.log"
   done
 fi
+fi  # bench
 
-if [ "${VNR_RENDER:-1}" != 0 ]; then
+if want render && [ "${VNR_RENDER:-1}" != 0 ]; then
   echo "== rendering (768x768, paper config models with online macro-cells, and the grids)"
   STEPS=${VNR_RENDER_STEPS:-20000}
   FRAMES=${VNR_RENDER_FRAMES:-12}
   NAMES=""
   for name in bonsai engine chris_t1; do
-    if [ -f "../shared/data/$name.json" ]; then NAMES="$NAMES $name"; fi
+    if [ -f "$DATA/$name.json" ]; then NAMES="$NAMES $name"; fi
   done
   if [ -z "$NAMES" ]; then
     cp "$VOL" "$OUT/synthetic.json" 2>/dev/null || true
     NAMES=synthetic
   fi
   for name in $NAMES; do
-    V=../shared/data/$name.json
+    V=$DATA/$name.json
     [ -f "$V" ] || V=$VOL
     $VNR train "$V" -o "$OUT/render_$name.vnr" --config paper --steps "$STEPS" --device cuda --macrocell-size 16 \
       --no-ssim --report "$OUT/render_train_$name.json" > "$OUT/render_train_$name.log" 2>&1 || status=1
@@ -156,6 +172,7 @@ print("\n".join(lines))
 PY
 fi
 
+if want bench; then
 python3 - "$OUT" <<'PY'
 import json, os, sys
 out = sys.argv[1]
@@ -195,4 +212,5 @@ lines.append("GPU: " + next((l.strip() for l in gpu.splitlines() if "NVIDIA" in 
 open(os.path.join(out, "table.md"), "w").write("\n".join(lines) + "\n")
 print("\n".join(lines))
 PY
+fi
 exit $status
