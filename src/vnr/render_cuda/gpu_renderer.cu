@@ -629,7 +629,8 @@ struct GpuRenderer::Impl {
       if (n_padded > n_points)
         VNR_CUDA_CHECK(cudaMemsetAsync(xyz.data() + 3 * n_points, 0, size_t(3 * (n_padded - n_points)) * 4, sb.stream));
       int stride = 1;
-      const float* v = evaluate(n_padded, &stride);
+      // every live ray may have ended in its coordinate stage: nothing to evaluate, the shading stage drops them
+      const float* v = n_padded > 0 ? evaluate(n_padded, &stride) : nullptr;
       VNR_LAUNCH(stream_shade_kernel<Ops>, nl, p, ops, live.data(), nl, K, spos.data(), sdt.data(), count.data(),
                  offset.data(), v, stride, keep.data());
       compact(live.data(), nl, next.data());
