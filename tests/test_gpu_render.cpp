@@ -185,6 +185,14 @@ TEST(GpuRender, NetworkImagesMatchTheCpuAndStrategiesAgree) {
     const std::string what = std::string(preset) + " " + render_mode_name(mode);
     const Image cpu = renderer_on(Device::Cpu, neural, vol, mc, tf, cam, o)->render(4);
     const Image gpu_stream = renderer_on(Device::Cuda, neural, vol, mc, tf, cam, o)->render(4);
+    {  // inference in slabs of 256 points: the same values (the fused MLP works per 16-sample tile)
+      GpuRenderer slabbed(neural, box_of(vol), mc, tf, cam, o);
+      slabbed.set_inference_slab(256);
+      const Image img = slabbed.render(4);
+      for (size_t i = 0; i < img.pixels.size(); ++i)
+        ASSERT_TRUE(img.pixels[i].x == gpu_stream.pixels[i].x && img.pixels[i].w == gpu_stream.pixels[i].w)
+            << what << " pixel " << i;
+    }
     o.strategy = RenderStrategy::InShader;
     const Image gpu_inshader = renderer_on(Device::Cuda, neural, vol, mc, tf, cam, o)->render(4);
     if (mode == RenderMode::PathTrace) {

@@ -26,6 +26,9 @@ constexpr int kThreads = 256;
 // samples: coherent hash-grid reads and few idle lanes).
 constexpr int kWarpsPerBlock = 4;
 constexpr int kBlockW = 16, kBlockH = 8;
+// Streaming: points per batched inference call at most, by default (the rest of an iteration's points go
+// in further calls); bounds the network's pass buffers (4M points x 64 encoding columns = 512 MiB of halves).
+constexpr int64_t kDefaultInferSlab = int64_t(1) << 22;
 
 // ---------------------------------------------------------------------------------------------------
 // Fields as seen by one warp of an in-shader kernel. bind() runs once per thread at the start of the
@@ -458,6 +461,7 @@ struct GpuRenderer::Impl {
   DeviceBuffer<unsigned char> cub_temp;
   int64_t* host = nullptr;  // pinned: [0] a sample total, [1] live rays
   int64_t n_pixels = 0;
+  int64_t infer_slab = kDefaultInferSlab;
 
   Impl(const Field& field, Vec3f b, const MacroCells& mc, const TransferFunction& tf, const Camera& cam,
        const RenderOptions& o, cuda::MlpPath mlp)
@@ -555,8 +559,18 @@ struct GpuRenderer::Impl {
   // Field values of n points (interleaved xyz in `xyz`, n a multiple of 16); *stride = floats per value.
   const float* evaluate(int64_t n, int* stride) {
     if (dnet) {
-      *stride = dnet->dims().n_out;
-      return dnet->infer(xyz.data(), n, sb);
+      const int n_out = dnet->dims().n_out;
+      *stride = n_out;
+      if (n <= infer_slab) return dnet->infer(xyz.data(), n, sb);
+      // in slabs: the pass buffers (n x encoding width halves, ...) stay bounded whatever the image size
+      if (values.size() < size_t(n) * n_out) values.resize(size_t(n) * n_out);
+      for (int64_t b = 0; b < n; b += infer_slab) {
+        const int64_t m = std::min(infer_slab, n - b);  // multiples of 16: n and the slab are
+        const float* out = dnet->infer(xyz.data() + 3 * b, m, sb);
+        VNR_CUDA_CHECK(cudaMemcpyAsync(values.data() + b * n_out, out, size_t(m) * n_out * sizeof(float),
+                                       cudaMemcpyDeviceToDevice, sb.stream));
+      }
+      return values.data();
     }
     if (values.size() < size_t(n)) values.resize(size_t(n));
     VNR_LAUNCH(grid_query_kernel, n, dvol, xyz.data(), n, values.data());
@@ -749,6 +763,9 @@ std::vector<float> GpuRenderer::max_opacity() {
 
 cuda::MlpPath GpuRenderer::mlp_path() const {
   return impl_->dnet ? impl_->dnet->path() : cuda::MlpPath::Auto;
+}
+void GpuRenderer::set_inference_slab(int64_t points) {
+  impl_->infer_slab = std::max<int64_t>(16, cuda::round_up(points, 16));
 }
 bool GpuRenderer::inshader_weights_shared() const { return impl_->dnet && impl_->netf.stage; }
 

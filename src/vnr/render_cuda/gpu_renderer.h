@@ -42,6 +42,9 @@ public:
   std::vector<float> max_opacity();
   // The MLP implementation of streaming inference (Fused or Cublas; in-shader always uses WMMA tiles).
   cuda::MlpPath mlp_path() const;
+  // Streaming: the most points one batched inference takes (default 4M; more go in further calls), which
+  // bounds the network's GPU buffers whatever the image size.
+  void set_inference_slab(int64_t points);
   // Whether the in-shader kernel holds the MLP weights in shared memory (else it reads them through L1).
   bool inshader_weights_shared() const;
 

@@ -23,6 +23,7 @@ void GpuRenderer::set_transfer_function(const TransferFunction&) { not_built(); 
 void GpuRenderer::set_ranges(const ValueRangeGrid&) { not_built(); }
 std::vector<float> GpuRenderer::max_opacity() { not_built(); }
 cuda::MlpPath GpuRenderer::mlp_path() const { not_built(); }
+void GpuRenderer::set_inference_slab(int64_t) { not_built(); }
 bool GpuRenderer::inshader_weights_shared() const { not_built(); }
 ValueRangeGrid gpu_value_ranges_from_grid(const GridView&, int) { not_built(); }
 
