@@ -24,14 +24,6 @@ namespace {
     if (cuda::devices().empty()) GTEST_SKIP() << "no CUDA device: " << cuda::no_device_reason(); \
   } while (0)
 
-Volume blobs(Int3 dims) {  // two blobs with empty space around them
-  return make_volume(dims, [](float x, float y, float z) {
-    float a = (x - 0.3f) * (x - 0.3f) + (y - 0.35f) * (y - 0.35f) + (z - 0.3f) * (z - 0.3f);
-    float b = (x - 0.7f) * (x - 0.7f) + (y - 0.6f) * (y - 0.6f) + (z - 0.65f) * (z - 0.65f);
-    return std::max(std::exp(-a * 60.0f), 0.8f * std::exp(-b * 90.0f)) * (0.8f + 0.2f * std::sin(40 * x));
-  });
-}
-
 double image_psnr(const Image& a, const Image& b) { return compare_images(a, b).psnr; }
 
 // Paired test of two Monte Carlo images: the mean per-pixel difference of r+g+b is within 4 standard

@@ -293,14 +293,6 @@ TEST(Strategies, RayPacketsGiveThePerRayImage) {
   }
 }
 
-Volume blobs(Int3 dims) {  // two blobs with empty space around them
-  return make_volume(dims, [](float x, float y, float z) {
-    float a = (x - 0.3f) * (x - 0.3f) + (y - 0.35f) * (y - 0.35f) + (z - 0.3f) * (z - 0.3f);
-    float b = (x - 0.7f) * (x - 0.7f) + (y - 0.6f) * (y - 0.6f) + (z - 0.65f) * (z - 0.65f);
-    return std::max(std::exp(-a * 60.0f), 0.8f * std::exp(-b * 90.0f)) * (0.8f + 0.2f * std::sin(40 * x));
-  });
-}
-
 TEST(Strategies, MacroCellsOnAndOffGiveTheSameRayMarchedImage) {
   Volume vol = blobs(Int3{48, 48, 48});
   GridField field(view_of(vol));

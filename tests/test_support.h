@@ -9,6 +9,7 @@
 #include <zlib.h>
 #include <algorithm>
 #include <atomic>
+#include <cmath>
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
@@ -194,6 +195,15 @@ inline Volume make_volume(Int3 dims, const std::vector<float>& values) {
 // The Marschner-Lobb test field.
 inline Volume synth(Int3 dims) {
   return make_volume(dims, [](float x, float y, float z) { return synth_value("marschner-lobb", x, y, z); });
+}
+
+// Two smooth blobs with empty space around them (macro-cells have cells to skip).
+inline Volume blobs(Int3 dims) {
+  return make_volume(dims, [](float x, float y, float z) {
+    float a = (x - 0.3f) * (x - 0.3f) + (y - 0.35f) * (y - 0.35f) + (z - 0.3f) * (z - 0.3f);
+    float b = (x - 0.7f) * (x - 0.7f) + (y - 0.6f) * (y - 0.6f) + (z - 0.65f) * (z - 0.65f);
+    return std::max(std::exp(-a * 60.0f), 0.8f * std::exp(-b * 90.0f)) * (0.8f + 0.2f * std::sin(40 * x));
+  });
 }
 
 // The world-space box of a volume: one unit per voxel.

@@ -75,16 +75,11 @@ namespace {
 Device choose_render_device(const RenderArgs& a, const RenderSource& src) {
   const Device asked = cuda::resolve_device(a.device);
   if (asked == Device::Cpu) return Device::Cpu;
-  if (src.model) {
-    try {
-      cuda::check_supported(*src.model->net);
-    } catch (const Error& e) {
-      if (a.device == "cuda") throw;
-      std::fprintf(stderr, "note: rendering on the CPU: %s\n", e.what());
-      return Device::Cpu;
-    }
-  }
-  return Device::Cuda;
+  const std::string why_not = src.model ? cuda::unsupported_reason(*src.model->net) : "";
+  if (why_not.empty()) return Device::Cuda;
+  if (a.device == "cuda") fail("{}; use --device cpu", why_not);
+  std::fprintf(stderr, "note: rendering on the CPU: %s\n", why_not.c_str());
+  return Device::Cpu;
 }
 }  // namespace
 

@@ -171,13 +171,7 @@ Device choose_device(const TrainArgs& a, const TrainingData& data, const Network
   if (why_not.empty() && cuda::free_memory_bytes() < need)
     why_not = fmt::format("the GPU has {} free, training needs about {} for this volume and batch",
                           human_bytes(double(cuda::free_memory_bytes())), human_bytes(double(need)));
-  if (why_not.empty()) {
-    try {
-      cuda::check_supported(net);
-    } catch (const Error& e) {
-      why_not = e.what();
-    }
-  }
+  if (why_not.empty()) why_not = cuda::unsupported_reason(net);
   if (why_not.empty()) return Device::Cuda;
   if (a.device == "cuda") fail("{}; use --device cpu", why_not);
   if (!a.quiet) std::fprintf(stderr, "note: training on the CPU: %s\n", why_not.c_str());

@@ -50,7 +50,9 @@ enum class MlpPath { Auto, Fused, Cublas };
 const char* mlp_path_name(MlpPath p);
 MlpPath parse_mlp_path(const std::string& s);  // auto | fused | cublas
 
-// Fails unless the network can run on the GPU (grid encoding, ReLU hidden layers).
+// Why the network cannot run on the GPU (it needs a grid encoding, ReLU hidden layers, at most 16
+// outputs); empty when it can. check_supported fails with that line.
+std::string unsupported_reason(const Network& net);
 void check_supported(const Network& net);
 
 struct GpuTrainOptions {

@@ -160,8 +160,7 @@ struct GpuTrainer::Impl {
   float factor = 1.0f;  // ExponentialDecay's
   bool profiling = false;
   cudaEvent_t events[5] = {};
-  ValueRangeGrid ranges;  // shape of the online ranges (empty grid: off)
-  RangeGridDims rdims;
+  ValueRangeGrid ranges;  // shape of the online ranges (their values live in range_lo/hi; none: off)
   DeviceBuffer<float> range_lo, range_hi;
 
   Impl(Network& n, GridView vol, GpuTrainOptions o) : net(n), opts(o) {
@@ -235,7 +234,7 @@ struct GpuTrainer::Impl {
     grow_tables(step + 2);
     sample_in_core(dvol, opts.seed, step, opts.chunk, opts.batch, xs.data(), ys.data(), zs.data(), target.data(), st);
     if (range_lo.size())
-      ranges_add_samples(rdims, xs.data(), ys.data(), zs.data(), target.data(), opts.batch, range_lo.data(),
+      ranges_add_samples(range_grid_dims(ranges), xs.data(), ys.data(), zs.data(), target.data(), opts.batch, range_lo.data(),
                          range_hi.data(), st);
     gradient_pass(net, d, path, half.data(), Coords{xs.data(), ys.data(), zs.data(), 1}, target.data(), opts.batch,
                   pass, grads.data(), loss_slots.data() + step, sb, [&](int i) { mark(i); });
@@ -290,10 +289,9 @@ float GpuTrainer::current_learning_rate() const {
 void GpuTrainer::enable_online_ranges(Int3 dims, int cell_size) {
   Impl& I = *impl_;
   I.ranges = ValueRangeGrid(dims, cell_size);
-  I.rdims = range_grid_dims(I.ranges);
   I.range_lo.resize(size_t(I.ranges.count()));
   I.range_hi.resize(size_t(I.ranges.count()));
-  ranges_clear(I.rdims, I.range_lo.data(), I.range_hi.data(), I.sb.stream);
+  ranges_clear(range_grid_dims(I.ranges), I.range_lo.data(), I.range_hi.data(), I.sb.stream);
 }
 bool GpuTrainer::has_online_ranges() const { return impl_->range_lo.size() > 0; }
 ValueRangeGrid GpuTrainer::online_ranges() {

@@ -52,15 +52,20 @@ uint64_t GpuTrainer::bytes_needed(const Network& net, uint64_t voxels, int64_t b
   return voxels * sizeof(float) + uint64_t(batch) * per_sample + net.n_params() * (5 * 4 + 2);
 }
 
-void check_supported(const Network& net) {
+std::string unsupported_reason(const Network& net) {
   const ModelConfig& c = net.config();
   if (!net.has_grid())
-    fail("--device cuda runs grid encodings (HashGrid, DenseGrid, TiledGrid); this model's encoding is not a grid: "
-         "use --device cpu");
+    return "--device cuda runs grid encodings (HashGrid, DenseGrid, TiledGrid); this model's encoding is not a grid";
   if (c.network.activation != Activation::ReLU)
-    fail("--device cuda runs ReLU hidden layers; this model uses {}: use --device cpu",
-         activation_name(c.network.activation));
-  if (net.mlp().n_out > 16) fail("--device cuda runs models with at most 16 outputs");
+    return fmt::format("--device cuda runs ReLU hidden layers; this model uses {}",
+                       activation_name(c.network.activation));
+  if (net.mlp().n_out > 16) return "--device cuda runs models with at most 16 outputs";
+  return "";
+}
+
+void check_supported(const Network& net) {
+  const std::string why = unsupported_reason(net);
+  if (!why.empty()) fail("{}: use --device cpu", why);
 }
 
 }  // namespace vnr::cuda

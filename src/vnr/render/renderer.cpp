@@ -89,10 +89,7 @@ Renderer::Renderer(const Field& field, Vec3f box, const MacroCells& mc, const Tr
   set_camera(cam);
 }
 
-void Renderer::set_camera(const Camera& cam) {
-  camera_ = cam;
-  set_render_camera(params_, cam, opt_);
-}
+void Renderer::set_camera(const Camera& cam) { set_render_camera(params_, cam, opt_); }
 
 template <class PointFn>
 void Renderer::inshader(const PointFn& f, Image& img, RenderStats& st) {

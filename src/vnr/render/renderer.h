@@ -111,7 +111,6 @@ private:
 
   const Field& field_;
   RenderOptions opt_;
-  Camera camera_;
   RenderParams params_;
   // Streaming buffers, kept between frames.
   std::vector<MarchState> march_;

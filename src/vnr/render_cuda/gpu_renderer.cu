@@ -3,7 +3,6 @@
 #include <mma.h>
 #include <algorithm>
 #include <chrono>
-#include <cstring>
 #include <cub/cub.cuh>
 #include "vnr/cuda/network.cuh"
 #include "vnr/nn/loss.h"
@@ -179,6 +178,20 @@ __device__ inline bool inshader_pixel(const RenderParams& p, int* ix, int* iy) {
   return *ix < p.cam.width && *iy < p.cam.height;
 }
 
+// The start of every in-shader kernel: the field bound to the block's shared memory and the thread's
+// pixel (out-of-image threads stay, inactive: the field evaluation is warp-cooperative).
+template <class Field>
+struct InshaderThread {
+  typename Field::Eval eval;
+  int ix, iy;
+  bool in_image;
+  __device__ InshaderThread(const RenderParams& p, const Field& field, unsigned char* smem)
+      : eval(field.bind(smem)) {
+    in_image = inshader_pixel(p, &ix, &iy);
+  }
+  __device__ int64_t pixel(const RenderParams& p) const { return int64_t(iy) * p.cam.width + ix; }
+};
+
 __device__ inline void count_samples(unsigned long long my, unsigned long long* total) {
   for (int off = 16; off > 0; off /= 2) my += __shfl_down_sync(kFull, my, off);
   if (threadIdx.x % 32 == 0 && my) atomicAdd(total, my);
@@ -190,12 +203,11 @@ template <class Field, int M>
 __global__ void __launch_bounds__(kWarpsPerBlock * 32)
     inshader_march(RenderParams p, Field field, int shadow, Vec4f* __restrict__ img, unsigned long long* samples) {
   extern __shared__ __align__(128) unsigned char smem[];
-  const auto eval = field.bind(smem);
-  int ix, iy;
-  const bool in_image = inshader_pixel(p, &ix, &iy);
+  const InshaderThread<Field> t(p, field, smem);
+  const auto& eval = t.eval;
   unsigned long long my = 0;
   MarchState s;
-  bool active = in_image && march_begin(p, ix, iy, s);
+  bool active = t.in_image && march_begin(p, t.ix, t.iy, s);
   Vec3f pos{0, 0, 0};
   float dt = 0;
   for (;;) {
@@ -212,7 +224,7 @@ __global__ void __launch_bounds__(kWarpsPerBlock * 32)
   if (shadow) {
     ShadowState sh;
     sh.T = 1;
-    active = in_image && shadow_begin(p, s, sh);
+    active = t.in_image && shadow_begin(p, s, sh);
     for (;;) {
       if (active) active = shadow_next(p, sh, &pos, &dt);
       if (!__any_sync(kFull, active)) break;
@@ -223,9 +235,9 @@ __global__ void __launch_bounds__(kWarpsPerBlock * 32)
         active = shadow_shade(p, sh, v, dt);
       }
     }
-    if (in_image) img[int64_t(iy) * p.cam.width + ix] = shadow_pixel(p, s, sh.T);
-  } else if (in_image) {
-    img[int64_t(iy) * p.cam.width + ix] = march_pixel(p, s);
+    if (t.in_image) img[t.pixel(p)] = shadow_pixel(p, s, sh.T);
+  } else if (t.in_image) {
+    img[t.pixel(p)] = march_pixel(p, s);
   }
   count_samples(my, samples);
 }
@@ -235,12 +247,11 @@ template <class Field>
 __global__ void __launch_bounds__(kWarpsPerBlock * 32)
     inshader_path(RenderParams p, Field field, Vec4f* __restrict__ img, unsigned long long* samples) {
   extern __shared__ __align__(128) unsigned char smem[];
-  const auto eval = field.bind(smem);
-  int ix, iy;
-  const bool in_image = inshader_pixel(p, &ix, &iy);
+  const InshaderThread<Field> t(p, field, smem);
+  const auto& eval = t.eval;
   unsigned long long my = 0;
   PathState s;
-  bool active = in_image && pt_begin(p, ix, iy, s) && pt_sample(p, s);
+  bool active = t.in_image && pt_begin(p, t.ix, t.iy, s) && pt_sample(p, s);
   for (;;) {
     if (!__any_sync(kFull, active)) break;
     const Vec3f u = active ? s.pos * p.inv_box : Vec3f{0, 0, 0};
@@ -250,7 +261,7 @@ __global__ void __launch_bounds__(kWarpsPerBlock * 32)
       active = pt_shade(p, s, v) && pt_sample(p, s);
     }
   }
-  if (in_image) img[int64_t(iy) * p.cam.width + ix] = pt_pixel(s);
+  if (t.in_image) img[t.pixel(p)] = pt_pixel(s);
   count_samples(my, samples);
 }
 
@@ -442,9 +453,8 @@ struct GpuRenderer::Impl {
   NetWarpField netf{};
   DeviceBuffer<NetWarpField> netf_device;
   // transfer function and macro-cells
-  DeviceBuffer<Vec4f> tf_table;
-  float tf_lo = 0, tf_w = 1;
-  int tf_n = 0;
+  DeviceBuffer<Vec4f> tf_table;  // p.tf views it
+  float tf_w = 1;                 // hi - lo of the TF window (macrocell_max_opacity divides by it)
   DeviceBuffer<float> range_lo, range_hi, max_op;
   // frame buffers
   DeviceBuffer<Vec4f> image;
@@ -459,7 +469,13 @@ struct GpuRenderer::Impl {
   DeviceBuffer<int> n_live;
   DeviceBuffer<unsigned long long> samples;
   DeviceBuffer<unsigned char> cub_temp;
-  int64_t* host = nullptr;  // pinned: [0] a sample total, [1] live rays
+  // What the host reads back (pinned): the live-ray count, and a sample total or the in-shader count.
+  struct HostCounts {
+    int live;
+    int64_t total;
+    unsigned long long samples;
+  };
+  HostCounts* host = nullptr;
   int64_t n_pixels = 0;
   int64_t infer_slab = kDefaultInferSlab;
 
@@ -481,7 +497,7 @@ struct GpuRenderer::Impl {
       cuda_fail_message("the GPU renderer needs a grid or network field");
     }
     n_pixels = int64_t(opt.width) * opt.height;
-    VNR_CUDA_CHECK(cudaMallocHost(&host, 2 * sizeof(int64_t)));
+    VNR_CUDA_CHECK(cudaMallocHost(&host, sizeof(HostCounts)));
     samples.resize(1);
     n_live.resize(1);
     image.resize(size_t(n_pixels));
@@ -526,8 +542,6 @@ struct GpuRenderer::Impl {
     if (tf.table.size() < 2) cuda_fail_message("the transfer function needs at least 2 entries");
     tf_table.resize(tf.table.size());
     tf_table.upload(tf.table.data(), tf.table.size());
-    tf_n = int(tf.table.size());
-    tf_lo = tf.lo;
     tf_w = tf.hi - tf.lo;
     TfView v = view_of(tf);
     v.table = tf_table.data();
@@ -552,7 +566,7 @@ struct GpuRenderer::Impl {
   void recompute_opacity() {
     if (!max_op.size() || !tf_table.size()) return;
     const int64_t cells = int64_t(max_op.size());
-    VNR_LAUNCH(max_opacity_kernel, cells, tf_table.data(), tf_n, tf_lo, tf_w, range_lo.data(), range_hi.data(), cells,
+    VNR_LAUNCH(max_opacity_kernel, cells, p.tf.table, p.tf.n, p.tf.lo, tf_w, range_lo.data(), range_hi.data(), cells,
                max_op.data());
   }
 
@@ -609,13 +623,14 @@ struct GpuRenderer::Impl {
 
   // Waits for the device and returns the live-ray count (and a sample total, when given).
   int64_t read_counts(const int64_t* total_on_device, int64_t* total, RenderStats& st) {
-    VNR_CUDA_CHECK(cudaMemcpyAsync(host, n_live.data(), sizeof(int), cudaMemcpyDeviceToHost, sb.stream));
+    VNR_CUDA_CHECK(cudaMemcpyAsync(&host->live, n_live.data(), sizeof(int), cudaMemcpyDeviceToHost, sb.stream));
     if (total_on_device)
-      VNR_CUDA_CHECK(cudaMemcpyAsync(host + 1, total_on_device, sizeof(int64_t), cudaMemcpyDeviceToHost, sb.stream));
+      VNR_CUDA_CHECK(
+          cudaMemcpyAsync(&host->total, total_on_device, sizeof(int64_t), cudaMemcpyDeviceToHost, sb.stream));
     VNR_CUDA_CHECK(cudaStreamSynchronize(sb.stream));
     st.host_syncs += 1;
-    if (total) *total = host[1];
-    return int64_t(*reinterpret_cast<int*>(host));
+    if (total) *total = host->total;
+    return host->live;
   }
 
   // One streaming pass (primary or shadow rays) over the rays whose keep flag is set.
@@ -704,12 +719,11 @@ struct GpuRenderer::Impl {
         inshader_march<Field, 7><<<grid, threads, smem, sb.stream>>>(p, f, shadow, image.data(), samples.data());
     }
     VNR_CUDA_LAUNCHED();
-    unsigned long long n = 0;
-    VNR_CUDA_CHECK(cudaMemcpyAsync(host, samples.data(), sizeof(n), cudaMemcpyDeviceToHost, sb.stream));
+    VNR_CUDA_CHECK(cudaMemcpyAsync(&host->samples, samples.data(), sizeof(unsigned long long), cudaMemcpyDeviceToHost,
+                                   sb.stream));
     VNR_CUDA_CHECK(cudaStreamSynchronize(sb.stream));
     st.host_syncs += 1;
-    std::memcpy(&n, host, sizeof(n));
-    st.field_samples += int64_t(n);
+    st.field_samples += int64_t(host->samples);
   }
 
   void render(uint32_t frame, RenderStats& st) {
@@ -770,14 +784,14 @@ void GpuRenderer::set_inference_slab(int64_t points) {
 bool GpuRenderer::inshader_weights_shared() const { return impl_->dnet && impl_->netf.stage; }
 
 ValueRangeGrid gpu_value_ranges_from_grid(const GridView& g, int cell_size) {
-  cuda::StreamAndBlas sb;
+  cuda::require_device();
   ValueRangeGrid out(Int3{g.nx, g.ny, g.nz}, cell_size);
   const size_t voxels = size_t(g.nx) * g.ny * g.nz, cells = size_t(out.count());
   DeviceBuffer<float> vol(voxels), lo(cells), hi(cells);
   vol.upload(g.data, voxels);
+  // the legacy default stream: ordered with the synchronous copies around it
   cuda::ranges_from_grid(GridView{vol.data(), g.nx, g.ny, g.nz}, cuda::range_grid_dims(out), lo.data(), hi.data(),
-                         sb.stream);
-  VNR_CUDA_CHECK(cudaStreamSynchronize(sb.stream));
+                         nullptr);
   lo.download(out.lo.data(), cells);
   hi.download(out.hi.data(), cells);
   return out;
