@@ -1,5 +1,5 @@
 // Single-thread cost of the grid encoding per level (forward gather and backward scatter) for the
-// paper config on random points — where each level sits between cache-resident and DRAM-bound.
+// paper and small configs on random points — where each level sits between cache-resident and DRAM-bound.
 #include <benchmark/benchmark.h>
 #include <cstdlib>
 #include <vector>
@@ -28,11 +28,16 @@ Fixture& fixture() {
   static Fixture f;
   return f;
 }
+Fixture& small_fixture() {
+  static Fixture f("small");
+  return f;
+}
+// Level benchmarks: arg = level for the paper config, 100 + level for the small one.
+Fixture& level_fixture(int64_t arg) { return arg >= 100 ? small_fixture() : fixture(); }
 
 // Whole encodings (all levels) of 65,536 random points, paper (arg 0) and small (arg 1) configs.
 void BM_GridEncode(benchmark::State& state) {
-  static Fixture small("small");
-  Fixture& f = state.range(0) ? small : fixture();
+  Fixture& f = state.range(0) ? small_fixture() : fixture();
   for (auto _ : state)
     for (int c = 0; c < (1 << 16); c += vnr::kChunk)
       vnr::kernels::grid_encode(f.net.grid(), f.net.grid_half(), f.x.data() + c, f.y.data() + c, f.z.data() + c,
@@ -48,9 +53,9 @@ BENCHMARK(BM_GridEncode)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond);
 // in a training step the tables are cold (Adam and the gradient scatter stream ~700 MB through the
 // caches) and the large levels cost 3-4x more (BM_GridEncode measures all levels together).
 void BM_GridEncodeLevel(benchmark::State& state) {
-  Fixture& f = fixture();
+  Fixture& f = level_fixture(state.range(0));
   vnr::GridLayout one = f.net.grid();
-  const int l = int(state.range(0));
+  const int l = int(state.range(0) % 100);
   one.levels[0] = one.levels[l];
   one.n_levels = 1;
   for (auto _ : state)
@@ -62,17 +67,17 @@ void BM_GridEncodeLevel(benchmark::State& state) {
 }
 
 void BM_GridBackwardLevel(benchmark::State& state) {
-  Fixture& f = fixture();
+  Fixture& f = level_fixture(state.range(0));
   std::vector<float> grad(f.net.grid_params(), 0.0f);
   for (auto _ : state)
-    vnr::kernels::grid_backward_level(f.net.grid(), uint32_t(state.range(0)), f.x.data(), f.y.data(), f.z.data(),
+    vnr::kernels::grid_backward_level(f.net.grid(), uint32_t(state.range(0) % 100), f.x.data(), f.y.data(), f.z.data(),
                                       1 << 16, f.dEnc.data(), f.net.mlp().in_pad, vnr::kChunk, grad.data());
   state.counters["ns/sample"] = benchmark::Counter(double(state.iterations()) * (1 << 16),
                                                    benchmark::Counter::kIsRate | benchmark::Counter::kInvert);
 }
 
-BENCHMARK(BM_GridEncodeLevel)->DenseRange(0, 7)->Unit(benchmark::kMillisecond);
-BENCHMARK(BM_GridBackwardLevel)->DenseRange(0, 7)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_GridEncodeLevel)->DenseRange(0, 7)->DenseRange(100, 103)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_GridBackwardLevel)->DenseRange(0, 7)->DenseRange(100, 103)->Unit(benchmark::kMillisecond);
 
 }  // namespace
 

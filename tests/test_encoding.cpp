@@ -307,37 +307,46 @@ TEST(Config, InstantvnrExampleModel) {
 }
 
 // Every SIMD target this machine supports (AVX-512, AVX2, SSE4, ...) encodes, scatters gradients and
-// looks up the ground truth bit-identically to the per-point reference functions.
+// looks up the ground truth bit-identically to the per-point reference functions: the paper config
+// (F = 8, dense and hashed levels), the small one (F = 2, every level dense: the x-pair gather path)
+// and F = 2 with smoothstep. A quarter of the points lie on the cube's faces and far corner, where
+// dense corners alias into the next row and an x-pair can straddle the table's end.
 TEST(GridEncoding, EverySimdTargetIsBitIdentical) {
-  Network net(preset_config("paper"));
-  net.init_params(3);
-  std::mt19937 gen(5);
-  std::uniform_real_distribution<float> U(0.f, 1.f);
-  for (uint64_t k = 0; k < net.grid_params(); ++k) net.grid_table()[k] = (U(gen) - 0.5f) * 0.5f;
-  net.sync_half_table();
-  const int n = kChunk;
-  std::vector<float> x(n), y(n), z(n), dEnc(size_t(net.mlp().in_pad) * n);
-  for (int s = 0; s < n; ++s) x[s] = U(gen), y[s] = U(gen), z[s] = U(gen);
-  for (auto& g : dEnc) g = U(gen) - 0.5f;
-  std::vector<float> ref_X0(size_t(net.mlp().enc_width) * n);
-  for (int s = 0; s < n; ++s) {
-    const float p[3] = {x[s], y[s], z[s]};
-    std::vector<float> f(net.mlp().enc_width);
-    net.encode_point(p, f.data());
-    for (uint32_t j = 0; j < net.mlp().enc_width; ++j) ref_X0[j * n + s] = f[j];
+  for (const Json& cfg : {preset_config("paper"), preset_config("small"), model(hashgrid(5, 2, 14, 3, "Smoothstep"))}) {
+    SCOPED_TRACE(cfg.dump());
+    Network net(cfg);
+    net.init_params(3);
+    std::mt19937 gen(5);
+    std::uniform_real_distribution<float> U(0.f, 1.f);
+    for (uint64_t k = 0; k < net.grid_params(); ++k) net.grid_table()[k] = (U(gen) - 0.5f) * 0.5f;
+    net.sync_half_table();
+    const int n = kChunk;
+    std::vector<float> x(n), y(n), z(n), dEnc(size_t(net.mlp().in_pad) * n);
+    for (int s = 0; s < n; ++s) {
+      x[s] = U(gen), y[s] = U(gen), z[s] = U(gen);
+      if (s % 4 == 1) x[s] = 1.0f, y[s] = s % 8 == 1 ? 1.0f : y[s], z[s] = s % 16 == 1 ? 1.0f : 0.97f + 0.03f * z[s];
+    }
+    for (auto& g : dEnc) g = U(gen) - 0.5f;
+    std::vector<float> ref_X0(size_t(net.mlp().enc_width) * n);
+    for (int s = 0; s < n; ++s) {
+      const float p[3] = {x[s], y[s], z[s]};
+      std::vector<float> f(net.mlp().enc_width);
+      net.encode_point(p, f.data());
+      for (uint32_t j = 0; j < net.mlp().enc_width; ++j) ref_X0[j * n + s] = f[j];
+    }
+    std::vector<float> ref_grad;
+    for (int64_t t : hwy::SupportedAndGeneratedTargets()) {
+      hwy::SetSupportedTargetsForTest(t);
+      SCOPED_TRACE(hwy::TargetName(t));
+      std::vector<float> X0(size_t(net.mlp().in_pad) * n);
+      net.encode(x.data(), y.data(), z.data(), n, X0.data());
+      for (size_t i = 0; i < ref_X0.size(); ++i) ASSERT_EQ(X0[i], ref_X0[i]) << i;
+      std::vector<float> grad(net.grid_params(), 0.0f);
+      for (uint32_t l = 0; l < net.grid().n_levels; ++l)
+        net.grid_backward_level(l, x.data(), y.data(), z.data(), n, dEnc.data(), n, grad.data());
+      if (ref_grad.empty()) ref_grad = grad;
+      else ASSERT_EQ(grad, ref_grad);
+    }
+    hwy::SetSupportedTargetsForTest(0);
   }
-  std::vector<float> ref_grad;
-  for (int64_t t : hwy::SupportedAndGeneratedTargets()) {
-    hwy::SetSupportedTargetsForTest(t);
-    SCOPED_TRACE(hwy::TargetName(t));
-    std::vector<float> X0(size_t(net.mlp().in_pad) * n);
-    net.encode(x.data(), y.data(), z.data(), n, X0.data());
-    for (size_t i = 0; i < ref_X0.size(); ++i) ASSERT_EQ(X0[i], ref_X0[i]) << i;
-    std::vector<float> grad(net.grid_params(), 0.0f);
-    for (uint32_t l = 0; l < net.grid().n_levels; ++l)
-      net.grid_backward_level(l, x.data(), y.data(), z.data(), n, dEnc.data(), n, grad.data());
-    if (ref_grad.empty()) ref_grad = grad;
-    else ASSERT_EQ(grad, ref_grad);
-  }
-  hwy::SetSupportedTargetsForTest(0);
 }

@@ -5,6 +5,8 @@
 #include <hwy/highway.h>
 
 #include <cmath>
+#include <cstring>
+#include "vnr/core/gather-inl.h"
 #include "vnr/nn/cpu_kernels.h"
 
 HWY_BEFORE_NAMESPACE();
@@ -137,6 +139,146 @@ HWY_INLINE void PipelinedBlocks(const GridLevel& L, bool smooth, const float* x,
   }
 }
 
+// One block of N samples from its corner block: per sample and corner, F features with one fp16
+// load, one conversion and one FMA per vector of features (accumulated in corner order k = 0..7).
+template <int F>
+HWY_INLINE void GatherBlock(const uint16_t* lt, const CornerBlock& cur, size_t N, float* out, int n, size_t s0) {
+  const DFF<F> dff;
+  const DHF<F> dhf;
+  constexpr size_t NV = (F + hn::MaxLanes(DFF<F>()) - 1) / hn::MaxLanes(DFF<F>());
+  const size_t NF = hn::Lanes(dff);
+  for (size_t s = 0; s < N; ++s) {
+    hn::Vec<DFF<F>> acc[NV];
+    for (size_t v = 0; v < NV; ++v) acc[v] = hn::Zero(dff);
+    for (int k = 0; k < 8; ++k) {
+      const auto* th = reinterpret_cast<const hwy::float16_t*>(lt + uint64_t(cur.entry[k][s]) * F);
+      const auto w = hn::Set(dff, cur.weight[k][s]);
+      for (size_t v = 0; v < NV; ++v) acc[v] = hn::MulAdd(w, hn::PromoteTo(dff, hn::LoadU(dhf, th + v * NF)), acc[v]);
+    }
+    alignas(64) float tmp[NV * kMaxLanes];
+    for (size_t v = 0; v < NV; ++v) hn::StoreU(acc[v], dff, tmp + v * NF);
+    for (int f = 0; f < F; ++f) out[f * n + s0 + s] = tmp[f];
+  }
+}
+
+#if HWY_TARGET != HWY_SCALAR
+// Up to 4 vectors of a small level's 32-bit entries, so that a lookup is a few in-register
+// permutes instead of a gather (level 0 of most configs: 4^3 = 64 entries, 256 bytes).
+struct RegisterTable {
+  static constexpr int kMaxVecs = 4;
+  hn::Vec<DU> t[kMaxVecs];
+  int vecs = 0;  // 0: the table does not fit
+};
+
+HWY_INLINE RegisterTable LoadRegisterTable(const uint16_t* lt, uint32_t n_entries) {
+  const DU du;
+  const size_t N = hn::Lanes(du);
+  RegisterTable r;
+  if (n_entries > RegisterTable::kMaxVecs * N) return r;
+  r.vecs = int((n_entries + N - 1) / N);
+  alignas(64) uint32_t buf[RegisterTable::kMaxVecs * kMaxLanes] = {};
+  for (uint32_t e = 0; e < n_entries; ++e) std::memcpy(&buf[e], lt + 2 * size_t(e), 4);
+  for (int v = 0; v < r.vecs; ++v) r.t[v] = hn::Load(du, buf + v * N);
+  return r;
+}
+
+HWY_INLINE hn::Vec<DU> RegisterLookup(const RegisterTable& r, hn::Vec<DU> e) {
+  const DU du;
+  const DI di;
+  const size_t N = hn::Lanes(du);
+  const auto lane = hn::IndicesFromVec(du, hn::And(e, hn::Set(du, uint32_t(N - 1))));
+  auto v = hn::TableLookupLanes(r.t[0], lane);
+  for (int k = 1; k < r.vecs; ++k)  // entries < 2^31: a signed compare
+    v = hn::IfThenElse(hn::RebindMask(du, hn::Gt(hn::BitCast(di, e), hn::Set(di, int32_t(k * N) - 1))),
+                       hn::TableLookupLanes(r.t[k], lane), v);
+  return v;
+}
+
+// Dense levels with two features, lanes = samples. An entry is 32 bits (feature 0 in the low half)
+// and the x-neighbours of a corner are adjacent entries, so each of the four x-pairs costs one 64-bit
+// gather element (GatherPairs; gathers cost per element on Zen 4) or, for a table that fits in
+// registers, two permutes. Two 16-bit permutes de-interleave the features; the 8 corners accumulate
+// in the order k = 0..7 with the weights of CornersVec, so the result is the per-sample path's bit
+// for bit.
+HWY_INLINE void DensePairBlockF2(const GridLevel& L, bool smooth, const uint16_t* lt, const RegisterTable& rt,
+                                 const float* x, const float* y, const float* z, float* out, int n, size_t s0) {
+  const DF df;
+  const DU du;
+  const DI di;
+  const hn::Repartition<uint16_t, DF> du16;
+  const hn::Half<decltype(du16)> du16h;
+  const hn::Rebind<hwy::float16_t, DF> dh;
+  const auto scale = hn::Set(df, L.scale), half = hn::Set(df, 0.5f), one = hn::Set(df, 1.0f);
+  const float* in[3] = {x + s0, y + s0, z + s0};
+  hn::Vec<DU> i[3];
+  hn::Vec<DF> sv[3], sm[3];
+  for (int d = 0; d < 3; ++d) {  // exactly CornersVec's operations
+    const auto p = hn::MulAdd(scale, hn::LoadU(df, in[d]), half);
+    const auto fl = hn::Floor(p);
+    i[d] = hn::BitCast(du, hn::ConvertTo(di, fl));
+    auto t = hn::Sub(p, fl);
+    if (smooth) t = hn::Mul(hn::Mul(t, t), hn::Sub(hn::Set(df, 3.0f), hn::Mul(hn::Set(df, 2.0f), t)));
+    sv[d] = t;
+    sm[d] = hn::Sub(one, t);
+  }
+  const auto res = hn::Set(du, L.res), res2 = hn::Set(du, L.res * L.res);
+  const auto nent = hn::Set(du, L.n_entries), mask = hn::Set(du, L.pow2_mask), c1 = hn::Set(du, 1u);
+  // Row offsets of y0, y0 + 1 and z0, z0 + 1 (u32 arithmetic: the same sums as CornersVec's products).
+  const auto ry0 = hn::Mul(i[1], res), rz0 = hn::Mul(i[2], res2);
+  const hn::Vec<DU> ry[2] = {ry0, hn::Add(ry0, res)}, rz[2] = {rz0, hn::Add(rz0, res2)};
+  const float* base = reinterpret_cast<const float*>(lt);  // entries as 32-bit words: only moved, never computed on
+  auto acc0 = hn::Zero(df), acc1 = hn::Zero(df);
+  for (int j = 0; j < 4; ++j) {  // pair j holds corners k = 2j (x0) and 2j + 1 (x0 + 1)
+    auto e = hn::Add(hn::Add(i[0], ry[j & 1]), rz[j >> 1]);
+    if (L.pow2_mask) e = hn::And(e, mask);
+    else e = hn::Min(e, hn::Sub(e, nent));
+    // The x0 + 1 entry is e + 1, except that e = n - 1 wraps to entry 0 (both the modulo and the mask).
+    const auto e1 = hn::Add(e, c1);
+    const auto wraps = hn::Eq(e1, nent);
+    hn::Vec<decltype(du16)> f0, f1;  // [feature 0 of x0 | of x0 + 1], [feature 1 of x0 | of x0 + 1]
+#if HWY_TARGET <= HWY_AVX3
+    if (!rt.vecs && hn::AllFalse(du, wraps)) {
+      // One gather per 8 samples, each 64-bit lane (f0 x0, f1 x0, f0 x1, f1 x1); one two-table
+      // 16-bit permute per feature puts the 16 samples' x0 values low and x1 values high.
+      const __m512i e32 = e.raw;
+      const __m512i lo = _mm512_i32gather_epi64(_mm512_castsi512_si256(e32), base, 4);
+      const __m512i hi = _mm512_i32gather_epi64(_mm512_extracti64x4_epi64(e32, 1), base, 4);
+      alignas(64) static constexpr uint16_t kF0[32] = {0,  4,  8,  12, 16, 20, 24, 28, 32, 36, 40, 44, 48, 52, 56, 60,
+                                                       2,  6,  10, 14, 18, 22, 26, 30, 34, 38, 42, 46, 50, 54, 58, 62};
+      const __m512i sel0 = _mm512_load_si512(kF0), c1w = _mm512_set1_epi16(1);
+      f0.raw = _mm512_permutex2var_epi16(lo, sel0, hi);
+      f1.raw = _mm512_permutex2var_epi16(lo, _mm512_add_epi16(sel0, c1w), hi);
+    } else
+#endif
+    {
+      hn::Vec<DF> a, b;
+      if (rt.vecs) {
+        a = hn::BitCast(df, RegisterLookup(rt, e));
+        b = hn::BitCast(df, RegisterLookup(rt, hn::IfThenZeroElse(wraps, e1)));
+      } else {
+        // A wrapping lane gathers the pair (n - 2, n - 1) instead, never reading past the table.
+        hn::Vec<DF> p, q;
+        vnr::HWY_NAMESPACE::GatherPairs(df, base, hn::BitCast(di, hn::IfThenElse(wraps, hn::Sub(e, c1), e)), &p, &q);
+        a = hn::IfThenElse(hn::RebindMask(df, wraps), q, p);
+        b = hn::IfThenElse(hn::RebindMask(df, wraps), hn::Set(df, base[0]), q);
+      }
+      f0 = hn::ConcatEven(du16, hn::BitCast(du16, b), hn::BitCast(du16, a));
+      f1 = hn::ConcatOdd(du16, hn::BitCast(du16, b), hn::BitCast(du16, a));
+    }
+    const auto wy = (j & 1) ? sv[1] : sm[1], wz = (j & 2) ? sv[2] : sm[2];
+    const auto wa = hn::Mul(hn::Mul(sm[0], wy), wz), wb = hn::Mul(hn::Mul(sv[0], wy), wz);
+    const auto a0 = hn::PromoteTo(df, hn::BitCast(dh, hn::LowerHalf(du16h, f0)));
+    const auto b0 = hn::PromoteTo(df, hn::BitCast(dh, hn::UpperHalf(du16h, f0)));
+    const auto a1 = hn::PromoteTo(df, hn::BitCast(dh, hn::LowerHalf(du16h, f1)));
+    const auto b1 = hn::PromoteTo(df, hn::BitCast(dh, hn::UpperHalf(du16h, f1)));
+    acc0 = hn::MulAdd(wb, b0, hn::MulAdd(wa, a0, acc0));
+    acc1 = hn::MulAdd(wb, b1, hn::MulAdd(wa, a1, acc1));
+  }
+  hn::StoreU(acc0, df, out + s0);
+  hn::StoreU(acc1, df, out + size_t(n) + s0);
+}
+#endif
+
 template <int F>
 void EncodeF(const GridLayout& g, const uint16_t* table, const float* x, const float* y, const float* z, int n,
              float* X0) {
@@ -151,25 +293,16 @@ void EncodeF(const GridLayout& g, const uint16_t* table, const float* x, const f
     const bool pf = uint64_t(L.n_entries) * F * sizeof(uint16_t) > (uint64_t(1) << 18);
     const int nb = ValidBlocks(vec_ok, x, y, z, n, N);
     const bool smooth = g.interpolation == Interpolation::Smoothstep;
-    PipelinedBlocks<F>(L, smooth, x, y, z, nb, N, lt, pf, [&](const CornerBlock& cur, size_t s0) {
-      // F features of a corner: one fp16 load, one conversion, one FMA per vector of features.
-      const DFF<F> dff;
-      const DHF<F> dhf;
-      constexpr size_t NV = (F + hn::MaxLanes(DFF<F>()) - 1) / hn::MaxLanes(DFF<F>());
-      const size_t NF = hn::Lanes(dff);
-      for (size_t s = 0; s < N; ++s) {
-        hn::Vec<DFF<F>> acc[NV];
-        for (size_t v = 0; v < NV; ++v) acc[v] = hn::Zero(dff);
-        for (int k = 0; k < 8; ++k) {
-          const auto* th = reinterpret_cast<const hwy::float16_t*>(lt + uint64_t(cur.entry[k][s]) * F);
-          const auto w = hn::Set(dff, cur.weight[k][s]);
-          for (size_t v = 0; v < NV; ++v) acc[v] = hn::MulAdd(w, hn::PromoteTo(dff, hn::LoadU(dhf, th + v * NF)), acc[v]);
-        }
-        alignas(64) float tmp[NV * kMaxLanes];
-        for (size_t v = 0; v < NV; ++v) hn::StoreU(acc[v], dff, tmp + v * NF);
-        for (int f = 0; f < F; ++f) out[f * n + s0 + s] = tmp[f];
-      }
-    });
+#if HWY_TARGET != HWY_SCALAR
+    if (F == 2 && !L.hashed && !pf && N >= 4) {
+      const RegisterTable rt = LoadRegisterTable(lt, L.n_entries);
+      for (int b = 0; b < nb; ++b) DensePairBlockF2(L, smooth, lt, rt, x, y, z, out, n, size_t(b) * N);
+    } else
+#endif
+    {
+      PipelinedBlocks<F>(L, smooth, x, y, z, nb, N, lt, pf,
+                         [&](const CornerBlock& cur, size_t s0) { GatherBlock<F>(lt, cur, N, out, n, s0); });
+    }
     for (int s = nb * int(N); s < n; ++s) grid_level_forward<F>(L, g.interpolation, table, x[s], y[s], z[s], out + s, n);
   }
 }

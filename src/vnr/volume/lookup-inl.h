@@ -10,6 +10,7 @@
 #endif
 
 #include <hwy/highway.h>
+#include "vnr/core/gather-inl.h"
 #include "vnr/volume/volume.h"
 
 HWY_BEFORE_NAMESPACE();
@@ -45,28 +46,6 @@ HWY_INLINE void GridPrefetchVec(DF df, const GridView& g, hwy::HWY_NAMESPACE::Ve
     __builtin_prefetch(p0 + rz, 0, 2);
     __builtin_prefetch(p0 + ry + rz, 0, 2);
   }
-}
-
-// base[idx[k]] into lane k of *a and base[idx[k] + 1] into lane k of *b, each pair gathered as one
-// 64-bit element (at byte offset 4 * idx: pairs start at any float, not at 8-byte multiples).
-// Gathers cost per element, so this halves their cost for neighbouring values.
-template <class DF>
-HWY_INLINE void GatherPairs(DF df, const float* base, hwy::HWY_NAMESPACE::Vec<hwy::HWY_NAMESPACE::RebindToSigned<DF>> idx,
-                            hwy::HWY_NAMESPACE::Vec<DF>* a, hwy::HWY_NAMESPACE::Vec<DF>* b) {
-  namespace hn = hwy::HWY_NAMESPACE;
-#if HWY_TARGET == HWY_SCALAR
-  *a = hn::GatherIndex(df, base, idx);
-  *b = hn::GatherIndex(df, base + 1, idx);
-#else
-  const hn::Half<hn::RebindToSigned<DF>> dih;
-  const hn::Repartition<int64_t, DF> di64;
-  const hn::Repartition<uint64_t, DF> du64;
-  const uint64_t* base64 = reinterpret_cast<const uint64_t*>(base);
-  const auto lo = hn::BitCast(df, hn::GatherOffset(du64, base64, hn::ShiftLeft<2>(hn::PromoteTo(di64, hn::LowerHalf(dih, idx)))));
-  const auto hi = hn::BitCast(df, hn::GatherOffset(du64, base64, hn::ShiftLeft<2>(hn::PromoteTo(di64, hn::UpperHalf(dih, idx)))));
-  *a = hn::ConcatEven(df, hi, lo);
-  *b = hn::ConcatOdd(df, hi, lo);
-#endif
 }
 
 // grid_lookup() for a vector of points. kPairs (volumes at least 2 voxels wide in x): each pair of
