@@ -194,20 +194,20 @@ HWY_INLINE hn::Vec<DU> RegisterLookup(const RegisterTable& r, hn::Vec<DU> e) {
   return v;
 }
 
-// Dense levels with two features, lanes = samples. An entry is 32 bits (feature 0 in the low half)
-// and the x-neighbours of a corner are adjacent entries, so each of the four x-pairs costs one 64-bit
-// gather element (GatherPairs; gathers cost per element on Zen 4) or, for a table that fits in
-// registers, two permutes. Two 16-bit permutes de-interleave the features; the 8 corners accumulate
-// in the order k = 0..7 with the weights of CornersVec, so the result is the per-sample path's bit
-// for bit.
-HWY_INLINE void DensePairBlockF2(const GridLevel& L, bool smooth, const uint16_t* lt, const RegisterTable& rt,
-                                 const float* x, const float* y, const float* z, float* out, int n, size_t s0) {
+// The four x-pairs of a block of N samples on a dense level, lanes = samples: pair j holds corners
+// k = 2j (entry e) and 2j + 1 (entry e + 1, or entry 0 where e + 1 wraps), with the weights of
+// CornersVec (same operations, so the same bits) and the same entries (u32 sums of the same terms).
+struct PairBlock {
+  hn::Vec<DU> e[4];
+  hn::Mask<DU> wraps[4];  // e = n - 1: the x0 + 1 corner is entry 0
+  hn::Vec<DF> wa[4], wb[4];
+};
+
+HWY_INLINE void DensePairs(const GridLevel& L, bool smooth, const float* x, const float* y, const float* z, size_t s0,
+                           PairBlock& pb) {
   const DF df;
   const DU du;
   const DI di;
-  const hn::Repartition<uint16_t, DF> du16;
-  const hn::Half<decltype(du16)> du16h;
-  const hn::Rebind<hwy::float16_t, DF> dh;
   const auto scale = hn::Set(df, L.scale), half = hn::Set(df, 0.5f), one = hn::Set(df, 1.0f);
   const float* in[3] = {x + s0, y + s0, z + s0};
   hn::Vec<DU> i[3];
@@ -226,15 +226,39 @@ HWY_INLINE void DensePairBlockF2(const GridLevel& L, bool smooth, const uint16_t
   // Row offsets of y0, y0 + 1 and z0, z0 + 1 (u32 arithmetic: the same sums as CornersVec's products).
   const auto ry0 = hn::Mul(i[1], res), rz0 = hn::Mul(i[2], res2);
   const hn::Vec<DU> ry[2] = {ry0, hn::Add(ry0, res)}, rz[2] = {rz0, hn::Add(rz0, res2)};
-  const float* base = reinterpret_cast<const float*>(lt);  // entries as 32-bit words: only moved, never computed on
-  auto acc0 = hn::Zero(df), acc1 = hn::Zero(df);
-  for (int j = 0; j < 4; ++j) {  // pair j holds corners k = 2j (x0) and 2j + 1 (x0 + 1)
+  for (int j = 0; j < 4; ++j) {
     auto e = hn::Add(hn::Add(i[0], ry[j & 1]), rz[j >> 1]);
     if (L.pow2_mask) e = hn::And(e, mask);
     else e = hn::Min(e, hn::Sub(e, nent));
-    // The x0 + 1 entry is e + 1, except that e = n - 1 wraps to entry 0 (both the modulo and the mask).
-    const auto e1 = hn::Add(e, c1);
-    const auto wraps = hn::Eq(e1, nent);
+    pb.e[j] = e;
+    pb.wraps[j] = hn::Eq(hn::Add(e, c1), nent);  // both the modulo and the mask wrap n to 0
+    const auto wy = (j & 1) ? sv[1] : sm[1], wz = (j & 2) ? sv[2] : sm[2];
+    pb.wa[j] = hn::Mul(hn::Mul(sm[0], wy), wz);
+    pb.wb[j] = hn::Mul(hn::Mul(sv[0], wy), wz);
+  }
+}
+
+// Forward, dense levels with two features, lanes = samples. An entry is 32 bits (feature 0 in the
+// low half) and a pair's entries are adjacent, so a pair costs one 64-bit gather element
+// (gathers cost per element on Zen 4) or, for a table that fits in registers, two permutes. Two
+// 16-bit permutes de-interleave the features; the corners accumulate in the order k = 0..7, so the
+// result is the per-sample path's bit for bit.
+HWY_INLINE void DensePairBlockF2(const GridLevel& L, bool smooth, const uint16_t* lt, const RegisterTable& rt,
+                                 const float* x, const float* y, const float* z, float* out, int n, size_t s0) {
+  const DF df;
+  const DU du;
+  const DI di;
+  const hn::Repartition<uint16_t, DF> du16;
+  const hn::Half<decltype(du16)> du16h;
+  const hn::Rebind<hwy::float16_t, DF> dh;
+  const auto c1 = hn::Set(du, 1u);
+  PairBlock pb;
+  DensePairs(L, smooth, x, y, z, s0, pb);
+  const float* base = reinterpret_cast<const float*>(lt);  // entries as 32-bit words: only moved, never computed on
+  auto acc0 = hn::Zero(df), acc1 = hn::Zero(df);
+  for (int j = 0; j < 4; ++j) {
+    const auto e = pb.e[j];
+    const auto wraps = pb.wraps[j];
     hn::Vec<decltype(du16)> f0, f1;  // [feature 0 of x0 | of x0 + 1], [feature 1 of x0 | of x0 + 1]
 #if HWY_TARGET <= HWY_AVX3
     if (!rt.vecs && hn::AllFalse(du, wraps)) {
@@ -254,7 +278,7 @@ HWY_INLINE void DensePairBlockF2(const GridLevel& L, bool smooth, const uint16_t
       hn::Vec<DF> a, b;
       if (rt.vecs) {
         a = hn::BitCast(df, RegisterLookup(rt, e));
-        b = hn::BitCast(df, RegisterLookup(rt, hn::IfThenZeroElse(wraps, e1)));
+        b = hn::BitCast(df, RegisterLookup(rt, hn::IfThenZeroElse(wraps, hn::Add(e, c1))));
       } else {
         // A wrapping lane gathers the pair (n - 2, n - 1) instead, never reading past the table.
         hn::Vec<DF> p, q;
@@ -265,18 +289,17 @@ HWY_INLINE void DensePairBlockF2(const GridLevel& L, bool smooth, const uint16_t
       f0 = hn::ConcatEven(du16, hn::BitCast(du16, b), hn::BitCast(du16, a));
       f1 = hn::ConcatOdd(du16, hn::BitCast(du16, b), hn::BitCast(du16, a));
     }
-    const auto wy = (j & 1) ? sv[1] : sm[1], wz = (j & 2) ? sv[2] : sm[2];
-    const auto wa = hn::Mul(hn::Mul(sm[0], wy), wz), wb = hn::Mul(hn::Mul(sv[0], wy), wz);
     const auto a0 = hn::PromoteTo(df, hn::BitCast(dh, hn::LowerHalf(du16h, f0)));
     const auto b0 = hn::PromoteTo(df, hn::BitCast(dh, hn::UpperHalf(du16h, f0)));
     const auto a1 = hn::PromoteTo(df, hn::BitCast(dh, hn::LowerHalf(du16h, f1)));
     const auto b1 = hn::PromoteTo(df, hn::BitCast(dh, hn::UpperHalf(du16h, f1)));
-    acc0 = hn::MulAdd(wb, b0, hn::MulAdd(wa, a0, acc0));
-    acc1 = hn::MulAdd(wb, b1, hn::MulAdd(wa, a1, acc1));
+    acc0 = hn::MulAdd(pb.wb[j], b0, hn::MulAdd(pb.wa[j], a0, acc0));
+    acc1 = hn::MulAdd(pb.wb[j], b1, hn::MulAdd(pb.wa[j], a1, acc1));
   }
   hn::StoreU(acc0, df, out + s0);
   hn::StoreU(acc1, df, out + size_t(n) + s0);
 }
+
 #endif
 
 template <int F>
