@@ -178,11 +178,18 @@ HWY_INLINE RegisterTable LoadRegisterTable(const uint16_t* lt, uint32_t n_entrie
   r.vecs = int((n_entries + N - 1) / N);
   alignas(64) uint32_t buf[RegisterTable::kMaxVecs * kMaxLanes] = {};
   for (uint32_t e = 0; e < n_entries; ++e) std::memcpy(&buf[e], lt + 2 * size_t(e), 4);
-  for (int v = 0; v < r.vecs; ++v) r.t[v] = hn::Load(du, buf + v * N);
+  for (int v = 0; v < RegisterTable::kMaxVecs; ++v) r.t[v] = hn::Load(du, buf + v * N);  // unused ones zero
   return r;
 }
 
 HWY_INLINE hn::Vec<DU> RegisterLookup(const RegisterTable& r, hn::Vec<DU> e) {
+#if HWY_TARGET <= HWY_AVX3
+  // Two-table permutes cover 32 entries each: at most two permutes and a blend.
+  const __m512i lo = _mm512_permutex2var_epi32(r.t[0].raw, e.raw, r.t[1].raw);
+  if (r.vecs <= 2) return hn::Vec<DU>{lo};
+  const __m512i hi = _mm512_permutex2var_epi32(r.t[2].raw, e.raw, r.t[3].raw);
+  return hn::Vec<DU>{_mm512_mask_blend_epi32(_mm512_test_epi32_mask(e.raw, _mm512_set1_epi32(32)), lo, hi)};
+#else
   const DU du;
   const DI di;
   const size_t N = hn::Lanes(du);
@@ -192,6 +199,7 @@ HWY_INLINE hn::Vec<DU> RegisterLookup(const RegisterTable& r, hn::Vec<DU> e) {
     v = hn::IfThenElse(hn::RebindMask(du, hn::Gt(hn::BitCast(di, e), hn::Set(di, int32_t(k * N) - 1))),
                        hn::TableLookupLanes(r.t[k], lane), v);
   return v;
+#endif
 }
 
 // The four x-pairs of a block of N samples on a dense level, lanes = samples: pair j holds corners
@@ -226,15 +234,17 @@ HWY_INLINE void DensePairs(const GridLevel& L, bool smooth, const float* x, cons
   // Row offsets of y0, y0 + 1 and z0, z0 + 1 (u32 arithmetic: the same sums as CornersVec's products).
   const auto ry0 = hn::Mul(i[1], res), rz0 = hn::Mul(i[2], res2);
   const hn::Vec<DU> ry[2] = {ry0, hn::Add(ry0, res)}, rz[2] = {rz0, hn::Add(rz0, res2)};
+  // (wx * wy) * wz in CornersVec's order; the wx * wy products are shared by both z.
+  const hn::Vec<DF> ay[2] = {hn::Mul(sm[0], sm[1]), hn::Mul(sm[0], sv[1])}, by[2] = {hn::Mul(sv[0], sm[1]), hn::Mul(sv[0], sv[1])};
   for (int j = 0; j < 4; ++j) {
     auto e = hn::Add(hn::Add(i[0], ry[j & 1]), rz[j >> 1]);
     if (L.pow2_mask) e = hn::And(e, mask);
     else e = hn::Min(e, hn::Sub(e, nent));
     pb.e[j] = e;
     pb.wraps[j] = hn::Eq(hn::Add(e, c1), nent);  // both the modulo and the mask wrap n to 0
-    const auto wy = (j & 1) ? sv[1] : sm[1], wz = (j & 2) ? sv[2] : sm[2];
-    pb.wa[j] = hn::Mul(hn::Mul(sm[0], wy), wz);
-    pb.wb[j] = hn::Mul(hn::Mul(sv[0], wy), wz);
+    const auto wz = (j & 2) ? sv[2] : sm[2];
+    pb.wa[j] = hn::Mul(ay[j & 1], wz);
+    pb.wb[j] = hn::Mul(by[j & 1], wz);
   }
 }
 
