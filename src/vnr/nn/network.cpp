@@ -301,6 +301,12 @@ void Network::grid_backward_level(uint32_t level, const float* x, const float* y
   kernels::grid_backward_level(grid_, level, x, y, z, n, dEnc, mlp_.in_pad, chunk, grad);
 }
 
+float* Network::thread_workspace(size_t floats) {
+  thread_local std::vector<float> ws;
+  if (ws.size() < floats) ws.resize(floats);
+  return ws.data();
+}
+
 size_t Network::infer_workspace_floats() const {
   // X0, every hidden activation, the output's pre-activation and activation
   return (size_t(mlp_.in_pad) + size_t(mlp_.n_hidden) * mlp_.width + 2 * size_t(mlp_.n_out)) * chunk_;

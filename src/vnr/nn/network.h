@@ -101,6 +101,9 @@ public:
 private:
   void infer_chunk(const float* x, const float* y, const float* z, int n, float* out, float* ws) const;
   size_t infer_workspace_floats() const;
+  // This thread's inference scratch, grown as needed and kept, so that the many small calls of the
+  // renderers do not each map and fault in a few hundred KiB (no change measurable at batch 65,536).
+  static float* thread_workspace(size_t floats);
 
   ModelConfig cfg_;
   Json cfg_json_;
@@ -115,8 +118,8 @@ void Network::infer_fn(int64_t n, CoordFn&& coord, float* out) const {
   const int64_t C = chunk_;
   const int64_t n_chunks = (n + C - 1) / C;
   parallel_threads([&](int t, int nt) {
-    std::vector<float> ws(infer_workspace_floats() + 4 * C);
-    float* xs = ws.data() + infer_workspace_floats();
+    float* ws = thread_workspace(infer_workspace_floats() + 4 * C);
+    float* xs = ws + infer_workspace_floats();
     float *ys = xs + C, *zs = ys + C, *o = zs + C;
     for (int64_t c = t; c < n_chunks; c += nt) {
       int64_t b = c * C, m = n - b < C ? n - b : C;
@@ -125,7 +128,7 @@ void Network::infer_fn(int64_t n, CoordFn&& coord, float* out) const {
         int64_t k = b + (i < m ? i : m - 1);
         coord(k, &xs[i], &ys[i], &zs[i]);
       }
-      infer_chunk(xs, ys, zs, int(mp), o, ws.data());
+      infer_chunk(xs, ys, zs, int(mp), o, ws);
       for (int64_t i = 0; i < m; ++i) out[b + i] = o[i];
     }
   });
