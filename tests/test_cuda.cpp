@@ -2,6 +2,7 @@
 // --device errors, and the per-sample form of the training sampler that the GPU kernels use, against
 // the CPU's. The GPU kernels themselves are tested in test_gpu.cpp (ctest label `gpu`).
 #include <gtest/gtest.h>
+#include <hwy/targets.h>
 #include <cmath>
 #include <numeric>
 #include "test_support.h"
@@ -20,18 +21,24 @@ namespace {
 
 // ---- CPU-checkable -------------------------------------------------------------------------------
 
+// On every SIMD target (the AVX-512 one draws two sample slots of the four streams per vector).
 TEST(CudaSampler, PerSampleCoordinatesEqualTheChunkSampler) {
-  for (int n : {256, 1024, 37, 3}) {
-    std::vector<float> x(n), y(n), z(n);
-    uniform_coordinates(1337, 5, 11, n, x.data(), y.data(), z.data());
-    for (int i = 0; i < n; ++i) {
-      float px, py, pz;
-      uniform_sample_coordinate(1337, 5, 11, n, i, &px, &py, &pz);
-      ASSERT_EQ(px, x[i]) << "n " << n << " i " << i;
-      ASSERT_EQ(py, y[i]);
-      ASSERT_EQ(pz, z[i]);
+  for (int64_t t : hwy::SupportedAndGeneratedTargets()) {
+    hwy::SetSupportedTargetsForTest(t);
+    SCOPED_TRACE(hwy::TargetName(t));
+    for (int n : {256, 1024, 37, 44, 8, 7, 3}) {
+      std::vector<float> x(n), y(n), z(n);
+      uniform_coordinates(1337, 5, 11, n, x.data(), y.data(), z.data());
+      for (int i = 0; i < n; ++i) {
+        float px, py, pz;
+        uniform_sample_coordinate(1337, 5, 11, n, i, &px, &py, &pz);
+        ASSERT_EQ(px, x[i]) << "n " << n << " i " << i;
+        ASSERT_EQ(py, y[i]);
+        ASSERT_EQ(pz, z[i]);
+      }
     }
   }
+  hwy::SetSupportedTargetsForTest(0);
 }
 
 TEST(CudaDevice, AutoFallsBackToTheCpuAndCudaSaysWhyNot) {
