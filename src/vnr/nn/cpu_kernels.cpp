@@ -19,6 +19,26 @@ using DU = hn::RebindToUnsigned<DF>;
 using DI = hn::RebindToSigned<DF>;
 constexpr size_t kMaxLanes = 64 / sizeof(float);  // 512-bit vectors at most
 
+// Lattice cell i, weight t of the upper corner (sv) and 1 - t (sm) per axis, for Lanes(DF) samples,
+// with exactly grid_corners()'s operations.
+HWY_INLINE void LatticeCoords(const GridLevel& L, bool smooth, const float* x, const float* y, const float* z,
+                              hn::Vec<DU>* i, hn::Vec<DF>* sv, hn::Vec<DF>* sm) {
+  const DF df;
+  const DU du;
+  const DI di;
+  const auto scale = hn::Set(df, L.scale), half = hn::Set(df, 0.5f), one = hn::Set(df, 1.0f);
+  const float* in[3] = {x, y, z};
+  for (int d = 0; d < 3; ++d) {
+    const auto p = hn::MulAdd(scale, hn::LoadU(df, in[d]), half);
+    const auto fl = hn::Floor(p);
+    i[d] = hn::BitCast(du, hn::ConvertTo(di, fl));
+    auto t = hn::Sub(p, fl);
+    if (smooth) t = hn::Mul(hn::Mul(t, t), hn::Sub(hn::Set(df, 3.0f), hn::Mul(hn::Set(df, 2.0f), t)));
+    sv[d] = t;
+    sm[d] = hn::Sub(one, t);
+  }
+}
+
 // Vectorised corner computation for one level and Lanes(DF) samples: entries and weights of the 8
 // corners, with exactly the operation order of grid_corners() (so results are bit-identical).
 // Valid for Linear/Smoothstep interpolation, Hash or Dense levels, and inputs in [0, 1] (then every
@@ -32,20 +52,9 @@ HWY_INLINE void CornersVec(const GridLevel& L, bool smooth, const float* x, cons
                            CornerBlock& cb) {
   const DF df;
   const DU du;
-  const DI di;
-  const auto scale = hn::Set(df, L.scale), half = hn::Set(df, 0.5f), one = hn::Set(df, 1.0f);
-  const float* in[3] = {x, y, z};
   hn::Vec<DU> i[3];
   hn::Vec<DF> sv[3], sm[3];
-  for (int d = 0; d < 3; ++d) {
-    const auto p = hn::MulAdd(scale, hn::LoadU(df, in[d]), half);
-    const auto fl = hn::Floor(p);
-    i[d] = hn::BitCast(du, hn::ConvertTo(di, fl));
-    auto t = hn::Sub(p, fl);
-    if (smooth) t = hn::Mul(hn::Mul(t, t), hn::Sub(hn::Set(df, 3.0f), hn::Mul(hn::Set(df, 2.0f), t)));
-    sv[d] = t;
-    sm[d] = hn::Sub(one, t);
-  }
+  LatticeCoords(L, smooth, x, y, z, i, sv, sm);
   const auto res = hn::Set(du, L.res), res2 = hn::Set(du, L.res * L.res);
   const auto n = hn::Set(du, L.n_entries), mask = hn::Set(du, L.pow2_mask);
   const auto p1 = hn::Set(du, 2654435761u), p2 = hn::Set(du, 805459861u), c1 = hn::Set(du, 1u);
@@ -213,22 +222,10 @@ struct PairBlock {
 
 HWY_INLINE void DensePairs(const GridLevel& L, bool smooth, const float* x, const float* y, const float* z, size_t s0,
                            PairBlock& pb) {
-  const DF df;
   const DU du;
-  const DI di;
-  const auto scale = hn::Set(df, L.scale), half = hn::Set(df, 0.5f), one = hn::Set(df, 1.0f);
-  const float* in[3] = {x + s0, y + s0, z + s0};
   hn::Vec<DU> i[3];
   hn::Vec<DF> sv[3], sm[3];
-  for (int d = 0; d < 3; ++d) {  // exactly CornersVec's operations
-    const auto p = hn::MulAdd(scale, hn::LoadU(df, in[d]), half);
-    const auto fl = hn::Floor(p);
-    i[d] = hn::BitCast(du, hn::ConvertTo(di, fl));
-    auto t = hn::Sub(p, fl);
-    if (smooth) t = hn::Mul(hn::Mul(t, t), hn::Sub(hn::Set(df, 3.0f), hn::Mul(hn::Set(df, 2.0f), t)));
-    sv[d] = t;
-    sm[d] = hn::Sub(one, t);
-  }
+  LatticeCoords(L, smooth, x + s0, y + s0, z + s0, i, sv, sm);
   const auto res = hn::Set(du, L.res), res2 = hn::Set(du, L.res * L.res);
   const auto nent = hn::Set(du, L.n_entries), mask = hn::Set(du, L.pow2_mask), c1 = hn::Set(du, 1u);
   // Row offsets of y0, y0 + 1 and z0, z0 + 1 (u32 arithmetic: the same sums as CornersVec's products).
