@@ -8,6 +8,7 @@
 #include <cstring>
 #include "vnr/core/gather-inl.h"
 #include "vnr/nn/cpu_kernels.h"
+#include "vnr/nn/lattice-inl.h"
 
 HWY_BEFORE_NAMESPACE();
 namespace vnr::kernels {
@@ -19,24 +20,13 @@ using DU = hn::RebindToUnsigned<DF>;
 using DI = hn::RebindToSigned<DF>;
 constexpr size_t kMaxLanes = 64 / sizeof(float);  // 512-bit vectors at most
 
-// Lattice cell i, weight t of the upper corner (sv) and 1 - t (sm) per axis, for Lanes(DF) samples,
-// with exactly grid_corners()'s operations.
+// Lattice cell i, weight t of the upper corner (sv) and 1 - t (sm) per axis, for Lanes(DF) samples.
 HWY_INLINE void LatticeCoords(const GridLevel& L, bool smooth, const float* x, const float* y, const float* z,
                               hn::Vec<DU>* i, hn::Vec<DF>* sv, hn::Vec<DF>* sm) {
   const DF df;
-  const DU du;
-  const DI di;
-  const auto scale = hn::Set(df, L.scale), half = hn::Set(df, 0.5f), one = hn::Set(df, 1.0f);
   const float* in[3] = {x, y, z};
-  for (int d = 0; d < 3; ++d) {
-    const auto p = hn::MulAdd(scale, hn::LoadU(df, in[d]), half);
-    const auto fl = hn::Floor(p);
-    i[d] = hn::BitCast(du, hn::ConvertTo(di, fl));
-    auto t = hn::Sub(p, fl);
-    if (smooth) t = hn::Mul(hn::Mul(t, t), hn::Sub(hn::Set(df, 3.0f), hn::Mul(hn::Set(df, 2.0f), t)));
-    sv[d] = t;
-    sm[d] = hn::Sub(one, t);
-  }
+  for (int d = 0; d < 3; ++d)
+    vnr::HWY_NAMESPACE::LatticeAxis(df, hn::Set(df, L.scale), hn::LoadU(df, in[d]), smooth, &i[d], &sv[d], &sm[d]);
 }
 
 // Vectorised corner computation for one level and Lanes(DF) samples: entries and weights of the 8

@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstring>
 #include <utility>
+#include "vnr/nn/lattice-inl.h"
 #include "vnr/nn/loss.h"
 #include "vnr/nn/network.h"
 #include "vnr/nn/point_eval.h"
@@ -62,19 +63,10 @@ struct LevelLattice {
 HWY_INLINE void SetupLattice(const PointEvalData& d, uint32_t l0, const VF (&pin)[3], bool smooth, LevelLattice& t) {
   const DF df;
   const DU du;
-  const DI di;
-  const VF scale = hn::Load(df, d.lvl_scale + l0), half = hn::Set(df, 0.5f), one = hn::Set(df, 1.0f);
+  const VF scale = hn::Load(df, d.lvl_scale + l0);
   hn::Vec<DU> c[3];
   VF sv[3], sm[3];
-  for (int a = 0; a < 3; ++a) {  // grid_corners(): p = fma(scale, x, 0.5), cell floor(p), t = p - floor(p)
-    const VF p = hn::MulAdd(scale, pin[a], half);
-    const VF fl = hn::Floor(p);
-    c[a] = hn::BitCast(du, hn::ConvertTo(di, fl));
-    VF tt = hn::Sub(p, fl);
-    if (smooth) tt = hn::Mul(hn::Mul(tt, tt), hn::Sub(hn::Set(df, 3.0f), hn::Mul(hn::Set(df, 2.0f), tt)));
-    sv[a] = tt;
-    sm[a] = hn::Sub(one, tt);
-  }
+  for (int a = 0; a < 3; ++a) vnr::HWY_NAMESPACE::LatticeAxis(df, scale, pin[a], smooth, &c[a], &sv[a], &sm[a]);
   const auto m1 = hn::Load(du, d.lvl_m1 + l0), m2 = hn::Load(du, d.lvl_m2 + l0);
   const hn::Vec<DU> x[2] = {c[0], hn::Add(c[0], hn::Set(du, 1u))};
   const auto y0 = hn::Mul(c[1], m1), z0 = hn::Mul(c[2], m2);

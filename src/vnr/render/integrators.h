@@ -80,12 +80,12 @@ VNR_HD VNR_INLINE bool step_begin(const RenderParams& p, Vec3f org, Vec3f dir, f
   return true;
 }
 
-// Makes sure the ray has a non-empty macro-cell to step in: transparent cells are skipped; inside a
-// cell with max opacity mu the step is s1 + (s2 - s1) * |min(max(mu, min_mu), 1) - 1|^2 (B.7;
-// adaptive = false forces s1 = s2 = fixed_step). False once the ray has left the volume.
 // Distances below this are no step (a cell the ray only grazes; the end of a used-up cell).
 VNR_HD VNR_INLINE float step_eps(float fixed_step) { return 1e-5f * fixed_step; }
 
+// Makes sure the ray has a non-empty macro-cell to step in: transparent cells are skipped; inside a
+// cell with max opacity mu the step is s1 + (s2 - s1) * |min(max(mu, min_mu), 1) - 1|^2 (B.7;
+// adaptive = false forces s1 = s2 = fixed_step). False once the ray has left the volume.
 VNR_HD VNR_INLINE bool step_segment(const RenderParams& p, StepState& s, bool adaptive, float fixed_step) {
   const float eps = step_eps(fixed_step);
   if (s.seg_end - s.t > eps) return true;  // still inside the cached cell

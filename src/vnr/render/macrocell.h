@@ -25,14 +25,14 @@ struct MacroCellView {
   Vec3f inv_cell_world{1.0f / 16, 1.0f / 16, 1.0f / 16};
 };
 
-// The largest opacity a transfer function (table of n entries over the window [tf_lo, tf_lo + tf_w])
-// gives to values in [lo, hi] (B.6: table entries floor(lo*(N-1)+0.5)-1 .. floor(hi*(N-1)+0.5)+1,
-// clamped); 0 for an empty range (lo > hi). Single-source: MacroCells::update and the GPU's recompute.
-// The nearest table entry of a normalised value.
+// The nearest table entry of a normalised value (a table of n entries over [tf_lo, tf_lo + tf_w]).
 VNR_HD VNR_INLINE int tf_nearest_entry(int n, float tf_lo, float tf_w, float u) {
   const float x = tf_w > 0 ? clampf((u - tf_lo) / tf_w, 0.0f, 1.0f) : 0.0f;
   return int(floorf(x * float(n - 1) + 0.5f));
 }
+// The largest opacity that transfer function gives to values in [lo, hi] (B.6: table entries
+// floor(lo*(N-1)+0.5)-1 .. floor(hi*(N-1)+0.5)+1, clamped); 0 for an empty range (lo > hi).
+// Single-source: MacroCells::update and the GPU's recompute.
 VNR_HD VNR_INLINE float macrocell_max_opacity(const Vec4f* table, int n, float tf_lo, float tf_w, float lo, float hi) {
   if (lo > hi) return 0.0f;
   int a = tf_nearest_entry(n, tf_lo, tf_w, lo) - 1, b = tf_nearest_entry(n, tf_lo, tf_w, hi) + 1;

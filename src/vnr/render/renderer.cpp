@@ -33,7 +33,7 @@ const char* render_mode_name(RenderMode m) {
 const char* render_strategy_name(RenderStrategy s) { return s == RenderStrategy::InShader ? "inshader" : "streaming"; }
 
 RenderParams make_render_params(Int3 dims, Vec3f box, const MacroCells& mc, const TransferFunction& tf,
-                                const RenderOptions& opt) {
+                                const Camera& cam, const RenderOptions& opt) {
   if (opt.width < 1 || opt.height < 1 || int64_t(opt.width) * opt.height > (int64_t(1) << 30))
     fail("invalid image size {}x{}", opt.width, opt.height);
   if (!(opt.step > 0) || !std::isfinite(opt.step)) fail("the step must be a positive number (got {})", opt.step);
@@ -56,11 +56,11 @@ RenderParams make_render_params(Int3 dims, Vec3f box, const MacroCells& mc, cons
   p.shade = opt.shade;
   // one voxel, in normalised coordinates
   p.grad_h = Vec3f{1.0f / float(dims.x), 1.0f / float(dims.y), 1.0f / float(dims.z)};
-  p.light_dir = normalize(opt.light.direction);
   p.light_color = opt.light.color;
   p.background = opt.background;
   p.density_scale = opt.density_scale;
   p.seed = opt.seed;
+  set_render_camera(p, cam, opt);
   return p;
 }
 
@@ -85,9 +85,7 @@ Image FrameRenderer::render(int frames, RenderStats* stats) {
 
 Renderer::Renderer(const Field& field, Vec3f box, const MacroCells& mc, const TransferFunction& tf, const Camera& cam,
                    const RenderOptions& opt)
-    : field_(field), opt_(opt), params_(make_render_params(field.dims(), box, mc, tf, opt)) {
-  set_camera(cam);
-}
+    : field_(field), opt_(opt), params_(make_render_params(field.dims(), box, mc, tf, cam, opt)) {}
 
 void Renderer::set_camera(const Camera& cam) { set_render_camera(params_, cam, opt_); }
 

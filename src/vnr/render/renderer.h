@@ -63,11 +63,11 @@ struct RenderStats {
 void accumulate_frame(Image& acc, const Image& frame, int index);
 
 // Validates the options and fills the per-ray parameters (pointers into tf and mc: host memory) for a
-// field of `dims` voxels in a box of world size `box`; the camera with set_render_camera.
+// field of `dims` voxels in a box of world size `box`, seen from cam.
 RenderParams make_render_params(Int3 dims, Vec3f box, const MacroCells& mc, const TransferFunction& tf,
-                                const RenderOptions& opt);
-// The camera frame for the image size of opt, and the light flip of B.8 (the original turns the light
-// to the viewer's side when it points away from the camera).
+                                const Camera& cam, const RenderOptions& opt);
+// A new view: the camera frame for the image size of opt, and the light flip of B.8 (the original
+// turns the light to the viewer's side when it points away from the camera).
 void set_render_camera(RenderParams& p, const Camera& cam, const RenderOptions& opt);
 
 // A renderer on some backend: the CPU's Renderer below, or the GPU's (render_cuda/gpu_renderer.h).

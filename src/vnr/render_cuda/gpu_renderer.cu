@@ -482,8 +482,7 @@ struct GpuRenderer::Impl {
   Impl(const Field& field, Vec3f b, const MacroCells& mc, const TransferFunction& tf, const Camera& cam,
        const RenderOptions& o, cuda::MlpPath mlp)
       : opt(o), box(b) {
-    p = make_render_params(field.dims(), box, mc, tf, opt);
-    set_render_camera(p, cam, opt);
+    p = make_render_params(field.dims(), box, mc, tf, cam, opt);
     if (auto* g = dynamic_cast<const GridField*>(&field)) {
       const GridView& hv = g->view();
       const size_t voxels = size_t(hv.nx) * hv.ny * hv.nz;
