@@ -8,6 +8,8 @@
 #   sh bench/gpu.sh OUTDIR
 #
 # Environment (all optional):
+#   VNR_CUDA_ARCH  CMAKE_CUDA_ARCHITECTURES of the build (default: the project's list; 90 builds for Hopper
+#                alone, several times faster)
 #   VNR_STAGES   which stages to run, of "tests sanitize bench render" (default: all; the build always
 #                runs, incrementally), so the work can be split over several calls of a time-limited
 #                machine that keeps build-gpu between them
@@ -32,10 +34,23 @@ want() { case "$STAGES" in *" $1 "*) return 0 ;; esac; return 1; }
 DATA=${VNR_DATA:-../shared/data}
 if [ ! -d "$DATA" ] && [ -d .data ]; then DATA=.data; fi
 CMAKE_EXTRA=""
-if [ ! -f /usr/include/nlohmann/json.hpp ] && [ -d .debs ]; then
+missing=""
+for h in nlohmann/json.hpp CLI/CLI.hpp fmt/format.h png.h zlib.h hwy/highway.h gtest/gtest.h; do
+  [ -f "/usr/include/$h" ] || missing="$missing $h"
+done
+if [ -n "$missing" ] && [ -d .debs ]; then
+  echo "unpacking .debs (missing:$missing)"
   mkdir -p /tmp/vnr-deps
   for f in .debs/*.deb; do dpkg -x "$f" /tmp/vnr-deps; done
-  CMAKE_EXTRA="-DCMAKE_PREFIX_PATH=/tmp/vnr-deps/usr -DCMAKE_CXX_FLAGS=-I/tmp/vnr-deps/usr/include"
+  # zlib1g-dev's libz.so points at Debian 12's absolute /lib/x86_64-linux-gnu/libz.so.1.2.13; aim it at
+  # whichever libz.so.1 this machine has
+  z=/tmp/vnr-deps/usr/lib/x86_64-linux-gnu/libz.so
+  if [ ! -e "$z" ]; then
+    for sys in /lib/x86_64-linux-gnu/libz.so.1 /usr/lib/x86_64-linux-gnu/libz.so.1 /usr/lib64/libz.so.1; do
+      if [ -e "$sys" ]; then ln -sf "$sys" "$z"; break; fi
+    done
+  fi
+  CMAKE_EXTRA="-DCMAKE_PREFIX_PATH=/tmp/vnr-deps/usr -DCMAKE_CXX_FLAGS=-I/tmp/vnr-deps/usr/include -DCMAKE_CUDA_FLAGS=-I/tmp/vnr-deps/usr/include"
   export LD_LIBRARY_PATH="/tmp/vnr-deps/usr/lib/x86_64-linux-gnu:${LD_LIBRARY_PATH:-}"
 fi
 export PATH="/usr/local/cuda/bin:$PATH"
@@ -44,6 +59,7 @@ export PATH="/usr/local/cuda/bin:$PATH"
 echo "== configure and build (-j$(nproc))"
 # shellcheck disable=SC2086
 cmake -S . -B build-gpu -G Ninja -DCMAKE_BUILD_TYPE=Release -DVNR_CUDA=ON -DVNR_BUILD_BENCH=OFF $CMAKE_EXTRA \
+  ${VNR_CUDA_ARCH:+-DCMAKE_CUDA_ARCHITECTURES=$VNR_CUDA_ARCH} \
   > "$OUT/configure.log" 2>&1 || { tail -30 "$OUT/configure.log"; exit 1; }
 start=$(date +%s)
 cmake --build build-gpu -j"$(nproc)" > "$OUT/build.log" 2>&1 || { tail -40 "$OUT/build.log"; exit 1; }
@@ -54,15 +70,25 @@ $VNR info | tee "$OUT/info.txt"
 status=0
 if want tests; then
   echo "== gpu tests"
-  ctest --test-dir build-gpu -L gpu --output-on-failure > "$OUT/gpu_tests.log" 2>&1 || status=1
+  ctest --test-dir build-gpu -L gpu --timeout 240 --output-on-failure > "$OUT/gpu_tests.log" 2>&1 || status=1
   tail -5 "$OUT/gpu_tests.log"
 fi
 if want sanitize; then
   echo "== compute-sanitizer"
+  # racecheck: GpuTrainer repeats GpuGradient's kernels for 500 steps, too slow under the tool. cuBLAS's own
+  # split-K GEMM kernels (nvjet_*, the weight gradients) report shared-memory hazards of their own; they are
+  # listed in the log but only a hazard in vnr's kernels fails the stage. (Excluding them with
+  # --kernel-name-exclude made the tool fail with an internal error on CUDA 13.0.)
   for tool in memcheck racecheck; do
     for t in test_gpu test_gpu_render; do
-      compute-sanitizer --tool $tool --error-exitcode 9 build-gpu/$t > "$OUT/sanitizer_${tool}_$t.log" 2>&1 || status=1
-      tail -2 "$OUT/sanitizer_${tool}_$t.log"
+      log="$OUT/sanitizer_${tool}_$t.log"
+      filter=""
+      [ $tool = racecheck ] && [ $t = test_gpu ] && filter="--gtest_filter=-GpuTrainer.*"
+      compute-sanitizer --tool $tool build-gpu/$t $filter > "$log" 2>&1 || status=1
+      ours=$(grep -E '(Invalid|Race reported|Error:)' "$log" | grep -vc 'nvjet' || true)
+      theirs=$(grep -c 'Race reported.*nvjet' "$log" || true)
+      [ "$ours" = 0 ] || status=1
+      echo "$tool $t: $ours reports in vnr's kernels, $theirs in cuBLAS's; $(grep -E 'PASSED|FAILED' "$log" | tail -1)"
     done
   done
 fi

@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cub/cub.cuh>
+#include "vnr/cuda/grid_device.cuh"
 #include "vnr/cuda/network.cuh"
 #include "vnr/nn/loss.h"
 #include "vnr/render/integrators.h"
@@ -47,16 +48,16 @@ struct GridWarpField {
 
 // The grid encoding of one point into one row of halves (the encode kernel's values, one thread doing
 // every level), pad columns zeroed.
-__device__ inline void encode_row(const GridLayout& g, const uint16_t* table, float x, float y, float z, __half* row,
+__device__ inline void encode_row(const GridLayout& g, const __half* table, float x, float y, float z, __half* row,
                                   int in_pad) {
   const int F = int(g.n_features), L = int(g.n_levels);
   for (int l = 0; l < L; ++l) {
     float out[8];
     switch (F) {
-      case 1: grid_level_forward<1>(g.levels[l], g.interpolation, table, x, y, z, out, 1); break;
-      case 2: grid_level_forward<2>(g.levels[l], g.interpolation, table, x, y, z, out, 1); break;
-      case 4: grid_level_forward<4>(g.levels[l], g.interpolation, table, x, y, z, out, 1); break;
-      default: grid_level_forward<8>(g.levels[l], g.interpolation, table, x, y, z, out, 1); break;
+      case 1: cuda::grid_level_forward_half<1>(g.levels[l], g.interpolation, table, x, y, z, out); break;
+      case 2: cuda::grid_level_forward_half<2>(g.levels[l], g.interpolation, table, x, y, z, out); break;
+      case 4: cuda::grid_level_forward_half<4>(g.levels[l], g.interpolation, table, x, y, z, out); break;
+      default: cuda::grid_level_forward_half<8>(g.levels[l], g.interpolation, table, x, y, z, out); break;
     }
     for (int f = 0; f < F; ++f) row[l * F + f] = __float2half_rn(out[f]);
   }
@@ -69,7 +70,7 @@ __device__ inline void encode_row(const GridLayout& g, const uint16_t* table, fl
 // the fused kernels' arithmetic), skipping a half whose lanes are all idle.
 struct NetWarpField {
   GridLayout grid;
-  const uint16_t* table;   // half grid parameters
+  const __half* table;     // half grid parameters
   const __half* weights;   // half MLP weights in GPU memory (tcnn order)
   MlpDims d;
   int out_act;
@@ -513,7 +514,7 @@ struct GpuRenderer::Impl {
     NetWarpField& f = netf;
     f.grid = net.grid();
     f.weights = dnet->half_params();
-    f.table = reinterpret_cast<const uint16_t*>(dnet->half_params() + net.mlp().n_params);
+    f.table = dnet->half_params() + net.mlp().n_params;
     f.d = d;
     f.out_act = int(net.config().network.output_activation);
     f.ld = std::max(d.in_pad, d.width) + 8;  // +8 halves: fewer shared-memory bank conflicts
