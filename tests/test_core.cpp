@@ -3,6 +3,7 @@
 #include "vnr/core/dtype.h"
 #include "vnr/core/error.h"
 #include "vnr/core/half.h"
+#include "vnr/core/progress.h"
 #include "vnr/core/rng.h"
 
 using namespace vnr;
@@ -46,4 +47,15 @@ TEST(DType, ParseNamesAndErrors) {
   } catch (const Error& e) {
     EXPECT_NE(std::string(e.what()).find("allowed: int8"), std::string::npos);
   }
+}
+
+// The first progress update of `vnr bench infer --device cuda` came after the CUDA context's start-up
+// and extrapolated "ETA 967s" for a 3-second run: no estimate before 1 % of the work and half a second.
+TEST(Progress, EtaIsWithheldUntilTheRateMeansSomething) {
+  EXPECT_EQ(eta_text(0.001, 1.0), "ETA ?");   // 0.1 % done
+  EXPECT_EQ(eta_text(0.2, 0.1), "ETA ?");     // too early
+  EXPECT_EQ(eta_text(0.25, 3.0), "ETA 9s");   // 3 s for a quarter: 9 s left
+  EXPECT_EQ(eta_text(0.5, 10.0), "ETA 10s");
+  EXPECT_EQ(eta_text(1.0, 10.0), "ETA 0s");
+  EXPECT_EQ(eta_text(1.5, 10.0), "ETA 0s");   // done beyond the total
 }

@@ -22,4 +22,7 @@ private:
 
 double seconds_since(std::chrono::steady_clock::time_point t0);
 
+// "ETA 12s" from the fraction done and the seconds elapsed; "ETA ?" while too little is done to say.
+std::string eta_text(double frac, double elapsed);
+
 }  // namespace vnr
