@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 #include <algorithm>
 #include <cmath>
+#include "render_support.h"
 #include "test_support.h"
 #include "vnr/cuda/cuda.h"
 #include "vnr/render/renderer.h"
@@ -111,12 +112,7 @@ TEST(GpuMacroCells, OnlineRangesOfTheGpuTrainerEqualTheCpuTrainers) {
 // everywhere, so its mean is tested.
 TEST(GpuRender, GridImagesMatchTheCpu) {
   REQUIRE_GPU();
-  Volume vol = synth(Int3{40, 36, 32});
-  GridField field(view_of(vol));
-  TransferFunction tf = tf_preset("ramp");
-  MacroCells mc(value_ranges_from_grid(view_of(vol), 8), box_of(vol));
-  mc.update(tf);
-  Camera cam = orbit_camera(box_of(vol), 30, 20, 30);
+  const GridScene scene;
   for (RenderMode mode : {RenderMode::RayMarch, RenderMode::Shadow, RenderMode::PathTrace})
     for (bool shade : {false, true}) {
       if (shade && mode != RenderMode::RayMarch) continue;
@@ -132,8 +128,11 @@ TEST(GpuRender, GridImagesMatchTheCpu) {
         const std::string what = std::string(render_mode_name(mode)) + (shade ? " shaded " : " ") +
                                  render_strategy_name(strategy);
         RenderStats cs, gs;
-        const Image cpu = renderer_on(Device::Cpu, field, vol, mc, tf, cam, o)->render(4, &cs);
-        const Image gpu = renderer_on(Device::Cuda, field, vol, mc, tf, cam, o)->render(4, &gs);
+        auto render_on = [&](Device dev, RenderStats* st) {
+          return renderer_on(dev, scene.field, scene.vol, scene.mc, scene.tf, scene.cam, o)->render(4, st);
+        };
+        const Image cpu = render_on(Device::Cpu, &cs);
+        const Image gpu = render_on(Device::Cuda, &gs);
         ASSERT_EQ(gpu.width, cpu.width);
         ASSERT_EQ(gpu.height, cpu.height);
         if (mode == RenderMode::PathTrace) {

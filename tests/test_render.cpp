@@ -14,6 +14,7 @@
 #include "vnr/train/trainer.h"
 #include "vnr/volume/value_range_grid.h"
 #include "vnr/volume/writer.h"
+#include "render_support.h"
 #include "test_support.h"
 
 using namespace vnr;
@@ -203,12 +204,7 @@ TEST(PathTrace, HomogeneousMediumMatchesTheAnalyticTransmittance) {
 }
 
 TEST(Strategies, StreamingAndInShaderGiveTheSameImageOnTheGrid) {
-  Volume vol = synth(Int3{40, 36, 32});
-  GridField field(view_of(vol));
-  TransferFunction tf = tf_preset("ramp");
-  MacroCells mc(value_ranges_from_grid(view_of(vol), 8), box_of(vol));
-  mc.update(tf);
-  Camera cam = orbit_camera(box_of(vol), 30, 20, 30);
+  const GridScene scene;
   for (RenderMode mode : {RenderMode::RayMarch, RenderMode::Shadow, RenderMode::PathTrace}) {
     for (bool shade : {false, true}) {
       if (shade && mode != RenderMode::RayMarch) continue;
@@ -222,7 +218,7 @@ TEST(Strategies, StreamingAndInShaderGiveTheSameImageOnTheGrid) {
         o.height = 40;
         o.seed = 5;
         o.samples_per_iteration = 3;
-        Renderer r(field, box_of(vol), mc, tf, cam, o);
+        Renderer r(scene.field, box_of(scene.vol), scene.mc, scene.tf, scene.cam, o);
         img[s] = r.render(2);
       }
       double sum = 0;

@@ -40,7 +40,7 @@ constexpr int kMaxWarps = 8;  // warps per block at most; each owns 16 samples
 // warps share a load; on an H100, 8 against 4 warps: paper config (width 64) training 108.5 -> 114.2 M
 // samples/s and resident inference 813 -> 837 M/s; small config (width 16) training 288 -> 280, within
 // noise, so narrow networks keep 4.
-__host__ __device__ inline int fused_warps(const MlpDims& d) { return d.width >= 64 ? 8 : 4; }
+inline int fused_warps(const MlpDims& d) { return d.width >= 64 ? 8 : 4; }
 
 constexpr int kSkew = 8;   // halves of padding per shared-memory row (bank conflicts); ldm stays a multiple of 8
 
