@@ -10,6 +10,7 @@
 #define VNR_BENCH_PEAK 1
 #endif
 
+#include "vnr/nn/mlp_bf16.h"
 #include "vnr/nn/mlp_kernels.h"
 
 namespace k = vnr::kernels;
@@ -66,6 +67,31 @@ void BM_BwdWeights(benchmark::State& state) {
   set_flops(state, rows, cols, n);
 }
 
+// The bf16 forward kernel (inference), same shapes: hidden rows give bf16 pairs with ReLU, a single
+// output row fp32 values.
+void BM_FwdBf16(benchmark::State& state) {
+  if (!k::bf16_supported()) {
+    state.SkipWithError("no AVX512-BF16");
+    return;
+  }
+  const int rows = int(state.range(0)), cols = int(state.range(1)), n = int(state.range(2));
+  const int kp = (cols + 1) / 2;
+  auto W = random_buf(size_t(rows) * cols, 1), X = random_buf(size_t(cols) * n, 2);
+  auto Wp = hwy::AllocateAligned<uint32_t>(size_t(rows) * kp), Xp = hwy::AllocateAligned<uint32_t>(size_t(kp) * n);
+  auto Y = hwy::AllocateAligned<float>(size_t(rows) * n);
+  k::weights_to_bf16_pairs(W.get(), rows, cols, cols, Wp.get());
+  k::activations_to_bf16_pairs(X.get(), cols, n, Xp.get());
+  for (auto _ : state) {
+    if (rows % 2 == 0)
+      k::matmul_fwd_bf16_relu(Wp.get(), rows, kp, Xp.get(), reinterpret_cast<uint32_t*>(Y.get()), n);
+    else
+      k::matmul_fwd_bf16_linear(Wp.get(), rows, kp, Xp.get(), Y.get(), n);
+    benchmark::DoNotOptimize(Y.get());
+    benchmark::ClobberMemory();
+  }
+  set_flops(state, rows, cols, n);
+}
+
 // Square hidden layers at widths 16..128 with n = 256, plus the paper's input (64 -> 64 is square)
 // and output (64 -> 1) layers and a larger chunk.
 void Shapes(benchmark::internal::Benchmark* b) {
@@ -93,24 +119,50 @@ __attribute__((target("avx512f"), noinline)) float fma_peak_loop(long iters) {
   return _mm512_reduce_add_ps(s);
 }
 
-void BM_FmaPeak(benchmark::State& state) {
-  if (!__builtin_cpu_supports("avx512f")) {
-    state.SkipWithError("no AVX-512");
+// Times `loop` (kIters iterations of 24 independent vector ops of flop_per_op each).
+template <class Loop>
+void run_peak(benchmark::State& state, bool supported, Loop loop, double flop_per_op) {
+  if (!supported) {
+    state.SkipWithError("instruction not supported on this CPU");
     return;
   }
   constexpr long kIters = 4096;
   long iters = kIters;
   for (auto _ : state) {
     benchmark::DoNotOptimize(iters);  // the loop is a pure function: keep it from being hoisted
-    benchmark::DoNotOptimize(fma_peak_loop(iters));
+    benchmark::DoNotOptimize(loop(iters));
   }
   state.counters["GFLOP/s"] = benchmark::Counter(
-      kIters * 24 * 32.0 * double(state.iterations()) * 1e-9, benchmark::Counter::kIsRate);
+      kIters * 24 * flop_per_op * double(state.iterations()) * 1e-9, benchmark::Counter::kIsRate);
 }
+
+void BM_FmaPeak(benchmark::State& state) { run_peak(state, __builtin_cpu_supports("avx512f"), fma_peak_loop, 32.0); }
 BENCHMARK(BM_FmaPeak);
+
+// The same loop with vdpbf16ps (two multiply-adds per fp32 lane): the ceiling of the bf16 kernels.
+__attribute__((target("avx512f,avx512bw,avx512bf16"), noinline)) float bf16_peak_loop(long iters) {
+  __m512 acc[24];
+#pragma GCC unroll 24
+  for (int j = 0; j < 24; ++j) acc[j] = _mm512_set1_ps(0.001f * j);
+  const __m512bh a = (__m512bh)_mm512_set1_epi16(0x3f80), b = (__m512bh)_mm512_set1_epi16(0x3380);
+  for (long i = 0; i < iters; ++i) {
+#pragma GCC unroll 24
+    for (int j = 0; j < 24; ++j) acc[j] = _mm512_dpbf16_ps(acc[j], a, b);
+  }
+  __m512 s = acc[0];
+#pragma GCC unroll 24
+  for (int j = 1; j < 24; ++j) s = _mm512_add_ps(s, acc[j]);
+  alignas(64) float lanes[16];
+  _mm512_store_ps(lanes, s);
+  return lanes[0];
+}
+
+void BM_Bf16DotPeak(benchmark::State& state) { run_peak(state, k::bf16_supported(), bf16_peak_loop, 64.0); }
+BENCHMARK(BM_Bf16DotPeak);
 #endif
 
 BENCHMARK(BM_Fwd)->Apply(Shapes);
+BENCHMARK(BM_FwdBf16)->Apply(Shapes);
 BENCHMARK(BM_BwdData)->Apply(Shapes);
 BENCHMARK(BM_BwdWeights)->Apply(Shapes);
 

@@ -1,7 +1,8 @@
 // Single-thread throughput of PointEvaluator::eval (the in-shader renderer's per-sample query) next
 // to batched Network::infer on the same points, so the ratio is visible. Counters: items_per_second
 // = points/s; per_pt = time per point.
-//   Models: Paper (HashGrid 8x8, 2^19, MLP 64x4), Ngp (HashGrid 16x2, 2^19, MLP 64x4), Small (4x2, 16x2).
+//   Models: Paper (HashGrid 8x8, 2^19, MLP 64x4), Ngp (HashGrid 16x2, 2^19, MLP 64x4), Small (4x2, 16x2);
+//   3-5: the same with bf16 inference.
 //   Points: Random (uniform in the cube: every corner a cold line in the large levels) or Ray
 //   (ray-marching order: 256 steps of 1/256 along random rays, so consecutive queries share lines).
 //   Encode / Mlp variants time the two halves of eval() alone (Mlp on precomputed encodings).
@@ -15,6 +16,7 @@
 #include <vector>
 
 #include "vnr/core/parallel.h"
+#include "vnr/nn/mlp_bf16.h"
 #include "vnr/nn/network.h"
 #include "vnr/nn/point_eval.h"
 
@@ -38,16 +40,18 @@ Json config_of(int model) {
 }
 
 // One network per model, initialised once (tcnn init, grid U[-1, 1] so features are O(1)).
+// Models 3-5 are models 0-2 with bf16 inference (Precision::BF16, AVX512-BF16 CPUs).
 const Network& model_net(int model) {
-  static std::unique_ptr<Network> nets[3];
+  static std::unique_ptr<Network> nets[6];
   if (!nets[model]) {
-    nets[model] = std::make_unique<Network>(config_of(model));
+    nets[model] = std::make_unique<Network>(config_of(model % 3));
     Network& net = *nets[model];
     net.init_params(1);
     std::mt19937 gen(2);
     std::uniform_real_distribution<float> U(-1.f, 1.f);
     for (uint64_t i = 0; i < net.grid_params(); ++i) net.grid_table()[i] = U(gen);
     net.sync_half_table();
+    if (model >= 3) net.set_inference_precision(parse_precision("bf16"));
   }
   return *nets[model];
 }
@@ -171,6 +175,8 @@ void Models(benchmark::internal::Benchmark* b) {
   for (int m : {0, 1, 2})
     for (int ray : {0, 1})
       for (int pf : {0, 1}) b->Args({m, ray, 1, pf});
+  if (kernels::bf16_supported())
+    for (int m : {3, 4, 5}) b->Args({m, 1, 1, 1});
   b->Args({0, 0, 0, 0});
   b->Args({1, 0, 0, 0});
   b->Unit(benchmark::kMillisecond);
@@ -180,6 +186,8 @@ void ModelsInfer(benchmark::internal::Benchmark* b) {
   b->ArgNames({"model", "ray"});
   for (int m : {0, 1, 2})
     for (int ray : {0, 1}) b->Args({m, ray});
+  if (kernels::bf16_supported())
+    for (int m : {3, 4, 5}) b->Args({m, 1});
   b->Unit(benchmark::kMillisecond);
 }
 
@@ -187,6 +195,9 @@ void ModelsMlp(benchmark::internal::Benchmark* b) {
   b->ArgNames({"model", "ray", "skip"});
   for (int m : {0, 1, 2})
     for (int skip : {1, 0}) b->Args({m, 0, skip});
+  if (kernels::bf16_supported())
+    for (int m : {3, 4, 5})
+      for (int skip : {1, 0}) b->Args({m, 0, skip});
   b->Unit(benchmark::kMicrosecond);
 }
 

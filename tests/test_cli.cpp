@@ -346,3 +346,42 @@ TEST(Cli, InfoReportsMacroCells) {
   EXPECT_NE(run("info " + without).out.find("macro-cells: none stored"), std::string::npos);
   EXPECT_TRUE(Json::parse(run("info --json " + without).out)["macrocells"].is_null());
 }
+
+// --precision: bf16 inference (AVX512-BF16 CPUs) gives the fp32 PSNR to within a few hundredths of a
+// dB and nearly the same image; reports say which arithmetic ran; unknown values are refused.
+TEST(Cli, InferencePrecision) {
+  const std::string d = temp_dir("vnr_cli");
+  ASSERT_EQ(run("synth marschner-lobb --dims 32,32,32 -o " + d + "/p.json --force").code, 0);
+  ASSERT_EQ(run("train " + d + "/p.json -o " + d + "/p.vnr --config paper --target-ratio 4 --steps 60 --batch 8192 -q")
+                .code,
+            0);
+  Result bad = run("eval " + d + "/p.vnr " + d + "/p.json --precision fp16");
+  EXPECT_NE(bad.code, 0);
+  EXPECT_NE(bad.err.find("fp16"), std::string::npos) << bad.err;
+  Result e32 = run("eval " + d + "/p.vnr " + d + "/p.json --precision fp32 --no-ssim --report " + d + "/e32.json");
+  ASSERT_EQ(e32.code, 0) << e32.err;
+  EXPECT_EQ(parse_json_file(d + "/e32.json")["precision"], "fp32");
+  Result ea = run("eval " + d + "/p.vnr " + d + "/p.json --no-ssim --report " + d + "/ea.json");  // auto
+  ASSERT_EQ(ea.code, 0) << ea.err;
+  const bool bf16 = parse_json_file(d + "/ea.json")["precision"] == "bf16";
+  if (!bf16) {
+    Result no = run("eval " + d + "/p.vnr " + d + "/p.json --precision bf16");
+    EXPECT_NE(no.code, 0);
+    EXPECT_NE(no.err.find("AVX512-BF16"), std::string::npos) << no.err;
+    GTEST_SKIP() << "this CPU has no AVX512-BF16: auto chose fp32, bf16 is refused";
+  }
+  const double p32 = parse_json_file(d + "/e32.json")["psnr"].get<double>();
+  const double p16 = parse_json_file(d + "/ea.json")["psnr"].get<double>();
+  EXPECT_GT(p32, 20.0);
+  EXPECT_NEAR(p16, p32, 0.05);
+  // Both strategies in bf16 against the fp32 streaming image.
+  ASSERT_EQ(run("render " + d + "/p.vnr -o " + d + "/r32.pfm --size 48x48 -q --precision fp32").code, 0);
+  for (const char* strategy : {"streaming", "inshader"}) {
+    Result r = run("render " + d + "/p.vnr -o " + d + "/r16.png --size 48x48 -q --precision bf16 --strategy " +
+                   std::string(strategy) + " --reference " + d + "/r32.pfm --report " + d + "/r16.json");
+    ASSERT_EQ(r.code, 0) << r.err;
+    Json rep = parse_json_file(d + "/r16.json");
+    EXPECT_EQ(rep["precision"], "bf16");
+    EXPECT_GT(rep["image_psnr"].get<double>(), 40.0) << strategy;
+  }
+}

@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "vnr/nn/mlp_bf16.h"
 #include "vnr/nn/mlp_kernels.h"
 
 namespace k = vnr::kernels;
@@ -296,5 +297,97 @@ TEST(MlpKernels, Fused16WideForwardMatchesLayerByLayer) {
     }
     vnr::kernels::ref::matmul_fwd(Wout.data(), 1, 16, a.data(), y.data(), n, false);
     for (int s = 0; s < n; ++s) EXPECT_NEAR(fused[s], y[s], 1e-5f) << n_hidden << " " << s;
+  }
+}
+
+// ---- bf16 inference kernels ----
+
+TEST(MlpBf16, RoundsToNearestEven) {
+  EXPECT_EQ(k::to_bf16(1.0f), 0x3f80);
+  EXPECT_EQ(k::to_bf16(-2.0f), 0xc000);
+  // 1 + 2^-8 lies halfway between 1 and 1 + 2^-7: ties go to the even mantissa (1.0)
+  EXPECT_EQ(k::to_bf16(1.0f + 1.0f / 256), 0x3f80);
+  EXPECT_EQ(k::to_bf16(1.0f + 3.0f / 256), 0x3f82);  // halfway, odd below: rounds up
+  EXPECT_EQ(k::to_bf16(1.0f + 1.0f / 256 + 1.0f / 65536), 0x3f81);
+  EXPECT_TRUE(std::isnan(k::from_bf16(k::to_bf16(std::nanf("")))));
+  EXPECT_EQ(k::from_bf16(k::to_bf16(0.15625f)), 0.15625f);  // exactly representable
+}
+
+// The vector kernels against the double-precision reference on the same bf16 operands: the only
+// difference is fp32 accumulation (and, for pairs, one bf16 rounding of a value that may sit on
+// the other side of a rounding boundary), bounded relative to the sum of |products|.
+TEST(MlpBf16, ForwardMatchesReference) {
+  if (!k::bf16_supported()) GTEST_SKIP() << "this CPU has no AVX512-BF16";
+  std::mt19937 rng(7);
+  for (int rows : {1, 2, 3, 4, 6, 8, 14, 16, 64}) {
+    for (int K : {1, 2, 5, 16, 64, 80}) {
+      for (int n : {16, 48, 64, 256}) {
+        SCOPED_TRACE(testing::Message() << rows << " x " << K << ", n = " << n);
+        const int kp = (K + 1) / 2;
+        std::vector<float> W = random_vec(size_t(rows) * K, rng), X = random_vec(size_t(K) * n, rng);
+        std::vector<uint32_t> Wp(size_t(rows) * kp), Xp(size_t(kp) * n);
+        k::weights_to_bf16_pairs(W.data(), rows, K, K, Wp.data());
+        k::activations_to_bf16_pairs(X.data(), K, n, Xp.data());
+        for (int j = 0; j < kp; ++j)  // the vector conversion equals the scalar rounding
+          for (int s = 0; s < n; ++s) {
+            const uint32_t p = Xp[size_t(j) * n + s];
+            ASSERT_EQ(p & 0xffffu, k::to_bf16(X[size_t(2 * j) * n + s]));
+            ASSERT_EQ(p >> 16, 2 * j + 1 < K ? k::to_bf16(X[size_t(2 * j + 1) * n + s]) : 0u);
+          }
+        // bound on the fp32 accumulation error: K * 2^-24 * sum |products| (<= K for |w|, |x| <= 1)
+        const float tol = float(K) * 6e-8f * float(K) + 1e-7f;
+        std::vector<float> Y(size_t(rows) * n), Yr(Y.size());
+        k::matmul_fwd_bf16_linear(Wp.data(), rows, kp, Xp.data(), Y.data(), n);
+        k::ref::matmul_fwd_bf16_linear(Wp.data(), rows, kp, Xp.data(), Yr.data(), n);
+        for (size_t i = 0; i < Y.size(); ++i) ASSERT_NEAR(Y[i], Yr[i], tol) << i;
+        if (rows % 2) continue;
+        std::vector<uint32_t> P(size_t(rows / 2) * n), Pr(P.size());
+        k::matmul_fwd_bf16_relu(Wp.data(), rows, kp, Xp.data(), P.data(), n);
+        k::ref::matmul_fwd_bf16_relu(Wp.data(), rows, kp, Xp.data(), Pr.data(), n);
+        for (size_t i = 0; i < P.size(); ++i)
+          for (int h = 0; h < 2; ++h) {
+            const float a = k::from_bf16(uint16_t(P[i] >> (16 * h))), b = k::from_bf16(uint16_t(Pr[i] >> (16 * h)));
+            ASSERT_GE(a, 0.0f);
+            ASSERT_NEAR(a, b, std::fabs(b) / 128 + tol) << i;  // one bf16 ulp
+          }
+      }
+    }
+  }
+}
+
+// The in-register 16-wide bf16 forward sums its hidden layers in the same order as the layer-by-layer
+// bf16 kernels (one accumulator per output, pairs in ascending order), so the hidden activations are
+// the same bf16 values; only the output's two accumulator chains round differently (fp32 level).
+TEST(MlpBf16, Fused16WideForwardMatchesLayerByLayer) {
+  if (!k::bf16_supported()) GTEST_SKIP() << "this CPU has no AVX512-BF16";
+  std::mt19937 rng(11);
+  for (int k0 : {8, 7, 16}) {
+    for (int n_mid : {0, 1, 3}) {
+      SCOPED_TRACE(testing::Message() << "k0 = " << k0 << ", " << n_mid << " middle layers");
+      const int n = 64, kp0 = (k0 + 1) / 2;
+      std::vector<float> W0 = random_vec(size_t(16) * k0, rng), X0 = random_vec(size_t(k0) * n, rng);
+      std::vector<uint32_t> W0p(size_t(16) * kp0), Wout(8);
+      k::weights_to_bf16_pairs(W0.data(), 16, k0, k0, W0p.data());
+      std::vector<std::vector<uint32_t>> Wh(n_mid, std::vector<uint32_t>(16 * 8));
+      std::vector<const uint32_t*> whp;
+      for (auto& w : Wh) {
+        std::vector<float> f = random_vec(16 * 16, rng);
+        k::weights_to_bf16_pairs(f.data(), 16, 16, 16, w.data());
+        whp.push_back(w.data());
+      }
+      std::vector<float> wo = random_vec(16, rng);
+      k::weights_to_bf16_pairs(wo.data(), 1, 16, 16, Wout.data());
+      std::vector<float> fused(n), layered(n);
+      k::mlp_forward_16_bf16(W0p.data(), k0, whp.data(), n_mid, Wout.data(), X0.data(), n, fused.data());
+      std::vector<uint32_t> P0(size_t(kp0) * n), A(8 * n), B(8 * n);
+      k::activations_to_bf16_pairs(X0.data(), k0, n, P0.data());
+      k::matmul_fwd_bf16_relu(W0p.data(), 16, kp0, P0.data(), A.data(), n);
+      for (int l = 0; l < n_mid; ++l) {
+        k::matmul_fwd_bf16_relu(whp[l], 16, 8, A.data(), B.data(), n);
+        std::swap(A, B);
+      }
+      k::matmul_fwd_bf16_linear(Wout.data(), 1, 8, A.data(), layered.data(), n);
+      for (int s = 0; s < n; ++s) ASSERT_NEAR(fused[s], layered[s], 1e-5f * (1.0f + std::fabs(layered[s]))) << s;
+    }
   }
 }

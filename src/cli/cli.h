@@ -20,6 +20,8 @@ struct VolumeArgs {
 
 // --device auto|cpu|cuda on train, eval, decode and bench (auto: cuda when a device is visible).
 void add_device_option(CLI::App* app, std::string& device);
+// --precision auto|fp32|bf16 on eval, decode, render and bench infer|render (Network::set_inference_precision).
+void add_precision_option(CLI::App* app, std::string& precision);
 
 Int3 parse_dims(const std::string& s);
 void write_report(const std::string& path, const Json& report);  // atomic; "" = no report
@@ -43,7 +45,7 @@ void add_bench_render(CLI::App& bench);
 struct RenderArgs {
   std::string scene, tf, mode = "raymarch", strategy = "streaming", macrocells, size = "768x768";
   std::string orbit, eye, center, up = "0,1,0", light, background, volume, ray_packets = "on";
-  std::string device = "auto", mlp = "auto";
+  std::string device = "auto", mlp = "auto", precision = "auto";
   float step = 1, step_max = 0, fovy = 30, density = 1;
   uint32_t seed = 0;
   int k = 0, macrocell_size = 16, threads = 0;

@@ -17,7 +17,7 @@ namespace vnr::cli {
 namespace {
 
 struct BenchArgs {
-  std::string what, volume, config = "paper", report, device = "auto", mlp = "auto";
+  std::string what, volume, config = "paper", report, device = "auto", mlp = "auto", precision = "auto";
   double seconds = 10;
   int64_t batch = 65536;
   int threads = 0;
@@ -36,10 +36,17 @@ double mlp_gflops(const Network& net, bool training, double seconds) {
         dout(m.n_out * C, 1e-3f), dW(m.n_params), dX(size_t(m.in_pad) * C), scratch(2 * m.width * C);
     Pcg32 rng(t + 1);
     for (auto& x : X0) x = rng.next_float();
+    const bool bf16 = !training && net.inference_precision() == Precision::BF16;
+    const std::vector<uint32_t> wp = bf16 ? net.bf16_weights() : std::vector<uint32_t>();
+    std::vector<uint32_t> pairs(bf16 ? net.mlp_bf16_scratch(C) : 0);
     auto t0 = std::chrono::steady_clock::now();
     int64_t chunks = 0;
     while (seconds_since(t0) < seconds) {
       for (int r = 0; r < 16; ++r, ++chunks) {
+        if (bf16) {
+          net.mlp_forward_bf16(X0.data(), C, wp.data(), pairs.data(), out.data());
+          continue;
+        }
         net.mlp_forward(X0.data(), C, acts.data(), out.data(), out.data());
         if (training) net.mlp_backward(X0.data(), acts.data(), dout.data(), C, dW.data(), dX.data(), scratch.data());
       }
@@ -140,6 +147,7 @@ void run_bench(const BenchArgs& a) {
   Network net(load_config(a.config));
   net.init_params(1337);
   if (dev == Device::Cuda) return run_bench_cuda(a, vol, net);
+  net.set_inference_precision(parse_precision(a.precision));
   const bool training = a.what == "train";
   std::vector<double> times;
   double phases[3] = {0, 0, 0};
@@ -176,8 +184,9 @@ void run_bench(const BenchArgs& a) {
   const double sps = a.batch / med;
   const double flops = net.flops_forward_per_sample() * (training ? 3.0 : 1.0);
   const double mlp_only = mlp_gflops(net, training, std::min(3.0, std::max(0.5, a.seconds / 4)));
-  std::printf("%s %s: %.3f M samples/s (median of %zu batches of %lld, %.2f ms each; min %.2f, max %.2f)\n",
-              a.what.c_str(), a.config.c_str(), sps / 1e6, times.size(), (long long)a.batch, med * 1e3,
+  std::printf("%s %s%s: %.3f M samples/s (median of %zu batches of %lld, %.2f ms each; min %.2f, max %.2f)\n",
+              a.what.c_str(), a.config.c_str(), net.inference_precision() == Precision::BF16 ? " (bf16)" : "",
+              sps / 1e6, times.size(), (long long)a.batch, med * 1e3,
               *std::min_element(times.begin(), times.end()) * 1e3, *std::max_element(times.begin(), times.end()) * 1e3);
   std::printf("MLP FLOPs: %.1f kFLOP/sample -> %.1f GFLOP/s end to end; MLP kernels alone: %.1f GFLOP/s on %d threads (%s)\n",
               flops / 1e3, flops * sps / 1e9, mlp_only, num_threads(), kernels::simd_target_name());
@@ -198,6 +207,7 @@ void run_bench(const BenchArgs& a) {
                  {"mlp_gflops", mlp_only},
                  {"threads", num_threads()},
                  {"simd", kernels::simd_target_name()},
+                 {"precision", training ? "fp32" : precision_name(net.inference_precision())},
                  {"n_params", net.n_params()}};
   if (training)
     report["phase_ms"] = {{"sample_encode_mlp", phases[0] * 1e3}, {"grid_backward", phases[1] * 1e3},
@@ -222,6 +232,7 @@ void add_bench(CLI::App& app) {
     c->add_option("--threads", a->threads, "CPU threads (default: all cores)");
     c->add_option("--report", a->report, "write a JSON report");
     add_device_option(c, a->device);
+    if (std::string(what) == "infer") add_precision_option(c, a->precision);
     c->add_option("--mlp", a->mlp, "cuda: MLP implementation, auto, fused or cublas")
         ->check(CLI::IsMember({"auto", "fused", "cublas"}))
         ->capture_default_str();

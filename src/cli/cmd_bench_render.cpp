@@ -80,7 +80,7 @@ void add_bench_render(CLI::App& bench) {
   c->callback([a]() {
     set_num_threads(a->r.threads);
     if (a->frames < 1 || a->warmup < 0) fail("--frames must be at least 1 and --warmup at least 0");
-    RenderSource src = open_render_source(a->input, a->r.volume, a->vol);
+    RenderSource src = open_render_source(a->input, a->r.volume, a->vol, parse_precision(a->r.precision));
     RenderSetup setup = make_render_setup(a->r, src);
     MacroCellMode with = a->macrocells.empty() ? default_macrocell_mode(src) : parse_macrocell_mode(a->macrocells);
     if (with == MacroCellMode::Off) with = src.volume ? MacroCellMode::Grid : MacroCellMode::Off;
@@ -132,8 +132,14 @@ void add_bench_render(CLI::App& bench) {
     report["device"] = device_name(setup.device);
     if (setup.device == Device::Cuda) report["gpu"] = cuda::devices().at(0).name;
     report["raw_field_samples_per_second"] = raw;
-    const std::string where = setup.device == Device::Cuda ? cuda::devices().at(0).name
-                                                           : fmt::format("{} threads", num_threads());
+    const bool cpu_net = setup.device == Device::Cpu && src.model;
+    report["precision"] = cpu_net ? Json(precision_name(src.model->net->inference_precision())) : Json(nullptr);
+    const std::string where = setup.device == Device::Cuda
+                                  ? cuda::devices().at(0).name
+                                  : fmt::format("{} threads{}", num_threads(),
+                                                cpu_net ? fmt::format(", {} network", precision_name(
+                                                                                           src.model->net->inference_precision()))
+                                                        : "");
     std::printf("%s (%s field), %dx%d, %s; raw batched field query: %s\n\n", src.description.c_str(),
                 src.field->kind(), setup.options.width, setup.options.height, where.c_str(),
                 raw > 0 ? fmt::format("{:.2f} M samples/s", raw / 1e6).c_str() : "not measured");

@@ -64,6 +64,7 @@ void RenderArgs::add(CLI::App* c) {
   c->add_option("--volume", volume, "ground-truth volume of a model (for --macrocells grid)");
   c->add_option("--threads", threads, "CPU threads (default: all cores)");
   add_device_option(c, device);
+  add_precision_option(c, precision);
   c->add_option("--mlp", mlp, "cuda: MLP of streaming inference, auto, fused or cublas")
       ->check(CLI::IsMember({"auto", "fused", "cublas"}))
       ->capture_default_str();
@@ -153,7 +154,7 @@ void add_render(CLI::App& app) {
     const std::string ext = extension_of(a->output);
     if (ext != ".png" && ext != ".pfm") fail("-o must name a .png or .pfm file, got '{}'", a->output);
     if (a->spp < 1) fail("--spp must be at least 1, got {}", a->spp);
-    RenderSource src = open_render_source(a->input, a->r.volume, a->vol);
+    RenderSource src = open_render_source(a->input, a->r.volume, a->vol, parse_precision(a->r.precision));
     RenderSetup setup = make_render_setup(a->r, src);
     std::optional<Image> reference;
     if (!a->reference.empty()) reference = read_image(a->reference);
@@ -183,6 +184,9 @@ void add_render(CLI::App& app) {
                    {"size", {setup.options.width, setup.options.height}},
                    {"threads", num_threads()},
                    {"device", device_name(setup.device)},
+                   {"precision", setup.device == Device::Cpu && src.model
+                                     ? Json(precision_name(src.model->net->inference_precision()))
+                                     : Json(nullptr)},
                    {"host_syncs", st.host_syncs}};
     std::string cmp;
     if (reference) {

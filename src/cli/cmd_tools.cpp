@@ -24,7 +24,7 @@ void add_eval(CLI::App& app) {
     int64_t sample = 0;
     uint64_t seed = 0;
     bool no_ssim = false, quiet = false;
-    std::string device = "auto";
+    std::string device = "auto", precision = "auto";
     VolumeArgs vol;
   };
   auto a = std::make_shared<Args>();
@@ -43,10 +43,12 @@ void add_eval(CLI::App& app) {
                 "a larger volume is evaluated in streamed z-slabs");
   c->add_flag("-q,--quiet", a->quiet, "no progress output");
   add_device_option(c, a->device);
+  add_precision_option(c, a->precision);
   a->vol.add(c);
   c->callback([a, c]() {
     set_num_threads(a->threads);
     Model m = load_model(a->model);
+    m.net->set_inference_precision(parse_precision(a->precision));
     const Device dev = cuda::resolve_device(a->device);
     if (dev == Device::Cuda) cuda::check_supported(*m.net);  // before reading the volume
     const VolumeDesc desc = describe_volume(a->volume, a->vol.raw());
@@ -92,6 +94,7 @@ void add_eval(CLI::App& app) {
 
     Json report = {{"method", method},
                    {"device", device_name(dev)},
+                   {"precision", dev == Device::Cpu ? Json(precision_name(m.net->inference_precision())) : Json(nullptr)},
                    {"compression_ratio", ratio},
                    {"model_bytes", model_bytes},
                    {"volume_bytes", volume_bytes}};
@@ -163,7 +166,7 @@ void add_eval(CLI::App& app) {
 
 void add_decode(CLI::App& app) {
   struct Args {
-    std::string model, output, dims, dtype = "float32", device = "auto";
+    std::string model, output, dims, dtype = "float32", device = "auto", precision = "auto";
     int threads = 0;
     bool quiet = false, force = false;
   };
@@ -177,10 +180,12 @@ void add_decode(CLI::App& app) {
   c->add_flag("-q,--quiet", a->quiet, "no progress output");
   c->add_flag("--force", a->force, "replace existing output files");
   add_device_option(c, a->device);
+  add_precision_option(c, a->precision);
   c->callback([a]() {
     set_num_threads(a->threads);
     check_no_overwrite(volume_output_files(a->output), a->force);
     Model m = load_model(a->model);
+    m.net->set_inference_precision(parse_precision(a->precision));
     Decoder decoder(*m.net, cuda::resolve_device(a->device));
     const Device dev = decoder.device();
     Int3 dims = a->dims.empty() ? m.dims : parse_dims(a->dims);

@@ -28,12 +28,14 @@ bool is_model_path(const std::string& path) {
   return false;
 }
 
-RenderSource open_render_source(const std::string& input, const std::string& ground_truth, const VolumeArgs& va) {
+RenderSource open_render_source(const std::string& input, const std::string& ground_truth, const VolumeArgs& va,
+                                Precision precision) {
   RenderSource s;
   if (is_model_path(input)) {
     s.model = load_model(input);
     if (s.model->dims.count() == 0) fail("'{}' does not say which volume size it represents", input);
     s.dims = s.model->dims;
+    s.model->net->set_inference_precision(precision);
     s.field = std::make_unique<NetworkField>(*s.model->net, s.dims);
     s.description = "model " + basename_of(input);
     if (!ground_truth.empty()) {

@@ -30,7 +30,9 @@ bool is_model_path(const std::string& path);
 
 // input: model or volume; ground_truth: optional volume (for --macrocells grid with a model, and for
 // comparisons).
-RenderSource open_render_source(const std::string& input, const std::string& ground_truth, const VolumeArgs& va);
+// A model's network infers with `precision` (the in-shader evaluator and the batched queries alike).
+RenderSource open_render_source(const std::string& input, const std::string& ground_truth, const VolumeArgs& va,
+                                Precision precision);
 
 // Macro-cells of a mode for a source: grid needs a volume, online needs a model trained by vnr (its
 // recorded value ranges), off is one cell. `cell_size` applies to grid, whose ranges are computed on the

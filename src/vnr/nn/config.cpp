@@ -1,4 +1,5 @@
 #include "vnr/nn/config.h"
+#include "vnr/nn/mlp_bf16.h"
 #include <cmath>
 #include "vnr/core/error.h"
 #include "vnr/core/fileio.h"
@@ -304,5 +305,15 @@ Json load_config(const std::string& preset_or_path) {
   ModelConfig::from_json(j);  // validate now, with the file's name in context
   return j;
 }
+
+Precision parse_precision(const std::string& name) {
+  if (name == "auto") return kernels::bf16_supported() ? Precision::BF16 : Precision::FP32;
+  if (name == "fp32") return Precision::FP32;
+  if (name != "bf16") fail("unknown precision '{}' (allowed: auto, fp32, bf16)", name);
+  if (!kernels::bf16_supported()) fail("precision bf16 needs a CPU with AVX512-BF16 (this one has none); use fp32");
+  return Precision::BF16;
+}
+
+const char* precision_name(Precision p) { return p == Precision::BF16 ? "bf16" : "fp32"; }
 
 }  // namespace vnr

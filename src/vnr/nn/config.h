@@ -15,6 +15,16 @@ enum class Interpolation { Nearest, Linear, Smoothstep };
 enum class Activation { None, ReLU, Exponential, Sine, Sigmoid, Squareplus, Softplus };
 enum class LossType { L1, L2, RelativeL2, RelativeL1 };
 
+// Arithmetic of inference (batched queries and the in-shader point evaluator; training is always
+// fp32). BF16: weights and activations rounded to bf16, products summed in fp32, on CPUs with
+// AVX512-BF16 (twice the fp32 FMA rate); tiny-cuda-nn infers in fp16, whose rounding is of the same
+// order.
+enum class Precision { FP32, BF16 };
+// "fp32", "bf16", or "auto" (bf16 where the CPU has AVX512-BF16, else fp32); anything else is an
+// error listing them. "bf16" on a CPU without AVX512-BF16 is an error too (no slow emulation).
+Precision parse_precision(const std::string& name);
+const char* precision_name(Precision p);
+
 // Bounds of the parameter-free encodings (their per-point outputs live in fixed-size stack buffers).
 constexpr uint32_t kMaxFrequencies = 32, kMaxOneBlobBins = 1024;
 constexpr uint32_t kMaxParameterFreeWidth = 3 * kMaxOneBlobBins;  // >= 3 * 2 * kMaxFrequencies

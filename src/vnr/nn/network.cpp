@@ -1,4 +1,5 @@
 #include "vnr/nn/network.h"
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <numeric>
@@ -8,6 +9,7 @@
 #include "vnr/core/rng.h"
 #include "vnr/nn/cpu_kernels.h"
 #include "vnr/nn/loss.h"
+#include "vnr/nn/mlp_bf16.h"
 #include "vnr/nn/mlp_kernels.h"
 
 namespace vnr {
@@ -308,8 +310,64 @@ float* Network::thread_workspace(size_t floats) {
 }
 
 size_t Network::infer_workspace_floats() const {
-  // X0, every hidden activation, the output's pre-activation and activation
-  return (size_t(mlp_.in_pad) + size_t(mlp_.n_hidden) * mlp_.width + 2 * size_t(mlp_.n_out)) * chunk_;
+  // fp32: X0, every hidden activation, the output's pre-activation and activation.
+  // bf16: X0, its pairs, two pair buffers for the hidden layers, the output.
+  const size_t fp32 = size_t(mlp_.in_pad) + size_t(mlp_.n_hidden) * mlp_.width + 2 * size_t(mlp_.n_out);
+  return std::max(fp32 * chunk_, size_t(mlp_.in_pad) * chunk_ + mlp_bf16_scratch(chunk_));
+}
+
+void Network::set_inference_precision(Precision p) {
+  const bool applies = mlp_.activation == Activation::ReLU && mlp_.width % 2 == 0 && kernels::bf16_supported();
+  precision_ = p == Precision::BF16 && applies ? Precision::BF16 : Precision::FP32;
+}
+
+std::vector<uint32_t> Network::bf16_weights() const {
+  const MlpLayout& m = mlp_;
+  const int kpw = int(m.width) / 2, kp0 = int(m.first_cols + 1) / 2;
+  std::vector<uint32_t> wp(size_t(m.width) * kp0 + size_t(m.n_hidden - 1) * m.width * kpw + size_t(m.n_out) * kpw);
+  uint32_t* w = wp.data();
+  for (uint32_t k = 0; k <= m.n_hidden; ++k) {
+    const int rows = k == m.n_hidden ? int(m.n_out) : int(m.width);
+    const int K = k == 0 ? int(m.first_cols) : int(m.width);
+    kernels::weights_to_bf16_pairs(params.data() + m.offset[k], rows, K, int(m.cols[k]), w);
+    w += size_t(rows) * ((K + 1) / 2);
+  }
+  return wp;
+}
+
+void Network::infer_chunk_bf16(const float* x, const float* y, const float* z, int n, float* out, float* ws,
+                               const uint32_t* wp) const {
+  float* X0 = ws;
+  encode(x, y, z, n, X0);
+  mlp_forward_bf16(X0, n, wp, reinterpret_cast<uint32_t*>(X0 + size_t(mlp_.in_pad) * n), out);
+}
+
+void Network::mlp_forward_bf16(const float* X0, int n, const uint32_t* wp, uint32_t* scratch, float* out) const {
+  const MlpLayout& m = mlp_;
+  const int kp0 = int(m.first_cols + 1) / 2, kpw = int(m.width) / 2;
+  float* pre = reinterpret_cast<float*>(scratch);
+  if (m.width == 16 && m.n_out == 1 && m.n_hidden <= 16 && n % 16 == 0) {  // as the fp32 path: in registers
+    const uint32_t* Wh[16];
+    for (uint32_t k = 1; k < m.n_hidden; ++k) Wh[k - 1] = wp + size_t(16) * kp0 + size_t(k - 1) * 16 * kpw;
+    kernels::mlp_forward_16_bf16(wp, int(m.first_cols), Wh, int(m.n_hidden - 1),
+                                 wp + size_t(16) * kp0 + size_t(m.n_hidden - 1) * 16 * kpw, X0, n, pre);
+    for (int s = 0; s < n; ++s) out[s] = activate(m.output_activation, pre[s]);
+    return;
+  }
+  uint32_t* P0 = scratch;
+  uint32_t* pairs[2] = {P0 + size_t(kp0) * n, P0 + size_t(kp0 + kpw) * n};
+  pre = reinterpret_cast<float*>(pairs[1] + size_t(kpw) * n);
+  kernels::activations_to_bf16_pairs(X0, int(m.first_cols), n, P0);
+  const uint32_t* in = P0;
+  int kp = kp0;
+  for (uint32_t k = 0; k < m.n_hidden; ++k) {
+    kernels::matmul_fwd_bf16_relu(wp, int(m.width), kp, in, pairs[k & 1], n);
+    wp += size_t(m.width) * kp;
+    in = pairs[k & 1];
+    kp = kpw;
+  }
+  kernels::matmul_fwd_bf16_linear(wp, int(m.n_out), kpw, in, pre, n);  // row 0 is the first output
+  for (int s = 0; s < n; ++s) out[s] = activate(m.output_activation, pre[s]);
 }
 
 void Network::infer_chunk(const float* x, const float* y, const float* z, int n, float* out, float* ws) const {

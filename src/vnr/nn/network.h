@@ -74,6 +74,11 @@ public:
   // acts: n_hidden blocks of width x n (post-activation); out: n_out x n (post-activation),
   // out_pre: pre-activation of the output layer (may alias out when the output activation is None).
   void mlp_forward(const float* X0, int n, float* acts, float* out_pre, float* out) const;
+  // bf16 inference forward (Precision::BF16): wp = bf16_weights() (every matrix as bf16 pairs, see
+  // mlp_bf16.h), scratch mlp_bf16_scratch(n) words; out: first output row after the output activation.
+  std::vector<uint32_t> bf16_weights() const;
+  size_t mlp_bf16_scratch(int n) const { return (size_t(mlp_.first_cols + 1) / 2 + mlp_.width + mlp_.n_out) * n; }
+  void mlp_forward_bf16(const float* X0, int n, const uint32_t* wp, uint32_t* scratch, float* out) const;
   // Given dL/d(out_pre) (n_out x n): accumulates dW (n_mlp params) and writes dL/dX0 (in_pad x n)
   // when dX0 != nullptr. scratch: 2 * width * n floats.
   void mlp_backward(const float* X0, const float* acts, const float* d_out_pre, int n, float* dW, float* dX0,
@@ -84,6 +89,11 @@ public:
                            const float* dEnc, int chunk, float* grad) const;
   size_t acts_floats(int n) const { return size_t(mlp_.n_hidden) * mlp_.width * n; }
   int chunk() const { return chunk_; }
+
+  // Precision of infer/infer_fn and of PointEvaluators built afterwards (default FP32). BF16 applies
+  // to ReLU MLPs of even width; others stay fp32 (inference_precision() then says FP32).
+  void set_inference_precision(Precision p);
+  Precision inference_precision() const { return precision_; }
 
   // ---- batched queries (parallel inside) ----
   // out[i] = first network output at point i; coords interleaved xyz.
@@ -100,6 +110,8 @@ public:
 
 private:
   void infer_chunk(const float* x, const float* y, const float* z, int n, float* out, float* ws) const;
+  void infer_chunk_bf16(const float* x, const float* y, const float* z, int n, float* out, float* ws,
+                        const uint32_t* wp) const;
   size_t infer_workspace_floats() const;
   // This thread's inference scratch, grown as needed and kept, so that the many small calls of the
   // renderers do not each map and fault in a few hundred KiB (no change measurable at batch 65,536).
@@ -109,6 +121,7 @@ private:
   Json cfg_json_;
   big_vector<uint16_t> grid_half_;
   int chunk_ = kChunk;
+  Precision precision_ = Precision::FP32;
   GridLayout grid_;
   MlpLayout mlp_;
 };
@@ -117,6 +130,9 @@ template <typename CoordFn>
 void Network::infer_fn(int64_t n, CoordFn&& coord, float* out) const {
   const int64_t C = chunk_;
   const int64_t n_chunks = (n + C - 1) / C;
+  // Converted per call (17 k weights for the paper config, ~10 us): the parameters may change
+  // between calls (online training).
+  const std::vector<uint32_t> wp = precision_ == Precision::BF16 ? bf16_weights() : std::vector<uint32_t>();
   parallel_threads([&](int t, int nt) {
     float* ws = thread_workspace(infer_workspace_floats() + 4 * C);
     float* xs = ws + infer_workspace_floats();
@@ -128,7 +144,8 @@ void Network::infer_fn(int64_t n, CoordFn&& coord, float* out) const {
         int64_t k = b + (i < m ? i : m - 1);
         coord(k, &xs[i], &ys[i], &zs[i]);
       }
-      infer_chunk(xs, ys, zs, int(mp), o, ws);
+      if (wp.empty()) infer_chunk(xs, ys, zs, int(mp), o, ws);
+      else infer_chunk_bf16(xs, ys, zs, int(mp), o, ws, wp.data());
       for (int64_t i = 0; i < m; ++i) out[b + i] = o[i];
     }
   });

@@ -406,6 +406,7 @@ HWY_AFTER_NAMESPACE();
 
 #if HWY_ONCE
 #include "vnr/core/error.h"
+#include "vnr/nn/mlp_bf16.h"
 
 namespace vnr {
 namespace point_eval {
@@ -498,6 +499,31 @@ PointEvaluator::PointEvaluator(const Network& net, bool skip_zero_activations) {
   mlp_ = k.mlp;
   prefetch_ = k.prefetch;
   target_ = k.target;
+  if (net.inference_precision() == Precision::BF16 && point_eval::bf16_eval(d.panel)) {
+    // The fp32 panels above as bf16 pair panels: row j of a panel holds, per output o, the pair
+    // (W[o][2j], W[o][2j + 1]) (zero past K: an odd K's last pair).
+    size_t words = d.width_pad / 2;
+    for (uint32_t k = 0; k < m.n_hidden; ++k) words += size_t(d.n_panels) * ((K_of(k) + 1) / 2) * d.panel;
+    weights_bf16_ = hwy::AllocateAligned<uint32_t>(words);
+    uint32_t* wb = weights_bf16_.get();
+    for (uint32_t k = 0; k < m.n_hidden; ++k) {
+      d.layer_bf16[k] = wb;
+      const uint32_t K = K_of(k);
+      for (uint32_t p = 0; p < d.n_panels; ++p) {
+        const float* F = d.layer[k] + size_t(p) * K * d.panel;  // fp32 panel p: row i = input i
+        for (uint32_t j = 0; j < (K + 1) / 2; ++j)
+          for (uint32_t o = 0; o < d.panel; ++o)
+            *wb++ = kernels::bf16_pair(F[2 * j * d.panel + o], 2 * j + 1 < K ? F[(2 * j + 1) * d.panel + o] : 0.0f);
+      }
+    }
+    d.wout_bf16 = wb;
+    for (uint32_t c = 0; c < d.width_pad; c += 2) *wb++ = kernels::bf16_pair(d.wout[c], d.wout[c + 1]);
+    d.encode = k.encode;
+    d.skip_zeros = false;
+    eval_ = point_eval::bf16_eval(d.panel);
+    mlp_ = point_eval::bf16_mlp(d.panel);
+    precision_ = Precision::BF16;
+  }
 }
 
 }  // namespace vnr

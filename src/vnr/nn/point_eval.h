@@ -61,6 +61,12 @@ struct PointEvalData {
   Activation out_act = Activation::None;
   const float* layer[34] = {};  // layer k: n_panels blocks of (K_k rows x panel), row i = input i
   const float* wout = nullptr;  // first output row, width_pad floats (zero-padded)
+  // ---- bf16 MLP (Precision::BF16; see mlp_bf16.h for the pair layout) ----
+  // layer k: n_panels blocks of (ceil(K_k / 2) pair rows x panel words), row j = inputs 2j, 2j + 1;
+  // output row 0 as width_pad / 2 pair words. The bf16 eval encodes through `encode`.
+  const uint32_t* layer_bf16[34] = {};
+  const uint32_t* wout_bf16 = nullptr;
+  void (*encode)(const PointEvalData&, float, float, float, float*) = nullptr;
 };
 
 class PointEvaluator {
@@ -87,6 +93,10 @@ public:
   float mlp(const float* enc) const { return mlp_(d_, enc); }
 
   uint32_t in_pad() const { return d_.in_pad; }
+  // BF16 when built from a network whose inference_precision() is BF16 and whose width exceeds 16
+  // (the MLP then runs on bf16 pairs with vdpbf16ps, as Network::infer does, without zero
+  // compaction); else FP32 (16-wide networks: faster in fp32 here, see point_eval_bf16.cpp).
+  Precision precision() const { return precision_; }
   bool skips_zeros() const { return d_.skip_zeros; }
   const char* simd_target() const { return target_; }  // the Highway target chosen at construction
 
@@ -106,11 +116,20 @@ public:
 private:
   PointEvalData d_;
   hwy::AlignedFreeUniquePtr<float[]> weights_;
+  hwy::AlignedFreeUniquePtr<uint32_t[]> weights_bf16_;
+  Precision precision_ = Precision::FP32;
   EvalFn eval_ = nullptr;
   EncodeFn encode_ = nullptr;
   MlpFn mlp_ = nullptr;
   PrefetchFn prefetch_ = nullptr;
   const char* target_ = "";
 };
+
+namespace point_eval {
+// The bf16 MLP and eval for a panel width of 32 or 64 (point_eval_bf16.cpp; AVX512-BF16 only);
+// nullptr otherwise.
+PointEvaluator::MlpFn bf16_mlp(uint32_t panel);
+PointEvaluator::EvalFn bf16_eval(uint32_t panel);
+}  // namespace point_eval
 
 }  // namespace vnr
