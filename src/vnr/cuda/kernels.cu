@@ -160,12 +160,11 @@ __global__ void voxel_centres_kernel(Int3 dims, int64_t first, int64_t count, in
 void encode(const GridLayout& g, const __half* table, Coords c, int64_t n, int in_pad, __half* X0, cudaStream_t s) {
   const int64_t total = n * g.n_levels;
   if (total <= 0) return;
-  const __half* t = table;
   switch (g.n_features) {
-    case 1: encode_kernel<1><<<blocks_for(total, kThreads), kThreads, 0, s>>>(g, t, c, n, in_pad, X0); break;
-    case 2: encode_kernel<2><<<blocks_for(total, kThreads), kThreads, 0, s>>>(g, t, c, n, in_pad, X0); break;
-    case 4: encode_kernel<4><<<blocks_for(total, kThreads), kThreads, 0, s>>>(g, t, c, n, in_pad, X0); break;
-    case 8: encode_kernel<8><<<blocks_for(total, kThreads), kThreads, 0, s>>>(g, t, c, n, in_pad, X0); break;
+    case 1: encode_kernel<1><<<blocks_for(total, kThreads), kThreads, 0, s>>>(g, table, c, n, in_pad, X0); break;
+    case 2: encode_kernel<2><<<blocks_for(total, kThreads), kThreads, 0, s>>>(g, table, c, n, in_pad, X0); break;
+    case 4: encode_kernel<4><<<blocks_for(total, kThreads), kThreads, 0, s>>>(g, table, c, n, in_pad, X0); break;
+    case 8: encode_kernel<8><<<blocks_for(total, kThreads), kThreads, 0, s>>>(g, table, c, n, in_pad, X0); break;
     default: cuda_fail_message("grid encoding: n_features_per_level must be 1, 2, 4 or 8");
   }
   VNR_CUDA_LAUNCHED();

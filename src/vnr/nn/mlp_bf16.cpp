@@ -4,6 +4,7 @@
 
 #include <cmath>
 #include <cstring>
+#include <vector>
 
 #include "vnr/core/error.h"
 
@@ -63,15 +64,12 @@ void matmul_fwd_bf16_linear(const uint32_t* Wp, int rows, int kp, const uint32_t
 }
 
 void matmul_fwd_bf16_relu(const uint32_t* Wp, int rows, int kp, const uint32_t* Xp, uint32_t* Yp, int n) {
+  std::vector<float> Y(size_t(rows) * n);
+  matmul_fwd_bf16_linear(Wp, rows, kp, Xp, Y.data(), n);
   for (int i = 0; i < rows; i += 2)
     for (int s = 0; s < n; ++s) {
-      double acc[2] = {0, 0};
-      for (int r = 0; r < 2; ++r)
-        for (int j = 0; j < kp; ++j) {
-          const uint32_t w = Wp[size_t(i + r) * kp + j], x = Xp[size_t(j) * n + s];
-          acc[r] += double(lo_of(w)) * lo_of(x) + double(hi_of(w)) * hi_of(x);
-        }
-      Yp[size_t(i / 2) * n + s] = bf16_pair(acc[0] > 0 ? float(acc[0]) : 0.0f, acc[1] > 0 ? float(acc[1]) : 0.0f);
+      const float a = Y[size_t(i) * n + s], b = Y[size_t(i + 1) * n + s];
+      Yp[size_t(i / 2) * n + s] = bf16_pair(a > 0 ? a : 0.0f, b > 0 ? b : 0.0f);
     }
 }
 
@@ -89,17 +87,11 @@ namespace {
 
 // Word permutation that interleaves the two halves of vcvtne2ps2bf16's result (low 16 words: row r,
 // high 16: row r + 1) into pairs: out word 2s = row r's sample s, 2s + 1 = row r + 1's.
-VNR_BF16_TARGET inline __m512i interleave_index() {
-  alignas(64) int16_t idx[32];
-  for (int s = 0; s < 16; ++s) {
-    idx[2 * s] = int16_t(s);
-    idx[2 * s + 1] = int16_t(16 + s);
-  }
-  return _mm512_load_si512(idx);
-}
+alignas(64) constexpr int16_t kInterleave[32] = {0, 16, 1, 17, 2,  18, 3,  19, 4,  20, 5,  21, 6,  22, 7,  23,
+                                                 8, 24, 9, 25, 10, 26, 11, 27, 12, 28, 13, 29, 14, 30, 15, 31};
 
-VNR_BF16_TARGET inline __m512i pack_pairs(__m512 lo, __m512 hi, __m512i idx) {
-  return _mm512_permutexvar_epi16(idx, (__m512i)_mm512_cvtne2ps_pbh(hi, lo));
+VNR_BF16_TARGET inline __m512i pack_pairs(__m512 lo, __m512 hi) {
+  return _mm512_permutexvar_epi16(_mm512_load_si512(kInterleave), (__m512i)_mm512_cvtne2ps_pbh(hi, lo));
 }
 
 // max(x, 0) returns the second operand for NaN: ReLU maps NaN to 0 as the fp32 kernels do. (The
@@ -111,7 +103,7 @@ VNR_BF16_TARGET inline __m512bh bcast(uint32_t w) { return (__m512bh)_mm512_set1
 // out at (row i0, sample s0): pairs row i0/2 (kPairs, R even) or floats row i0.
 template <int R, int V, bool kPairs>
 VNR_BF16_TARGET inline void Tile(const uint32_t* __restrict wp, int kp, const uint32_t* __restrict xp, size_t n,
-                                 void* out, __m512i idx) {
+                                 void* out) {
   __m512 acc[R][V];
   for (int r = 0; r < R; ++r)
     for (int v = 0; v < V; ++v) acc[r][v] = _mm512_setzero_ps();
@@ -129,7 +121,7 @@ VNR_BF16_TARGET inline void Tile(const uint32_t* __restrict wp, int kp, const ui
     uint32_t* yp = static_cast<uint32_t*>(out);
     for (int r = 0; r < R; r += 2)
       for (int v = 0; v < V; ++v)
-        _mm512_storeu_si512(yp + size_t(r / 2) * n + 16 * v, pack_pairs(relu(acc[r][v]), relu(acc[r + 1][v]), idx));
+        _mm512_storeu_si512(yp + size_t(r / 2) * n + 16 * v, pack_pairs(relu(acc[r][v]), relu(acc[r + 1][v])));
   } else {
     float* y = static_cast<float*>(out);
     for (int r = 0; r < R; ++r)
@@ -141,18 +133,17 @@ constexpr int kTileR = 6;  // 6 x 4 = 24 zmm accumulators + 4 operands, as the f
 constexpr int kTileV = 4;
 
 template <int V, bool kPairs>
-VNR_BF16_TARGET inline void TileRows(int rem, const uint32_t* wp, int kp, const uint32_t* xp, size_t n, void* out,
-                                     __m512i idx) {
+VNR_BF16_TARGET inline void TileRows(int rem, const uint32_t* wp, int kp, const uint32_t* xp, size_t n, void* out) {
   switch (rem) {
-    case 2: Tile<2, V, kPairs>(wp, kp, xp, n, out, idx); break;
-    case 4: Tile<4, V, kPairs>(wp, kp, xp, n, out, idx); break;
-    case 6: Tile<6, V, kPairs>(wp, kp, xp, n, out, idx); break;
+    case 2: Tile<2, V, kPairs>(wp, kp, xp, n, out); break;
+    case 4: Tile<4, V, kPairs>(wp, kp, xp, n, out); break;
+    case 6: Tile<6, V, kPairs>(wp, kp, xp, n, out); break;
     default:
       if constexpr (!kPairs) {
         switch (rem) {
-          case 1: Tile<1, V, false>(wp, kp, xp, n, out, idx); break;
-          case 3: Tile<3, V, false>(wp, kp, xp, n, out, idx); break;
-          case 5: Tile<5, V, false>(wp, kp, xp, n, out, idx); break;
+          case 1: Tile<1, V, false>(wp, kp, xp, n, out); break;
+          case 3: Tile<3, V, false>(wp, kp, xp, n, out); break;
+          case 5: Tile<5, V, false>(wp, kp, xp, n, out); break;
           default: break;
         }
       }
@@ -161,7 +152,6 @@ VNR_BF16_TARGET inline void TileRows(int rem, const uint32_t* wp, int kp, const 
 
 template <bool kPairs>
 VNR_BF16_TARGET void Gemm(const uint32_t* Wp, int rows, int kp, const uint32_t* Xp, void* out, int n) {
-  const __m512i idx = interleave_index();
   const size_t nn = size_t(n);
   auto out_at = [&](int i0, size_t s0) -> void* {
     if constexpr (kPairs) return static_cast<uint32_t*>(out) + size_t(i0 / 2) * nn + s0;
@@ -171,22 +161,21 @@ VNR_BF16_TARGET void Gemm(const uint32_t* Wp, int rows, int kp, const uint32_t* 
   for (; s0 + 16 * kTileV <= nn; s0 += 16 * kTileV)
     for (int i0 = 0; i0 < rows; i0 += kTileR)
       TileRows<kTileV, kPairs>(rows - i0 < kTileR ? rows - i0 : kTileR, Wp + size_t(i0) * kp, kp, Xp + s0, nn,
-                               out_at(i0, s0), idx);
+                               out_at(i0, s0));
   for (; s0 < nn; s0 += 16)  // n is a multiple of 16
     for (int i0 = 0; i0 < rows; i0 += kTileR)
       TileRows<1, kPairs>(rows - i0 < kTileR ? rows - i0 : kTileR, Wp + size_t(i0) * kp, kp, Xp + s0, nn,
-                          out_at(i0, s0), idx);
+                          out_at(i0, s0));
 }
 
 VNR_BF16_TARGET void ToPairs(const float* X, int K, int n, uint32_t* P) {
-  const __m512i idx = interleave_index();
   const int kp = (K + 1) / 2;
   for (int j = 0; j < kp; ++j) {
     const float* lo = X + size_t(2 * j) * n;
     const float* hi = 2 * j + 1 < K ? lo + n : nullptr;
     for (int s = 0; s < n; s += 16)
       _mm512_storeu_si512(P + size_t(j) * n + s, pack_pairs(_mm512_loadu_ps(lo + s),
-                                                            hi ? _mm512_loadu_ps(hi + s) : _mm512_setzero_ps(), idx));
+                                                            hi ? _mm512_loadu_ps(hi + s) : _mm512_setzero_ps()));
   }
 }
 
@@ -196,7 +185,6 @@ VNR_BF16_TARGET void ToPairs(const float* X, int K, int n, uint32_t* P) {
 VNR_BF16_TARGET void Forward16(const uint32_t* W0, int k0, const uint32_t* const* Wh, int n_mid, const uint32_t* Wout,
                                const float* X0, int n, float* out) {
   constexpr int kW = 16;
-  const __m512i idx = interleave_index();
   const __m512 zero = _mm512_setzero_ps();
   const int kp0 = (k0 + 1) / 2;
   for (size_t s0 = 0; s0 + 16 <= size_t(n); s0 += 16) {
@@ -205,17 +193,17 @@ VNR_BF16_TARGET void Forward16(const uint32_t* W0, int k0, const uint32_t* const
     for (int j = 0; j < kp0; ++j) {
       const __m512 lo = _mm512_loadu_ps(X0 + size_t(2 * j) * n + s0);
       const __m512 hi = 2 * j + 1 < k0 ? _mm512_loadu_ps(X0 + size_t(2 * j + 1) * n + s0) : zero;
-      const __m512bh x = (__m512bh)pack_pairs(lo, hi, idx);
+      const __m512bh x = (__m512bh)pack_pairs(lo, hi);
       for (int o = 0; o < kW; ++o) h[o] = _mm512_dpbf16_ps(h[o], bcast(W0[o * kp0 + j]), x);
     }
     __m512bh p[kW / 2];
-    for (int j = 0; j < kW / 2; ++j) p[j] = (__m512bh)pack_pairs(relu(h[2 * j]), relu(h[2 * j + 1]), idx);
+    for (int j = 0; j < kW / 2; ++j) p[j] = (__m512bh)pack_pairs(relu(h[2 * j]), relu(h[2 * j + 1]));
     for (int l = 0; l < n_mid; ++l) {
       const uint32_t* W = Wh[l];
       for (int o = 0; o < kW; ++o) h[o] = zero;
       for (int j = 0; j < kW / 2; ++j)
         for (int o = 0; o < kW; ++o) h[o] = _mm512_dpbf16_ps(h[o], bcast(W[o * (kW / 2) + j]), p[j]);
-      for (int j = 0; j < kW / 2; ++j) p[j] = (__m512bh)pack_pairs(relu(h[2 * j]), relu(h[2 * j + 1]), idx);
+      for (int j = 0; j < kW / 2; ++j) p[j] = (__m512bh)pack_pairs(relu(h[2 * j]), relu(h[2 * j + 1]));
     }
     __m512 y0 = zero, y1 = zero;  // two chains: the output's 8 dot products would otherwise wait on each other
     for (int j = 0; j < kW / 2; j += 2) {

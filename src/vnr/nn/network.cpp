@@ -309,6 +309,11 @@ float* Network::thread_workspace(size_t floats) {
   return ws.data();
 }
 
+bool Network::fused_16(int n) const {
+  const MlpLayout& m = mlp_;
+  return m.activation == Activation::ReLU && m.width == 16 && m.n_out == 1 && m.n_hidden <= 16 && n % 16 == 0;
+}
+
 size_t Network::infer_workspace_floats() const {
   // fp32: X0, every hidden activation, the output's pre-activation and activation.
   // bf16: X0, its pairs, two pair buffers for the hidden layers, the output.
@@ -346,7 +351,7 @@ void Network::mlp_forward_bf16(const float* X0, int n, const uint32_t* wp, uint3
   const MlpLayout& m = mlp_;
   const int kp0 = int(m.first_cols + 1) / 2, kpw = int(m.width) / 2;
   float* pre = reinterpret_cast<float*>(scratch);
-  if (m.width == 16 && m.n_out == 1 && m.n_hidden <= 16 && n % 16 == 0) {  // as the fp32 path: in registers
+  if (fused_16(n)) {  // as the fp32 path: the whole forward pass in registers
     const uint32_t* Wh[16];
     for (uint32_t k = 1; k < m.n_hidden; ++k) Wh[k - 1] = wp + size_t(16) * kp0 + size_t(k - 1) * 16 * kpw;
     kernels::mlp_forward_16_bf16(wp, int(m.first_cols), Wh, int(m.n_hidden - 1),
@@ -377,7 +382,7 @@ void Network::infer_chunk(const float* x, const float* y, const float* z, int n,
   float* pre = acts + acts_floats(n);
   float* y_out = pre + size_t(m.n_out) * n;
   encode(x, y, z, n, X0);
-  if (m.activation == Activation::ReLU && m.width == 16 && m.n_out == 1 && m.n_hidden <= 16 && n % 16 == 0) {
+  if (fused_16(n)) {
     // 16-wide networks: the whole forward pass in registers (the tiled GEMMs cannot fill the FMA pipes).
     const float* Wh[16];
     for (uint32_t k = 1; k < m.n_hidden; ++k) Wh[k - 1] = params.data() + m.offset[k];

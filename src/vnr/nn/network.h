@@ -113,6 +113,8 @@ private:
   void infer_chunk_bf16(const float* x, const float* y, const float* z, int n, float* out, float* ws,
                         const uint32_t* wp) const;
   size_t infer_workspace_floats() const;
+  // Inference of n samples takes the in-register 16-wide kernels (fp32 mlp_forward_16 or its bf16 twin).
+  bool fused_16(int n) const;
   // This thread's inference scratch, grown as needed and kept, so that the many small calls of the
   // renderers do not each map and fault in a few hundred KiB (no change measurable at batch 65,536).
   static float* thread_workspace(size_t floats);

@@ -56,20 +56,24 @@ void UniformCoordinates(uint64_t seed, uint64_t step, uint64_t chunk, int n, flo
   const hn::Half<hn::ScalableTag<float>> df;
   static_assert(kStreams == 4, "two sample slots of the four streams per 512-bit vector");
   if (hn::Lanes(du64) == 8 && n >= 8) {
-    // Jump-ahead maps: state after d draws is s * M^d + inc * (M^(d-1) + ... + 1).
-    uint64_t mpow[7] = {1};
-    for (int d = 1; d <= 6; ++d) mpow[d] = mpow[d - 1] * Pcg32::kMult;
+    // Jump-ahead maps, s -> s * M^d + C_d after d draws: Pcg32::advance from state 1 without
+    // increment gives M^d, from state 0 with the stream's increment C_d.
+    auto jump = [](uint64_t state, uint64_t inc, uint64_t d) {
+      Pcg32 r;
+      r.state = state;
+      r.inc = inc;
+      r.advance(d);
+      return r.state;
+    };
     alignas(64) uint64_t s0[8], c1[8], c2[8], c6[8];
     for (int k = 0; k < 8; ++k) {
       const Pcg32& r = rng[k % 4];
-      uint64_t geo[7] = {0};  // geo[d] = 1 + M + ... + M^(d-1)
-      for (int d = 1; d <= 6; ++d) geo[d] = geo[d - 1] + mpow[d - 1];
-      s0[k] = k < 4 ? r.state : r.state * mpow[3] + r.inc * geo[3];  // slot t + 1: three draws later
-      c1[k] = r.inc * geo[1];
-      c2[k] = r.inc * geo[2];
-      c6[k] = r.inc * geo[6];
+      s0[k] = k < 4 ? r.state : jump(r.state, r.inc, 3);  // slot t + 1: three draws later
+      c1[k] = jump(0, r.inc, 1);
+      c2[k] = jump(0, r.inc, 2);
+      c6[k] = jump(0, r.inc, 6);
     }
-    const auto m1 = hn::Set(du64, mpow[1]), m2 = hn::Set(du64, mpow[2]), m6 = hn::Set(du64, mpow[6]);
+    const auto m1 = hn::Set(du64, jump(1, 0, 1)), m2 = hn::Set(du64, jump(1, 0, 2)), m6 = hn::Set(du64, jump(1, 0, 6));
     const auto C1 = hn::Load(du64, c1), C2 = hn::Load(du64, c2), C6 = hn::Load(du64, c6);
     auto s = hn::Load(du64, s0);
     for (; i + 8 <= n; i += 8) {
