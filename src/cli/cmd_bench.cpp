@@ -147,8 +147,8 @@ void run_bench(const BenchArgs& a) {
   Network net(load_config(a.config));
   net.init_params(1337);
   if (dev == Device::Cuda) return run_bench_cuda(a, vol, net);
-  net.set_inference_precision(parse_precision(a.precision));
   const bool training = a.what == "train";
+  if (!training) net.set_inference_precision(parse_precision(a.precision));  // training is always fp32
   std::vector<double> times;
   double phases[3] = {0, 0, 0};
   auto t0 = std::chrono::steady_clock::now();
