@@ -1,7 +1,7 @@
 #include "vnr/nn/optimizer.h"
+#include <algorithm>
 #include <cfloat>
 #include <cmath>
-#include <algorithm>
 #include "vnr/core/parallel.h"
 #include "vnr/nn/cpu_kernels.h"
 
@@ -67,7 +67,9 @@ void Adam::step(float* params, float* grads, uint16_t* non_matrix_half) {
     std::fill(g, g + n_nm, 0.0f);
     return;
   }
-  parallel_for_range(n_nm, 1 << 16, [&](int64_t b, int64_t e) {
+  // Ranges of at most 2^16, and no more than an even share per thread (small grids: one range each).
+  const int64_t share = (n_nm + num_threads() - 1) / num_threads();
+  parallel_for_range(n_nm, std::min<int64_t>(int64_t(1) << 16, (share + 63) / 64 * 64), [&](int64_t b, int64_t e) {
     kernels::adam_range(ks, p + b, g + b, mm + b, vv + b, cc + b, non_matrix_half ? non_matrix_half + b : nullptr, e - b);
   });
 }
