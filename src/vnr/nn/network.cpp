@@ -88,7 +88,6 @@ Network::Network(const Json& config, uint32_t n_output_dims)
   mlp_ = make_mlp_layout(cfg_, n_output_dims);
   params.assign(n_params(), 0.0f);
   grid_half_.assign(grid_params(), 0);
-  chunk_ = mlp_.width <= 32 ? 4 * kChunk : kChunk;
 }
 
 void Network::sync_half_table() { floats_to_halves(grid_table(), grid_half_.data(), grid_params()); }
@@ -318,7 +317,7 @@ size_t Network::infer_workspace_floats() const {
   // fp32: X0, every hidden activation, the output's pre-activation and activation.
   // bf16: X0, its pairs, two pair buffers for the hidden layers, the output.
   const size_t fp32 = size_t(mlp_.in_pad) + size_t(mlp_.n_hidden) * mlp_.width + 2 * size_t(mlp_.n_out);
-  return std::max(fp32 * chunk_, size_t(mlp_.in_pad) * chunk_ + mlp_bf16_scratch(chunk_));
+  return std::max(fp32 * kChunk, size_t(mlp_.in_pad) * kChunk + mlp_bf16_scratch(kChunk));
 }
 
 void Network::set_inference_precision(Precision p) {
