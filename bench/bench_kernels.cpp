@@ -102,24 +102,36 @@ void Shapes(benchmark::internal::Benchmark* b) {
 }
 
 #ifdef VNR_BENCH_PEAK
-// Register-only zmm FMA loop (24 independent chains): the machine's ceiling at the moment of the
-// run, so the kernels' GFLOP/s can be read as a fraction of it on this shared, noisy VM.
-__attribute__((target("avx512f"), noinline)) float fma_peak_loop(long iters) {
-  __m512 acc[24];
+// The peak loops' 24 independent accumulator chains: their start values and their sum (which keeps
+// the loop's work alive). avx512f only, so both loops' wider targets can inline them.
+constexpr int kPeakChains = 24;
+__attribute__((target("avx512f"), always_inline)) inline void peak_init(__m512 (&acc)[kPeakChains]) {
 #pragma GCC unroll 24
-  for (int j = 0; j < 24; ++j) acc[j] = _mm512_set1_ps(0.001f * j);
+  for (int j = 0; j < kPeakChains; ++j) acc[j] = _mm512_set1_ps(0.001f * j);
+}
+__attribute__((target("avx512f"), always_inline)) inline float peak_sum(const __m512 (&acc)[kPeakChains]) {
+  __m512 s = acc[0];
+#pragma GCC unroll 24
+  for (int j = 1; j < kPeakChains; ++j) s = _mm512_add_ps(s, acc[j]);
+  alignas(64) float lanes[16];
+  _mm512_store_ps(lanes, s);
+  return lanes[0];
+}
+
+// Register-only zmm FMA loop: the machine's ceiling at the moment of the run, so the kernels'
+// GFLOP/s can be read as a fraction of it on this shared, noisy VM.
+__attribute__((target("avx512f"), noinline)) float fma_peak_loop(long iters) {
+  __m512 acc[kPeakChains];
+  peak_init(acc);
   const __m512 a = _mm512_set1_ps(0.9999f), b = _mm512_set1_ps(1e-6f);
   for (long i = 0; i < iters; ++i) {
 #pragma GCC unroll 24
-    for (int j = 0; j < 24; ++j) acc[j] = _mm512_fmadd_ps(acc[j], a, b);
+    for (int j = 0; j < kPeakChains; ++j) acc[j] = _mm512_fmadd_ps(acc[j], a, b);
   }
-  __m512 s = acc[0];
-#pragma GCC unroll 24
-  for (int j = 1; j < 24; ++j) s = _mm512_add_ps(s, acc[j]);
-  return _mm512_reduce_add_ps(s);
+  return peak_sum(acc);
 }
 
-// Times `loop` (kIters iterations of 24 independent vector ops of flop_per_op each).
+// Times `loop` (kIters iterations of kPeakChains independent vector ops of flop_per_op each).
 template <class Loop>
 void run_peak(benchmark::State& state, bool supported, Loop loop, double flop_per_op) {
   if (!supported) {
@@ -133,7 +145,7 @@ void run_peak(benchmark::State& state, bool supported, Loop loop, double flop_pe
     benchmark::DoNotOptimize(loop(iters));
   }
   state.counters["GFLOP/s"] = benchmark::Counter(
-      kIters * 24 * flop_per_op * double(state.iterations()) * 1e-9, benchmark::Counter::kIsRate);
+      kIters * kPeakChains * flop_per_op * double(state.iterations()) * 1e-9, benchmark::Counter::kIsRate);
 }
 
 void BM_FmaPeak(benchmark::State& state) { run_peak(state, __builtin_cpu_supports("avx512f"), fma_peak_loop, 32.0); }
@@ -141,20 +153,14 @@ BENCHMARK(BM_FmaPeak);
 
 // The same loop with vdpbf16ps (two multiply-adds per fp32 lane): the ceiling of the bf16 kernels.
 __attribute__((target("avx512f,avx512bw,avx512bf16"), noinline)) float bf16_peak_loop(long iters) {
-  __m512 acc[24];
-#pragma GCC unroll 24
-  for (int j = 0; j < 24; ++j) acc[j] = _mm512_set1_ps(0.001f * j);
+  __m512 acc[kPeakChains];
+  peak_init(acc);
   const __m512bh a = (__m512bh)_mm512_set1_epi16(0x3f80), b = (__m512bh)_mm512_set1_epi16(0x3380);
   for (long i = 0; i < iters; ++i) {
 #pragma GCC unroll 24
-    for (int j = 0; j < 24; ++j) acc[j] = _mm512_dpbf16_ps(acc[j], a, b);
+    for (int j = 0; j < kPeakChains; ++j) acc[j] = _mm512_dpbf16_ps(acc[j], a, b);
   }
-  __m512 s = acc[0];
-#pragma GCC unroll 24
-  for (int j = 1; j < 24; ++j) s = _mm512_add_ps(s, acc[j]);
-  alignas(64) float lanes[16];
-  _mm512_store_ps(lanes, s);
-  return lanes[0];
+  return peak_sum(acc);
 }
 
 void BM_Bf16DotPeak(benchmark::State& state) { run_peak(state, k::bf16_supported(), bf16_peak_loop, 64.0); }

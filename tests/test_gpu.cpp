@@ -176,7 +176,7 @@ TEST(GpuTrainer, LossCurveAndPsnrFollowTheCpuAndModelsMoveBothWays) {
   for (int i = 0; i < steps; ++i) cpu.step();
   auto gpu_net = make();
   cuda::GpuTrainer gpu(*gpu_net, view_of(vol),
-                       cuda::GpuTrainOptions{16384, 5, Trainer::chunk_for(*gpu_net, 16384), cuda::MlpPath::Auto});
+                       cuda::GpuTrainOptions{16384, 5, kChunk, cuda::MlpPath::Auto});
   // One step first: the Adam update of the first step is lr * sign(g) for every touched parameter, so
   // parameters move by the learning rate in the same direction wherever the gradients agree in sign.
   {
@@ -184,7 +184,7 @@ TEST(GpuTrainer, LossCurveAndPsnrFollowTheCpuAndModelsMoveBothWays) {
     Trainer c1(*one_cpu, std::make_shared<InCoreSampler>(vol), TrainOptions{16384, 5});
     c1.step();
     auto one_gpu = make();
-    cuda::GpuTrainer g1(*one_gpu, view_of(vol), cuda::GpuTrainOptions{16384, 5, Trainer::chunk_for(*one_gpu, 16384)});
+    cuda::GpuTrainer g1(*one_gpu, view_of(vol), cuda::GpuTrainOptions{16384, 5, kChunk});
     g1.run(1);
     g1.download();
     size_t agree = 0;

@@ -91,7 +91,7 @@ TEST(GpuMacroCells, OnlineRangesOfTheGpuTrainerEqualTheCpuTrainers) {
   const int64_t batch = 4096;
   Trainer cpu(cpu_net, std::make_shared<InCoreSampler>(vol), TrainOptions{batch, 9});
   cpu.enable_online_ranges(vol.dims, 8);
-  cuda::GpuTrainer gpu(gpu_net, view_of(vol), cuda::GpuTrainOptions{batch, 9, Trainer::chunk_for(cpu_net, batch)});
+  cuda::GpuTrainer gpu(gpu_net, view_of(vol), cuda::GpuTrainOptions{batch, 9, kChunk});
   gpu.enable_online_ranges(vol.dims, 8);
   for (int i = 0; i < 3; ++i) cpu.step();
   gpu.run(3);

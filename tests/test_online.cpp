@@ -123,8 +123,7 @@ TEST(OnlineLoop, MacroCellsAreTheValueRangesOfTheTrainingSamples) {
   const ValueRangeGrid& online = loop.macrocells()->ranges();
 
   // The same samples, drawn again: the trainer's chunks of (seed, step, chunk).
-  int C = s.net.chunk();
-  while (batch % C) C /= 2;
+  const int C = kChunk;
   InCoreSampler sampler(s.vol);
   ValueRangeGrid ref(s.vol.dims, 4);
   std::vector<float> x(C), y(C), z(C), v(C);

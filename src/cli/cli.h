@@ -1,9 +1,14 @@
 #pragma once
 #include <CLI/CLI.hpp>
 #include <string>
+#include "vnr/core/device.h"
 #include "vnr/core/json.h"
 #include "vnr/core/math.h"
 #include "vnr/volume/volume.h"
+
+namespace vnr {
+class Network;
+}
 
 namespace vnr::cli {
 
@@ -22,6 +27,9 @@ struct VolumeArgs {
 void add_device_option(CLI::App* app, std::string& device);
 // --precision auto|fp32|bf16 on eval, decode, render and bench infer|render (Network::set_inference_precision).
 void add_precision_option(CLI::App* app, std::string& precision);
+// A report's "precision": the CPU network's inference arithmetic, "fp32" or "bf16"; null on the GPU
+// (its own fp16 MLP) or without a network (a grid).
+Json precision_json(const Network* net, Device dev);
 
 Int3 parse_dims(const std::string& s);
 void write_report(const std::string& path, const Json& report);  // atomic; "" = no report

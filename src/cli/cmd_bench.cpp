@@ -27,7 +27,7 @@ struct BenchArgs {
 // MLP forward (+ backward when training) alone over chunks, all threads: GFLOP/s.
 double mlp_gflops(const Network& net, bool training, double seconds) {
   const MlpLayout& m = net.mlp();
-  const int C = net.chunk();
+  const int C = kChunk;
   double flops_per_chunk = net.flops_forward_per_sample() * C * (training ? 3.0 : 1.0);
   std::vector<double> per_thread(num_threads(), 0.0);
   double el = 0;
@@ -72,7 +72,7 @@ void run_bench_cuda(const BenchArgs& a, const Volume& vol, Network& net) {
   double mlp_seconds = 0, resident_sps = 0;
   uint64_t peak = 0;
   if (training) {
-    cuda::GpuTrainer tr(net, view_of(vol), cuda::GpuTrainOptions{a.batch, 1337, Trainer::chunk_for(net, a.batch), asked});
+    cuda::GpuTrainer tr(net, view_of(vol), cuda::GpuTrainOptions{a.batch, 1337, kChunk, asked});
     tr.run(5);  // warm-up
     tr.synchronize();
     auto t0 = std::chrono::steady_clock::now();

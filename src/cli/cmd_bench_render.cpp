@@ -132,14 +132,13 @@ void add_bench_render(CLI::App& bench) {
     report["device"] = device_name(setup.device);
     if (setup.device == Device::Cuda) report["gpu"] = cuda::devices().at(0).name;
     report["raw_field_samples_per_second"] = raw;
-    const bool cpu_net = setup.device == Device::Cpu && src.model;
-    report["precision"] = cpu_net ? Json(precision_name(src.model->net->inference_precision())) : Json(nullptr);
-    const std::string where = setup.device == Device::Cuda
-                                  ? cuda::devices().at(0).name
-                                  : fmt::format("{} threads{}", num_threads(),
-                                                cpu_net ? fmt::format(", {} network", precision_name(
-                                                                                           src.model->net->inference_precision()))
-                                                        : "");
+    const Json precision = precision_json(src.model ? src.model->net.get() : nullptr, setup.device);
+    report["precision"] = precision;
+    const std::string where =
+        setup.device == Device::Cuda
+            ? cuda::devices().at(0).name
+            : fmt::format("{} threads{}", num_threads(),
+                          precision.is_null() ? "" : fmt::format(", {} network", precision.get<std::string>()));
     std::printf("%s (%s field), %dx%d, %s; raw batched field query: %s\n\n", src.description.c_str(),
                 src.field->kind(), setup.options.width, setup.options.height, where.c_str(),
                 raw > 0 ? fmt::format("{:.2f} M samples/s", raw / 1e6).c_str() : "not measured");

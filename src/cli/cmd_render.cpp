@@ -184,9 +184,7 @@ void add_render(CLI::App& app) {
                    {"size", {setup.options.width, setup.options.height}},
                    {"threads", num_threads()},
                    {"device", device_name(setup.device)},
-                   {"precision", setup.device == Device::Cpu && src.model
-                                     ? Json(precision_name(src.model->net->inference_precision()))
-                                     : Json(nullptr)},
+                   {"precision", precision_json(src.model ? src.model->net.get() : nullptr, setup.device)},
                    {"host_syncs", st.host_syncs}};
     std::string cmp;
     if (reference) {

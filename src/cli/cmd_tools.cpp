@@ -94,7 +94,7 @@ void add_eval(CLI::App& app) {
 
     Json report = {{"method", method},
                    {"device", device_name(dev)},
-                   {"precision", dev == Device::Cpu ? Json(precision_name(m.net->inference_precision())) : Json(nullptr)},
+                   {"precision", precision_json(m.net.get(), dev)},
                    {"compression_ratio", ratio},
                    {"model_bytes", model_bytes},
                    {"volume_bytes", volume_bytes}};

@@ -223,7 +223,7 @@ void run_train(const TrainArgs& a) {
   if (dev == Device::Cuda) {
     gpu = std::make_unique<cuda::GpuTrainer>(
         net, view_of(*data.vol),
-        cuda::GpuTrainOptions{a.batch, a.seed, Trainer::chunk_for(net, a.batch), cuda::parse_mlp_path(a.mlp)});
+        cuda::GpuTrainOptions{a.batch, a.seed, kChunk, cuda::parse_mlp_path(a.mlp)});
     if (a.macrocell_size > 0) gpu->enable_online_ranges(data.dims, a.macrocell_size);
     if (!a.quiet)
       std::fprintf(stderr, "training on %s (MLP: %s)\n", cuda::devices().at(0).name.c_str(),

@@ -9,6 +9,7 @@
 #include "vnr/core/parallel.h"
 #include "vnr/cuda/cuda.h"
 #include "vnr/nn/mlp_kernels.h"
+#include "vnr/nn/network.h"
 
 namespace vnr::cli {
 
@@ -59,6 +60,10 @@ void add_precision_option(CLI::App* app, std::string& precision) {
                    "needs AVX512-BF16, ~1.4x faster), fp32, or auto = bf16 where the CPU has it")
       ->check(CLI::IsMember({"auto", "fp32", "bf16"}))
       ->capture_default_str();
+}
+
+Json precision_json(const Network* net, Device dev) {
+  return net && dev == Device::Cpu ? Json(precision_name(net->inference_precision())) : Json(nullptr);
 }
 
 void add_device_option(CLI::App* app, std::string& device) {

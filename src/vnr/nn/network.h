@@ -34,8 +34,8 @@ MlpLayout make_mlp_layout(const ModelConfig& cfg, uint32_t n_output_dims = 1);
 // Total parameter count of a config, without allocating anything.
 uint64_t count_params(const Json& config, uint32_t n_output_dims = 1);
 
-// Samples are processed in chunks whose MLP activations stay in L2: Network::chunk() = kChunk
-// samples for every width. (Narrow MLPs once used 1024 against per-chunk overheads; with today's
+// Samples are processed in chunks of kChunk, whose MLP activations stay in L2, for every width
+// (training draws its samples per (step, chunk), so the GPU trainer uses the same chunks). (Narrow MLPs once used 1024 against per-chunk overheads; with today's
 // kernels 256 trains the small config 8-30 % faster, the chunk then sharing L2 with the grid
 // tables, and infers within 2 %.) Training batches are multiples of kChunk.
 constexpr int kChunk = 256;
@@ -89,7 +89,6 @@ public:
   void grid_backward_level(uint32_t level, const float* x, const float* y, const float* z, int64_t n,
                            const float* dEnc, int chunk, float* grad) const;
   size_t acts_floats(int n) const { return size_t(mlp_.n_hidden) * mlp_.width * n; }
-  int chunk() const { return kChunk; }
 
   // Precision of infer/infer_fn and of PointEvaluators built afterwards (default FP32). BF16 applies
   // to ReLU MLPs of even width; others stay fp32 (inference_precision() then says FP32).

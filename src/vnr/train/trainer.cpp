@@ -46,9 +46,8 @@ Trainer::Trainer(Network& net, std::shared_ptr<Sampler> sampler, TrainOptions op
   const MlpLayout& m = net.mlp();
   grads_.assign(net.n_params(), 0.0f);
   dW_.assign(n_threads_, std::vector<float>(m.n_params, 0.0f));
-  // Every chunk full, and the encoding-gradient rows all have the same stride.
-  const int C = chunk_for(net, opts_.batch);
-  chunk_ = C;
+  // Every chunk full (the batch is a multiple of kChunk): the encoding-gradient rows all have one stride.
+  const int C = kChunk;
   // workspace per thread: target, X0, acts, out_pre, out, dout, scratch
   size_t ws = C + size_t(m.in_pad) * C + net.acts_floats(C) + 3 * size_t(m.n_out) * C + 2 * size_t(m.width) * C;
   ws_.assign(n_threads_, std::vector<float>(ws, 0.0f));
@@ -60,15 +59,9 @@ Trainer::Trainer(Network& net, std::shared_ptr<Sampler> sampler, TrainOptions op
   chunk_loss_.resize(n_chunks);
 }
 
-int Trainer::chunk_for(const Network& net, int64_t batch) {
-  int C = net.chunk();
-  while (C > 1 && batch % C) C /= 2;
-  return C;
-}
-
 float Trainer::step() {
   const MlpLayout& m = net_.mlp();
-  const int64_t C = chunk_;
+  const int64_t C = kChunk;
   const int64_t n_chunks = opts_.batch / C;
   const uint64_t step = adam_.steps_done();
   const float inv_n = 1.0f / float(opts_.batch * m.n_out);

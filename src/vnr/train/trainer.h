@@ -26,9 +26,6 @@ struct TrainOptions {
 class Trainer {
 public:
   Trainer(Network& net, std::shared_ptr<Sampler> sampler, TrainOptions opts);
-  // Samples per chunk for a batch: the network's preferred chunk, halved until it divides the batch
-  // (samples are drawn per (step, chunk), so the GPU trainer uses the same value to draw the same ones).
-  static int chunk_for(const Network& net, int64_t batch);
   float step();  // one training step; returns the mean loss of its batch
   uint64_t steps_done() const { return adam_.steps_done(); }
   float current_learning_rate() const { return adam_.current_learning_rate(); }
@@ -49,7 +46,6 @@ private:
   TrainOptions opts_;
   Adam adam_;
   int n_threads_;
-  int chunk_;  // samples per chunk in this trainer
   big_vector<float> grads_;              // full gradient (MLP part overwritten each step)
   std::vector<std::vector<float>> dW_;    // per-thread MLP gradient
   std::vector<std::vector<float>> ws_;    // per-thread chunk workspace
