@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "vnr/nn/mlp_bf16.h"
+#include "vnr/nn/mlp_bf16_train.h"
 #include "vnr/nn/mlp_kernels.h"
 
 namespace k = vnr::kernels;
@@ -389,5 +390,99 @@ TEST(MlpBf16, Fused16WideForwardMatchesLayerByLayer) {
       k::matmul_fwd_bf16_linear(Wout.data(), 1, 8, A.data(), layered.data(), n);
       for (int s = 0; s < n; ++s) ASSERT_NEAR(fused[s], layered[s], 1e-5f * (1.0f + std::fabs(layered[s]))) << s;
     }
+  }
+}
+
+// ---- bf16 training kernels (sample-major, mlp_bf16_train.h) ----
+
+namespace {
+std::vector<uint32_t> random_pairs(size_t count, std::mt19937& rng) {
+  std::vector<float> f = random_vec(2 * count, rng);
+  std::vector<uint32_t> p(count);
+  for (size_t i = 0; i < count; ++i) p[i] = k::bf16_pair(f[2 * i], f[2 * i + 1]);
+  return p;
+}
+}  // namespace
+
+// Every epilogue, every V, row counts with every tail, in the two addressing patterns the trainer
+// uses (P rows contiguous: forward and data gradient; P columns contiguous: weight gradient).
+TEST(MlpBf16Train, PairGemmMatchesReference) {
+  if (!k::bf16_supported()) GTEST_SKIP() << "this CPU has no AVX512-BF16";
+  std::mt19937 rng(23);
+  using Out = k::PairGemmOut;
+  for (int V : {1, 2, 4, 8})
+    for (int M : {1, 5, 12, 13, 31, 64})
+      for (int kp : {1, 8, 33})
+        for (bool rows_contiguous : {true, false})
+          for (Out out : {Out::ReluBf16, Out::MaskBf16, Out::F32, Out::AddF32, Out::Column}) {
+            SCOPED_TRACE(testing::Message() << "V " << V << " M " << M << " kp " << kp << " rows " << rows_contiguous
+                                            << " out " << int(out));
+            const int L = 16 * V;
+            std::vector<uint32_t> P = random_pairs(size_t(M) * kp, rng), Q = random_pairs(size_t(kp) * (L + 3), rng);
+            k::PairGemm g;
+            g.P = P.data(), g.kp = kp, g.si = rows_contiguous ? kp : 1, g.sk = rows_contiguous ? 1 : M;
+            g.Q = Q.data(), g.ldq = L + 3, g.V = V, g.M = M, g.out = out;
+            const int valid = L - 5;
+            g.valid = valid;
+            std::vector<uint16_t> maskv(size_t(M) * L);
+            for (uint16_t& m : maskv) m = k::to_bf16(std::uniform_real_distribution<float>(-1, 1)(rng));
+            g.mask = maskv.data(), g.mask_ld = L;
+            const float tol = float(kp) * 2 * 1.2e-7f * 2 * kp + 1e-7f;  // fp32 sums of 2 kp products |p| <= 1
+            if (out == Out::ReluBf16 || out == Out::MaskBf16) {
+              std::vector<uint16_t> a(size_t(M) * L + 7, 0x1234), b = a;
+              g.dst = a.data(), g.ld = L;
+              k::pair_gemm(g);
+              g.dst = b.data();
+              k::ref::pair_gemm(g);
+              for (size_t i = 0; i < a.size(); ++i) {
+                const float x = k::from_bf16(a[i]), y = k::from_bf16(b[i]);
+                ASSERT_NEAR(x, y, std::fabs(y) / 128 + tol) << i;  // one bf16 ulp
+                if (out == Out::ReluBf16 && i < size_t(M) * L) ASSERT_GE(x, 0.0f);
+              }
+            } else {
+              const bool column = out == Out::Column;
+              std::vector<float> a = random_vec(column ? size_t(L) * M + 3 : size_t(M) * (L + 2), rng), b = a;
+              g.ld = column ? M : L + 2;
+              g.dst = a.data();
+              k::pair_gemm(g);
+              g.dst = b.data();
+              k::ref::pair_gemm(g);
+              for (size_t i = 0; i < a.size(); ++i) ASSERT_NEAR(a[i], b[i], tol) << i;
+            }
+          }
+}
+
+TEST(MlpBf16Train, LayoutConversionsAreExact) {
+  if (!k::bf16_supported()) GTEST_SKIP() << "this CPU has no AVX512-BF16";
+  std::mt19937 rng(29);
+  for (int K : {1, 7, 8, 16, 31, 33, 64, 100}) {
+    SCOPED_TRACE(testing::Message() << "K = " << K);
+    const int n = 64, kp = (K + 1) / 2, lda = kp + 2;
+    const std::vector<float> X = random_vec(size_t(K) * n, rng);
+    std::vector<uint32_t> A(size_t(n) * lda, 0xdeadbeefu);
+    k::feature_major_to_sm_pairs(X.data(), K, n, A.data(), lda);
+    for (int s = 0; s < n; ++s)
+      for (int j = 0; j < lda; ++j) {
+        const uint32_t want = j >= kp ? 0xdeadbeefu
+                                      : k::bf16_pair(X[size_t(2 * j) * n + s], 2 * j + 1 < K ? X[size_t(2 * j + 1) * n + s] : 0.0f);
+        ASSERT_EQ(A[size_t(s) * lda + j], want) << s << " " << j;
+      }
+    const int ldd = (K + 15) / 16 * 16;
+    const std::vector<float> D = random_vec(size_t(n) * ldd, rng);
+    std::vector<float> Xb(size_t(K + 1) * n, -7.0f);
+    k::sm_to_feature_major(D.data(), ldd, K, n, Xb.data(), n);
+    for (int c = 0; c <= K; ++c)
+      for (int s = 0; s < n; ++s) ASSERT_EQ(Xb[size_t(c) * n + s], c < K ? D[size_t(s) * ldd + c] : -7.0f);
+    // sample pairs of a bf16 row-major matrix (row stride K + 3 words)
+    const int lds = ldd, ldw = K + 3;
+    std::vector<uint16_t> Aw(size_t(n) * ldw);
+    for (uint16_t& w : Aw) w = k::to_bf16(std::uniform_real_distribution<float>(-1, 1)(rng));
+    std::vector<uint32_t> S(size_t(n / 2) * lds, 0xdeadbeefu);
+    k::sample_pairs(Aw.data(), ldw, K, n, S.data(), lds);
+    for (int j = 0; j < n / 2; ++j)
+      for (int c = 0; c < lds; ++c) {
+        const uint32_t want = c < K ? uint32_t(Aw[size_t(2 * j) * ldw + c]) | uint32_t(Aw[size_t(2 * j + 1) * ldw + c]) << 16 : 0u;
+        ASSERT_EQ(S[size_t(j) * lds + c], want) << j << " " << c;
+      }
   }
 }

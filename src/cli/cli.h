@@ -27,6 +27,8 @@ struct VolumeArgs {
 void add_device_option(CLI::App* app, std::string& device);
 // --precision auto|fp32|bf16 on eval, decode, render and bench infer|render (Network::set_inference_precision).
 void add_precision_option(CLI::App* app, std::string& precision);
+// --precision auto|fp32|bf16 on train and bench train (resolve_training_precision).
+void add_training_precision_option(CLI::App* app, std::string& precision);
 // A report's "precision": the CPU network's inference arithmetic, "fp32" or "bf16"; null on the GPU
 // (its own fp16 MLP) or without a network (a grid).
 Json precision_json(const Network* net, Device dev);

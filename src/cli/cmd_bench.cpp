@@ -25,7 +25,7 @@ struct BenchArgs {
 };
 
 // MLP forward (+ backward when training) alone over chunks, all threads: GFLOP/s.
-double mlp_gflops(const Network& net, bool training, double seconds) {
+double mlp_gflops(const Network& net, bool training, Precision train_precision, double seconds) {
   const MlpLayout& m = net.mlp();
   const int C = kChunk;
   double flops_per_chunk = net.flops_forward_per_sample() * C * (training ? 3.0 : 1.0);
@@ -39,12 +39,21 @@ double mlp_gflops(const Network& net, bool training, double seconds) {
     const bool bf16 = !training && net.inference_precision() == Precision::BF16;
     const std::vector<uint32_t> wp = bf16 ? net.bf16_weights() : std::vector<uint32_t>();
     std::vector<uint32_t> pairs(bf16 ? net.mlp_bf16_scratch(C) : 0);
+    const bool bf16_train = training && train_precision == Precision::BF16;
+    Network::Bf16TrainWeights tw;
+    if (bf16_train) tw = net.bf16_train_weights();
+    std::vector<uint32_t> tws(bf16_train ? net.mlp_train_bf16_scratch(C) : 0);
     auto t0 = std::chrono::steady_clock::now();
     int64_t chunks = 0;
     while (seconds_since(t0) < seconds) {
       for (int r = 0; r < 16; ++r, ++chunks) {
         if (bf16) {
           net.mlp_forward_bf16(X0.data(), C, wp.data(), pairs.data(), out.data());
+          continue;
+        }
+        if (bf16_train) {
+          net.mlp_forward_train_bf16(X0.data(), C, tw, tws.data(), out.data(), out.data());
+          net.mlp_backward_train_bf16(dout.data(), C, tw, tws.data(), dW.data(), dX.data());
           continue;
         }
         net.mlp_forward(X0.data(), C, acts.data(), out.data(), out.data());
@@ -148,13 +157,16 @@ void run_bench(const BenchArgs& a) {
   net.init_params(1337);
   if (dev == Device::Cuda) return run_bench_cuda(a, vol, net);
   const bool training = a.what == "train";
-  if (!training) net.set_inference_precision(parse_precision(a.precision));  // training is always fp32
+  if (!training) net.set_inference_precision(parse_precision(a.precision));
+  const Precision train_precision = training ? resolve_training_precision(a.precision, net) : Precision::FP32;
   std::vector<double> times;
   double phases[3] = {0, 0, 0};
   auto t0 = std::chrono::steady_clock::now();
   Progress bar(std::string("bench ") + a.what, a.seconds, false);
   if (training) {
-    Trainer tr(net, std::make_shared<InCoreSampler>(vol), TrainOptions{a.batch, 1337});
+    TrainOptions to{a.batch, 1337};
+    to.precision = train_precision;
+    Trainer tr(net, std::make_shared<InCoreSampler>(vol), to);
     for (int w = 0; w < 2; ++w) tr.step();  // warm-up: page-in, caches
     t0 = std::chrono::steady_clock::now();
     std::vector<double> ph[3];
@@ -183,9 +195,10 @@ void run_bench(const BenchArgs& a) {
   const double med = median(times);
   const double sps = a.batch / med;
   const double flops = net.flops_forward_per_sample() * (training ? 3.0 : 1.0);
-  const double mlp_only = mlp_gflops(net, training, std::min(3.0, std::max(0.5, a.seconds / 4)));
+  const double mlp_only = mlp_gflops(net, training, train_precision, std::min(3.0, std::max(0.5, a.seconds / 4)));
   std::printf("%s %s%s: %.3f M samples/s (median of %zu batches of %lld, %.2f ms each; min %.2f, max %.2f)\n",
-              a.what.c_str(), a.config.c_str(), net.inference_precision() == Precision::BF16 ? " (bf16)" : "",
+              a.what.c_str(), a.config.c_str(),
+              (training ? train_precision : net.inference_precision()) == Precision::BF16 ? " (bf16)" : "",
               sps / 1e6, times.size(), (long long)a.batch, med * 1e3,
               *std::min_element(times.begin(), times.end()) * 1e3, *std::max_element(times.begin(), times.end()) * 1e3);
   std::printf("MLP FLOPs: %.1f kFLOP/sample -> %.1f GFLOP/s end to end; MLP kernels alone: %.1f GFLOP/s on %d threads (%s)\n",
@@ -207,7 +220,7 @@ void run_bench(const BenchArgs& a) {
                  {"mlp_gflops", mlp_only},
                  {"threads", num_threads()},
                  {"simd", kernels::simd_target_name()},
-                 {"precision", training ? "fp32" : precision_name(net.inference_precision())},
+                 {"precision", precision_name(training ? train_precision : net.inference_precision())},
                  {"n_params", net.n_params()}};
   if (training)
     report["phase_ms"] = {{"sample_encode_mlp", phases[0] * 1e3}, {"grid_backward", phases[1] * 1e3},
@@ -233,6 +246,7 @@ void add_bench(CLI::App& app) {
     c->add_option("--report", a->report, "write a JSON report");
     add_device_option(c, a->device);
     if (std::string(what) == "infer") add_precision_option(c, a->precision);
+    else add_training_precision_option(c, a->precision);
     c->add_option("--mlp", a->mlp, "cuda: MLP implementation, auto, fused or cublas")
         ->check(CLI::IsMember({"auto", "fused", "cublas"}))
         ->capture_default_str();

@@ -229,7 +229,9 @@ void run_train(const TrainArgs& a) {
       std::fprintf(stderr, "training on %s (MLP: %s)\n", cuda::devices().at(0).name.c_str(),
                    cuda::mlp_path_name(gpu->mlp_path()));
   } else {
-    cpu = std::make_unique<Trainer>(net, data.sampler, TrainOptions{a.batch, a.seed});
+    TrainOptions to{a.batch, a.seed};
+    to.precision = resolve_training_precision(a.precision, net);
+    cpu = std::make_unique<Trainer>(net, data.sampler, to);
     if (a.macrocell_size > 0) cpu->enable_online_ranges(data.dims, a.macrocell_size);
   }
   std::unique_ptr<TrainPreview> preview;
@@ -240,7 +242,8 @@ void run_train(const TrainArgs& a) {
   auto record_training = [&](int64_t done, double seconds, float loss) {
     model.training = {{"steps", done},          {"seconds", seconds}, {"interrupted", bool(g_interrupted)},
                       {"batch", a.batch},       {"seed", a.seed},     {"final_loss", loss},
-                      {"threads", num_threads()}, {"sampler", data.kind}, {"device", device_name(dev)}};
+                      {"threads", num_threads()}, {"sampler", data.kind}, {"device", device_name(dev)},
+                      {"precision", cpu ? Json(precision_name(cpu->options().precision)) : Json(nullptr)}};
     if (gpu) {
       gpu->download();  // the model file is written from net.params
       if (gpu->has_online_ranges()) model.macrocells = gpu->online_ranges();
@@ -339,8 +342,8 @@ void run_train(const TrainArgs& a) {
   const uint64_t model_bytes = file_size(a.output);
   const double ratio = double(data.source_bytes()) / double(model_bytes);
   const double sps = double(done) * a.batch / train_seconds;
-  std::printf("trained %lld steps in %.2fs (%.2f M samples/s), final loss %.6f\n", (long long)done, train_seconds,
-              sps / 1e6, loss);
+  std::printf("trained %lld steps in %.2fs (%.2f M samples/s%s), final loss %.6f\n", (long long)done, train_seconds,
+              sps / 1e6, cpu && cpu->options().precision == Precision::BF16 ? ", bf16 MLP" : "", loss);
   if (preview)
     std::printf("previews: %lld PNG(s) in %s, %.2fs (not counted as training time)\n",
                 (long long)preview->frames_written(), preview_opts->dir.c_str(), preview_seconds);
@@ -371,6 +374,7 @@ void run_train(const TrainArgs& a) {
                  {"memory_budget", budget},
                  {"loss_history", gpu ? gpu->losses() : cpu->loss_history()},
                  {"device", device_name(dev)},
+                 {"precision", cpu ? Json(precision_name(cpu->options().precision)) : Json(nullptr)},
                  {"preview_seconds", preview_seconds},
                  {"config", net.config_json()}};
   if (data.out_of_core) {
@@ -417,6 +421,7 @@ void add_train(CLI::App& app) {
   c->add_option("--mlp", a->mlp, "cuda: MLP implementation, auto (fused when the width allows), fused or cublas")
       ->check(CLI::IsMember({"auto", "fused", "cublas"}))
       ->capture_default_str();
+  add_training_precision_option(c, a->precision);
   c->add_option("--report", a->report, "write a JSON report");
   c->add_option("--macrocell-size", a->macrocell_size,
                  "voxels per macro-cell of the value ranges recorded from the training samples for rendering (0: none)")

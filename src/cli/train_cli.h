@@ -17,6 +17,7 @@ struct TrainArgs {
   int macrocell_size = 16;
   bool quiet = false, no_ssim = false;
   std::string device = "auto", mlp = "auto";  // backend; MLP path on the GPU
+  std::string precision = "auto";             // CPU: the MLP's training arithmetic
   VolumeArgs vol;
   PreviewArgs preview;  // --preview-every N --preview-dir DIR [--preview-size/-mode/-tf]
   // Samplers (issue 4): incore | outofcore | mmap; "" = incore when the volume fits the budget.

@@ -8,13 +8,7 @@
 
 #include "vnr/core/error.h"
 
-#if defined(__x86_64__) && defined(__GNUC__)
-#include <immintrin.h>
-#define VNR_HAVE_BF16_KERNELS 1
-#define VNR_BF16_TARGET __attribute__((target("avx512f,avx512bw,avx512vl,avx512dq,avx512bf16")))
-#else
-#define VNR_HAVE_BF16_KERNELS 0
-#endif
+#include "vnr/nn/bf16_simd.h"
 
 namespace vnr::kernels {
 
@@ -35,10 +29,8 @@ float from_bf16(uint16_t h) {
 
 uint32_t bf16_pair(float lo, float hi) { return uint32_t(to_bf16(lo)) | uint32_t(to_bf16(hi)) << 16; }
 
-namespace {
-float lo_of(uint32_t p) { return from_bf16(uint16_t(p & 0xffffu)); }
-float hi_of(uint32_t p) { return from_bf16(uint16_t(p >> 16)); }
-}  // namespace
+using bf16_detail::hi_of;
+using bf16_detail::lo_of;
 
 void weights_to_bf16_pairs(const float* W, int rows, int K, int ldw, uint32_t* Wp) {
   const int kp = (K + 1) / 2;
@@ -85,14 +77,7 @@ bool bf16_supported() {
 
 namespace {
 
-// Word permutation that interleaves the two halves of vcvtne2ps2bf16's result (low 16 words: row r,
-// high 16: row r + 1) into pairs: out word 2s = row r's sample s, 2s + 1 = row r + 1's.
-alignas(64) constexpr int16_t kInterleave[32] = {0, 16, 1, 17, 2,  18, 3,  19, 4,  20, 5,  21, 6,  22, 7,  23,
-                                                 8, 24, 9, 25, 10, 26, 11, 27, 12, 28, 13, 29, 14, 30, 15, 31};
-
-VNR_BF16_TARGET inline __m512i pack_pairs(__m512 lo, __m512 hi) {
-  return _mm512_permutexvar_epi16(_mm512_load_si512(kInterleave), (__m512i)_mm512_cvtne2ps_pbh(hi, lo));
-}
+using bf16_detail::pack_pairs;
 
 // max(x, 0) returns the second operand for NaN: ReLU maps NaN to 0 as the fp32 kernels do. (The
 // all-ones maskz form avoids GCC 12's false -Wuninitialized inside _mm512_max_ps.)

@@ -84,6 +84,26 @@ public:
   // when dX0 != nullptr. scratch: 2 * width * n floats.
   void mlp_backward(const float* X0, const float* acts, const float* d_out_pre, int n, float* dW, float* dX0,
                     float* scratch) const;
+  // ---- bf16 training (TrainOptions::precision BF16; kernels in mlp_bf16_train.h) ----
+  // ReLU MLPs of width 16, 32, 64 or 128 (every FullyFusedMLP) with at most 128 inputs and outputs,
+  // on CPUs with AVX512-BF16.
+  bool bf16_training_supported() const;
+  // The matrices as bf16 pairs in the two layouts the kernels read: wt (pairs over columns, lanes
+  // over rows: forward) and wp (pairs over rows, lanes over columns: data gradient). The weights
+  // change every step: the trainer converts them once per step.
+  struct Bf16TrainWeights {
+    std::vector<uint32_t> data;
+    uint64_t wt[34], wp[34];  // offsets into data, per matrix
+  };
+  Bf16TrainWeights bf16_train_weights() const;
+  size_t mlp_train_bf16_scratch(int n) const;  // uint32 words for one chunk of n samples
+  // mlp_forward's out_pre and out from bf16 operands; the activations stay (bf16, sample-major) in
+  // scratch for mlp_backward_train_bf16 of the same chunk. n a multiple of 32.
+  void mlp_forward_train_bf16(const float* X0, int n, const Bf16TrainWeights& w, uint32_t* scratch, float* out_pre,
+                              float* out) const;
+  // mlp_backward's dW (accumulated) and dX0 (when not null) from bf16 operands.
+  void mlp_backward_train_bf16(const float* d_out_pre, int n, const Bf16TrainWeights& w, uint32_t* scratch,
+                               float* dW, float* dX0) const;
   // Grid parameter gradient of one level for samples [0, n): grad += dL/dtheta, reading the
   // encoding gradient from dEnc in the chunked layout (chunk c at c * in_pad * chunk, row stride chunk).
   void grid_backward_level(uint32_t level, const float* x, const float* y, const float* z, int64_t n,

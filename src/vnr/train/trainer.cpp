@@ -4,6 +4,7 @@
 #include "vnr/core/error.h"
 #include "vnr/core/parallel.h"
 #include "vnr/nn/loss.h"
+#include "vnr/nn/mlp_bf16.h"
 
 namespace vnr {
 
@@ -37,6 +38,17 @@ double loss_and_grads(LossType loss, Activation act, const float* out, const flo
 
 }  // namespace
 
+Precision resolve_training_precision(const std::string& name, const Network& net) {
+  if (name == "fp32") return Precision::FP32;
+  if (name == "auto")
+    return net.bf16_training_supported() && net.mlp().width >= kBf16TrainMinWidth ? Precision::BF16 : Precision::FP32;
+  if (name != "bf16") fail("unknown precision '{}' (allowed: auto, fp32, bf16)", name);
+  if (!kernels::bf16_supported()) fail("precision bf16 needs a CPU with AVX512-BF16 (this one has none); use fp32");
+  if (!net.bf16_training_supported())
+    fail("bf16 training needs a ReLU MLP of width 16, 32, 64 or 128 with at most 128 inputs and outputs; use fp32");
+  return Precision::BF16;
+}
+
 Trainer::Trainer(Network& net, std::shared_ptr<Sampler> sampler, TrainOptions opts)
     : net_(net), sampler_(std::move(sampler)), opts_(opts),
       adam_(net.config().adam, net.config().decay, net.n_params(), net.mlp().n_params) {
@@ -51,6 +63,11 @@ Trainer::Trainer(Network& net, std::shared_ptr<Sampler> sampler, TrainOptions op
   // workspace per thread: target, X0, acts, out_pre, out, dout, scratch
   size_t ws = C + size_t(m.in_pad) * C + net.acts_floats(C) + 3 * size_t(m.n_out) * C + 2 * size_t(m.width) * C;
   ws_.assign(n_threads_, std::vector<float>(ws, 0.0f));
+  if (opts_.precision == Precision::BF16) {
+    if (!net.bf16_training_supported())
+      fail("bf16 training needs a CPU with AVX512-BF16 and a ReLU MLP of width 16, 32, 64 or 128; use fp32");
+    bf16_ws_.assign(n_threads_, std::vector<uint32_t>(net.mlp_train_bf16_scratch(C)));
+  }
   xs_.resize(opts_.batch);
   ys_.resize(opts_.batch);
   zs_.resize(opts_.batch);
@@ -68,6 +85,8 @@ float Trainer::step() {
   const bool grid = net_.has_grid();
   sampler_->begin_step(step);
   auto t0 = std::chrono::steady_clock::now();
+  const bool bf16 = opts_.precision == Precision::BF16;
+  if (bf16) bf16_w_ = net_.bf16_train_weights();  // the weights changed in the last step's Adam
 
   parallel_threads([&](int t, int nt) {
     std::vector<float>& w = ws_[t];
@@ -88,14 +107,16 @@ float Trainer::step() {
       sampler_->sample(opts_.seed, step, uint64_t(c), n, x, y, z, target);
       if (!thread_ranges_.empty()) thread_ranges_[t].add_samples(x, y, z, target, n);
       net_.encode(x, y, z, n, X0);
-      net_.mlp_forward(X0, n, acts, out_pre, out);
+      if (bf16) net_.mlp_forward_train_bf16(X0, n, bf16_w_, bf16_ws_[t].data(), out_pre, out);
+      else net_.mlp_forward(X0, n, acts, out_pre, out);
       double loss = 0;
       for (uint32_t o = 0; o < m.n_out; ++o)  // n_out targets per sample; vnr volumes are scalar (n_out = 1)
         loss += loss_and_grads(net_.config().loss, m.output_activation, out + o * n, out_pre + o * n, target, n,
                                inv_n, dout + o * n);
       chunk_loss_[c] = loss;
-      net_.mlp_backward(X0, acts, dout, n, dW, grid ? dEnc_.data() + c * int64_t(m.in_pad) * C : nullptr,
-                        scratch);
+      float* dEnc = grid ? dEnc_.data() + c * int64_t(m.in_pad) * C : nullptr;
+      if (bf16) net_.mlp_backward_train_bf16(dout, n, bf16_w_, bf16_ws_[t].data(), dW, dEnc);
+      else net_.mlp_backward(X0, acts, dout, n, dW, dEnc, scratch);
     }
   });
   auto t1 = std::chrono::steady_clock::now();
