@@ -433,6 +433,7 @@ TEST(SeriesCli, PerTimestepModelsThatEvalAccepts) {
   ASSERT_EQ(rep["rows"].size(), 3u);
   EXPECT_EQ(rep["complete"], true);
   EXPECT_EQ(rep["mode"], "per_timestep");
+  EXPECT_EQ(rep["precision"], "fp32");  // --precision auto keeps the small config's 16-wide MLP in fp32
   for (int k = 0; k < 3; ++k) {
     const Json& row = rep["rows"][size_t(k)];
     std::string model = d + "/out/t000" + std::to_string(k) + ".vnr";
@@ -480,6 +481,7 @@ TEST(SeriesCli, ContinuousReportsRecovery) {
   EXPECT_HAS(t.out, "t0001 -> t0002");
   Json rep = parse_json_file(d + "/out/series.json");
   EXPECT_EQ(rep["mode"], "continuous");
+  EXPECT_EQ(rep["precision"], "fp32");
   ASSERT_EQ(rep["rows"].size(), 3u);
   EXPECT_TRUE(rep["rows"][0]["switch"].is_null());
   for (int k = 1; k < 3; ++k) {
