@@ -415,6 +415,7 @@ size_t Network::mlp_train_bf16_scratch(int n) const { return Bf16TrainScratch(ml
 void Network::mlp_forward_train_bf16(const float* X0, int n, const Bf16TrainWeights& w, uint32_t* scratch,
                                      float* out_pre, float* out) const {
   const MlpLayout& m = mlp_;
+  if (n % 32) fail("bf16 training works on multiples of 32 samples, got {}", n);
   const Bf16TrainScratch L(m, n);
   const int W = L.W;
   kernels::feature_major_to_sm_pairs(X0, int(m.first_cols), n, scratch + L.A0, L.kp0);
@@ -445,6 +446,7 @@ void Network::mlp_forward_train_bf16(const float* X0, int n, const Bf16TrainWeig
 void Network::mlp_backward_train_bf16(const float* d_out_pre, int n, const Bf16TrainWeights& w, uint32_t* scratch,
                                       float* dW, float* dX0) const {
   const MlpLayout& m = mlp_;
+  if (n % 32) fail("bf16 training works on multiples of 32 samples, got {}", n);
   const Bf16TrainScratch L(m, n);
   const int W = L.W, no = int(m.n_out), nop = (no + 1) / 2, H = int(m.n_hidden);
   auto acts = [&](int k) {  // input of matrix k, bf16 words
