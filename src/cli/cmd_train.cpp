@@ -221,6 +221,9 @@ void run_train(const TrainArgs& a) {
   std::unique_ptr<Trainer> cpu;
   std::unique_ptr<cuda::GpuTrainer> gpu;
   if (dev == Device::Cuda) {
+    if (a.precision != "auto" && !a.quiet)
+      std::fprintf(stderr, "note: --precision %s applies to CPU training; the GPU trainer keeps its own arithmetic\n",
+                   a.precision.c_str());
     gpu = std::make_unique<cuda::GpuTrainer>(
         net, view_of(*data.vol),
         cuda::GpuTrainOptions{a.batch, a.seed, kChunk, cuda::parse_mlp_path(a.mlp)});
