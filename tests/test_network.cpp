@@ -193,14 +193,20 @@ double relative_l2_error(const float* a, const float* b, size_t count) {
 // the fp32 path (bf16 rounding noise). Whether that noise costs quality is a training question:
 // README, "bf16 training".
 TEST(Mlp, Bf16TrainingMatchesRoundedReference) {
-  std::vector<std::pair<std::string, Json>> configs = {{"paper", preset_config("paper")},
-                                                       {"small", preset_config("small")},
-                                                       {"width 32", small_model("HashGrid", 32, 3)},
-                                                       {"width 128", small_model("HashGrid", 128, 1)},
-                                                       {"identity, sigmoid", small_model("Identity", 16, 2, "Sigmoid")}};
-  for (auto& [name, config] : configs) {
+  struct Case {
+    std::string name;
+    Json config;
+    uint32_t n_out;
+  };
+  const std::vector<Case> cases = {{"paper", preset_config("paper"), 1},
+                                   {"small", preset_config("small"), 1},
+                                   {"width 32", small_model("HashGrid", 32, 3), 1},
+                                   {"width 128", small_model("HashGrid", 128, 1), 1},
+                                   {"identity, sigmoid", small_model("Identity", 16, 2, "Sigmoid"), 1},
+                                   {"3 outputs", small_model("HashGrid", 64, 2), 3}};
+  for (const auto& [name, config, n_out] : cases) {
     SCOPED_TRACE(name);
-    Network net(config);
+    Network net(config, n_out);
     if (!net.bf16_training_supported()) GTEST_SKIP() << "no AVX512-BF16 on this CPU";
     net.init_params(3);
     const MlpLayout& m = net.mlp();
@@ -217,7 +223,7 @@ TEST(Mlp, Bf16TrainingMatchesRoundedReference) {
     net.mlp_backward_train_bf16(dout.data(), n, w, scratch.data(), dW.data(), dX0.data());
     const Bf16TrainResult R = bf16_training_reference(net, X0, dout, n);
     EXPECT_LT(relative_max_error(pre.data(), R.out_pre.data(), pre.size()), 1e-2);
-    for (int i = 0; i < n; ++i) EXPECT_EQ(out[i], activate(m.output_activation, pre[i]));
+    for (size_t i = 0; i < pre.size(); ++i) EXPECT_EQ(out[i], activate(m.output_activation, pre[i]));
     for (uint32_t k = 0; k <= m.n_hidden; ++k) {
       const size_t count = m.rows[k] * m.cols[k];
       EXPECT_LT(relative_max_error(dW.data() + m.offset[k], R.dW.data() + m.offset[k], count), 1e-2) << "matrix " << k;
