@@ -65,7 +65,7 @@ void add_precision_option(CLI::App* app, std::string& precision) {
 void add_training_precision_option(CLI::App* app, std::string& precision) {
   app->add_option("--precision", precision,
                    "CPU training arithmetic of the MLP: bf16 (weights, activations and gradients rounded to bf16, sums "
-                   "and Adam in fp32; needs AVX512-BF16, ~1.4x faster steps for the paper config), fp32, or auto = "
+                   "and Adam in fp32; needs AVX512-BF16, 1.3-1.4x faster paper-config steps), fp32, or auto = "
                    "bf16 where the CPU has it and the MLP is at least 32 wide (16-wide ones train faster in fp32)")
       ->check(CLI::IsMember({"auto", "fp32", "bf16"}))
       ->capture_default_str();
