@@ -99,6 +99,63 @@ HWY_INLINE hwy::HWY_NAMESPACE::Vec<DF> GridLookupVec(DF df, const GridView& g, h
   return hn::Add(hn::Mul(c0, u2), hn::Mul(c1, t[2]));
 }
 
+// grid_lookup() from a z-paired grid (ZPairGrid, data = pairs (v(x,y,z), v(x,y,min(z+1,nz-1)))): the
+// axes as cell_axis, the corners v[x + 2y + 4z] as 4 pairs (z0, z1) of the rows y0 and y1.
+template <class DF>
+HWY_INLINE hwy::HWY_NAMESPACE::Vec<DF> GridLookupZPairVec(DF df, const float* zp, int32_t nx, int32_t ny, int32_t nz,
+                                                          hwy::HWY_NAMESPACE::Vec<DF> ux,
+                                                          hwy::HWY_NAMESPACE::Vec<DF> uy,
+                                                          hwy::HWY_NAMESPACE::Vec<DF> uz) {
+  namespace hn = hwy::HWY_NAMESPACE;
+  const hn::RebindToSigned<DF> di;
+  using VI = hn::Vec<decltype(di)>;
+  const auto one = hn::Set(df, 1.0f);
+  const hn::Vec<DF> u[3] = {ux, uy, uz};
+  const int32_t dims[3] = {nx, ny, nz};
+  VI i0[3], i1[3];
+  hn::Vec<DF> t[3];
+  for (int d = 0; d < 3; ++d) {
+    const auto q = CellAxisPos(df, u[d], dims[d]);
+    const auto fl = hn::Floor(q);
+    i0[d] = hn::ConvertTo(di, fl);
+    i1[d] = hn::Min(hn::Add(i0[d], hn::Set(di, 1)), hn::Set(di, dims[d] - 1));
+    t[d] = hn::Sub(q, fl);
+  }
+  const auto plane = hn::Mul(i0[2], hn::Set(di, nx * ny));
+  hn::Vec<DF> v[8];
+  for (int k = 0; k < 4; ++k) {  // k = x + 2y: the pair (z0, z1) of corner (x, y)
+    const VI voxel = hn::Add(hn::Add(k & 1 ? i1[0] : i0[0], hn::Mul(k & 2 ? i1[1] : i0[1], hn::Set(di, nx))), plane);
+    GatherPairs(df, zp, hn::Add(voxel, voxel), &v[k], &v[k + 4]);
+  }
+  const auto u0 = hn::Sub(one, t[0]), u1 = hn::Sub(one, t[1]), u2 = hn::Sub(one, t[2]);
+  const auto c00 = hn::Add(hn::Mul(v[0], u0), hn::Mul(v[1], t[0]));
+  const auto c10 = hn::Add(hn::Mul(v[2], u0), hn::Mul(v[3], t[0]));
+  const auto c01 = hn::Add(hn::Mul(v[4], u0), hn::Mul(v[5], t[0]));
+  const auto c11 = hn::Add(hn::Mul(v[6], u0), hn::Mul(v[7], t[0]));
+  const auto c0 = hn::Add(hn::Mul(c00, u1), hn::Mul(c10, t[1]));
+  const auto c1 = hn::Add(hn::Mul(c01, u1), hn::Mul(c11, t[1]));
+  return hn::Add(hn::Mul(c0, u2), hn::Mul(c1, t[2]));
+}
+
+// Prefetches (prefetcht1) the two rows a z-paired lookup at (ux, uy, uz) reads.
+template <class DF>
+HWY_INLINE void ZPairPrefetchVec(DF df, const float* zp, int32_t nx, int32_t ny, int32_t nz,
+                                 hwy::HWY_NAMESPACE::Vec<DF> ux, hwy::HWY_NAMESPACE::Vec<DF> uy,
+                                 hwy::HWY_NAMESPACE::Vec<DF> uz) {
+  namespace hn = hwy::HWY_NAMESPACE;
+  const hn::RebindToSigned<DF> di;
+  constexpr size_t kMaxLanes = HWY_MAX_BYTES / sizeof(float);
+  const auto cx = hn::ConvertTo(di, CellAxisPos(df, ux, nx)), cy = hn::ConvertTo(di, CellAxisPos(df, uy, ny)),
+             cz = hn::ConvertTo(di, CellAxisPos(df, uz, nz));
+  alignas(HWY_MAX_BYTES) int32_t voxel[kMaxLanes];
+  hn::Store(hn::Add(cx, hn::Add(hn::Mul(cy, hn::Set(di, nx)), hn::Mul(cz, hn::Set(di, nx * ny)))), di, voxel);
+  for (size_t l = 0; l < hn::Lanes(df); ++l) {
+    const float* p0 = zp + 2 * int64_t(voxel[l]);
+    __builtin_prefetch(p0, 0, 2);
+    __builtin_prefetch(p0 + 2 * int64_t(nx), 0, 2);
+  }
+}
+
 }  // namespace HWY_NAMESPACE
 }  // namespace vnr
 HWY_AFTER_NAMESPACE();
