@@ -400,6 +400,7 @@ TEST(Sampler, InCoreTargetsAreTheGridLookups) {
   for (const GridView g : {GridView{vol.data(), 24, 24, 24}, GridView{vol.data(), 1, 24, 24}}) {
     const InCoreSampler sampler(g);
     EXPECT_EQ(sampler.uses_zpair_copy(), g.nx >= 2);
+    EXPECT_FALSE(InCoreSampler(g, 8 * vol.size() - 1).uses_zpair_copy());  // a copy over the limit is not made
     const int n = 1000;
     std::vector<float> x(n), y(n), z(n), target(n);
     sampler.sample(3, 7, 11, n, x.data(), y.data(), z.data(), target.data());

@@ -2,9 +2,9 @@
 
 namespace vnr {
 
-InCoreSampler::InCoreSampler(GridView grid) : grid_(grid) {
+InCoreSampler::InCoreSampler(GridView grid, uint64_t zpair_max_bytes) : grid_(grid) {
   const uint64_t voxels = uint64_t(grid.nx) * uint64_t(grid.ny) * uint64_t(grid.nz);
-  if (grid.nx >= 2 && ZPairGrid::fits(grid) && 2 * sizeof(float) * voxels <= kZPairMaxBytes)
+  if (grid.nx >= 2 && ZPairGrid::fits(grid) && 2 * sizeof(float) * voxels <= zpair_max_bytes)
     zpair_ = std::make_unique<ZPairGrid>(grid);
 }
 
