@@ -2,7 +2,8 @@
 // bf16 inference kernels for the MLP forward pass (AVX512-BF16 `vdpbf16ps`): weights and activations
 // rounded to bf16 (round to nearest even), products summed in fp32. One vdpbf16ps does two
 // multiply-adds per fp32 lane at the rate of one fp32 FMA, so the MLP runs at twice the FMA peak
-// (Zen 4: 233 vs 115 GFLOP/s per core, measured). Inference only: training keeps fp32.
+// (Zen 4: 233 vs 115 GFLOP/s per core, measured). Inference; training has its own sample-major kernels
+// (mlp_bf16_train.h).
 //
 // Layout "pairs": an activation matrix X (K x n, feature-major) is stored as P[j * n + s] (uint32)
 // = bf16(X[2j][s]) in the low half, bf16(X[2j + 1][s]) in the high half (0 past K), which is the
