@@ -60,8 +60,11 @@ Trainer::Trainer(Network& net, std::shared_ptr<Sampler> sampler, TrainOptions op
   dW_.assign(n_threads_, std::vector<float>(m.n_params, 0.0f));
   // Every chunk full (the batch is a multiple of kChunk): the encoding-gradient rows all have one stride.
   const int C = kChunk;
-  // workspace per thread: target, X0, acts, out_pre, out, dout, scratch
-  size_t ws = C + size_t(m.in_pad) * C + net.acts_floats(C) + 3 * size_t(m.n_out) * C + 2 * size_t(m.width) * C;
+  // workspace per thread: target, X0, acts, out_pre, out, dout, scratch (acts and scratch: fp32 MLP only;
+  // the bf16 MLP keeps its activations in bf16_ws_)
+  const bool fp32_mlp = opts_.precision != Precision::BF16;
+  size_t ws = C + size_t(m.in_pad) * C + (fp32_mlp ? net.acts_floats(C) : 0) + 3 * size_t(m.n_out) * C +
+              (fp32_mlp ? 2 * size_t(m.width) * C : 0);
   ws_.assign(n_threads_, std::vector<float>(ws, 0.0f));
   if (opts_.precision == Precision::BF16) {
     if (!net.bf16_training_supported())
@@ -93,7 +96,7 @@ float Trainer::step() {
     float* target = w.data();
     float* X0 = target + C;
     float* acts = X0 + size_t(m.in_pad) * C;
-    float* out_pre = acts + net_.acts_floats(int(C));
+    float* out_pre = acts + (bf16 ? 0 : net_.acts_floats(int(C)));
     float* out = out_pre + size_t(m.n_out) * C;
     float* dout = out + size_t(m.n_out) * C;
     float* scratch = dout + size_t(m.n_out) * C;
