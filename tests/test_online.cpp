@@ -296,6 +296,8 @@ TEST(TrainPreview, WritesPngsEveryNSteps) {
       EXPECT_EQ(t, 0.0) << step;
   }
   EXPECT_EQ(preview.after_step(8), 0.0) << "a step is written once";
+  // Previews infer in bf16 where the CPU has it, then hand the network back in its own precision.
+  EXPECT_EQ(s.trainer.network().inference_precision(), Precision::FP32);
   EXPECT_GT(preview.finish(10), 0.0) << "the final step, not a multiple of 4";
   EXPECT_EQ(preview.finish(10), 0.0);
   EXPECT_EQ(preview.frames_written(), 3);

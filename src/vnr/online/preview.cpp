@@ -55,6 +55,14 @@ TrainPreview::TrainPreview(const PreviewOptions& o, Trainer& trainer, Int3 dims)
 
 double TrainPreview::write(int64_t step) {
   auto t0 = std::chrono::steady_clock::now();
+  // Previews infer as `vnr render` does by default (bf16 where the CPU has it); the training run's
+  // own inference precision (its final evaluation is fp32) is restored afterwards.
+  struct PrecisionScope {
+    Network& net;
+    Precision keep;
+    ~PrecisionScope() { net.set_inference_precision(keep); }
+  } scope{loop_->trainer().network(), loop_->trainer().network().inference_precision()};
+  scope.net.set_inference_precision(parse_precision("auto"));
   const Image& img = loop_->render_frame();
   last_path_ = preview_path(o_.dir, step);
   write_image(last_path_, img);
