@@ -238,6 +238,8 @@ void run_train(const TrainArgs& a) {
     cpu = std::make_unique<Trainer>(net, data.sampler, to);
     if (a.macrocell_size > 0) cpu->enable_online_ranges(data.dims, a.macrocell_size);
   }
+  // Reports' "precision": the CPU trainer's MLP arithmetic; null on the GPU (its own arithmetic).
+  const Json precision_report = cpu ? Json(precision_name(cpu->options().precision)) : Json(nullptr);
   std::unique_ptr<TrainPreview> preview;
   if (preview_opts) preview = std::make_unique<TrainPreview>(*preview_opts, *cpu, data.dims);
   double preview_seconds = 0;  // left out of the training time and samples/s
@@ -247,7 +249,7 @@ void run_train(const TrainArgs& a) {
     model.training = {{"steps", done},          {"seconds", seconds}, {"interrupted", bool(g_interrupted)},
                       {"batch", a.batch},       {"seed", a.seed},     {"final_loss", loss},
                       {"threads", num_threads()}, {"sampler", data.kind}, {"device", device_name(dev)},
-                      {"precision", cpu ? Json(precision_name(cpu->options().precision)) : Json(nullptr)}};
+                      {"precision", precision_report}};
     if (gpu) {
       gpu->download();  // the model file is written from net.params
       if (gpu->has_online_ranges()) model.macrocells = gpu->online_ranges();
@@ -378,7 +380,7 @@ void run_train(const TrainArgs& a) {
                  {"memory_budget", budget},
                  {"loss_history", gpu ? gpu->losses() : cpu->loss_history()},
                  {"device", device_name(dev)},
-                 {"precision", cpu ? Json(precision_name(cpu->options().precision)) : Json(nullptr)},
+                 {"precision", precision_report},
                  {"preview_seconds", preview_seconds},
                  {"config", net.config_json()}};
   if (data.out_of_core) {

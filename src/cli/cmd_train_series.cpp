@@ -154,12 +154,13 @@ void run_train_series(const TrainArgs& a) {
   };
   auto t_all = std::chrono::steady_clock::now();
 
+  const Precision precision = resolve_training_precision(a.precision, *model.net);
   try {
     SigintGuard guard;
     if (!a.continuous) {
       SeriesOptions so;
       so.train = TrainOptions{a.batch, a.seed};
-      so.train.precision = resolve_training_precision(a.precision, *model.net);
+      so.train.precision = precision;
       so.steps = a.steps >= 0 ? a.steps : (a.seconds > 0 ? -1 : 1000);
       so.seconds = a.seconds;
       so.macrocell_size = a.macrocell_size;
@@ -167,7 +168,7 @@ void run_train_series(const TrainArgs& a) {
       report["steps_per_timestep"] = so.steps >= 0 ? Json(so.steps) : Json(nullptr);
       report["seconds_per_timestep"] = a.seconds;
       report["config"] = model.net->config_json();
-      report["precision"] = precision_name(so.train.precision);
+      report["precision"] = precision_name(precision);
       auto t_start = std::chrono::steady_clock::now();
       hooks.on_loaded = [&](int t, double) {
         bar = std::make_unique<Progress>(fmt::format("t{:04d}", t), by_time ? a.seconds : double(so.steps), a.quiet);
@@ -217,7 +218,7 @@ void run_train_series(const TrainArgs& a) {
     } else {
       ContinuousOptions co;
       co.train = TrainOptions{a.batch, a.seed};
-      co.train.precision = resolve_training_precision(a.precision, *model.net);
+      co.train.precision = precision;
       co.switch_every = a.switch_every;
       co.macrocell_size = a.macrocell_size;
       co.ssim = !a.no_ssim;
@@ -264,7 +265,7 @@ void run_train_series(const TrainArgs& a) {
         report["switch_every"] = a.switch_every;
         report["learning_rate"] = lr;
         report["config"] = m.net->config_json();
-        report["precision"] = precision_name(co.train.precision);
+        report["precision"] = precision_name(precision);
         write_report(report_path, report);
       };
       ContinuousResult res = train_continuous(model, ts, load, co, hooks, done);

@@ -67,8 +67,7 @@ Trainer::Trainer(Network& net, std::shared_ptr<Sampler> sampler, TrainOptions op
               (fp32_mlp ? 2 * size_t(m.width) * C : 0);
   ws_.assign(n_threads_, std::vector<float>(ws, 0.0f));
   if (opts_.precision == Precision::BF16) {
-    if (!net.bf16_training_supported())
-      fail("bf16 training needs a CPU with AVX512-BF16 and a ReLU MLP of width 16, 32, 64 or 128; use fp32");
+    resolve_training_precision("bf16", net);  // its checks: one error line where bf16 cannot run
     bf16_ws_.assign(n_threads_, std::vector<uint32_t>(net.mlp_train_bf16_scratch(C)));
   }
   xs_.resize(opts_.batch);

@@ -26,61 +26,96 @@ HWY_INLINE hwy::HWY_NAMESPACE::Vec<DF> CellAxisPos(DF df, hwy::HWY_NAMESPACE::Ve
   return hn::Min(hn::Max(p, hn::Zero(df)), hn::Set(df, float(n - 1)));
 }
 
-// Prefetches (into L2, prefetcht1) the four x-rows that the lookups at (ux, uy, uz) will read:
-// the gathers are latency-bound, and Zen's gathers stall until all lanes arrive.
 template <class DF>
-HWY_INLINE void GridPrefetchVec(DF df, const GridView& g, hwy::HWY_NAMESPACE::Vec<DF> ux,
-                                hwy::HWY_NAMESPACE::Vec<DF> uy, hwy::HWY_NAMESPACE::Vec<DF> uz) {
-  namespace hn = hwy::HWY_NAMESPACE;
-  const hn::RebindToSigned<DF> di;
-  constexpr size_t kMaxLanes = HWY_MAX_BYTES / sizeof(float);
-  const auto cx = hn::ConvertTo(di, CellAxisPos(df, ux, g.nx)), cy = hn::ConvertTo(di, CellAxisPos(df, uy, g.ny)),
-             cz = hn::ConvertTo(di, CellAxisPos(df, uz, g.nz));
-  alignas(HWY_MAX_BYTES) int32_t base[kMaxLanes];
-  hn::Store(hn::Add(cx, hn::Add(hn::Mul(cy, hn::Set(di, g.nx)), hn::Mul(cz, hn::Set(di, g.nx * g.ny)))), di, base);
-  const int64_t ry = g.nx, rz = int64_t(g.nx) * g.ny;
-  for (size_t l = 0; l < hn::Lanes(df); ++l) {
-    const float* p0 = g.data + base[l];
-    __builtin_prefetch(p0, 0, 2);
-    __builtin_prefetch(p0 + ry, 0, 2);
-    __builtin_prefetch(p0 + rz, 0, 2);
-    __builtin_prefetch(p0 + ry + rz, 0, 2);
-  }
-}
+using LookupVecF = hwy::HWY_NAMESPACE::Vec<DF>;
+template <class DF>
+using LookupVecI = hwy::HWY_NAMESPACE::Vec<hwy::HWY_NAMESPACE::RebindToSigned<DF>>;
 
-// grid_lookup() for a vector of points. kPairs (volumes at least 2 voxels wide in x): each pair of
-// x-neighbours loads as one 64-bit element (GatherPairs), half the gathered elements. The lower x
-// corner is then clamped to N-2, so at q = N-1 the pair is (N-2, N-1) with weight 1 on the last
-// voxel where the scalar code takes (N-1, N-1) with weight 0: v*0 + V*1 and V*1 + V*0 are both
-// exactly V for finite values (up to the sign of a zero V), so the result still matches.
-template <bool kPairs, class DF>
-HWY_INLINE hwy::HWY_NAMESPACE::Vec<DF> GridLookupVec(DF df, const GridView& g, hwy::HWY_NAMESPACE::Vec<DF> ux,
-                                                     hwy::HWY_NAMESPACE::Vec<DF> uy, hwy::HWY_NAMESPACE::Vec<DF> uz) {
+// cell_axis() for the three axes of a vector of points: lower voxel i0, upper i1 = min(i0 + 1, N - 1),
+// weight t of the upper. kPairX (volumes at least 2 voxels wide in x): x's lower voxel is clamped to
+// N - 2 so that (i0, i0 + 1) is always a pair within the row (i1 = i0 + 1). At q = N - 1 that pair is
+// (N - 2, N - 1) with weight 1 on the last voxel where the scalar code takes (N - 1, N - 1) with
+// weight 0: v*0 + V*1 and V*1 + V*0 are both exactly V for finite values (up to the sign of a zero
+// V), so the lookup still matches.
+template <bool kPairX, class DF>
+HWY_INLINE void CellAxesVec(DF df, const int32_t (&dims)[3], const LookupVecF<DF> (&u)[3], LookupVecI<DF> (&i0)[3],
+                            LookupVecI<DF> (&i1)[3], LookupVecF<DF> (&t)[3]) {
   namespace hn = hwy::HWY_NAMESPACE;
   const hn::RebindToSigned<DF> di;
-  using VI = hn::Vec<decltype(di)>;
-  const auto one = hn::Set(df, 1.0f);
-  const auto sy = hn::Set(di, g.nx), sz = hn::Set(di, g.nx * g.ny), ione = hn::Set(di, 1);
-  const hn::Vec<DF> u[3] = {ux, uy, uz};
-  const int32_t dims[3] = {g.nx, g.ny, g.nz};
-  VI i0[3], i1[3];
-  hn::Vec<DF> t[3];
   for (int d = 0; d < 3; ++d) {
     const auto q = CellAxisPos(df, u[d], dims[d]);
-    if (kPairs && d == 0) {
+    if (kPairX && d == 0) {
       i0[0] = hn::Min(hn::ConvertTo(di, hn::Floor(q)), hn::Set(di, dims[0] - 2));
+      i1[0] = hn::Add(i0[0], hn::Set(di, 1));
       t[0] = hn::Sub(q, hn::ConvertTo(df, i0[0]));
     } else {
       const auto fl = hn::Floor(q);
       i0[d] = hn::ConvertTo(di, fl);
-      i1[d] = hn::Min(hn::Add(i0[d], ione), hn::Set(di, dims[d] - 1));
+      i1[d] = hn::Min(hn::Add(i0[d], hn::Set(di, 1)), hn::Set(di, dims[d] - 1));
       t[d] = hn::Sub(q, fl);
     }
   }
+}
+
+// trilinear_corners() for a vector of points: corners v[x + 2y + 4z], weights t per axis.
+template <class DF>
+HWY_INLINE LookupVecF<DF> TrilinearVec(DF df, const LookupVecF<DF> (&v)[8], const LookupVecF<DF> (&t)[3]) {
+  namespace hn = hwy::HWY_NAMESPACE;
+  const auto one = hn::Set(df, 1.0f);
+  const auto u0 = hn::Sub(one, t[0]), u1 = hn::Sub(one, t[1]), u2 = hn::Sub(one, t[2]);
+  const auto c00 = hn::Add(hn::Mul(v[0], u0), hn::Mul(v[1], t[0]));
+  const auto c10 = hn::Add(hn::Mul(v[2], u0), hn::Mul(v[3], t[0]));
+  const auto c01 = hn::Add(hn::Mul(v[4], u0), hn::Mul(v[5], t[0]));
+  const auto c11 = hn::Add(hn::Mul(v[6], u0), hn::Mul(v[7], t[0]));
+  const auto c0 = hn::Add(hn::Mul(c00, u1), hn::Mul(c10, t[1]));
+  const auto c1 = hn::Add(hn::Mul(c01, u1), hn::Mul(c11, t[1]));
+  return hn::Add(hn::Mul(c0, u2), hn::Mul(c1, t[2]));
+}
+
+// Prefetches (into L2, prefetcht1) the rows the lookups at (ux, uy, uz) will read: for each point,
+// data + scale * (its cell's lower voxel) + each of the n_rows offsets. The lookups are latency-bound,
+// and Zen's gathers stall until all lanes arrive.
+template <class DF>
+HWY_INLINE void PrefetchCellRows(DF df, const float* data, int64_t scale, const int32_t (&dims)[3],
+                                 LookupVecF<DF> ux, LookupVecF<DF> uy, LookupVecF<DF> uz, const int64_t* rows,
+                                 int n_rows) {
+  namespace hn = hwy::HWY_NAMESPACE;
+  const hn::RebindToSigned<DF> di;
+  constexpr size_t kMaxLanes = HWY_MAX_BYTES / sizeof(float);
+  const auto cx = hn::ConvertTo(di, CellAxisPos(df, ux, dims[0])), cy = hn::ConvertTo(di, CellAxisPos(df, uy, dims[1])),
+             cz = hn::ConvertTo(di, CellAxisPos(df, uz, dims[2]));
+  alignas(HWY_MAX_BYTES) int32_t voxel[kMaxLanes];
+  hn::Store(hn::Add(cx, hn::Add(hn::Mul(cy, hn::Set(di, dims[0])), hn::Mul(cz, hn::Set(di, dims[0] * dims[1])))), di,
+            voxel);
+  for (size_t l = 0; l < hn::Lanes(df); ++l) {
+    const float* p0 = data + scale * int64_t(voxel[l]);
+    for (int r = 0; r < n_rows; ++r) __builtin_prefetch(p0 + rows[r], 0, 2);
+  }
+}
+
+// The four x-rows of a grid lookup.
+template <class DF>
+HWY_INLINE void GridPrefetchVec(DF df, const GridView& g, LookupVecF<DF> ux, LookupVecF<DF> uy, LookupVecF<DF> uz) {
+  const int64_t ry = g.nx, rz = int64_t(g.nx) * g.ny;
+  const int64_t rows[4] = {0, ry, rz, ry + rz};
+  PrefetchCellRows(df, g.data, 1, {g.nx, g.ny, g.nz}, ux, uy, uz, rows, 4);
+}
+
+// grid_lookup() for a vector of points. kPairs (volumes at least 2 voxels wide in x): each pair of
+// x-neighbours loads as one 64-bit element (GatherPairs), half the gathered elements.
+template <bool kPairs, class DF>
+HWY_INLINE LookupVecF<DF> GridLookupVec(DF df, const GridView& g, LookupVecF<DF> ux, LookupVecF<DF> uy,
+                                        LookupVecF<DF> uz) {
+  namespace hn = hwy::HWY_NAMESPACE;
+  const hn::RebindToSigned<DF> di;
+  const auto sy = hn::Set(di, g.nx), sz = hn::Set(di, g.nx * g.ny);
+  LookupVecI<DF> i0[3], i1[3];
+  LookupVecF<DF> t[3];
+  CellAxesVec<kPairs>(df, {g.nx, g.ny, g.nz}, {ux, uy, uz}, i0, i1, t);
   // The 8 corners v[x + 2y + 4z] (x = 0: i0, 1: i1), a row pair at a time.
-  hn::Vec<DF> v[8];
+  LookupVecF<DF> v[8];
   for (int k = 0; k < 4; ++k) {
-    const VI row = hn::Add(hn::Mul(k & 1 ? i1[1] : i0[1], sy), hn::Mul(k & 2 ? i1[2] : i0[2], sz));
+    const auto row = hn::Add(hn::Mul(k & 1 ? i1[1] : i0[1], sy), hn::Mul(k & 2 ? i1[2] : i0[2], sz));
     if constexpr (kPairs) {
       GatherPairs(df, g.data, hn::Add(i0[0], row), &v[2 * k], &v[2 * k + 1]);
     } else {
@@ -88,72 +123,33 @@ HWY_INLINE hwy::HWY_NAMESPACE::Vec<DF> GridLookupVec(DF df, const GridView& g, h
       v[2 * k + 1] = hn::GatherIndex(df, g.data, hn::Add(i1[0], row));
     }
   }
-  // trilinear_corners()
-  const auto u0 = hn::Sub(one, t[0]), u1 = hn::Sub(one, t[1]), u2 = hn::Sub(one, t[2]);
-  const auto c00 = hn::Add(hn::Mul(v[0], u0), hn::Mul(v[1], t[0]));
-  const auto c10 = hn::Add(hn::Mul(v[2], u0), hn::Mul(v[3], t[0]));
-  const auto c01 = hn::Add(hn::Mul(v[4], u0), hn::Mul(v[5], t[0]));
-  const auto c11 = hn::Add(hn::Mul(v[6], u0), hn::Mul(v[7], t[0]));
-  const auto c0 = hn::Add(hn::Mul(c00, u1), hn::Mul(c10, t[1]));
-  const auto c1 = hn::Add(hn::Mul(c01, u1), hn::Mul(c11, t[1]));
-  return hn::Add(hn::Mul(c0, u2), hn::Mul(c1, t[2]));
+  return TrilinearVec(df, v, t);
+}
+
+// The two rows (y0, y1) of a z-paired lookup (ZPairGrid, two floats per voxel).
+template <class DF>
+HWY_INLINE void ZPairPrefetchVec(DF df, const ZPairGrid& g, LookupVecF<DF> ux, LookupVecF<DF> uy, LookupVecF<DF> uz) {
+  const int64_t rows[2] = {0, 2 * int64_t(g.nx)};
+  PrefetchCellRows(df, g.data.data(), 2, {g.nx, g.ny, g.nz}, ux, uy, uz, rows, 2);
 }
 
 // grid_lookup() from a z-paired grid (ZPairGrid, data = pairs (v(x,y,z), v(x,y,min(z+1,nz-1)))): the
-// axes as cell_axis, the corners v[x + 2y + 4z] as 4 pairs (z0, z1) of the rows y0 and y1.
+// corners v[x + 2y + 4z] as 4 pairs (z0, z1) of the rows y0 and y1, gathered as 64-bit elements.
 template <class DF>
-HWY_INLINE hwy::HWY_NAMESPACE::Vec<DF> GridLookupZPairVec(DF df, const float* zp, int32_t nx, int32_t ny, int32_t nz,
-                                                          hwy::HWY_NAMESPACE::Vec<DF> ux,
-                                                          hwy::HWY_NAMESPACE::Vec<DF> uy,
-                                                          hwy::HWY_NAMESPACE::Vec<DF> uz) {
+HWY_INLINE LookupVecF<DF> GridLookupZPairVec(DF df, const ZPairGrid& g, LookupVecF<DF> ux, LookupVecF<DF> uy,
+                                             LookupVecF<DF> uz) {
   namespace hn = hwy::HWY_NAMESPACE;
   const hn::RebindToSigned<DF> di;
-  using VI = hn::Vec<decltype(di)>;
-  const auto one = hn::Set(df, 1.0f);
-  const hn::Vec<DF> u[3] = {ux, uy, uz};
-  const int32_t dims[3] = {nx, ny, nz};
-  VI i0[3], i1[3];
-  hn::Vec<DF> t[3];
-  for (int d = 0; d < 3; ++d) {
-    const auto q = CellAxisPos(df, u[d], dims[d]);
-    const auto fl = hn::Floor(q);
-    i0[d] = hn::ConvertTo(di, fl);
-    i1[d] = hn::Min(hn::Add(i0[d], hn::Set(di, 1)), hn::Set(di, dims[d] - 1));
-    t[d] = hn::Sub(q, fl);
-  }
-  const auto plane = hn::Mul(i0[2], hn::Set(di, nx * ny));
-  hn::Vec<DF> v[8];
+  LookupVecI<DF> i0[3], i1[3];
+  LookupVecF<DF> t[3];
+  CellAxesVec<false>(df, {g.nx, g.ny, g.nz}, {ux, uy, uz}, i0, i1, t);
+  const auto plane = hn::Mul(i0[2], hn::Set(di, g.nx * g.ny));
+  LookupVecF<DF> v[8];
   for (int k = 0; k < 4; ++k) {  // k = x + 2y: the pair (z0, z1) of corner (x, y)
-    const VI voxel = hn::Add(hn::Add(k & 1 ? i1[0] : i0[0], hn::Mul(k & 2 ? i1[1] : i0[1], hn::Set(di, nx))), plane);
-    GatherPairs(df, zp, hn::Add(voxel, voxel), &v[k], &v[k + 4]);
+    const auto voxel = hn::Add(hn::Add(k & 1 ? i1[0] : i0[0], hn::Mul(k & 2 ? i1[1] : i0[1], hn::Set(di, g.nx))), plane);
+    GatherPairs(df, g.data.data(), hn::Add(voxel, voxel), &v[k], &v[k + 4]);
   }
-  const auto u0 = hn::Sub(one, t[0]), u1 = hn::Sub(one, t[1]), u2 = hn::Sub(one, t[2]);
-  const auto c00 = hn::Add(hn::Mul(v[0], u0), hn::Mul(v[1], t[0]));
-  const auto c10 = hn::Add(hn::Mul(v[2], u0), hn::Mul(v[3], t[0]));
-  const auto c01 = hn::Add(hn::Mul(v[4], u0), hn::Mul(v[5], t[0]));
-  const auto c11 = hn::Add(hn::Mul(v[6], u0), hn::Mul(v[7], t[0]));
-  const auto c0 = hn::Add(hn::Mul(c00, u1), hn::Mul(c10, t[1]));
-  const auto c1 = hn::Add(hn::Mul(c01, u1), hn::Mul(c11, t[1]));
-  return hn::Add(hn::Mul(c0, u2), hn::Mul(c1, t[2]));
-}
-
-// Prefetches (prefetcht1) the two rows a z-paired lookup at (ux, uy, uz) reads.
-template <class DF>
-HWY_INLINE void ZPairPrefetchVec(DF df, const float* zp, int32_t nx, int32_t ny, int32_t nz,
-                                 hwy::HWY_NAMESPACE::Vec<DF> ux, hwy::HWY_NAMESPACE::Vec<DF> uy,
-                                 hwy::HWY_NAMESPACE::Vec<DF> uz) {
-  namespace hn = hwy::HWY_NAMESPACE;
-  const hn::RebindToSigned<DF> di;
-  constexpr size_t kMaxLanes = HWY_MAX_BYTES / sizeof(float);
-  const auto cx = hn::ConvertTo(di, CellAxisPos(df, ux, nx)), cy = hn::ConvertTo(di, CellAxisPos(df, uy, ny)),
-             cz = hn::ConvertTo(di, CellAxisPos(df, uz, nz));
-  alignas(HWY_MAX_BYTES) int32_t voxel[kMaxLanes];
-  hn::Store(hn::Add(cx, hn::Add(hn::Mul(cy, hn::Set(di, nx)), hn::Mul(cz, hn::Set(di, nx * ny)))), di, voxel);
-  for (size_t l = 0; l < hn::Lanes(df); ++l) {
-    const float* p0 = zp + 2 * int64_t(voxel[l]);
-    __builtin_prefetch(p0, 0, 2);
-    __builtin_prefetch(p0 + 2 * int64_t(nx), 0, 2);
-  }
+  return TrilinearVec(df, v, t);
 }
 
 }  // namespace HWY_NAMESPACE

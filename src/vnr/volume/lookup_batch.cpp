@@ -16,24 +16,31 @@ namespace vnr {
 namespace HWY_NAMESPACE {
 namespace hn = hwy::HWY_NAMESPACE;
 
+// Runs block(i) for the full vectors of points [0, n), having called prefetch(b) kAhead blocks
+// ahead (one block's loads take about one memory latency); returns where the full blocks end.
+template <class Prefetch, class Block>
+HWY_INLINE int64_t PrefetchedBlocks(int64_t n, int64_t N, const Prefetch& prefetch, const Block& block) {
+  constexpr int64_t kAhead = 4;
+  for (int64_t b = 0; b < kAhead && (b + 1) * N <= n; ++b) prefetch(b * N);
+  int64_t i = 0;
+  for (; i + N <= n; i += N) {
+    if (i + (kAhead + 1) * N <= n) prefetch(i + kAhead * N);
+    block(i);
+  }
+  return i;
+}
+
 // Points [0, n - n % lanes) of LookupBatch, with or without x-neighbour pairs.
 template <bool kPairs>
 int64_t LookupBlocks(const GridView& g, const float* x, const float* y, const float* z, int64_t n, float* out) {
   const hn::ScalableTag<float> df;
-  const int64_t N = int64_t(hn::Lanes(df));
-  auto prefetch_block = [&](int64_t b) {
-    GridPrefetchVec(df, g, hn::LoadU(df, x + b), hn::LoadU(df, y + b), hn::LoadU(df, z + b));
-  };
-  // Prefetch kAhead blocks ahead: one block's gathers take about one memory latency.
-  constexpr int64_t kAhead = 4;
-  for (int64_t b = 0; b < kAhead && (b + 1) * N <= n; ++b) prefetch_block(b * N);
-  int64_t i = 0;
-  for (; i + N <= n; i += N) {
-    if (i + (kAhead + 1) * N <= n) prefetch_block(i + kAhead * N);
-    hn::StoreU(GridLookupVec<kPairs>(df, g, hn::LoadU(df, x + i), hn::LoadU(df, y + i), hn::LoadU(df, z + i)), df,
-               out + i);
-  }
-  return i;
+  return PrefetchedBlocks(
+      n, int64_t(hn::Lanes(df)),
+      [&](int64_t b) { GridPrefetchVec(df, g, hn::LoadU(df, x + b), hn::LoadU(df, y + b), hn::LoadU(df, z + b)); },
+      [&](int64_t i) {
+        hn::StoreU(GridLookupVec<kPairs>(df, g, hn::LoadU(df, x + i), hn::LoadU(df, y + i), hn::LoadU(df, z + i)),
+                   df, out + i);
+      });
 }
 
 void LookupBatch(const GridView& g, const float* x, const float* y, const float* z, int64_t n, float* out) {
@@ -62,22 +69,16 @@ HWY_INLINE __m512 Load4Records(const float* zp, const int32_t* idx) {
 HWY_INLINE void ZPairBlockAvx3(const ZPairGrid& g, const float* x, const float* y, const float* z, float* out) {
   const hn::ScalableTag<float> df;
   const hn::RebindToSigned<decltype(df)> di;
-  const float* zp = g.data.data();
-  const auto one = hn::Set(df, 1.0f);
-  const auto qx = CellAxisPos(df, hn::LoadU(df, x), g.nx), qy = CellAxisPos(df, hn::LoadU(df, y), g.ny),
-             qz = CellAxisPos(df, hn::LoadU(df, z), g.nz);
-  const auto ix = hn::Min(hn::ConvertTo(di, hn::Floor(qx)), hn::Set(di, g.nx - 2));
-  const auto tx = hn::Sub(qx, hn::ConvertTo(df, ix));
-  const auto fy = hn::Floor(qy), fz = hn::Floor(qz);
-  const auto iy0 = hn::ConvertTo(di, fy), iz0 = hn::ConvertTo(di, fz);
-  const auto iy1 = hn::Min(hn::Add(iy0, hn::Set(di, 1)), hn::Set(di, g.ny - 1));
-  const auto ty = hn::Sub(qy, fy), tz = hn::Sub(qz, fz);
-  const auto base = hn::Add(ix, hn::Mul(iz0, hn::Set(di, g.nx * g.ny)));
+  LookupVecI<decltype(df)> i0[3], i1[3];
+  LookupVecF<decltype(df)> t[3];
+  CellAxesVec<true>(df, {g.nx, g.ny, g.nz}, {hn::LoadU(df, x), hn::LoadU(df, y), hn::LoadU(df, z)}, i0, i1, t);
+  const auto base = hn::Add(i0[0], hn::Mul(i0[2], hn::Set(di, g.nx * g.ny)));
   // Record indices (floats) in the order the transpose needs: position 4k + j = sample 4j + k.
   const __m512i order = _mm512_setr_epi32(0, 4, 8, 12, 1, 5, 9, 13, 2, 6, 10, 14, 3, 7, 11, 15);
-  hn::Vec<decltype(df)> v[8];
+  const float* zp = g.data.data();
+  LookupVecF<decltype(df)> v[8];
   for (int row = 0; row < 2; ++row) {
-    const auto voxel = hn::Add(base, hn::Mul(row ? iy1 : iy0, hn::Set(di, g.nx)));
+    const auto voxel = hn::Add(base, hn::Mul(row ? i1[1] : i0[1], hn::Set(di, g.nx)));
     alignas(64) int32_t r[16];
     _mm512_store_si512(r, _mm512_permutexvar_epi32(order, hn::Add(voxel, voxel).raw));
     const __m512 R0 = Load4Records(zp, r), R1 = Load4Records(zp, r + 4), R2 = Load4Records(zp, r + 8),
@@ -87,54 +88,36 @@ HWY_INLINE void ZPairBlockAvx3(const ZPairGrid& g, const float* x, const float* 
                   t2 = _mm512_castps_pd(_mm512_maskz_unpacklo_ps(0xffff, R2, R3)),
                   t3 = _mm512_castps_pd(_mm512_maskz_unpackhi_ps(0xffff, R2, R3));
     // Lane 4j + k of each now holds sample 4j + k: (x0, z0), (x0, z1), (x1, z0), (x1, z1).
-    v[2 * row] = hn::Vec<decltype(df)>{_mm512_castpd_ps(_mm512_maskz_unpacklo_pd(0xff, t0, t2))};
-    v[2 * row + 4] = hn::Vec<decltype(df)>{_mm512_castpd_ps(_mm512_maskz_unpackhi_pd(0xff, t0, t2))};
-    v[2 * row + 1] = hn::Vec<decltype(df)>{_mm512_castpd_ps(_mm512_maskz_unpacklo_pd(0xff, t1, t3))};
-    v[2 * row + 5] = hn::Vec<decltype(df)>{_mm512_castpd_ps(_mm512_maskz_unpackhi_pd(0xff, t1, t3))};
+    v[2 * row].raw = _mm512_castpd_ps(_mm512_maskz_unpacklo_pd(0xff, t0, t2));
+    v[2 * row + 4].raw = _mm512_castpd_ps(_mm512_maskz_unpackhi_pd(0xff, t0, t2));
+    v[2 * row + 1].raw = _mm512_castpd_ps(_mm512_maskz_unpacklo_pd(0xff, t1, t3));
+    v[2 * row + 5].raw = _mm512_castpd_ps(_mm512_maskz_unpackhi_pd(0xff, t1, t3));
   }
-  // trilinear_corners()
-  const auto u0 = hn::Sub(one, tx), u1 = hn::Sub(one, ty), u2 = hn::Sub(one, tz);
-  const auto c00 = hn::Add(hn::Mul(v[0], u0), hn::Mul(v[1], tx));
-  const auto c10 = hn::Add(hn::Mul(v[2], u0), hn::Mul(v[3], tx));
-  const auto c01 = hn::Add(hn::Mul(v[4], u0), hn::Mul(v[5], tx));
-  const auto c11 = hn::Add(hn::Mul(v[6], u0), hn::Mul(v[7], tx));
-  const auto c0 = hn::Add(hn::Mul(c00, u1), hn::Mul(c10, ty));
-  const auto c1 = hn::Add(hn::Mul(c01, u1), hn::Mul(c11, ty));
-  hn::StoreU(hn::Add(hn::Mul(c0, u2), hn::Mul(c1, tz)), df, out);
+  hn::StoreU(TrilinearVec(df, v, t), df, out);
 }
 #endif
 
 void LookupZPairBatch(const ZPairGrid& g, const float* x, const float* y, const float* z, int64_t n, float* out) {
   const hn::ScalableTag<float> df;
   const int64_t N = int64_t(hn::Lanes(df));
-  const float* zp = g.data.data();
-  auto prefetch_block = [&](int64_t b) {
-    ZPairPrefetchVec(df, zp, g.nx, g.ny, g.nz, hn::LoadU(df, x + b), hn::LoadU(df, y + b), hn::LoadU(df, z + b));
-  };
-  constexpr int64_t kAhead = 4;  // as LookupBlocks
-  for (int64_t b = 0; b < kAhead && (b + 1) * N <= n; ++b) prefetch_block(b * N);
-  int64_t i = 0;
-  for (; i + N <= n; i += N) {
-    if (i + (kAhead + 1) * N <= n) prefetch_block(i + kAhead * N);
+  auto lookup = [&](const float* px, const float* py, const float* pz, float* po) {
 #if HWY_TARGET <= HWY_AVX3
-    if (g.nx >= 2) {
-      ZPairBlockAvx3(g, x + i, y + i, z + i, out + i);
-      continue;
-    }
+    if (g.nx >= 2) return ZPairBlockAvx3(g, px, py, pz, po);
 #endif
-    hn::StoreU(GridLookupZPairVec(df, zp, g.nx, g.ny, g.nz, hn::LoadU(df, x + i), hn::LoadU(df, y + i),
-                                  hn::LoadU(df, z + i)),
-               df, out + i);
-  }
-  if (i < n) {  // the tail, padded to one vector
+    hn::StoreU(GridLookupZPairVec(df, g, hn::LoadU(df, px), hn::LoadU(df, py), hn::LoadU(df, pz)), df, po);
+  };
+  const int64_t i = PrefetchedBlocks(
+      n, N,
+      [&](int64_t b) { ZPairPrefetchVec(df, g, hn::LoadU(df, x + b), hn::LoadU(df, y + b), hn::LoadU(df, z + b)); },
+      [&](int64_t b) { lookup(x + b, y + b, z + b, out + b); });
+  if (i < n) {  // the tail, padded to one vector with the last point
     alignas(HWY_MAX_BYTES) float px[HWY_MAX_BYTES / 4], py[HWY_MAX_BYTES / 4], pz[HWY_MAX_BYTES / 4],
         po[HWY_MAX_BYTES / 4];
     for (int64_t l = 0; l < N; ++l) {
       const int64_t k = i + l < n ? i + l : n - 1;
       px[l] = x[k], py[l] = y[k], pz[l] = z[k];
     }
-    hn::Store(GridLookupZPairVec(df, zp, g.nx, g.ny, g.nz, hn::Load(df, px), hn::Load(df, py), hn::Load(df, pz)), df,
-              po);
+    lookup(px, py, pz, po);
     for (int64_t l = 0; i + l < n; ++l) out[i + l] = po[l];
   }
 }
