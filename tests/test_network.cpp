@@ -393,14 +393,11 @@ TEST(Trainer, LearnsASmoothVolumeAndIsDeterministic) {
   EXPECT_GT(psnr, 30.0);
 }
 
-// The in-core sampler's targets are grid_lookup's bits, from its z-paired copy (volumes up to
-// kZPairMaxBytes of copy, at least 2 voxels wide) or from the grid itself.
+// The in-core sampler's targets are grid_lookup's bits.
 TEST(Sampler, InCoreTargetsAreTheGridLookups) {
   std::vector<float> vol = smooth_volume(24);
   for (const GridView g : {GridView{vol.data(), 24, 24, 24}, GridView{vol.data(), 1, 24, 24}}) {
     const InCoreSampler sampler(g);
-    EXPECT_EQ(sampler.uses_zpair_copy(), g.nx >= 2);
-    EXPECT_FALSE(InCoreSampler(g, 8 * vol.size() - 1).uses_zpair_copy());  // a copy over the limit is not made
     const int n = 1000;
     std::vector<float> x(n), y(n), z(n), target(n);
     sampler.sample(3, 7, 11, n, x.data(), y.data(), z.data(), target.data());

@@ -756,7 +756,7 @@ TEST(RealData, BonsaiLoads) {
 TEST(Lookup, BatchIsBitIdenticalToPointLookup) {
   // Non-cubic, odd sizes, 1 and 2 voxels wide in x (the SIMD lookup loads x-neighbours as pairs from
   // 2 voxels up), 1 voxel in y and z; points inside, on the border and outside [0,1] (clamped), NaN;
-  // values of both signs. The z-paired copy (ZPairGrid, the trainer's targets) gives the same bits.
+  // values of both signs.
   for (const vnr::Int3 dims : {vnr::Int3{7, 5, 3}, vnr::Int3{2, 3, 4}, vnr::Int3{1, 4, 2}, vnr::Int3{19, 1, 1}}) {
     const int nx = int(dims.x), ny = int(dims.y), nz = int(dims.z);
     std::vector<float> data(size_t(nx) * ny * nz);
@@ -772,16 +772,13 @@ TEST(Lookup, BatchIsBitIdenticalToPointLookup) {
     x.push_back(std::nanf(""));  // NaN coordinates clamp to 0, as in grid_lookup
     y.push_back(0.5f);
     z.push_back(std::nanf(""));
-    std::vector<float> out(x.size()), zout(x.size());
-    const vnr::ZPairGrid zp(g);  // the trainer's z-paired copy: the same lookup
+    std::vector<float> out(x.size());
     for (int64_t t : hwy::SupportedAndGeneratedTargets()) {  // every SIMD target this machine has
       hwy::SetSupportedTargetsForTest(t);
       vnr::grid_lookup_batch(g, x.data(), y.data(), z.data(), int64_t(x.size()), out.data());
-      vnr::grid_lookup_zpair_batch(zp, x.data(), y.data(), z.data(), int64_t(x.size()), zout.data());
       for (size_t i = 0; i < x.size(); ++i) {
         const float want = vnr::grid_lookup(g, x[i], y[i], z[i]);
         ASSERT_EQ(out[i], want) << hwy::TargetName(t) << " " << i << " nx " << nx;
-        ASSERT_EQ(zout[i], want) << "z-paired, " << hwy::TargetName(t) << " " << i << " nx " << nx;
       }
     }
     hwy::SetSupportedTargetsForTest(0);

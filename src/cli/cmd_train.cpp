@@ -62,8 +62,7 @@ TrainingData open_training_data(const TrainArgs& a, const VolumeDesc& desc, uint
     t.vol = load_volume(desc, a.vol.load());
     t.lo = t.vol->lo;
     t.hi = t.vol->hi;
-    // The z-paired copy of the targets (2x the volume) only from what the budget leaves.
-    t.sampler = std::make_shared<InCoreSampler>(*t.vol, std::min(InCoreSampler::kZPairMaxBytes, budget - in_core_bytes));
+    t.sampler = std::make_shared<InCoreSampler>(*t.vol);
     if (!a.quiet)
       std::fprintf(stderr, "volume %s: %lldx%lldx%lld %s, %s, range [%g, %g], loaded in %.1fs\n", a.volume.c_str(),
                    (long long)t.dims.x, (long long)t.dims.y, (long long)t.dims.z, dtype_name(t.dtype),

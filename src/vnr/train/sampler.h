@@ -1,6 +1,5 @@
 #pragma once
 #include <cstdint>
-#include <memory>
 #include "vnr/core/rng.h"
 #include "vnr/volume/volume.h"
 
@@ -27,22 +26,15 @@ VNR_HD inline uint32_t rng_below(Pcg32& rng, uint32_t n) { return uint32_t((uint
 void uniform_coordinates(uint64_t seed, uint64_t step, uint64_t chunk, int n, float* x, float* y, float* z);
 
 // Uniform coordinates, cell-centred trilinear targets from a volume in memory (compat.md B.3).
-// Targets come from a z-paired copy of the grid (ZPairGrid: twice the grid's memory, 1.4x faster
-// lookups, the same bits) when that copy takes at most zpair_max_bytes (default kZPairMaxBytes; the
-// CLI passes what its memory budget leaves); larger volumes are looked up in the grid itself.
 class InCoreSampler : public Sampler {
 public:
-  static constexpr uint64_t kZPairMaxBytes = uint64_t(512) << 20;
-  explicit InCoreSampler(GridView grid, uint64_t zpair_max_bytes = kZPairMaxBytes);
-  explicit InCoreSampler(const Volume& vol, uint64_t zpair_max_bytes = kZPairMaxBytes)
-      : InCoreSampler(view_of(vol), zpair_max_bytes) {}
+  explicit InCoreSampler(GridView grid) : grid_(grid) {}
+  explicit InCoreSampler(const Volume& vol) : grid_(view_of(vol)) {}
   void sample(uint64_t seed, uint64_t step, uint64_t chunk, int n, float* x, float* y, float* z,
               float* target) const override;
-  bool uses_zpair_copy() const { return zpair_ != nullptr; }
 
 private:
   GridView grid_;
-  std::unique_ptr<ZPairGrid> zpair_;
 };
 
 }  // namespace vnr

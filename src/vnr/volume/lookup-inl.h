@@ -72,33 +72,25 @@ HWY_INLINE LookupVecF<DF> TrilinearVec(DF df, const LookupVecF<DF> (&v)[8], cons
   return hn::Add(hn::Mul(c0, u2), hn::Mul(c1, t[2]));
 }
 
-// Prefetches (into L2, prefetcht1) the rows the lookups at (ux, uy, uz) will read: for each point,
-// data + scale * (its cell's lower voxel) + each of the n_rows offsets. The lookups are latency-bound,
-// and Zen's gathers stall until all lanes arrive.
+// Prefetches (into L2, prefetcht1) the four x-rows the grid lookups at (ux, uy, uz) will read. The
+// lookups are latency-bound, and Zen's gathers stall until all lanes arrive.
 template <class DF>
-HWY_INLINE void PrefetchCellRows(DF df, const float* data, int64_t scale, const int32_t (&dims)[3],
-                                 LookupVecF<DF> ux, LookupVecF<DF> uy, LookupVecF<DF> uz, const int64_t* rows,
-                                 int n_rows) {
+HWY_INLINE void GridPrefetchVec(DF df, const GridView& g, LookupVecF<DF> ux, LookupVecF<DF> uy, LookupVecF<DF> uz) {
   namespace hn = hwy::HWY_NAMESPACE;
   const hn::RebindToSigned<DF> di;
   constexpr size_t kMaxLanes = HWY_MAX_BYTES / sizeof(float);
-  const auto cx = hn::ConvertTo(di, CellAxisPos(df, ux, dims[0])), cy = hn::ConvertTo(di, CellAxisPos(df, uy, dims[1])),
-             cz = hn::ConvertTo(di, CellAxisPos(df, uz, dims[2]));
+  const auto cx = hn::ConvertTo(di, CellAxisPos(df, ux, g.nx)), cy = hn::ConvertTo(di, CellAxisPos(df, uy, g.ny)),
+             cz = hn::ConvertTo(di, CellAxisPos(df, uz, g.nz));
   alignas(HWY_MAX_BYTES) int32_t voxel[kMaxLanes];
-  hn::Store(hn::Add(cx, hn::Add(hn::Mul(cy, hn::Set(di, dims[0])), hn::Mul(cz, hn::Set(di, dims[0] * dims[1])))), di,
-            voxel);
-  for (size_t l = 0; l < hn::Lanes(df); ++l) {
-    const float* p0 = data + scale * int64_t(voxel[l]);
-    for (int r = 0; r < n_rows; ++r) __builtin_prefetch(p0 + rows[r], 0, 2);
-  }
-}
-
-// The four x-rows of a grid lookup.
-template <class DF>
-HWY_INLINE void GridPrefetchVec(DF df, const GridView& g, LookupVecF<DF> ux, LookupVecF<DF> uy, LookupVecF<DF> uz) {
+  hn::Store(hn::Add(cx, hn::Add(hn::Mul(cy, hn::Set(di, g.nx)), hn::Mul(cz, hn::Set(di, g.nx * g.ny)))), di, voxel);
   const int64_t ry = g.nx, rz = int64_t(g.nx) * g.ny;
-  const int64_t rows[4] = {0, ry, rz, ry + rz};
-  PrefetchCellRows(df, g.data, 1, {g.nx, g.ny, g.nz}, ux, uy, uz, rows, 4);
+  for (size_t l = 0; l < hn::Lanes(df); ++l) {
+    const float* p0 = g.data + voxel[l];
+    __builtin_prefetch(p0, 0, 2);
+    __builtin_prefetch(p0 + ry, 0, 2);
+    __builtin_prefetch(p0 + rz, 0, 2);
+    __builtin_prefetch(p0 + ry + rz, 0, 2);
+  }
 }
 
 // grid_lookup() for a vector of points. kPairs (volumes at least 2 voxels wide in x): each pair of
@@ -122,32 +114,6 @@ HWY_INLINE LookupVecF<DF> GridLookupVec(DF df, const GridView& g, LookupVecF<DF>
       v[2 * k] = hn::GatherIndex(df, g.data, hn::Add(i0[0], row));
       v[2 * k + 1] = hn::GatherIndex(df, g.data, hn::Add(i1[0], row));
     }
-  }
-  return TrilinearVec(df, v, t);
-}
-
-// The two rows (y0, y1) of a z-paired lookup (ZPairGrid, two floats per voxel).
-template <class DF>
-HWY_INLINE void ZPairPrefetchVec(DF df, const ZPairGrid& g, LookupVecF<DF> ux, LookupVecF<DF> uy, LookupVecF<DF> uz) {
-  const int64_t rows[2] = {0, 2 * int64_t(g.nx)};
-  PrefetchCellRows(df, g.data.data(), 2, {g.nx, g.ny, g.nz}, ux, uy, uz, rows, 2);
-}
-
-// grid_lookup() from a z-paired grid (ZPairGrid, data = pairs (v(x,y,z), v(x,y,min(z+1,nz-1)))): the
-// corners v[x + 2y + 4z] as 4 pairs (z0, z1) of the rows y0 and y1, gathered as 64-bit elements.
-template <class DF>
-HWY_INLINE LookupVecF<DF> GridLookupZPairVec(DF df, const ZPairGrid& g, LookupVecF<DF> ux, LookupVecF<DF> uy,
-                                             LookupVecF<DF> uz) {
-  namespace hn = hwy::HWY_NAMESPACE;
-  const hn::RebindToSigned<DF> di;
-  LookupVecI<DF> i0[3], i1[3];
-  LookupVecF<DF> t[3];
-  CellAxesVec<false>(df, {g.nx, g.ny, g.nz}, {ux, uy, uz}, i0, i1, t);
-  const auto plane = hn::Mul(i0[2], hn::Set(di, g.nx * g.ny));
-  LookupVecF<DF> v[8];
-  for (int k = 0; k < 4; ++k) {  // k = x + 2y: the pair (z0, z1) of corner (x, y)
-    const auto voxel = hn::Add(hn::Add(k & 1 ? i1[0] : i0[0], hn::Mul(k & 2 ? i1[1] : i0[1], hn::Set(di, g.nx))), plane);
-    GatherPairs(df, g.data.data(), hn::Add(voxel, voxel), &v[k], &v[k + 4]);
   }
   return TrilinearVec(df, v, t);
 }

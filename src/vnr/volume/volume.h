@@ -137,18 +137,4 @@ inline bool grid_fits_gather_indices(const GridView& g) {
 // The same lookup for n points (SoA), vectorised with gathers; bit-identical to grid_lookup.
 void grid_lookup_batch(const GridView& g, const float* x, const float* y, const float* z, int64_t n, float* out);
 
-// A z-paired copy of a grid for the training targets: voxel v stores (value, value one slice up in
-// z, clamped at the top), 8 bytes, so a lookup's 8 corners are 4 pairs from 2 rows - about half the
-// cache lines of the plain grid (random lookups into a volume beyond the caches are bound by the
-// misses a core keeps in flight). Twice the grid's memory; volumes below 2^30 voxels.
-struct ZPairGrid {
-  big_vector<float> data;  // 2 floats per voxel, x fastest
-  int32_t nx = 0, ny = 0, nz = 0;
-  static bool fits(const GridView& g) { return uint64_t(g.nx) * uint64_t(g.ny) * uint64_t(g.nz) < (uint64_t(1) << 30); }
-  explicit ZPairGrid(const GridView& g);
-};
-// grid_lookup() for n points (SoA) from the z-paired copy: bit-identical to grid_lookup on its grid.
-void grid_lookup_zpair_batch(const ZPairGrid& g, const float* x, const float* y, const float* z, int64_t n,
-                             float* out);
-
 }  // namespace vnr
