@@ -57,14 +57,16 @@ Trainer::Trainer(Network& net, std::shared_ptr<Sampler> sampler, TrainOptions op
   n_threads_ = num_threads();
   const MlpLayout& m = net.mlp();
   grads_.assign(net.n_params(), 0.0f);
-  dW_.assign(n_threads_, std::vector<float>(m.n_params, 0.0f));
+  private_grid_grads_ =
+      net.has_grid() && (net.n_params() - m.n_params) * sizeof(float) <= opts_.private_grid_grad_max_bytes;
+  dW_.assign(n_threads_, std::vector<float>(private_grid_grads_ ? net.n_params() : m.n_params, 0.0f));
   // Every chunk full (the batch is a multiple of kChunk): the encoding-gradient rows all have one stride.
   const int C = kChunk;
-  // workspace per thread: target, X0, acts, out_pre, out, dout, scratch (acts and scratch: fp32 MLP only;
-  // the bf16 MLP keeps its activations in bf16_ws_)
+  // workspace per thread: target, X0, acts, out_pre, out, dout, scratch, dEnc (acts and scratch: fp32
+  // MLP only, the bf16 MLP keeps its activations in bf16_ws_; dEnc: private grid gradients only)
   const bool fp32_mlp = opts_.precision != Precision::BF16;
   size_t ws = C + size_t(m.in_pad) * C + (fp32_mlp ? net.acts_floats(C) : 0) + 3 * size_t(m.n_out) * C +
-              (fp32_mlp ? 2 * size_t(m.width) * C : 0);
+              (fp32_mlp ? 2 * size_t(m.width) * C : 0) + (private_grid_grads_ ? size_t(m.in_pad) * C : 0);
   ws_.assign(n_threads_, std::vector<float>(ws, 0.0f));
   if (opts_.precision == Precision::BF16) {
     resolve_training_precision("bf16", net);  // its checks: one error line where bf16 cannot run
@@ -74,7 +76,7 @@ Trainer::Trainer(Network& net, std::shared_ptr<Sampler> sampler, TrainOptions op
   ys_.resize(opts_.batch);
   zs_.resize(opts_.batch);
   const int64_t n_chunks = opts_.batch / C;
-  if (net.has_grid()) dEnc_.resize(size_t(n_chunks) * C * m.in_pad);
+  if (net.has_grid() && !private_grid_grads_) dEnc_.resize(size_t(n_chunks) * C * m.in_pad);
   chunk_loss_.resize(n_chunks);
 }
 
@@ -99,8 +101,9 @@ float Trainer::step() {
     float* out = out_pre + size_t(m.n_out) * C;
     float* dout = out + size_t(m.n_out) * C;
     float* scratch = dout + size_t(m.n_out) * C;
+    float* chunk_dEnc = scratch + (bf16 ? 0 : 2 * size_t(m.width) * C);
     float* dW = dW_[t].data();
-    std::memset(dW, 0, sizeof(float) * m.n_params);
+    std::memset(dW, 0, sizeof(float) * dW_[t].size());
     for (int64_t c = t; c < n_chunks; c += nt) {
       float* x = xs_.data() + c * C;
       float* y = ys_.data() + c * C;
@@ -116,14 +119,17 @@ float Trainer::step() {
         loss += loss_and_grads(net_.config().loss, m.output_activation, out + o * n, out_pre + o * n, target, n,
                                inv_n, dout + o * n);
       chunk_loss_[c] = loss;
-      float* dEnc = grid ? dEnc_.data() + c * int64_t(m.in_pad) * C : nullptr;
+      float* dEnc = !grid ? nullptr : private_grid_grads_ ? chunk_dEnc : dEnc_.data() + c * int64_t(m.in_pad) * C;
       if (bf16) net_.mlp_backward_train_bf16(dout, n, bf16_w_, bf16_ws_[t].data(), dW, dEnc);
       else net_.mlp_backward(X0, acts, dout, n, dW, dEnc, scratch);
+      if (grid && private_grid_grads_)
+        for (uint32_t l = 0; l < net_.grid().n_levels; ++l)
+          net_.grid_backward_level(l, x, y, z, n, dEnc, n, dW + m.n_params);
     }
   });
   auto t1 = std::chrono::steady_clock::now();
 
-  if (grid) {
+  if (grid && !private_grid_grads_) {
     float* ggrid = grads_.data() + m.n_params;
     const uint32_t L = net_.grid().n_levels;
     // Levels dealt round-robin: thread t owns levels t, t + nt, ... (its writes never overlap another's).
@@ -134,11 +140,16 @@ float Trainer::step() {
   }
   auto t2 = std::chrono::steady_clock::now();
 
-  // Sum per-thread MLP gradients in thread order (deterministic for a thread count).
+  // Sum the per-thread gradients in thread order (deterministic for a thread count).
   float* gm = grads_.data();
-  std::memcpy(gm, dW_[0].data(), sizeof(float) * m.n_params);
-  for (int t = 1; t < n_threads_; ++t)
-    for (uint64_t i = 0; i < m.n_params; ++i) gm[i] += dW_[t][i];
+  const int64_t n_summed = int64_t(dW_[0].size());
+  auto sum_range = [&](int64_t b, int64_t e) {
+    std::memcpy(gm + b, dW_[0].data() + b, sizeof(float) * size_t(e - b));
+    for (int t = 1; t < n_threads_; ++t)
+      for (int64_t i = b; i < e; ++i) gm[i] += dW_[t][size_t(i)];
+  };
+  if (private_grid_grads_) parallel_for_range(n_summed, (n_summed + n_threads_ - 1) / n_threads_, sum_range);
+  else sum_range(0, n_summed);  // the MLP's alone: too few to share out
   adam_.step(net_.params.data(), grads_.data(), net_.has_grid() ? net_.grid_half_mut() : nullptr);
   auto t3 = std::chrono::steady_clock::now();
   phase_seconds[0] = std::chrono::duration<double>(t1 - t0).count();
