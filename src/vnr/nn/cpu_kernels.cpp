@@ -511,6 +511,21 @@ void AdamRange(const AdamStep& k, float* HWY_RESTRICT w, float* HWY_RESTRICT gra
   }
 }
 
+void DeinterleaveXyz(const float* HWY_RESTRICT xyz, int64_t n, float* HWY_RESTRICT x, float* HWY_RESTRICT y,
+                     float* HWY_RESTRICT z) {
+  const DF df;
+  const int64_t N = int64_t(hn::Lanes(df));
+  int64_t i = 0;
+  for (; i + N <= n; i += N) {
+    hn::Vec<DF> a, b, c;
+    hn::LoadInterleaved3(df, xyz + 3 * i, a, b, c);
+    hn::StoreU(a, df, x + i);
+    hn::StoreU(b, df, y + i);
+    hn::StoreU(c, df, z + i);
+  }
+  for (; i < n; ++i) x[i] = xyz[3 * i], y[i] = xyz[3 * i + 1], z[i] = xyz[3 * i + 2];
+}
+
 }  // namespace HWY_NAMESPACE
 }  // namespace vnr::kernels
 HWY_AFTER_NAMESPACE();
@@ -520,6 +535,11 @@ namespace vnr::kernels {
 HWY_EXPORT(GridEncode);
 HWY_EXPORT(GridBackwardLevel);
 HWY_EXPORT(AdamRange);
+HWY_EXPORT(DeinterleaveXyz);
+
+void deinterleave_xyz(const float* xyz, int64_t n, float* x, float* y, float* z) {
+  HWY_DYNAMIC_DISPATCH(DeinterleaveXyz)(xyz, n, x, y, z);
+}
 
 void grid_encode(const GridLayout& g, const uint16_t* table, const float* x, const float* y, const float* z, int n,
                  float* X0) {

@@ -14,6 +14,9 @@ void grid_encode(const GridLayout& g, const uint16_t* table, const float* x, con
 void grid_backward_level(const GridLayout& g, uint32_t level, const float* x, const float* y, const float* z,
                          int64_t n, const float* dEnc, uint32_t in_pad, int chunk, float* grad);
 
+// x[i], y[i], z[i] = xyz[3i], xyz[3i + 1], xyz[3i + 2] for i in [0, n) (interleaved points to SoA).
+void deinterleave_xyz(const float* xyz, int64_t n, float* x, float* y, float* z);
+
 struct AdamStep {
   float lr, beta1, beta2, eps, l2, rel, abs_decay, lo, hi;
   bool matrix;     // true: l2 applies, never skipped; false: skipped where the gradient is 0

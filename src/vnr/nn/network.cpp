@@ -266,7 +266,7 @@ void Network::mlp_forward(const float* X0, int n, float* acts, float* out_pre, f
   // Output layer: only the n_out real rows are computed; tcnn's padded rows never reach the loss.
   kernels::matmul_fwd(params.data() + m.offset[m.n_hidden], int(m.n_out), int(m.width), in, out_pre, n, false);
   if (m.output_activation != Activation::None)
-    for (size_t i = 0; i < size_t(m.n_out) * n; ++i) out[i] = activate(m.output_activation, out_pre[i]);
+    activate_n(m.output_activation, out_pre, int64_t(m.n_out) * n, out);
   else if (out != out_pre)
     std::memcpy(out, out_pre, sizeof(float) * m.n_out * n);
 }
@@ -438,7 +438,7 @@ void Network::mlp_forward_train_bf16(const float* X0, int n, const Bf16TrainWeig
   g.out = kernels::PairGemmOut::Column, g.dst = out_pre, g.ld = n, g.valid = int(m.n_out);
   kernels::pair_gemm(g);
   if (m.output_activation != Activation::None)
-    for (size_t i = 0; i < size_t(m.n_out) * n; ++i) out[i] = activate(m.output_activation, out_pre[i]);
+    activate_n(m.output_activation, out_pre, int64_t(m.n_out) * n, out);
   else if (out != out_pre)
     std::memcpy(out, out_pre, sizeof(float) * m.n_out * n);
 }
@@ -514,7 +514,7 @@ void Network::mlp_forward_bf16(const float* X0, int n, const uint32_t* wp, uint3
     for (uint32_t k = 1; k < m.n_hidden; ++k) Wh[k - 1] = wp + size_t(16) * kp0 + size_t(k - 1) * 16 * kpw;
     kernels::mlp_forward_16_bf16(wp, int(m.first_cols), Wh, int(m.n_hidden - 1),
                                  wp + size_t(16) * kp0 + size_t(m.n_hidden - 1) * 16 * kpw, X0, n, pre);
-    for (int s = 0; s < n; ++s) out[s] = activate(m.output_activation, pre[s]);
+    activate_n(m.output_activation, pre, n, out);
     return;
   }
   uint32_t* P0 = scratch;
@@ -530,7 +530,7 @@ void Network::mlp_forward_bf16(const float* X0, int n, const uint32_t* wp, uint3
     kp = kpw;
   }
   kernels::matmul_fwd_bf16_linear(wp, int(m.n_out), kpw, in, pre, n);  // row 0 is the first output
-  for (int s = 0; s < n; ++s) out[s] = activate(m.output_activation, pre[s]);
+  activate_n(m.output_activation, pre, n, out);
 }
 
 void Network::infer_chunk(const float* x, const float* y, const float* z, int n, float* out, float* ws) const {
@@ -546,7 +546,7 @@ void Network::infer_chunk(const float* x, const float* y, const float* z, int n,
     for (uint32_t k = 1; k < m.n_hidden; ++k) Wh[k - 1] = params.data() + m.offset[k];
     kernels::mlp_forward_16(params.data() + m.offset[0], int(m.first_cols), int(m.in_pad), Wh, int(m.n_hidden - 1),
                             params.data() + m.offset[m.n_hidden], X0, n, pre);
-    for (int s = 0; s < n; ++s) out[s] = activate(m.output_activation, pre[s]);
+    activate_n(m.output_activation, pre, n, out);
     return;
   }
   mlp_forward(X0, n, acts, pre, y_out);
@@ -556,10 +556,8 @@ void Network::infer_chunk(const float* x, const float* y, const float* z, int n,
 void Network::infer(const float* coords, int64_t n, float* out) const {
   infer_fn(
       n,
-      [&](int64_t i, float* x, float* y, float* z) {
-        *x = coords[3 * i];
-        *y = coords[3 * i + 1];
-        *z = coords[3 * i + 2];
+      [&](int64_t first, int64_t count, float* x, float* y, float* z) {
+        kernels::deinterleave_xyz(coords + 3 * first, count, x, y, z);
       },
       out);
 }
