@@ -57,7 +57,8 @@ public:
   bool has_online_ranges() const { return !thread_ranges_.empty(); }
   ValueRangeGrid online_ranges() const;
   // Seconds spent in each phase of the last step (sample+MLP, grid backward, optimizer); a grid
-  // scattered per chunk counts in the first.
+  // scattered per chunk (grid_backward_per_chunk()) counts in the first.
+  bool grid_backward_per_chunk() const { return private_grid_grads_; }
   double phase_seconds[3] = {0, 0, 0};
 
 private:
