@@ -73,7 +73,8 @@ private:
   std::vector<std::vector<float>> ws_;    // per-thread chunk workspace
   std::vector<std::vector<uint32_t>> bf16_ws_;  // per-thread bf16 chunk workspace (BF16 training)
   Network::Bf16TrainWeights bf16_w_;             // this step's weights in bf16 (BF16 training)
-  std::vector<float> xs_, ys_, zs_, dEnc_;  // dEnc_: the whole batch's (shared grid gradient only)
+  std::vector<float> xs_, ys_, zs_;
+  big_vector<float> dEnc_;  // the whole batch's dL/dX0 (per-level grid backward only; 64-byte aligned rows)
   std::vector<double> chunk_loss_;
   std::vector<float> loss_history_;
   std::vector<ValueRangeGrid> thread_ranges_;
