@@ -265,10 +265,7 @@ void Network::mlp_forward(const float* X0, int n, float* acts, float* out_pre, f
   }
   // Output layer: only the n_out real rows are computed; tcnn's padded rows never reach the loss.
   kernels::matmul_fwd(params.data() + m.offset[m.n_hidden], int(m.n_out), int(m.width), in, out_pre, n, false);
-  if (m.output_activation != Activation::None)
-    activate_n(m.output_activation, out_pre, int64_t(m.n_out) * n, out);
-  else if (out != out_pre)
-    std::memcpy(out, out_pre, sizeof(float) * m.n_out * n);
+  activate_n(m.output_activation, out_pre, int64_t(m.n_out) * n, out);
 }
 
 void Network::mlp_backward(const float* X0, const float* acts, const float* d_out_pre, int n, float* dW, float* dX0,
@@ -437,10 +434,7 @@ void Network::mlp_forward_train_bf16(const float* X0, int n, const Bf16TrainWeig
   g.Q = w.data.data() + w.wt[m.n_hidden], g.ldq = lanes_out, g.V = lanes_out / 16, g.M = n;
   g.out = kernels::PairGemmOut::Column, g.dst = out_pre, g.ld = n, g.valid = int(m.n_out);
   kernels::pair_gemm(g);
-  if (m.output_activation != Activation::None)
-    activate_n(m.output_activation, out_pre, int64_t(m.n_out) * n, out);
-  else if (out != out_pre)
-    std::memcpy(out, out_pre, sizeof(float) * m.n_out * n);
+  activate_n(m.output_activation, out_pre, int64_t(m.n_out) * n, out);
 }
 
 void Network::mlp_backward_train_bf16(const float* d_out_pre, int n, const Bf16TrainWeights& w, uint32_t* scratch,

@@ -8,39 +8,31 @@
 
 #include "vnr/volume/lookup-inl.h"
 #include "vnr/volume/volume.h"
-#include "vnr/core/error.h"
-#include "vnr/core/parallel.h"
 
 HWY_BEFORE_NAMESPACE();
 namespace vnr {
 namespace HWY_NAMESPACE {
 namespace hn = hwy::HWY_NAMESPACE;
 
-// Runs block(i) for the full vectors of points [0, n), having called prefetch(b) kAhead blocks
-// ahead (one block's loads take about one memory latency); returns where the full blocks end.
-template <class Prefetch, class Block>
-HWY_INLINE int64_t PrefetchedBlocks(int64_t n, int64_t N, const Prefetch& prefetch, const Block& block) {
-  constexpr int64_t kAhead = 4;
-  for (int64_t b = 0; b < kAhead && (b + 1) * N <= n; ++b) prefetch(b * N);
-  int64_t i = 0;
-  for (; i + N <= n; i += N) {
-    if (i + (kAhead + 1) * N <= n) prefetch(i + kAhead * N);
-    block(i);
-  }
-  return i;
-}
-
 // Points [0, n - n % lanes) of LookupBatch, with or without x-neighbour pairs.
 template <bool kPairs>
 int64_t LookupBlocks(const GridView& g, const float* x, const float* y, const float* z, int64_t n, float* out) {
   const hn::ScalableTag<float> df;
-  return PrefetchedBlocks(
-      n, int64_t(hn::Lanes(df)),
-      [&](int64_t b) { GridPrefetchVec(df, g, hn::LoadU(df, x + b), hn::LoadU(df, y + b), hn::LoadU(df, z + b)); },
-      [&](int64_t i) {
-        hn::StoreU(GridLookupVec<kPairs>(df, g, hn::LoadU(df, x + i), hn::LoadU(df, y + i), hn::LoadU(df, z + i)),
-                   df, out + i);
-      });
+  const int64_t N = int64_t(hn::Lanes(df));
+  auto prefetch_block = [&](int64_t b) {
+    GridPrefetchVec(df, g, hn::LoadU(df, x + b), hn::LoadU(df, y + b), hn::LoadU(df, z + b));
+  };
+  // Prefetch kAhead blocks ahead: one block's gathers take about one memory latency (without the
+  // prefetches the lookups inside training steps take 1.7x as long).
+  constexpr int64_t kAhead = 4;
+  for (int64_t b = 0; b < kAhead && (b + 1) * N <= n; ++b) prefetch_block(b * N);
+  int64_t i = 0;
+  for (; i + N <= n; i += N) {
+    if (i + (kAhead + 1) * N <= n) prefetch_block(i + kAhead * N);
+    hn::StoreU(GridLookupVec<kPairs>(df, g, hn::LoadU(df, x + i), hn::LoadU(df, y + i), hn::LoadU(df, z + i)), df,
+               out + i);
+  }
+  return i;
 }
 
 void LookupBatch(const GridView& g, const float* x, const float* y, const float* z, int64_t n, float* out) {
