@@ -2,7 +2,10 @@
 // finite differences, closed forms and hand-computed updates.
 #include <gtest/gtest.h>
 #include <cmath>
+#include <atomic>
+#include <chrono>
 #include <random>
+#include <thread>
 #include "vnr/nn/loss.h"
 #include "vnr/nn/mlp_bf16.h"
 #include "vnr/nn/network.h"
@@ -422,6 +425,55 @@ TEST(Trainer, PrivateGridGradientsEqualTheSeparatePass) {
   EXPECT_EQ(lp2[0], ls2[0]);  // the first loss precedes any update
   for (size_t i = 1; i < lp2.size(); ++i) EXPECT_NEAR(lp2[i], ls2[i], 1e-3 * ls2[i]) << i;
   EXPECT_LT(lp2.back(), lp2.front() * 0.5f);
+}
+
+// The step's shared tail chunks go to whichever thread is free, yet the trained model depends only on
+// the thread count: a sampler that slows one thread or the other changes who runs which chunk (counted
+// here), not one bit of the parameters, with a private grid gradient (small config) and with the
+// level pass. Against dealing every chunk round-robin the sums differ only in order.
+TEST(Trainer, SharedTailChunksGiveTheSameModelWhicheverThreadRunsThem) {
+  const int n = 24;
+  const std::vector<float> vol = smooth_volume(n);
+  const GridView g{vol.data(), n, n, n};
+  struct SlowThread : Sampler {
+    InCoreSampler inner;
+    int slow;
+    mutable std::atomic<int> chunks[2] = {0, 0};
+    SlowThread(GridView g, int slow) : inner(g), slow(slow) {}
+    void sample(uint64_t seed, uint64_t step, uint64_t chunk, int n, float* x, float* y, float* z,
+                float* target) const override {
+      const int t = omp_get_thread_num();
+      ++chunks[t & 1];
+      if (t == slow) std::this_thread::sleep_for(std::chrono::microseconds(300));
+      inner.sample(seed, step, chunk, n, x, y, z, target);
+    }
+  };
+  auto run = [&](int slow, int64_t tail, uint64_t private_max_bytes, int* chunks0) {
+    auto net = std::make_unique<Network>(preset_config("small"));
+    net->init_params(7);
+    TrainOptions o{8192, 7};  // 32 chunks: 16 dealt, 16 shared
+    o.shared_tail_chunks = tail;
+    o.private_grid_grad_max_bytes = private_max_bytes;
+    auto sampler = std::make_shared<SlowThread>(g, slow);
+    Trainer tr(*net, sampler, o);
+    for (int i = 0; i < 6; ++i) tr.step();
+    if (chunks0) *chunks0 = sampler->chunks[0];
+    return std::make_pair(std::move(net), tr.loss_history());
+  };
+  const int threads = num_threads();
+  set_num_threads(2);
+  for (const uint64_t private_max : {TrainOptions{}.private_grid_grad_max_bytes, uint64_t(0)}) {
+    int c0_slow = 0, c0_fast = 0;
+    auto [a, la] = run(0, 32, private_max, &c0_slow);
+    auto [b, lb] = run(1, 32, private_max, &c0_fast);
+    EXPECT_LT(c0_slow, c0_fast) << "the slowed thread should have claimed fewer shared chunks";
+    EXPECT_EQ(a->params, b->params) << "private grid " << private_max;
+    EXPECT_EQ(la, lb);
+    auto [r, lr] = run(-1, 0, private_max, nullptr);
+    EXPECT_EQ(la[0], lr[0]);  // the first loss precedes any update
+    for (size_t i = 1; i < la.size(); ++i) EXPECT_NEAR(la[i], lr[i], 1e-3 * lr[i]) << i;
+  }
+  set_num_threads(threads);
 }
 
 // The in-core sampler's targets are grid_lookup's bits.

@@ -208,10 +208,12 @@ void run_bench(const BenchArgs& a) {
               *std::min_element(times.begin(), times.end()) * 1e3, *std::max_element(times.begin(), times.end()) * 1e3);
   std::printf("MLP FLOPs: %.1f kFLOP/sample -> %.1f GFLOP/s end to end; MLP kernels alone: %.1f GFLOP/s on %d threads (%s)\n",
               flops / 1e3, flops * sps / 1e9, mlp_only, num_threads(), kernels::simd_target_name());
-  // The trainer's phases (report key, printed name, median ms); a grid scattered per chunk has no phase of its own.
+  // The trainer's phases (report key, printed name, median ms); a grid scattered per chunk has a phase
+  // of its own only for the step's shared chunks.
   std::vector<std::tuple<const char*, const char*, double>> phase_rows;
   if (training && grid_per_chunk)
     phase_rows = {{"sample_encode_mlp_grid_backward", "sample+encode+MLP+grid backward (per chunk)", phases[0]},
+                  {"grid_backward_shared_chunks", "grid backward (shared chunks)", phases[1]},
                   {"optimizer", "optimizer", phases[2]}};
   else if (training)
     phase_rows = {{"sample_encode_mlp", "sample+encode+MLP", phases[0]},

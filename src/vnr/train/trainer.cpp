@@ -1,4 +1,6 @@
 #include "vnr/train/trainer.h"
+#include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cstring>
 #include "vnr/core/error.h"
@@ -78,6 +80,9 @@ Trainer::Trainer(Network& net, std::shared_ptr<Sampler> sampler, TrainOptions op
   const int64_t n_chunks = opts_.batch / C;
   if (net.has_grid() && !private_grid_grads_) dEnc_.resize(size_t(n_chunks) * C * m.in_pad);
   chunk_loss_.resize(n_chunks);
+  n_tail_ = n_threads_ > 1 ? std::clamp<int64_t>(opts_.shared_tail_chunks, 0, n_chunks / 2) : 0;
+  tail_dW_.assign(size_t(n_tail_) * m.n_params, 0.0f);
+  if (private_grid_grads_) tail_dEnc_.resize(size_t(n_tail_) * C * m.in_pad);
 }
 
 float Trainer::step() {
@@ -92,6 +97,8 @@ float Trainer::step() {
   const bool bf16 = opts_.precision == Precision::BF16;
   if (bf16) bf16_w_ = net_.bf16_train_weights();  // the weights changed in the last step's Adam
 
+  const int64_t n_static = n_chunks - n_tail_;
+  std::atomic<int64_t> next_tail{0};
   parallel_threads([&](int t, int nt) {
     std::vector<float>& w = ws_[t];
     float* target = w.data();
@@ -102,9 +109,9 @@ float Trainer::step() {
     float* dout = out + size_t(m.n_out) * C;
     float* scratch = dout + size_t(m.n_out) * C;
     float* chunk_dEnc = scratch + (bf16 ? 0 : 2 * size_t(m.width) * C);
-    float* dW = dW_[t].data();
-    std::memset(dW, 0, sizeof(float) * dW_[t].size());
-    for (int64_t c = t; c < n_chunks; c += nt) {
+    // One chunk: MLP gradient accumulated into dW, dL/dX0 into dEnc (when there is a grid), and a
+    // private grid's gradient scattered into grid_dW (when not null).
+    auto run_chunk = [&](int64_t c, float* dW, float* dEnc, float* grid_dW) {
       float* x = xs_.data() + c * C;
       float* y = ys_.data() + c * C;
       float* z = zs_.data() + c * C;
@@ -119,37 +126,60 @@ float Trainer::step() {
         loss += loss_and_grads(net_.config().loss, m.output_activation, out + o * n, out_pre + o * n, target, n,
                                inv_n, dout + o * n);
       chunk_loss_[c] = loss;
-      float* dEnc = !grid ? nullptr : private_grid_grads_ ? chunk_dEnc : dEnc_.data() + c * int64_t(m.in_pad) * C;
       if (bf16) net_.mlp_backward_train_bf16(dout, n, bf16_w_, bf16_ws_[t].data(), dW, dEnc);
       else net_.mlp_backward(X0, acts, dout, n, dW, dEnc, scratch);
-      if (grid && private_grid_grads_)
-        for (uint32_t l = 0; l < net_.grid().n_levels; ++l)
-          net_.grid_backward_level(l, x, y, z, n, dEnc, n, dW + m.n_params);
+      if (grid_dW)
+        for (uint32_t l = 0; l < net_.grid().n_levels; ++l) net_.grid_backward_level(l, x, y, z, n, dEnc, n, grid_dW);
+    };
+    auto batch_dEnc = [&](int64_t c) { return dEnc_.data() + c * int64_t(m.in_pad) * C; };
+    float* dW = dW_[t].data();
+    std::memset(dW, 0, sizeof(float) * dW_[t].size());
+    for (int64_t c = t; c < n_static; c += nt)
+      run_chunk(c, dW, !grid ? nullptr : private_grid_grads_ ? chunk_dEnc : batch_dEnc(c),
+                private_grid_grads_ ? dW + m.n_params : nullptr);
+    // The shared tail: claimed in any order, but each chunk's results go to its own slots.
+    for (int64_t i; (i = next_tail.fetch_add(1, std::memory_order_relaxed)) < n_tail_;) {
+      float* tdW = tail_dW_.data() + i * int64_t(m.n_params);
+      std::memset(tdW, 0, sizeof(float) * m.n_params);
+      const int64_t c = n_static + i;
+      run_chunk(c, tdW, !grid ? nullptr : private_grid_grads_ ? tail_dEnc_.data() + i * int64_t(m.in_pad) * C : batch_dEnc(c),
+                nullptr);
     }
   });
   auto t1 = std::chrono::steady_clock::now();
 
-  if (grid && !private_grid_grads_) {
-    float* ggrid = grads_.data() + m.n_params;
+  if (grid && (!private_grid_grads_ || n_tail_ > 0)) {
     const uint32_t L = net_.grid().n_levels;
-    // Levels dealt round-robin: thread t owns levels t, t + nt, ... (its writes never overlap another's).
+    // Levels dealt round-robin: thread t owns levels t, t + nt, ... (its writes never overlap another's):
+    // every sample into the batch gradient, or a private grid's shared chunks into thread t's copy.
     parallel_threads([&](int t, int nt) {
-      for (uint32_t l = uint32_t(t); l < L; l += uint32_t(nt))
-        net_.grid_backward_level(l, xs_.data(), ys_.data(), zs_.data(), opts_.batch, dEnc_.data(), int(C), ggrid);
+      for (uint32_t l = uint32_t(t); l < L; l += uint32_t(nt)) {
+        if (!private_grid_grads_) {
+          net_.grid_backward_level(l, xs_.data(), ys_.data(), zs_.data(), opts_.batch, dEnc_.data(), int(C),
+                                   grads_.data() + m.n_params);
+        } else {
+          const int64_t s0 = n_static * C;
+          net_.grid_backward_level(l, xs_.data() + s0, ys_.data() + s0, zs_.data() + s0, n_tail_ * C,
+                                   tail_dEnc_.data(), int(C), dW_[t].data() + m.n_params);
+        }
+      }
     });
   }
   auto t2 = std::chrono::steady_clock::now();
 
-  // Sum the per-thread gradients in thread order (deterministic for a thread count).
+  // Sum the per-thread gradients in thread order, then the shared chunks' MLP gradients in chunk order
+  // (deterministic for a thread count).
   float* gm = grads_.data();
-  const int64_t n_summed = int64_t(dW_[0].size());
-  auto sum_range = [&](int64_t b, int64_t e) {
+  const int64_t n_summed = int64_t(dW_[0].size()), n_mlp = int64_t(m.n_params);
+  parallel_for_range(n_summed, (n_summed + n_threads_ - 1) / n_threads_, [&](int64_t b, int64_t e) {
     std::memcpy(gm + b, dW_[0].data() + b, sizeof(float) * size_t(e - b));
     for (int t = 1; t < n_threads_; ++t)
       for (int64_t i = b; i < e; ++i) gm[i] += dW_[t][size_t(i)];
-  };
-  if (private_grid_grads_) parallel_for_range(n_summed, (n_summed + n_threads_ - 1) / n_threads_, sum_range);
-  else sum_range(0, n_summed);  // the MLP's alone: too few to share out
+    for (int64_t k = 0; k < n_tail_; ++k) {
+      const float* tdW = tail_dW_.data() + k * n_mlp;
+      for (int64_t i = b; i < std::min(e, n_mlp); ++i) gm[i] += tdW[i];
+    }
+  });
   adam_.step(net_.params.data(), grads_.data(), net_.has_grid() ? net_.grid_half_mut() : nullptr);
   auto t3 = std::chrono::steady_clock::now();
   phase_seconds[0] = std::chrono::duration<double>(t1 - t0).count();

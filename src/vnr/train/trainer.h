@@ -22,6 +22,11 @@ struct TrainOptions {
   // 5-10 % faster steps than a separate scatter pass); larger grids are scattered after the chunks,
   // each level by one thread (no private copies of tens of MiB).
   uint64_t private_grid_grad_max_bytes = uint64_t(1) << 20;
+  // The step's last chunks go one at a time to whichever thread is free, so a core slowed by another
+  // job does not hold the step up (each such chunk keeps its own MLP gradient, and its grid gradient
+  // is scattered after the loop, so results still depend only on the thread count). 0: every chunk
+  // is dealt round-robin. Not used on one thread.
+  int64_t shared_tail_chunks = 32;
 };
 
 // --precision of training: "fp32", "bf16" (an error where Network::bf16_training_supported() is
@@ -37,11 +42,14 @@ Precision resolve_training_precision(const std::string& name, const Network& net
 // Parallel structure of a step (2 threads shown; see docs/ARCHITECTURE.md):
 //  1. chunks of 256 samples are dealt round-robin to threads; each thread samples, encodes, runs the
 //     MLP forward/backward with activations in L2, accumulates its own dW, and stores dL/d(encoding);
-//     a small grid's gradient is scattered here too, chunk by chunk, into the thread's own copy;
-//  2. otherwise grid levels are dealt round-robin to threads; each thread scatters the gradient of its
-//     levels for every sample, so no two threads write the same entry (no atomics, no copies);
-//  3. the per-thread gradients are summed in thread order, then one fused Adam pass updates all
-//     parameters.
+//     a small grid's gradient is scattered here too, chunk by chunk, into the thread's own copy. The
+//     last TrainOptions::shared_tail_chunks chunks are claimed by whichever thread is free; each keeps
+//     its own MLP gradient and its dL/d(encoding);
+//  2. grid levels are dealt round-robin to threads; each thread scatters the gradient of its levels
+//     (for every sample; for a small grid, for the shared chunks only), so no two threads write the
+//     same entry (no atomics, no copies);
+//  3. the per-thread and per-shared-chunk gradients are summed in a fixed order, then one fused Adam
+//     pass updates all parameters.
 class Trainer {
 public:
   Trainer(Network& net, std::shared_ptr<Sampler> sampler, TrainOptions opts);
@@ -57,7 +65,7 @@ public:
   bool has_online_ranges() const { return !thread_ranges_.empty(); }
   ValueRangeGrid online_ranges() const;
   // Seconds spent in each phase of the last step (sample+MLP, grid backward, optimizer); a grid
-  // scattered per chunk (grid_backward_per_chunk()) counts in the first.
+  // scattered per chunk (grid_backward_per_chunk()) counts in the first, but for the shared chunks'.
   bool grid_backward_per_chunk() const { return private_grid_grads_; }
   double phase_seconds[3] = {0, 0, 0};
 
@@ -75,6 +83,9 @@ private:
   Network::Bf16TrainWeights bf16_w_;             // this step's weights in bf16 (BF16 training)
   std::vector<float> xs_, ys_, zs_;
   big_vector<float> dEnc_;  // the whole batch's dL/dX0 (per-level grid backward only; 64-byte aligned rows)
+  int64_t n_tail_ = 0;             // shared chunks at the end of each step (TrainOptions::shared_tail_chunks)
+  std::vector<float> tail_dW_;     // their MLP gradients, n_tail_ x n_mlp
+  big_vector<float> tail_dEnc_;    // their dL/dX0 when the grid is private (else in dEnc_)
   std::vector<double> chunk_loss_;
   std::vector<float> loss_history_;
   std::vector<ValueRangeGrid> thread_ranges_;
