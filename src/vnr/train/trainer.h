@@ -46,8 +46,8 @@ Precision resolve_training_precision(const std::string& name, const Network& net
 //     last TrainOptions::shared_tail_chunks chunks are claimed by whichever thread is free; each keeps
 //     its own MLP gradient and its dL/d(encoding);
 //  2. grid levels are dealt round-robin to threads; each thread scatters the gradient of its levels
-//     (for every sample; for a small grid, for the shared chunks only), so no two threads write the
-//     same entry (no atomics, no copies);
+//     (for every sample; for a small grid, for the shared chunks only, into the thread's copy), so no
+//     two threads write the same entry (no atomics);
 //  3. the per-thread and per-shared-chunk gradients are summed in a fixed order, then one fused Adam
 //     pass updates all parameters.
 class Trainer {
@@ -65,7 +65,8 @@ public:
   bool has_online_ranges() const { return !thread_ranges_.empty(); }
   ValueRangeGrid online_ranges() const;
   // Seconds spent in each phase of the last step (sample+MLP, grid backward, optimizer); a grid
-  // scattered per chunk (grid_backward_per_chunk()) counts in the first, but for the shared chunks'.
+  // scattered per chunk (grid_backward_per_chunk()) counts in the first, except the shared chunks'
+  // share, which is the second.
   bool grid_backward_per_chunk() const { return private_grid_grads_; }
   double phase_seconds[3] = {0, 0, 0};
 
