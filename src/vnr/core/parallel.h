@@ -1,4 +1,5 @@
 #pragma once
+#include <atomic>
 #include <cstdint>
 #include <omp.h>
 
@@ -30,6 +31,14 @@ void parallel_for_range(int64_t n, int64_t grain, F&& f) {
     int64_t b = c * grain, e = b + grain < n ? b + grain : n;
     f(b, e);
   }
+}
+
+// Inside parallel_threads: f(i) for the indices [0, n) this thread claims from `next` (shared by the
+// threads, starting at 0), one at a time, whichever thread is free first. Only for work whose
+// results do not depend on the thread that runs it: a core slowed by another job then takes less.
+template <typename F>
+void for_each_claimed(std::atomic<int64_t>& next, int64_t n, F&& f) {
+  for (int64_t i; (i = next.fetch_add(1, std::memory_order_relaxed)) < n;) f(i);
 }
 
 // Runs f(thread_index, n_threads) once on every worker thread.

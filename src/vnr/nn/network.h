@@ -164,7 +164,7 @@ void Network::infer_fn(int64_t n, CoordFn&& coord, float* out) const {
     float* ws = thread_workspace(infer_workspace_floats() + 4 * C);
     float* xs = ws + infer_workspace_floats();
     float *ys = xs + C, *zs = ys + C, *o = zs + C;
-    for (int64_t c; (c = next_chunk.fetch_add(1, std::memory_order_relaxed)) < n_chunks;) {
+    for_each_claimed(next_chunk, n_chunks, [&](int64_t c) {
       int64_t b = c * C, m = n - b < C ? n - b : C;
       int64_t mp = (m + 15) / 16 * 16;  // kernels work on multiples of 16 samples
       if constexpr (std::is_invocable_v<CoordFn&, int64_t, int64_t, float*, float*, float*>) {
@@ -178,7 +178,7 @@ void Network::infer_fn(int64_t n, CoordFn&& coord, float* out) const {
       else infer_chunk_bf16(xs, ys, zs, int(mp), dst, ws, wp.data());
       if (dst == o)
         for (int64_t i = 0; i < m; ++i) out[b + i] = o[i];
-    }
+    });
   });
 }
 

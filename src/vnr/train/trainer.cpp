@@ -109,9 +109,10 @@ float Trainer::step() {
     float* dout = out + size_t(m.n_out) * C;
     float* scratch = dout + size_t(m.n_out) * C;
     float* chunk_dEnc = scratch + (bf16 ? 0 : 2 * size_t(m.width) * C);
-    // One chunk: MLP gradient accumulated into dW, dL/dX0 into dEnc (when there is a grid), and a
-    // private grid's gradient scattered into grid_dW (when not null).
-    auto run_chunk = [&](int64_t c, float* dW, float* dEnc, float* grid_dW) {
+    // One chunk: MLP gradient accumulated into dW; dL/dX0 (when there is a grid) into the batch buffer,
+    // or for a private grid into private_dEnc, and then scattered into grid_dW when that is not null.
+    auto run_chunk = [&](int64_t c, float* dW, float* private_dEnc, float* grid_dW) {
+      float* dEnc = !grid ? nullptr : private_grid_grads_ ? private_dEnc : dEnc_.data() + c * int64_t(m.in_pad) * C;
       float* x = xs_.data() + c * C;
       float* y = ys_.data() + c * C;
       float* z = zs_.data() + c * C;
@@ -131,38 +132,30 @@ float Trainer::step() {
       if (grid_dW)
         for (uint32_t l = 0; l < net_.grid().n_levels; ++l) net_.grid_backward_level(l, x, y, z, n, dEnc, n, grid_dW);
     };
-    auto batch_dEnc = [&](int64_t c) { return dEnc_.data() + c * int64_t(m.in_pad) * C; };
     float* dW = dW_[t].data();
     std::memset(dW, 0, sizeof(float) * dW_[t].size());
     for (int64_t c = t; c < n_static; c += nt)
-      run_chunk(c, dW, !grid ? nullptr : private_grid_grads_ ? chunk_dEnc : batch_dEnc(c),
-                private_grid_grads_ ? dW + m.n_params : nullptr);
+      run_chunk(c, dW, chunk_dEnc, private_grid_grads_ ? dW + m.n_params : nullptr);
     // The shared tail: claimed in any order, but each chunk's results go to its own slots.
-    for (int64_t i; (i = next_tail.fetch_add(1, std::memory_order_relaxed)) < n_tail_;) {
+    for_each_claimed(next_tail, n_tail_, [&](int64_t i) {
       float* tdW = tail_dW_.data() + i * int64_t(m.n_params);
       std::memset(tdW, 0, sizeof(float) * m.n_params);
-      const int64_t c = n_static + i;
-      run_chunk(c, tdW, !grid ? nullptr : private_grid_grads_ ? tail_dEnc_.data() + i * int64_t(m.in_pad) * C : batch_dEnc(c),
+      run_chunk(n_static + i, tdW, private_grid_grads_ ? tail_dEnc_.data() + i * int64_t(m.in_pad) * C : nullptr,
                 nullptr);
-    }
+    });
   });
   auto t1 = std::chrono::steady_clock::now();
 
   if (grid && (!private_grid_grads_ || n_tail_ > 0)) {
-    const uint32_t L = net_.grid().n_levels;
     // Levels dealt round-robin: thread t owns levels t, t + nt, ... (its writes never overlap another's):
     // every sample into the batch gradient, or a private grid's shared chunks into thread t's copy.
+    const int64_t s0 = private_grid_grads_ ? n_static * C : 0;
+    const int64_t ns = private_grid_grads_ ? n_tail_ * C : opts_.batch;
+    const float* dEnc = private_grid_grads_ ? tail_dEnc_.data() : dEnc_.data();
     parallel_threads([&](int t, int nt) {
-      for (uint32_t l = uint32_t(t); l < L; l += uint32_t(nt)) {
-        if (!private_grid_grads_) {
-          net_.grid_backward_level(l, xs_.data(), ys_.data(), zs_.data(), opts_.batch, dEnc_.data(), int(C),
-                                   grads_.data() + m.n_params);
-        } else {
-          const int64_t s0 = n_static * C;
-          net_.grid_backward_level(l, xs_.data() + s0, ys_.data() + s0, zs_.data() + s0, n_tail_ * C,
-                                   tail_dEnc_.data(), int(C), dW_[t].data() + m.n_params);
-        }
-      }
+      float* ggrid = (private_grid_grads_ ? dW_[t].data() : grads_.data()) + m.n_params;
+      for (uint32_t l = uint32_t(t); l < net_.grid().n_levels; l += uint32_t(nt))
+        net_.grid_backward_level(l, xs_.data() + s0, ys_.data() + s0, zs_.data() + s0, ns, dEnc, int(C), ggrid);
     });
   }
   auto t2 = std::chrono::steady_clock::now();

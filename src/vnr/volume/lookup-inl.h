@@ -26,56 +26,11 @@ HWY_INLINE hwy::HWY_NAMESPACE::Vec<DF> CellAxisPos(DF df, hwy::HWY_NAMESPACE::Ve
   return hn::Min(hn::Max(p, hn::Zero(df)), hn::Set(df, float(n - 1)));
 }
 
-template <class DF>
-using LookupVecF = hwy::HWY_NAMESPACE::Vec<DF>;
-template <class DF>
-using LookupVecI = hwy::HWY_NAMESPACE::Vec<hwy::HWY_NAMESPACE::RebindToSigned<DF>>;
-
-// cell_axis() for the three axes of a vector of points: lower voxel i0, upper i1 = min(i0 + 1, N - 1),
-// weight t of the upper. kPairX (volumes at least 2 voxels wide in x): x's lower voxel is clamped to
-// N - 2 so that (i0, i0 + 1) is always a pair within the row (i1 = i0 + 1). At q = N - 1 that pair is
-// (N - 2, N - 1) with weight 1 on the last voxel where the scalar code takes (N - 1, N - 1) with
-// weight 0: v*0 + V*1 and V*1 + V*0 are both exactly V for finite values (up to the sign of a zero
-// V), so the lookup still matches.
-template <bool kPairX, class DF>
-HWY_INLINE void CellAxesVec(DF df, const int32_t (&dims)[3], const LookupVecF<DF> (&u)[3], LookupVecI<DF> (&i0)[3],
-                            LookupVecI<DF> (&i1)[3], LookupVecF<DF> (&t)[3]) {
-  namespace hn = hwy::HWY_NAMESPACE;
-  const hn::RebindToSigned<DF> di;
-  for (int d = 0; d < 3; ++d) {
-    const auto q = CellAxisPos(df, u[d], dims[d]);
-    if (kPairX && d == 0) {
-      i0[0] = hn::Min(hn::ConvertTo(di, hn::Floor(q)), hn::Set(di, dims[0] - 2));
-      i1[0] = hn::Add(i0[0], hn::Set(di, 1));
-      t[0] = hn::Sub(q, hn::ConvertTo(df, i0[0]));
-    } else {
-      const auto fl = hn::Floor(q);
-      i0[d] = hn::ConvertTo(di, fl);
-      i1[d] = hn::Min(hn::Add(i0[d], hn::Set(di, 1)), hn::Set(di, dims[d] - 1));
-      t[d] = hn::Sub(q, fl);
-    }
-  }
-}
-
-// trilinear_corners() for a vector of points: corners v[x + 2y + 4z], weights t per axis.
-template <class DF>
-HWY_INLINE LookupVecF<DF> TrilinearVec(DF df, const LookupVecF<DF> (&v)[8], const LookupVecF<DF> (&t)[3]) {
-  namespace hn = hwy::HWY_NAMESPACE;
-  const auto one = hn::Set(df, 1.0f);
-  const auto u0 = hn::Sub(one, t[0]), u1 = hn::Sub(one, t[1]), u2 = hn::Sub(one, t[2]);
-  const auto c00 = hn::Add(hn::Mul(v[0], u0), hn::Mul(v[1], t[0]));
-  const auto c10 = hn::Add(hn::Mul(v[2], u0), hn::Mul(v[3], t[0]));
-  const auto c01 = hn::Add(hn::Mul(v[4], u0), hn::Mul(v[5], t[0]));
-  const auto c11 = hn::Add(hn::Mul(v[6], u0), hn::Mul(v[7], t[0]));
-  const auto c0 = hn::Add(hn::Mul(c00, u1), hn::Mul(c10, t[1]));
-  const auto c1 = hn::Add(hn::Mul(c01, u1), hn::Mul(c11, t[1]));
-  return hn::Add(hn::Mul(c0, u2), hn::Mul(c1, t[2]));
-}
-
 // Prefetches (into L2, prefetcht1) the four x-rows the grid lookups at (ux, uy, uz) will read. The
 // lookups are latency-bound, and Zen's gathers stall until all lanes arrive.
 template <class DF>
-HWY_INLINE void GridPrefetchVec(DF df, const GridView& g, LookupVecF<DF> ux, LookupVecF<DF> uy, LookupVecF<DF> uz) {
+HWY_INLINE void GridPrefetchVec(DF df, const GridView& g, hwy::HWY_NAMESPACE::Vec<DF> ux,
+                                hwy::HWY_NAMESPACE::Vec<DF> uy, hwy::HWY_NAMESPACE::Vec<DF> uz) {
   namespace hn = hwy::HWY_NAMESPACE;
   const hn::RebindToSigned<DF> di;
   constexpr size_t kMaxLanes = HWY_MAX_BYTES / sizeof(float);
@@ -94,20 +49,38 @@ HWY_INLINE void GridPrefetchVec(DF df, const GridView& g, LookupVecF<DF> ux, Loo
 }
 
 // grid_lookup() for a vector of points. kPairs (volumes at least 2 voxels wide in x): each pair of
-// x-neighbours loads as one 64-bit element (GatherPairs), half the gathered elements.
+// x-neighbours loads as one 64-bit element (GatherPairs), half the gathered elements. The lower x
+// corner is then clamped to N-2, so at q = N-1 the pair is (N-2, N-1) with weight 1 on the last
+// voxel where the scalar code takes (N-1, N-1) with weight 0: v*0 + V*1 and V*1 + V*0 are both
+// exactly V for finite values (up to the sign of a zero V), so the result still matches.
 template <bool kPairs, class DF>
-HWY_INLINE LookupVecF<DF> GridLookupVec(DF df, const GridView& g, LookupVecF<DF> ux, LookupVecF<DF> uy,
-                                        LookupVecF<DF> uz) {
+HWY_INLINE hwy::HWY_NAMESPACE::Vec<DF> GridLookupVec(DF df, const GridView& g, hwy::HWY_NAMESPACE::Vec<DF> ux,
+                                                     hwy::HWY_NAMESPACE::Vec<DF> uy, hwy::HWY_NAMESPACE::Vec<DF> uz) {
   namespace hn = hwy::HWY_NAMESPACE;
   const hn::RebindToSigned<DF> di;
-  const auto sy = hn::Set(di, g.nx), sz = hn::Set(di, g.nx * g.ny);
-  LookupVecI<DF> i0[3], i1[3];
-  LookupVecF<DF> t[3];
-  CellAxesVec<kPairs>(df, {g.nx, g.ny, g.nz}, {ux, uy, uz}, i0, i1, t);
+  using VI = hn::Vec<decltype(di)>;
+  const auto one = hn::Set(df, 1.0f);
+  const auto sy = hn::Set(di, g.nx), sz = hn::Set(di, g.nx * g.ny), ione = hn::Set(di, 1);
+  const hn::Vec<DF> u[3] = {ux, uy, uz};
+  const int32_t dims[3] = {g.nx, g.ny, g.nz};
+  VI i0[3], i1[3];
+  hn::Vec<DF> t[3];
+  for (int d = 0; d < 3; ++d) {
+    const auto q = CellAxisPos(df, u[d], dims[d]);
+    if (kPairs && d == 0) {
+      i0[0] = hn::Min(hn::ConvertTo(di, hn::Floor(q)), hn::Set(di, dims[0] - 2));
+      t[0] = hn::Sub(q, hn::ConvertTo(df, i0[0]));
+    } else {
+      const auto fl = hn::Floor(q);
+      i0[d] = hn::ConvertTo(di, fl);
+      i1[d] = hn::Min(hn::Add(i0[d], ione), hn::Set(di, dims[d] - 1));
+      t[d] = hn::Sub(q, fl);
+    }
+  }
   // The 8 corners v[x + 2y + 4z] (x = 0: i0, 1: i1), a row pair at a time.
-  LookupVecF<DF> v[8];
+  hn::Vec<DF> v[8];
   for (int k = 0; k < 4; ++k) {
-    const auto row = hn::Add(hn::Mul(k & 1 ? i1[1] : i0[1], sy), hn::Mul(k & 2 ? i1[2] : i0[2], sz));
+    const VI row = hn::Add(hn::Mul(k & 1 ? i1[1] : i0[1], sy), hn::Mul(k & 2 ? i1[2] : i0[2], sz));
     if constexpr (kPairs) {
       GatherPairs(df, g.data, hn::Add(i0[0], row), &v[2 * k], &v[2 * k + 1]);
     } else {
@@ -115,7 +88,15 @@ HWY_INLINE LookupVecF<DF> GridLookupVec(DF df, const GridView& g, LookupVecF<DF>
       v[2 * k + 1] = hn::GatherIndex(df, g.data, hn::Add(i1[0], row));
     }
   }
-  return TrilinearVec(df, v, t);
+  // trilinear_corners()
+  const auto u0 = hn::Sub(one, t[0]), u1 = hn::Sub(one, t[1]), u2 = hn::Sub(one, t[2]);
+  const auto c00 = hn::Add(hn::Mul(v[0], u0), hn::Mul(v[1], t[0]));
+  const auto c10 = hn::Add(hn::Mul(v[2], u0), hn::Mul(v[3], t[0]));
+  const auto c01 = hn::Add(hn::Mul(v[4], u0), hn::Mul(v[5], t[0]));
+  const auto c11 = hn::Add(hn::Mul(v[6], u0), hn::Mul(v[7], t[0]));
+  const auto c0 = hn::Add(hn::Mul(c00, u1), hn::Mul(c10, t[1]));
+  const auto c1 = hn::Add(hn::Mul(c01, u1), hn::Mul(c11, t[1]));
+  return hn::Add(hn::Mul(c0, u2), hn::Mul(c1, t[2]));
 }
 
 }  // namespace HWY_NAMESPACE
