@@ -39,6 +39,9 @@ void write_report(const std::string& path, const Json& report);  // atomic; "" =
 // overwrite someone's data) unless force is set.
 void check_no_overwrite(const std::vector<std::string>& files, bool force);
 std::string human_bytes(double bytes);
+// A compression ratio for people: two decimals, or two significant digits below 0.01 (a model larger
+// than a tiny volume would otherwise read "0.00").
+std::string format_ratio(double ratio);
 double median(std::vector<double> v);  // upper median; 0 for none
 
 void add_train(CLI::App& app);

@@ -79,8 +79,8 @@ void add_eval(CLI::App& app) {
     auto print_whole = [&](const EvalResult& ev, Json& report) {
       std::printf("PSNR %.2f dB", ev.psnr);
       if (!a->no_ssim) std::printf(", SSIM %.4f", ev.ssim);
-      std::printf(", max |error| %.4g (%.4g in data units), compression ratio %.2f, decoded in %.2fs\n",
-                  ev.max_abs_error, ev.max_abs_error_original, ratio, ev.decode_seconds);
+      std::printf(", max |error| %.4g (%.4g in data units), compression ratio %s, decoded in %.2fs\n",
+                  ev.max_abs_error, ev.max_abs_error_original, format_ratio(ratio).c_str(), ev.decode_seconds);
       report.update({{"psnr", ev.psnr},
                      {"psnr_ci95", nullptr},
                      {"ssim", a->no_ssim ? Json(nullptr) : Json(ev.ssim)},
@@ -127,9 +127,9 @@ void add_eval(CLI::App& app) {
     if (method == "sampled") {
       SampledEval ev = evaluate_sampled(*m.net, desc, range.lo, range.hi, a->sample, a->seed, load_opts, dev);
       std::printf("PSNR %.2f dB (95%% interval %.2f to %.2f dB, from %lld sampled voxels), max |error| seen %.4g "
-                  "(%.4g in data units), compression ratio %.2f, decoded in %.2fs\n",
+                  "(%.4g in data units), compression ratio %s, decoded in %.2fs\n",
                   ev.psnr, ev.psnr_ci95_lo, ev.psnr_ci95_hi, (long long)ev.samples, ev.max_abs_error,
-                  ev.max_abs_error_original, ratio, ev.decode_seconds);
+                  ev.max_abs_error_original, format_ratio(ratio).c_str(), ev.decode_seconds);
       report.update({{"psnr", ev.psnr},
                      {"psnr_ci95", {ev.psnr_ci95_lo, ev.psnr_ci95_hi}},
                      {"ssim", nullptr},
@@ -296,9 +296,9 @@ void add_info(CLI::App& app) {
     std::printf("network: %s %u x %u hidden, %s; loss %s\n", cfg.network.fully_fused ? "FullyFusedMLP" : "CutlassMLP",
                 cfg.network.n_neurons, cfg.network.n_hidden_layers, activation_name(cfg.network.activation),
                 loss_name(cfg.loss));
-    std::printf("parameters: %llu (%s in fp16); file %s; compression ratio %.2f\n",
+    std::printf("parameters: %llu (%s in fp16); file %s; compression ratio %s\n",
                 (unsigned long long)n.n_params(), human_bytes(2.0 * n.n_params()).c_str(), human_bytes(double(bytes)).c_str(),
-                vol_bytes / double(bytes));
+                format_ratio(vol_bytes / double(bytes)).c_str());
     if (m.macrocells)
       std::printf("macro-cells: %lldx%lldx%lld cells of %d voxels (%lld with a value range), recorded while training\n",
                   (long long)m.macrocells->cells.x, (long long)m.macrocells->cells.y, (long long)m.macrocells->cells.z,

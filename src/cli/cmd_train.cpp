@@ -355,9 +355,9 @@ void run_train(const TrainArgs& a) {
   std::printf("PSNR %.2f dB%s", psnr, psnr_note.c_str());
   if (ssim) std::printf(", SSIM %.4f", *ssim);
   std::printf(", max |error| %.4g (%.4g in data units)\n", max_err, max_err_orig);
-  std::printf("model %s: %s, %llu parameters; volume %s; compression ratio %.2f\n", a.output.c_str(),
+  std::printf("model %s: %s, %llu parameters; volume %s; compression ratio %s\n", a.output.c_str(),
               human_bytes(double(model_bytes)).c_str(), (unsigned long long)net.n_params(),
-              human_bytes(double(data.source_bytes())).c_str(), ratio);
+              human_bytes(double(data.source_bytes())).c_str(), format_ratio(ratio).c_str());
   Json report = {{"steps", done},
                  {"seconds", train_seconds},
                  {"seconds_per_step", done > 0 ? train_seconds / double(done) : 0.0},

@@ -109,6 +109,8 @@ std::string human_bytes(double b) {
   return fmt::format("{:.2f} {}", b, u[i]);
 }
 
+std::string format_ratio(double r) { return r >= 0.01 || r == 0 ? fmt::format("{:.2f}", r) : fmt::format("{:.2g}", r); }
+
 }  // namespace vnr::cli
 
 int main(int argc, char** argv) {
