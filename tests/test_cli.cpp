@@ -8,6 +8,7 @@
 #include <vector>
 #include "vnr/core/fileio.h"
 #include "vnr/core/json.h"
+#include "vnr/nn/mlp_bf16.h"
 #include "vnr/train/model_io.h"
 #include "vnr/volume/volume.h"
 #include "test_support.h"
@@ -368,15 +369,19 @@ TEST(Cli, InferencePrecision) {
   EXPECT_EQ(parse_json_file(d + "/e32.json")["precision"], "fp32");
   Result ea = run("eval " + d + "/p.vnr " + d + "/p.json --no-ssim --report " + d + "/ea.json");  // auto
   ASSERT_EQ(ea.code, 0) << ea.err;
-  const bool bf16 = parse_json_file(d + "/ea.json")["precision"] == "bf16";
-  if (!bf16) {
+  // auto: bf16 where it pays (AMD CPUs with AVX512-BF16), else fp32.
+  EXPECT_EQ(parse_json_file(d + "/ea.json")["precision"], kernels::bf16_preferred() ? "bf16" : "fp32");
+  if (!kernels::bf16_supported()) {
     Result no = run("eval " + d + "/p.vnr " + d + "/p.json --precision bf16");
     EXPECT_NE(no.code, 0);
     EXPECT_NE(no.err.find("AVX512-BF16"), std::string::npos) << no.err;
     GTEST_SKIP() << "this CPU has no AVX512-BF16: auto chose fp32, bf16 is refused";
   }
+  Result e16 = run("eval " + d + "/p.vnr " + d + "/p.json --precision bf16 --no-ssim --report " + d + "/e16.json");
+  ASSERT_EQ(e16.code, 0) << e16.err;
+  EXPECT_EQ(parse_json_file(d + "/e16.json")["precision"], "bf16");
   const double p32 = parse_json_file(d + "/e32.json")["psnr"].get<double>();
-  const double p16 = parse_json_file(d + "/ea.json")["psnr"].get<double>();
+  const double p16 = parse_json_file(d + "/e16.json")["psnr"].get<double>();
   EXPECT_GT(p32, 20.0);
   EXPECT_NEAR(p16, p32, 0.05);
   // Both strategies in bf16 against the fp32 streaming image.
@@ -408,12 +413,18 @@ TEST(Cli, TrainingPrecision) {
   EXPECT_EQ(parse_json_file(d + "/ts.json")["precision"], "fp32");  // 16 wide: fp32 under auto
   Result ra = run(train + "-o " + d + "/pa.vnr --config paper --report " + d + "/ta.json");  // auto
   ASSERT_EQ(ra.code, 0) << ra.err;
-  if (parse_json_file(d + "/ta.json")["precision"] != "bf16") {
+  // auto: bf16 for this 64-wide MLP where it pays (AMD CPUs with AVX512-BF16), else fp32.
+  EXPECT_EQ(parse_json_file(d + "/ta.json")["precision"], kernels::bf16_preferred() ? "bf16" : "fp32");
+  if (!kernels::bf16_supported()) {
     Result no = run(train + "-o " + d + "/x.vnr --config paper --precision bf16");
     EXPECT_NE(no.code, 0);
     EXPECT_NE(no.err.find("AVX512-BF16"), std::string::npos) << no.err;
     GTEST_SKIP() << "this CPU has no AVX512-BF16: auto chose fp32, bf16 is refused";
   }
+  if (!kernels::bf16_preferred())  // supported but not auto's choice here: ask for it
+    ra = run(train + "-o " + d + "/pb.vnr --config paper --precision bf16 --report " + d + "/ta.json");
+  ASSERT_EQ(ra.code, 0) << ra.err;
+  EXPECT_EQ(parse_json_file(d + "/ta.json")["precision"], "bf16");
   EXPECT_NE(ra.out.find("bf16 MLP"), std::string::npos) << ra.out;
   const double p32 = parse_json_file(d + "/t32.json")["psnr"].get<double>();
   const double p16 = parse_json_file(d + "/ta.json")["psnr"].get<double>();

@@ -307,7 +307,7 @@ Json load_config(const std::string& preset_or_path) {
 }
 
 Precision parse_precision(const std::string& name) {
-  if (name == "auto") return kernels::bf16_supported() ? Precision::BF16 : Precision::FP32;
+  if (name == "auto") return kernels::bf16_preferred() ? Precision::BF16 : Precision::FP32;
   if (name == "fp32") return Precision::FP32;
   if (name != "bf16") fail("unknown precision '{}' (allowed: auto, fp32, bf16)", name);
   if (!kernels::bf16_supported()) fail("precision bf16 needs a CPU with AVX512-BF16 (this one has none); use fp32");

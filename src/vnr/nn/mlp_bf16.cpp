@@ -75,6 +75,11 @@ bool bf16_supported() {
   return ok;
 }
 
+bool bf16_preferred() {
+  static const bool ok = bf16_supported() && __builtin_cpu_is("amd");
+  return ok;
+}
+
 namespace {
 
 using bf16_detail::pack_pairs;
@@ -225,6 +230,7 @@ void matmul_fwd_bf16_linear(const uint32_t* Wp, int rows, int kp, const uint32_t
 #else
 
 bool bf16_supported() { return false; }
+bool bf16_preferred() { return false; }
 void mlp_forward_16_bf16(const uint32_t*, int, const uint32_t* const*, int, const uint32_t*, const float*, int, float*) {
   fail("bf16 kernels need AVX512-BF16");
 }

@@ -15,6 +15,11 @@ namespace vnr::kernels {
 
 // True when this CPU has AVX512-BF16 (checked once); the callers fall back to fp32 otherwise.
 bool bf16_supported();
+// What `--precision auto` takes: bf16 where it is supported and pays. AMD's AVX512-BF16 cores (Zen 4 on)
+// run vdpbf16ps at the fp32 FMA rate, twice the multiply-adds; on an Intel Xeon with AVX512-BF16
+// (Emerald Rapids, measured) the bf16 kernels were slower than fp32 (inference 0.65-0.77x, CPU
+// rendering 0.6-0.8x, training equal), so auto keeps fp32 on Intel.
+bool bf16_preferred();
 
 uint16_t to_bf16(float f);  // round to nearest even; NaN stays NaN
 float from_bf16(uint16_t h);
