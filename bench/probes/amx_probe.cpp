@@ -3,7 +3,7 @@
 // loads and stores, on one thread. Measures what an AMX backend for the batched MLP could reach on an
 // Intel Xeon with AMX (README, "CUDA backend": the GPU machine's CPU). Linux only (asks the kernel for
 // the tile state). Build and run:
-//   g++ -O2 -mamx-tile -mamx-bf16 bench/amx_probe.cpp -o amx_probe && ./amx_probe [REPS]
+//   g++ -O2 -mamx-tile -mamx-bf16 bench/probes/amx_probe.cpp -o amx_probe && ./amx_probe [REPS]
 #include <immintrin.h>
 #include <sys/syscall.h>
 #include <unistd.h>
