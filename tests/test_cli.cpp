@@ -93,9 +93,10 @@ TEST(Cli, ConstantVolumeTrainsAndReports) {
   EXPECT_TRUE(std::isfinite(rep["psnr"].get<double>()));
   EXPECT_GT(rep["psnr"].get<double>(), 40.0);  // the target is 0 everywhere
   // The model is far larger than 512 voxels: the printed ratio keeps two significant digits, not "0.00".
-  const size_t at = r.out.find("compression ratio ");
+  const std::string label = "compression ratio ";
+  const size_t at = r.out.find(label);
   ASSERT_NE(at, std::string::npos) << r.out;
-  const double printed = std::stod(r.out.substr(at + 18));
+  const double printed = std::stod(r.out.substr(at + label.size()));
   EXPECT_NEAR(printed, rep["compression_ratio"].get<double>(), 0.05 * rep["compression_ratio"].get<double>()) << r.out;
   Model m = load_model(d + "/c.vnr");
   EXPECT_EQ(m.lo, 42.0);

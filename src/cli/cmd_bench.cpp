@@ -3,8 +3,8 @@
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
+#include <array>
 #include <string>
-#include <tuple>
 #include <vector>
 #include "cli.h"
 #include "vnr/core/error.h"
@@ -164,14 +164,14 @@ void run_bench(const BenchArgs& a) {
   const Precision train_precision = training ? resolve_training_precision(a.precision, net) : Precision::FP32;
   std::vector<double> times;
   double phases[3] = {0, 0, 0};
-  bool grid_per_chunk = false;  // the grid backward runs inside the per-chunk phase
+  std::array<Trainer::Phase, 3> phase_names{};
   auto t0 = std::chrono::steady_clock::now();
   Progress bar(std::string("bench ") + a.what, a.seconds, false);
   if (training) {
     TrainOptions to{a.batch, 1337};
     to.precision = train_precision;
     Trainer tr(net, std::make_shared<InCoreSampler>(vol), to);
-    grid_per_chunk = tr.grid_backward_per_chunk();
+    phase_names = tr.phases();
     for (int w = 0; w < 2; ++w) tr.step();  // warm-up: page-in, caches
     t0 = std::chrono::steady_clock::now();
     std::vector<double> ph[3];
@@ -208,21 +208,10 @@ void run_bench(const BenchArgs& a) {
               *std::min_element(times.begin(), times.end()) * 1e3, *std::max_element(times.begin(), times.end()) * 1e3);
   std::printf("MLP FLOPs: %.1f kFLOP/sample -> %.1f GFLOP/s end to end; MLP kernels alone: %.1f GFLOP/s on %d threads (%s)\n",
               flops / 1e3, flops * sps / 1e9, mlp_only, num_threads(), kernels::simd_target_name());
-  // The trainer's phases (report key, printed name, median ms); a grid scattered per chunk has a phase
-  // of its own only for the step's shared chunks.
-  std::vector<std::tuple<const char*, const char*, double>> phase_rows;
-  if (training && grid_per_chunk)
-    phase_rows = {{"sample_encode_mlp_grid_backward", "sample+encode+MLP+grid backward (per chunk)", phases[0]},
-                  {"grid_backward_shared_chunks", "grid backward (shared chunks)", phases[1]},
-                  {"optimizer", "optimizer", phases[2]}};
-  else if (training)
-    phase_rows = {{"sample_encode_mlp", "sample+encode+MLP", phases[0]},
-                  {"grid_backward", "grid backward", phases[1]},
-                  {"optimizer", "optimizer", phases[2]}};
   if (training) {
     std::string line;
-    for (const auto& [key, name, s] : phase_rows)
-      line += fmt::format("{}{} {:.2f}", line.empty() ? "" : ", ", name, s * 1e3);
+    for (int p = 0; p < 3; ++p)
+      line += fmt::format("{}{} {:.2f}", p ? ", " : "", phase_names[p].name, phases[p] * 1e3);
     std::printf("phases (median ms): %s\n", line.c_str());
   }
   Json report = {{"mode", a.what},
@@ -243,7 +232,7 @@ void run_bench(const BenchArgs& a) {
                  {"n_params", net.n_params()}};
   if (training) {
     Json ph = Json::object();
-    for (const auto& [key, name, s] : phase_rows) ph[key] = s * 1e3;
+    for (int p = 0; p < 3; ++p) ph[phase_names[p].key] = phases[p] * 1e3;
     report["phase_ms"] = ph;
   }
   write_report(a.report, report);

@@ -1,4 +1,5 @@
 #include "vnr/render/field.h"
+#include <cstring>
 #include "vnr/core/parallel.h"
 
 namespace vnr {
@@ -10,10 +11,10 @@ void GridField::query(const float* x, const float* y, const float* z, int64_t n,
 void NetworkField::query(const float* x, const float* y, const float* z, int64_t n, float* out) const {
   net_.infer_fn(
       n,
-      [&](int64_t i, float* px, float* py, float* pz) {
-        *px = x[i];
-        *py = y[i];
-        *pz = z[i];
+      [&](int64_t first, int64_t count, float* px, float* py, float* pz) {  // whole chunks: three copies
+        std::memcpy(px, x + first, sizeof(float) * size_t(count));
+        std::memcpy(py, y + first, sizeof(float) * size_t(count));
+        std::memcpy(pz, z + first, sizeof(float) * size_t(count));
       },
       out);
 }

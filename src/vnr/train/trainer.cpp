@@ -187,6 +187,14 @@ float Trainer::step() {
   return float(loss);
 }
 
+std::array<Trainer::Phase, 3> Trainer::phases() const {
+  if (private_grid_grads_)
+    return {{{"sample_encode_mlp_grid_backward", "sample+encode+MLP+grid backward (per chunk)"},
+             {"grid_backward_shared_chunks", "grid backward (shared chunks)"},
+             {"optimizer", "optimizer"}}};
+  return {{{"sample_encode_mlp", "sample+encode+MLP"}, {"grid_backward", "grid backward"}, {"optimizer", "optimizer"}}};
+}
+
 void Trainer::enable_online_ranges(Int3 dims, int cell_size) {
   thread_ranges_.assign(size_t(n_threads_), ValueRangeGrid(dims, cell_size));
 }

@@ -1,4 +1,5 @@
 #pragma once
+#include <array>
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -64,10 +65,14 @@ public:
   void enable_online_ranges(Int3 dims, int cell_size = 16);
   bool has_online_ranges() const { return !thread_ranges_.empty(); }
   ValueRangeGrid online_ranges() const;
-  // Seconds spent in each phase of the last step (sample+MLP, grid backward, optimizer); a grid
-  // scattered per chunk (grid_backward_per_chunk()) counts in the first, except the shared chunks'
-  // share, which is the second.
-  bool grid_backward_per_chunk() const { return private_grid_grads_; }
+  // Seconds spent in each phase of the last step, and what each one holds (report key, printed name):
+  // sample+encode+MLP, grid backward, optimizer; a grid scattered per chunk (private copies) counts in
+  // the first, except the shared chunks' share, which is the second.
+  struct Phase {
+    const char* key;
+    const char* name;
+  };
+  std::array<Phase, 3> phases() const;
   double phase_seconds[3] = {0, 0, 0};
 
 private:
