@@ -34,7 +34,7 @@ std::vector<float> random_points(int n, uint64_t seed) {
 std::unique_ptr<Network> trained_network(const std::string& preset, const Volume& vol, int steps = 30) {
   auto net = std::make_unique<Network>(preset_config(preset));
   net->init_params(7);
-  Trainer tr(*net, std::make_shared<InCoreSampler>(vol), TrainOptions{4096, 7});
+  CpuTrainer tr(*net, std::make_shared<InCoreSampler>(vol), TrainOptions{4096, 7});
   for (int i = 0; i < steps; ++i) tr.step();
   return net;
 }
@@ -172,7 +172,7 @@ TEST(GpuTrainer, LossCurveAndPsnrFollowTheCpuAndModelsMoveBothWays) {
     return net;
   };
   auto cpu_net = make();
-  Trainer cpu(*cpu_net, std::make_shared<InCoreSampler>(vol), TrainOptions{16384, 5});
+  CpuTrainer cpu(*cpu_net, std::make_shared<InCoreSampler>(vol), TrainOptions{16384, 5});
   for (int i = 0; i < steps; ++i) cpu.step();
   auto gpu_net = make();
   cuda::GpuTrainer gpu(*gpu_net, view_of(vol),
@@ -181,7 +181,7 @@ TEST(GpuTrainer, LossCurveAndPsnrFollowTheCpuAndModelsMoveBothWays) {
   // parameters move by the learning rate in the same direction wherever the gradients agree in sign.
   {
     auto one_cpu = make();
-    Trainer c1(*one_cpu, std::make_shared<InCoreSampler>(vol), TrainOptions{16384, 5});
+    CpuTrainer c1(*one_cpu, std::make_shared<InCoreSampler>(vol), TrainOptions{16384, 5});
     c1.step();
     auto one_gpu = make();
     cuda::GpuTrainer g1(*one_gpu, view_of(vol), cuda::GpuTrainOptions{16384, 5, kChunk});

@@ -89,7 +89,7 @@ TEST(GpuMacroCells, OnlineRangesOfTheGpuTrainerEqualTheCpuTrainers) {
   cpu_net.init_params(5);
   gpu_net.init_params(5);
   const int64_t batch = 4096;
-  Trainer cpu(cpu_net, std::make_shared<InCoreSampler>(vol), TrainOptions{batch, 9});
+  CpuTrainer cpu(cpu_net, std::make_shared<InCoreSampler>(vol), TrainOptions{batch, 9});
   cpu.enable_online_ranges(vol.dims, 8);
   cuda::GpuTrainer gpu(gpu_net, view_of(vol), cuda::GpuTrainOptions{batch, 9, kChunk});
   gpu.enable_online_ranges(vol.dims, 8);
@@ -159,7 +159,7 @@ TEST(GpuRender, NetworkImagesMatchTheCpuAndStrategiesAgree) {
   for (const char* preset : {"small", "paper"}) {
   Network net(preset_config(preset));
   net.init_params(3);
-  Trainer trainer(net, std::make_shared<InCoreSampler>(vol), TrainOptions{16384, 3});
+  CpuTrainer trainer(net, std::make_shared<InCoreSampler>(vol), TrainOptions{16384, 3});
   trainer.enable_online_ranges(vol.dims, 8);
   for (int i = 0; i < 200; ++i) trainer.step();
   NetworkField neural(net, vol.dims);

@@ -361,14 +361,14 @@ std::vector<float> smooth_volume(int n) {
 }
 }  // namespace
 
-TEST(Trainer, LearnsASmoothVolumeAndIsDeterministic) {
+TEST(CpuTrainer, LearnsASmoothVolumeAndIsDeterministic) {
   const int n = 24;
   std::vector<float> vol = smooth_volume(n);
   GridView g{vol.data(), n, n, n};
   auto run = [&](int steps) {
     auto net = std::make_unique<Network>(preset_config("small"));
     net->init_params(42);
-    Trainer tr(*net, std::make_shared<InCoreSampler>(g), TrainOptions{8192, 42});
+    CpuTrainer tr(*net, std::make_shared<InCoreSampler>(g), TrainOptions{8192, 42});
     for (int i = 0; i < steps; ++i) tr.step();
     return std::make_pair(std::move(net), tr.loss_history());
   };
@@ -399,7 +399,7 @@ TEST(Trainer, LearnsASmoothVolumeAndIsDeterministic) {
 // A small grid's gradient scattered per chunk into per-thread copies (the default for the small
 // config) is the gradient of the separate level-by-level pass: on one thread the same sums in the same
 // order (bit-identical models), on two the same up to the order of the two threads' partial sums.
-TEST(Trainer, PrivateGridGradientsEqualTheSeparatePass) {
+TEST(CpuTrainer, PrivateGridGradientsEqualTheSeparatePass) {
   const int n = 24;
   const std::vector<float> vol = smooth_volume(n);
   const GridView g{vol.data(), n, n, n};
@@ -408,7 +408,7 @@ TEST(Trainer, PrivateGridGradientsEqualTheSeparatePass) {
     net->init_params(7);
     TrainOptions o{8192, 7};
     o.private_grid_grad_max_bytes = private_max_bytes;
-    Trainer tr(*net, std::make_shared<InCoreSampler>(g), o);
+    CpuTrainer tr(*net, std::make_shared<InCoreSampler>(g), o);
     for (int i = 0; i < steps; ++i) tr.step();
     return std::make_pair(std::move(net), tr.loss_history());
   };
@@ -431,7 +431,7 @@ TEST(Trainer, PrivateGridGradientsEqualTheSeparatePass) {
 // the thread count: a sampler that slows one thread or the other changes who runs which chunk (counted
 // here), not one bit of the parameters, with a private grid gradient (small config) and with the
 // level pass. Against dealing every chunk round-robin the sums differ only in order.
-TEST(Trainer, SharedTailChunksGiveTheSameModelWhicheverThreadRunsThem) {
+TEST(CpuTrainer, SharedTailChunksGiveTheSameModelWhicheverThreadRunsThem) {
   const int n = 24;
   const std::vector<float> vol = smooth_volume(n);
   const GridView g{vol.data(), n, n, n};
@@ -455,7 +455,7 @@ TEST(Trainer, SharedTailChunksGiveTheSameModelWhicheverThreadRunsThem) {
     o.shared_tail_chunks = tail;
     o.private_grid_grad_max_bytes = private_max_bytes;
     auto sampler = std::make_shared<SlowThread>(g, slow);
-    Trainer tr(*net, sampler, o);
+    CpuTrainer tr(*net, sampler, o);
     for (int i = 0; i < 6; ++i) tr.step();
     if (chunks0) *chunks0 = sampler->chunks[0];
     return std::make_pair(std::move(net), tr.loss_history());
@@ -496,25 +496,25 @@ TEST(Sampler, InCoreTargetsAreTheGridLookups) {
   }
 }
 
-TEST(Trainer, RejectsBadBatch) {
+TEST(CpuTrainer, RejectsBadBatch) {
   Network net(preset_config("small"));
   std::vector<float> vol(8, 0.f);
   GridView g{vol.data(), 2, 2, 2};
-  EXPECT_THROW(Trainer(net, std::make_shared<InCoreSampler>(g), TrainOptions{1000, 1}), std::exception);
+  EXPECT_THROW(CpuTrainer(net, std::make_shared<InCoreSampler>(g), TrainOptions{1000, 1}), std::exception);
 }
 
 TEST(TargetRatio, SizesTheModelNearTheRequestedRatio) {
   const uint64_t volume_bytes = 16u << 20;  // bonsai: 256^3 uint8
   for (double ratio : {4.0, 16.0, 50.0, 200.0}) {
     std::string note;
-    Json c = size_config_for_ratio(preset_config("paper"), volume_bytes, ratio, &note);
+    ModelConfig c = size_config_for_ratio(ModelConfig::from_json(preset_config("paper")), volume_bytes, ratio, &note);
     const double bytes = double(count_params(c)) * 2;
     const double achieved = double(volume_bytes) / bytes;
     EXPECT_GT(achieved, ratio / 2) << note;
     EXPECT_LT(achieved, ratio * 2) << note;
     EXPECT_NE(note.find("levels"), std::string::npos);
     // The MLP and everything but the grid size is kept.
-    EXPECT_EQ(c["network"], Network(preset_config("paper")).config_json()["network"]);
+    EXPECT_EQ(c.to_json()["network"], Network(preset_config("paper")).config_json()["network"]);
   }
-  EXPECT_THROW(size_config_for_ratio(preset_config("paper"), volume_bytes, -1, nullptr), std::exception);
+  EXPECT_THROW(size_config_for_ratio(load_config("paper"), volume_bytes, -1, nullptr), std::exception);
 }

@@ -43,7 +43,7 @@ bool same_pixels(const Image& a, const Image& b) {
 struct Training {
   Volume vol;
   Network net;
-  Trainer trainer;
+  CpuTrainer trainer;
   Training(Int3 dims, int64_t batch, int cell_size, uint32_t seed = 3)
       : vol(synth(dims)), net(small_config()),
         trainer((net.init_params(seed), net), std::make_shared<InCoreSampler>(vol), TrainOptions{batch, seed}) {
@@ -62,12 +62,12 @@ RenderOptions small_options(RenderMode mode = RenderMode::RayMarch,
 }
 
 // A renderer built from scratch over the network's current parameters and the trainer's ranges.
-Image fresh_render(Trainer& trainer, Int3 dims, const TransferFunction& tf, const Camera& cam,
+Image fresh_render(CpuTrainer& trainer, Int3 dims, const TransferFunction& tf, const Camera& cam,
                    const RenderOptions& o, int frames) {
   NetworkField field(trainer.network(), dims);
   MacroCells mc(trainer.online_ranges(), box_of(dims));
   mc.update(tf);
-  return Renderer(field, box_of(dims), mc, tf, cam, o).render(frames);
+  return CpuRenderer(field, box_of(dims), mc, tf, cam, o).render(frames);
 }
 
 bool same_table(const TransferFunction& a, const TransferFunction& b) {
@@ -96,7 +96,7 @@ TEST(OnlineLoop, FramesMatchAFreshRendererBitForBit) {
     EXPECT_EQ(loop.accumulated_frames(), 1) << "a training step restarts accumulation";
     EXPECT_FALSE(same_pixels(a, b)) << "the frame after more training shows the trained model";
     EXPECT_TRUE(same_pixels(b, fresh_render(s.trainer, s.vol.dims, tf, cam, o, 1)));
-    // Without training, frames accumulate exactly as Renderer::render(n) does.
+    // Without training, frames accumulate exactly as CpuRenderer::render(n) does.
     loop.render_frame();
     const Image c = loop.render_frame();
     EXPECT_EQ(loop.accumulated_frames(), 3);
@@ -207,7 +207,7 @@ TEST(OnlineLoop, ImageQualityImprovesAsTrainingProceeds) {
   GridField grid(view_of(s.vol));
   MacroCells mc_grid(value_ranges_from_grid(view_of(s.vol), 8), box_of(s.vol.dims));
   mc_grid.update(tf);
-  const Image truth = Renderer(grid, box_of(s.vol.dims), mc_grid, tf, cam, o).render(1);
+  const Image truth = CpuRenderer(grid, box_of(s.vol.dims), mc_grid, tf, cam, o).render(1);
   OnlineLoop loop(s.trainer, s.vol.dims, tf, cam, o);
   std::vector<double> psnr;
   for (int steps : {0, 10, 140}) {
@@ -263,7 +263,7 @@ TEST(OnlineLoop, RejectsWhatCannotWork) {
   Volume vol = synth(Int3{16, 16, 16});
   Network net(small_config());
   net.init_params(1);
-  Trainer plain(net, std::make_shared<InCoreSampler>(vol), TrainOptions{1024, 1});
+  CpuTrainer plain(net, std::make_shared<InCoreSampler>(vol), TrainOptions{1024, 1});
   const TransferFunction tf = tf_preset("ramp");
   const Camera cam = orbit_camera(box_of(vol.dims), 0, 0, 30);
   EXPECT_THROW(OnlineLoop(plain, vol.dims, tf, cam, small_options()), Error) << "no online ranges recorded";

@@ -323,7 +323,7 @@ TEST(OutOfCore, LossCurveMatchesInCoreWithinTolerance) {
   auto train = [&](std::shared_ptr<Sampler> sampler, std::vector<float>* hist) {
     Network net(load_config("small"));
     net.init_params(7);
-    Trainer t(net, std::move(sampler), TrainOptions{4096, 7});
+    CpuTrainer t(net, std::move(sampler), TrainOptions{4096, 7});
     for (int i = 0; i < 1000; ++i) t.step();
     *hist = t.loss_history();
     return evaluate(net, vol, false).psnr;

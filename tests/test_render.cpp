@@ -124,7 +124,7 @@ TEST(MacroCells, OnlineRangesCoverEveryRegionTheDataOccupies) {
                    {"network", {{"otype", "FullyFusedMLP"}, {"n_neurons", 16}, {"n_hidden_layers", 1}}},
                    {"loss", {{"otype", "L2"}}}});
   net.init_params(1);
-  Trainer trainer(net, std::make_shared<InCoreSampler>(vol), TrainOptions{16384, 5});
+  CpuTrainer trainer(net, std::make_shared<InCoreSampler>(vol), TrainOptions{16384, 5});
   trainer.enable_online_ranges(vol.dims, 8);
   for (int i = 0; i < 12; ++i) trainer.step();
   ValueRangeGrid online = trainer.online_ranges();
@@ -162,7 +162,7 @@ TEST(RayMarch, ConstantFieldMatchesTheClosedForm) {
       o.step = 0.7f;
       o.step_max = step_max;
       Camera cam{Vec3f{12, 10, 200}, Vec3f{12, 10, 15}, Vec3f{0, 1, 0}, 1.0f};  // centre ray along -z
-      Renderer r(field, box_of(vol), mc, tf, cam, o);
+      CpuRenderer r(field, box_of(vol), mc, tf, cam, o);
       Image img = r.render(1);
       const Vec4f p = img.at(4, 4);
       const double A = 1 - std::pow(1 - a0, 30.0);
@@ -192,7 +192,7 @@ TEST(PathTrace, HomogeneousMediumMatchesTheAnalyticTransmittance) {
     o.density_scale = density;
     o.seed = 11;
     Camera cam{Vec3f{8, 8, 4000}, Vec3f{8, 8, 20}, Vec3f{0, 1, 0}, 0.05f};  // nearly parallel rays along -z
-    Renderer r(field, box_of(vol), mc, tf, cam, o);
+    CpuRenderer r(field, box_of(vol), mc, tf, cam, o);
     Image img = r.render(64);
     double mean = 0;
     for (const Vec4f& p : img.pixels) mean += p.x;
@@ -218,7 +218,7 @@ TEST(Strategies, StreamingAndInShaderGiveTheSameImageOnTheGrid) {
         o.height = 40;
         o.seed = 5;
         o.samples_per_iteration = 3;
-        Renderer r(scene.field, box_of(scene.vol), scene.mc, scene.tf, scene.cam, o);
+        CpuRenderer r(scene.field, box_of(scene.vol), scene.mc, scene.tf, scene.cam, o);
         img[s] = r.render(2);
       }
       double sum = 0;
@@ -266,7 +266,7 @@ TEST(Strategies, RayPacketsGiveThePerRayImage) {
       o.step = c.step;
       o.step_max = c.step_max;
       o.seed = 3;
-      Renderer r(field, box_of(vol), mc, tf, cam, o);
+      CpuRenderer r(field, box_of(vol), mc, tf, cam, o);
       return r.render(2, st);
     };
     RenderStats ref_stats;
@@ -301,7 +301,7 @@ TEST(Strategies, MacroCellsOnAndOffGiveTheSameRayMarchedImage) {
     RenderOptions o;
     o.width = o.height = 64;
     o.step_max = step_max;
-    Renderer r(field, box_of(vol), mc, tf, cam, o);
+    CpuRenderer r(field, box_of(vol), mc, tf, cam, o);
     return r.render(4, st);
   };
   RenderStats s_on, s_off;
@@ -321,7 +321,7 @@ TEST(Strategies, TrainedModelRendersCloseToItsGrid) {
               {"optimizer", {{"otype", "Adam"}, {"learning_rate", 1e-2}}}};
   Network net(cfg);
   net.init_params(3);
-  Trainer trainer(net, std::make_shared<InCoreSampler>(vol), TrainOptions{16384, 3});
+  CpuTrainer trainer(net, std::make_shared<InCoreSampler>(vol), TrainOptions{16384, 3});
   trainer.enable_online_ranges(vol.dims, 8);
   for (int i = 0; i < 300; ++i) trainer.step();
   EvalResult ev = evaluate(net, vol, false);
@@ -335,11 +335,11 @@ TEST(Strategies, TrainedModelRendersCloseToItsGrid) {
   Camera cam = orbit_camera(box_of(vol), 40, 25, 30);
   RenderOptions o;
   o.width = o.height = 64;
-  Image ref = Renderer(grid, box_of(vol), mc_grid, tf, cam, o).render(2);
-  Image nn_grid = Renderer(neural, box_of(vol), mc_grid, tf, cam, o).render(2);
-  Image nn_online = Renderer(neural, box_of(vol), mc_online, tf, cam, o).render(2);
+  Image ref = CpuRenderer(grid, box_of(vol), mc_grid, tf, cam, o).render(2);
+  Image nn_grid = CpuRenderer(neural, box_of(vol), mc_grid, tf, cam, o).render(2);
+  Image nn_online = CpuRenderer(neural, box_of(vol), mc_online, tf, cam, o).render(2);
   o.strategy = RenderStrategy::InShader;
-  Image nn_inshader = Renderer(neural, box_of(vol), mc_online, tf, cam, o).render(2);
+  Image nn_inshader = CpuRenderer(neural, box_of(vol), mc_online, tf, cam, o).render(2);
   const double p_grid = image_psnr(nn_grid, ref), p_online = image_psnr(nn_online, ref);
   std::printf("model PSNR %.2f dB; image PSNR vs grid: %.2f dB (grid macro-cells), %.2f dB (online)\n", ev.psnr,
               p_grid, p_online);
@@ -350,7 +350,7 @@ TEST(Strategies, TrainedModelRendersCloseToItsGrid) {
   RecordProperty("image_psnr_online_macrocells", std::to_string(p_online));
 }
 
-TEST(Renderer, RejectsBadOptions) {
+TEST(CpuRenderer, RejectsBadOptions) {
   Volume vol = synth(Int3{8, 8, 8});
   GridField field(view_of(vol));
   TransferFunction tf = tf_preset("ramp");
@@ -359,7 +359,7 @@ TEST(Renderer, RejectsBadOptions) {
   auto make = [&](auto&& edit) {
     RenderOptions o;
     edit(o);
-    Renderer r(field, box_of(vol), mc, tf, cam, o);
+    CpuRenderer r(field, box_of(vol), mc, tf, cam, o);
   };
   EXPECT_THROW(make([](RenderOptions& o) { o.width = 0; }), Error);
   EXPECT_THROW(make([](RenderOptions& o) { o.step = 0; }), Error);

@@ -295,10 +295,10 @@ TEST(Series, ContinuousKeepsTheLearningRateAndSwitchesTarget) {
   const Int3 dims{24, 24, 24};
   std::vector<Volume> frames = inverse_pair(dims);
   FrameLoader load = [&](int t) { return make_volume(dims, std::vector<float>(frames[t].data.begin(), frames[t].data.end())); };
-  // The config decays every step: a per-timestep Trainer's rate drops fast...
+  // The config decays every step: a per-timestep CpuTrainer's rate drops fast...
   {
     Model m = fresh_model(decaying_config());
-    Trainer tr(*m.net, std::make_shared<InCoreSampler>(frames[0]), TrainOptions{4096, 1});
+    CpuTrainer tr(*m.net, std::make_shared<InCoreSampler>(frames[0]), TrainOptions{4096, 1});
     for (int i = 0; i < 5; ++i) tr.step();
     EXPECT_LT(tr.current_learning_rate(), 0.6f * 0.005f);
   }
@@ -320,7 +320,7 @@ TEST(Series, ContinuousKeepsTheLearningRateAndSwitchesTarget) {
   ASSERT_EQ(r.learning_rate_history.size(), size_t(2 * N));
   for (float lr : r.learning_rate_history) EXPECT_EQ(lr, 0.005f);
   EXPECT_EQ(r.learning_rate, 0.005f);
-  EXPECT_FALSE(ModelConfig::from_json(r.config).decay.enabled);
+  EXPECT_FALSE(r.config.decay.enabled);
   EXPECT_FALSE(m.net->config().decay.enabled);  // the saved models say so too
   EXPECT_EQ(r.probe_voxels, int64_t(dims.count()));  // 24^3 < 2^16: every voxel
 

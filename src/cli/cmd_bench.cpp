@@ -164,13 +164,13 @@ void run_bench(const BenchArgs& a) {
   const Precision train_precision = training ? resolve_training_precision(a.precision, net) : Precision::FP32;
   std::vector<double> times;
   double phases[3] = {0, 0, 0};
-  std::array<Trainer::Phase, 3> phase_names{};
+  std::array<CpuTrainer::Phase, 3> phase_names{};
   auto t0 = std::chrono::steady_clock::now();
   Progress bar(std::string("bench ") + a.what, a.seconds, false);
   if (training) {
     TrainOptions to{a.batch, 1337};
     to.precision = train_precision;
-    Trainer tr(net, std::make_shared<InCoreSampler>(vol), to);
+    CpuTrainer tr(net, std::make_shared<InCoreSampler>(vol), to);
     phase_names = tr.phases();
     for (int w = 0; w < 2; ++w) tr.step();  // warm-up: page-in, caches
     t0 = std::chrono::steady_clock::now();

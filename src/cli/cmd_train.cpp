@@ -137,7 +137,7 @@ TrainingData open_training_data(const TrainArgs& a, const VolumeDesc& desc, uint
 // (f = 0.073), 500 steps, 3 seeds each: factor 1 -> 36.6 dB mean with spikes, 0.2 -> 39.4, 0.1 -> 40.2
 // without spikes (in-core 40.4). But an under-fitting run (128^3, a ratio-20 config, no spikes) lost
 // 1.4 dB with 0.1, so the default stays the configured rate (1).
-Json scale_grid_learning_rate(Json config, const TrainArgs& a, const OutOfCoreSampler& s) {
+ModelConfig scale_grid_learning_rate(ModelConfig config, const TrainArgs& a, const OutOfCoreSampler& s) {
   double scale;
   if (a.grid_lr_scale == "auto") {
     scale = std::clamp(s.resident_fraction(), 0.1, 1.0);
@@ -148,14 +148,13 @@ Json scale_grid_learning_rate(Json config, const TrainArgs& a, const OutOfCoreSa
       fail("--grid-lr-scale expects auto or a positive number, got '{}'", a.grid_lr_scale);
   }
   if (scale == 1.0) return config;
-  ModelConfig c = ModelConfig::from_json(config);
-  c.adam.non_matrix_learning_rate_factor *= float(scale);
+  config.adam.non_matrix_learning_rate_factor *= float(scale);
   if (!a.quiet)
     std::fprintf(stderr,
                  "out-of-core: the buffer holds %.1f%% of the volume; grid learning rate scaled by %.3g "
                  "(--grid-lr-scale %s)\n",
                  100 * s.resident_fraction(), scale, a.grid_lr_scale.c_str());
-  return c.to_json();
+  return config;
 }
 
 // --device: "cuda" where the run can train on the GPU (the volume in memory, a grid encoding with ReLU
@@ -198,7 +197,7 @@ void run_train(const TrainArgs& a) {
   const uint64_t budget =
       a.memory_budget.empty() ? available_memory_bytes() / 2 : parse_byte_size(a.memory_budget);
   if (budget == 0) fail("--memory-budget must be positive");
-  Json config = load_config(a.config);
+  ModelConfig config = load_config(a.config);
   VolumeDesc desc = describe_volume(a.volume, a.vol.raw());
   TrainingData data = open_training_data(a, desc, budget);
   if (data.hi == data.lo && !a.quiet)
@@ -218,7 +217,7 @@ void run_train(const TrainArgs& a) {
 
   const int64_t steps = a.steps >= 0 ? a.steps : (a.seconds > 0 ? INT64_MAX : 1000);
   const Device dev = choose_device(a, data, net, preview_opts.has_value());
-  std::unique_ptr<Trainer> cpu;
+  std::unique_ptr<CpuTrainer> cpu;
   std::unique_ptr<cuda::GpuTrainer> gpu;
   if (dev == Device::Cuda) {
     if (a.precision != "auto" && !a.quiet)
@@ -234,7 +233,7 @@ void run_train(const TrainArgs& a) {
   } else {
     TrainOptions to{a.batch, a.seed};
     to.precision = resolve_training_precision(a.precision, net);
-    cpu = std::make_unique<Trainer>(net, data.sampler, to);
+    cpu = std::make_unique<CpuTrainer>(net, data.sampler, to);
     if (a.macrocell_size > 0) cpu->enable_online_ranges(data.dims, a.macrocell_size);
   }
   // Reports' "precision": the CPU trainer's MLP arithmetic; null on the GPU (its own arithmetic).
@@ -398,7 +397,7 @@ void run_train(const TrainArgs& a) {
 
 }  // namespace
 
-Model new_model(const Json& config, Int3 dims, DType dtype, double lo, double hi, uint32_t seed) {
+Model new_model(const ModelConfig& config, Int3 dims, DType dtype, double lo, double hi, uint32_t seed) {
   Model model;
   model.net = std::make_unique<Network>(config);
   model.dims = dims;

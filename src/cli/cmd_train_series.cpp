@@ -89,7 +89,7 @@ Json eval_row(const EvalResult& ev, bool ssim) {
 
 void run_train_series(const TrainArgs& a) {
   check_series_args(a);
-  Json config = load_config(a.config);
+  ModelConfig config = load_config(a.config);
   const RawOptions raw = a.vol.raw();
   const LoadOptions load_opts = a.vol.load();
 

@@ -33,7 +33,7 @@ struct TrainArgs {
 };
 
 // A fresh model for a volume of these dims/dtype/range, parameters initialised from `seed`.
-Model new_model(const Json& config, Int3 dims, DType dtype, double lo, double hi, uint32_t seed);
+Model new_model(const ModelConfig& config, Int3 dims, DType dtype, double lo, double hi, uint32_t seed);
 
 // `vnr train SERIES --timesteps ... -o DIR`, with or without --continuous.
 void run_train_series(const TrainArgs& a);

@@ -83,7 +83,7 @@ public:
   uint64_t steps_done() const;
   float current_learning_rate() const;
   // Online macro-cells (paper "Macro-Cell Optimization"): from now on every batch widens the value
-  // ranges of the cells around its samples, on the GPU (the CPU Trainer's cells, exactly).
+  // ranges of the cells around its samples, on the GPU (the CpuTrainer's cells, exactly).
   void enable_online_ranges(Int3 dims, int cell_size = 16);
   bool has_online_ranges() const;
   ValueRangeGrid online_ranges();  // synchronises

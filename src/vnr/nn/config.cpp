@@ -297,13 +297,11 @@ Json preset_config(const std::string& name) {
   return c;
 }
 
-Json load_config(const std::string& preset_or_path) {
-  if (is_preset(preset_or_path)) return preset_config(preset_or_path);
+ModelConfig load_config(const std::string& preset_or_path) {
+  if (is_preset(preset_or_path)) return ModelConfig::from_json(preset_config(preset_or_path));
   if (!file_exists(preset_or_path))
     fail("--config '{}' is neither a preset ({}) nor an existing file", preset_or_path, preset_names());
-  Json j = parse_json_file(preset_or_path);
-  ModelConfig::from_json(j);  // validate now, with the file's name in context
-  return j;
+  return ModelConfig::from_json(parse_json_file(preset_or_path));
 }
 
 Precision parse_precision(const std::string& name) {

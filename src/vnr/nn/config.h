@@ -79,8 +79,9 @@ Json preset_config(const std::string& name);
 bool is_preset(const std::string& name);
 const char* preset_names();  // "paper, small"
 
-// Loads a config from a preset name or a JSON file path.
-Json load_config(const std::string& preset_or_path);
+// The typed config of a preset name or a JSON file path: parsed once here; everything downstream
+// (--target-ratio sizing, learning-rate scaling, Network) works on the ModelConfig.
+ModelConfig load_config(const std::string& preset_or_path);
 
 const char* activation_name(Activation a);
 const char* loss_name(LossType l);

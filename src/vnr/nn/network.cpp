@@ -77,14 +77,13 @@ MlpLayout make_mlp_layout(const ModelConfig& cfg, uint32_t n_output_dims) {
   return m;
 }
 
-uint64_t count_params(const Json& config, uint32_t n_output_dims) {
-  ModelConfig c = ModelConfig::from_json(config);
+uint64_t count_params(const ModelConfig& c, uint32_t n_output_dims) {
   uint64_t grid = c.encoding.type == EncodingType::Grid ? make_grid_layout(c.encoding).n_params() : 0;
   return make_mlp_layout(c, n_output_dims).n_params + grid;
 }
 
-Network::Network(const Json& config, uint32_t n_output_dims)
-    : cfg_(ModelConfig::from_json(config)), cfg_json_(cfg_.to_json()) {  // canonical: every key explicit
+Network::Network(const ModelConfig& config, uint32_t n_output_dims)
+    : cfg_(config), cfg_json_(cfg_.to_json()) {  // canonical: every key explicit
   if (has_grid()) grid_ = make_grid_layout(cfg_.encoding);
   mlp_ = make_mlp_layout(cfg_, n_output_dims);
   params.assign(n_params(), 0.0f);

@@ -34,7 +34,7 @@ struct MlpLayout {
 
 MlpLayout make_mlp_layout(const ModelConfig& cfg, uint32_t n_output_dims = 1);
 // Total parameter count of a config, without allocating anything.
-uint64_t count_params(const Json& config, uint32_t n_output_dims = 1);
+uint64_t count_params(const ModelConfig& config, uint32_t n_output_dims = 1);
 
 // Samples are processed in chunks of kChunk, whose MLP activations stay in L2, for every width
 // (training draws its samples per (step, chunk), so the GPU trainer uses the same chunks). (Narrow MLPs once used 1024 against per-chunk overheads; with today's
@@ -44,7 +44,10 @@ constexpr int kChunk = 256;
 
 class Network {
 public:
-  explicit Network(const Json& config, uint32_t n_output_dims = 1);
+  explicit Network(const ModelConfig& config, uint32_t n_output_dims = 1);
+  // The same from tiny-cuda-nn JSON (parsed by ModelConfig::from_json): model files and tests.
+  explicit Network(const Json& config, uint32_t n_output_dims = 1)
+      : Network(ModelConfig::from_json(config), n_output_dims) {}
 
   const ModelConfig& config() const { return cfg_; }
   const Json& config_json() const { return cfg_json_; }

@@ -11,7 +11,7 @@ double seconds_between(std::chrono::steady_clock::time_point a, std::chrono::ste
 }
 }  // namespace
 
-OnlineLoop::OnlineLoop(Trainer& trainer, Int3 dims, const TransferFunction& tf, const Camera& camera,
+OnlineLoop::OnlineLoop(CpuTrainer& trainer, Int3 dims, const TransferFunction& tf, const Camera& camera,
                        const RenderOptions& options, MacroCellMode mc)
     : trainer_(trainer), dims_(dims), box_{float(dims.x), float(dims.y), float(dims.z)}, tf_(tf), camera_(camera),
       opt_(options), mc_mode_(mc) {
@@ -20,7 +20,7 @@ OnlineLoop::OnlineLoop(Trainer& trainer, Int3 dims, const TransferFunction& tf, 
     fail("online rendering builds its macro-cells from the training samples: use online or off, not grid");
   if (mc == MacroCellMode::Online) {
     if (!trainer.has_online_ranges())
-      fail("online macro-cells need the trainer's online value ranges (Trainer::enable_online_ranges)");
+      fail("online macro-cells need the trainer's online value ranges (CpuTrainer::enable_online_ranges)");
     // Checked once here (a merge of empty grids: cheap) so that mistakes fail before any training.
     const ValueRangeGrid g = trainer.online_ranges();
     if (!(g.volume_dims == dims))
@@ -52,7 +52,7 @@ bool OnlineLoop::refresh() {
     else
       mc_ = std::make_unique<MacroCells>(MacroCells::single(dims_, box_));
     mc_->update(tf_);
-    renderer_ = std::make_unique<Renderer>(*field_, box_, *mc_, tf_, camera_, opt_);
+    renderer_ = std::make_unique<CpuRenderer>(*field_, box_, *mc_, tf_, camera_, opt_);
     rendered_step_ = step;
     model_dirty_ = tf_dirty_ = options_dirty_ = camera_dirty_ = false;
     return true;
@@ -61,7 +61,7 @@ bool OnlineLoop::refresh() {
     // The renderer holds views of tf_ and of the macro-cells' opacities: rebuilt after them.
     renderer_.reset();
     if (tf_dirty_) mc_->update(tf_);
-    renderer_ = std::make_unique<Renderer>(*field_, box_, *mc_, tf_, camera_, opt_);
+    renderer_ = std::make_unique<CpuRenderer>(*field_, box_, *mc_, tf_, camera_, opt_);
     tf_dirty_ = options_dirty_ = camera_dirty_ = false;
     return true;
   }

@@ -7,25 +7,25 @@
 // frame on the same GPU stream: sample a batch -> optimise -> widen the macro-cell value ranges with
 // the batch's samples -> recompute the macro-cells' max opacity -> render with the current weights.
 // Here the same loop runs on the CPU, sequentially (both halves use every core):
-//   train(n)        n Trainer::step()s; each step's samples widen the trainer's per-thread
-//                   ValueRangeGrids (Trainer::enable_online_ranges) as they are drawn;
-//   render_frame()  if the model changed since the last frame (Trainer::steps_done() moved, or
-//                   model_changed() was called): merge the per-thread ranges (Trainer::online_ranges,
+//   train(n)        n CpuTrainer::step()s; each step's samples widen the trainer's per-thread
+//                   ValueRangeGrids (CpuTrainer::enable_online_ranges) as they are drawn;
+//   render_frame()  if the model changed since the last frame (CpuTrainer::steps_done() moved, or
+//                   model_changed() was called): merge the per-thread ranges (CpuTrainer::online_ranges,
 //                   O(cells x threads)), rebuild MacroCells from them and recompute their max opacity
 //                   for the transfer function, rebuild the NetworkField (its in-shader PointEvaluator
-//                   copies the weights, so it must see the new ones) and the Renderer; then render one
+//                   copies the weights, so it must see the new ones) and the CpuRenderer; then render one
 //                   frame with the current parameters.
 //   run(T, k, cb)   train(k); render_frame(); cb(...) until T steps are done: k = 1 is the paper's
 //                   one-step-per-frame loop.
 // The per-frame refresh is cheap next to a frame (measured on the 2-core VM: merging 2 per-thread grids
-// of 262,144 cells ~0.1 ms, a paper-config PointEvaluator ~0.02 ms; rebuilding the Renderer made no
+// of 262,144 cells ~0.1 ms, a paper-config PointEvaluator ~0.02 ms; rebuilding the CpuRenderer made no
 // measurable difference to the frame time), so nothing is updated in place.
 // train and render stay unaware of each other: the macro-cells pass between them as a ValueRangeGrid.
 //
 // Progressive accumulation: while nothing changes, consecutive frames (frame numbers 0, 1, 2, ...:
-// their jitter and random numbers) are averaged, exactly as Renderer::render(n) averages them. Any
+// their jitter and random numbers) are averaged, exactly as CpuRenderer::render(n) averages them. Any
 // change — a training step, set_camera, set_transfer_function, set_options, model_changed — restarts
-// it at frame 0, so a frame is always bit-identical to one from a freshly built Renderer over the same
+// it at frame 0, so a frame is always bit-identical to one from a freshly built CpuRenderer over the same
 // network, macro-cells, camera and options.
 #include <cstdint>
 #include <functional>
@@ -38,12 +38,12 @@ namespace vnr {
 
 // What one rendered frame cost and showed.
 struct OnlineFrame {
-  uint64_t step = 0;          // training steps done (Trainer::steps_done) when it was rendered
+  uint64_t step = 0;          // training steps done (CpuTrainer::steps_done) when it was rendered
   int accumulated = 0;        // frames averaged into the image (1 right after any change)
   float loss = 0;             // loss of the last training step (0 before any)
-  double train_seconds = 0;   // time in Trainer::step() through train() since the previous frame
+  double train_seconds = 0;   // time in CpuTrainer::step() through train() since the previous frame
   double update_seconds = 0;  // merging the online ranges, macro-cell max opacities, field/renderer rebuild
-  double render_seconds = 0;  // Renderer::render_frame + accumulation
+  double render_seconds = 0;  // CpuRenderer::render_frame + accumulation
 };
 
 class OnlineLoop {
@@ -52,7 +52,7 @@ public:
   // box [0, dims], as `vnr render`). mc: Online (the trainer must have online ranges enabled, with the
   // same dims) or Off (one cell over the box; Grid needs a ground truth, which online training does
   // not assume).
-  OnlineLoop(Trainer& trainer, Int3 dims, const TransferFunction& tf, const Camera& camera,
+  OnlineLoop(CpuTrainer& trainer, Int3 dims, const TransferFunction& tf, const Camera& camera,
              const RenderOptions& options, MacroCellMode mc = MacroCellMode::Online);
   OnlineLoop(const OnlineLoop&) = delete;
   OnlineLoop& operator=(const OnlineLoop&) = delete;
@@ -82,7 +82,7 @@ public:
   const MacroCells* macrocells() const { return mc_.get(); }
   const std::vector<float>& loss_history() const { return trainer_.loss_history(); }
   const std::vector<OnlineFrame>& frames() const { return frames_; }  // one entry per render_frame()
-  Trainer& trainer() { return trainer_; }
+  CpuTrainer& trainer() { return trainer_; }
   const Camera& camera() const { return camera_; }
   const TransferFunction& transfer_function() const { return tf_; }
   const RenderOptions& options() const { return opt_; }
@@ -92,7 +92,7 @@ private:
   // Brings field, macro-cells and renderer up to date; returns whether anything changed.
   bool refresh();
 
-  Trainer& trainer_;
+  CpuTrainer& trainer_;
   Int3 dims_;
   Vec3f box_;
   TransferFunction tf_;
@@ -102,7 +102,7 @@ private:
   // The renderer refers to the field, the macro-cells and tf_: rebuilt together (renderer last).
   std::unique_ptr<NetworkField> field_;
   std::unique_ptr<MacroCells> mc_;
-  std::unique_ptr<Renderer> renderer_;
+  std::unique_ptr<CpuRenderer> renderer_;
   uint64_t rendered_step_ = 0;  // steps_done() the current field/macro-cells were built at
   bool model_dirty_ = true, tf_dirty_ = true, options_dirty_ = true, camera_dirty_ = true;
   Image frame_, acc_;

@@ -83,14 +83,14 @@ Image FrameRenderer::render(int frames, RenderStats* stats) {
   return acc;
 }
 
-Renderer::Renderer(const Field& field, Vec3f box, const MacroCells& mc, const TransferFunction& tf, const Camera& cam,
+CpuRenderer::CpuRenderer(const Field& field, Vec3f box, const MacroCells& mc, const TransferFunction& tf, const Camera& cam,
                    const RenderOptions& opt)
     : field_(field), opt_(opt), params_(make_render_params(field.dims(), box, mc, tf, cam, opt)) {}
 
-void Renderer::set_camera(const Camera& cam) { set_render_camera(params_, cam, opt_); }
+void CpuRenderer::set_camera(const Camera& cam) { set_render_camera(params_, cam, opt_); }
 
 template <class PointFn>
-void Renderer::inshader(const PointFn& f, Image& img, RenderStats& st) {
+void CpuRenderer::inshader(const PointFn& f, Image& img, RenderStats& st) {
   const RenderParams& p = params_;
   const int W = opt_.width, H = opt_.height;
   // 8x8 pixel tiles dealt round-robin to threads: neighbouring rays read neighbouring voxels.
@@ -164,7 +164,7 @@ void Renderer::inshader(const PointFn& f, Image& img, RenderStats& st) {
   st.field_samples += samples.load();
 }
 
-void Renderer::query(int64_t n, RenderStats& st) {
+void CpuRenderer::query(int64_t n, RenderStats& st) {
   qv_.resize(size_t(n));
   if (n > 0) field_.query(qx_.data(), qy_.data(), qz_.data(), n, qv_.data());
   st.field_samples += n;
@@ -196,12 +196,12 @@ void compact_pixels(std::vector<int32_t>& live, const std::vector<uint8_t>& keep
 constexpr int64_t kGrain = 512;  // rays per parallel work item in the streaming stages
 }  // namespace
 
-void Renderer::start_queue() {
+void CpuRenderer::start_queue() {
   tiled_pixel_order(opt_.width, opt_.height, live_);
   compact_pixels(live_, keep_, next_live_);
 }
 
-void Renderer::stream_march(Image& img, RenderStats& st) {
+void CpuRenderer::stream_march(Image& img, RenderStats& st) {
   const RenderParams& p = params_;
   const int W = opt_.width;
   const int64_t n = int64_t(W) * opt_.height;
@@ -290,7 +290,7 @@ void Renderer::stream_march(Image& img, RenderStats& st) {
   parallel_for(n, [&](int64_t i) { img.pixels[i] = shadow_pixel(p, march_[i], shadow_[i].T); });
 }
 
-void Renderer::stream_path(Image& img, RenderStats& st) {
+void CpuRenderer::stream_path(Image& img, RenderStats& st) {
   const RenderParams& p = params_;
   const int W = opt_.width;
   const int64_t n = int64_t(W) * opt_.height;
@@ -329,7 +329,7 @@ void Renderer::stream_path(Image& img, RenderStats& st) {
   }
 }
 
-void Renderer::render_frame(uint32_t frame, Image& img, RenderStats* stats) {
+void CpuRenderer::render_frame(uint32_t frame, Image& img, RenderStats* stats) {
   RenderStats local;
   RenderStats& st = stats ? *stats : local;
   auto t0 = std::chrono::steady_clock::now();

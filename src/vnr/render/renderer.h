@@ -70,7 +70,7 @@ RenderParams make_render_params(Int3 dims, Vec3f box, const MacroCells& mc, cons
 // turns the light to the viewer's side when it points away from the camera).
 void set_render_camera(RenderParams& p, const Camera& cam, const RenderOptions& opt);
 
-// A renderer on some backend: the CPU's Renderer below, or the GPU's (render_cuda/gpu_renderer.h).
+// A renderer on some backend: the CPU's CpuRenderer below, or the GPU's (render_cuda/gpu_renderer.h).
 class FrameRenderer {
 public:
   virtual ~FrameRenderer() = default;
@@ -89,10 +89,10 @@ private:
   Image resident_;
 };
 
-class Renderer final : public FrameRenderer {
+class CpuRenderer final : public FrameRenderer {
 public:
   // field, macro-cells and tf must outlive the renderer; box = world size of the volume box.
-  Renderer(const Field& field, Vec3f box, const MacroCells& mc, const TransferFunction& tf, const Camera& cam,
+  CpuRenderer(const Field& field, Vec3f box, const MacroCells& mc, const TransferFunction& tf, const Camera& cam,
            const RenderOptions& opt);
   void render_frame(uint32_t frame, Image& img, RenderStats* stats = nullptr) override;
   void set_camera(const Camera& cam) override;

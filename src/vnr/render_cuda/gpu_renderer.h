@@ -56,7 +56,7 @@ private:
 // Value ranges of a normalised grid computed on the GPU: value_ranges_from_grid's cells, exactly.
 ValueRangeGrid gpu_value_ranges_from_grid(const GridView& g, int cell_size = 16);
 
-// The renderer of a device: the CPU Renderer or a GpuRenderer.
+// The renderer of a device: the CpuRenderer or a GpuRenderer.
 std::unique_ptr<FrameRenderer> make_renderer(Device device, const Field& field, Vec3f box, const MacroCells& mc,
                                              const TransferFunction& tf, const Camera& cam, const RenderOptions& opt,
                                              cuda::MlpPath mlp = cuda::MlpPath::Auto);

@@ -99,6 +99,6 @@ SampledEval evaluate_sampled(const Network& net, const VolumeDesc& desc, double 
 
 // Sizes the grid of `config` (log2_hashmap_size, and n_levels if needed) so the fp16 model is about
 // volume_bytes / ratio. Returns the adjusted config; `note` describes the choice.
-Json size_config_for_ratio(const Json& config, uint64_t volume_bytes, double ratio, std::string* note);
+ModelConfig size_config_for_ratio(const ModelConfig& config, uint64_t volume_bytes, double ratio, std::string* note);
 
 }  // namespace vnr

@@ -126,7 +126,7 @@ std::vector<TimestepResult> train_series(Model& model, const std::vector<int>& t
     // A fresh trainer: fresh Adam state and learning-rate schedule, step counter from 0.
     TrainOptions to = opts.train;
     to.seed = opts.train.seed + uint32_t(i);
-    Trainer trainer(net, std::make_shared<InCoreSampler>(vol), to);
+    CpuTrainer trainer(net, std::make_shared<InCoreSampler>(vol), to);
     if (opts.macrocell_size > 0) trainer.enable_online_ranges(vol.dims, opts.macrocell_size);
     int64_t budget = r.warm_started && opts.warm_steps >= 0 ? opts.warm_steps : opts.steps;
     if (budget < 0) budget = INT64_MAX;
@@ -200,12 +200,11 @@ double PsnrProbe::psnr(const Network& net, const Volume& vol) const {
   return mse > 0 ? 10 * std::log10(1 / mse) : 999.0;
 }
 
-Json fixed_learning_rate_config(const Json& config, float learning_rate) {
-  ModelConfig c = ModelConfig::from_json(config);
+ModelConfig fixed_learning_rate_config(ModelConfig c, float learning_rate) {
   c.decay.enabled = false;
   if (learning_rate > 0) c.adam.learning_rate = learning_rate;
   else if (learning_rate < 0 || !std::isfinite(learning_rate)) fail("the learning rate must be positive, got {}", learning_rate);
-  return c.to_json();
+  return c;
 }
 
 int64_t steps_to_recover(const std::vector<ProbePoint>& probes, int64_t switch_step, double threshold) {
@@ -226,7 +225,7 @@ ContinuousResult train_continuous(Model& model, const std::vector<int>& timestep
 
   ContinuousResult res;
   // One network with a constant learning rate, same parameters.
-  res.config = fixed_learning_rate_config(model.net->config_json(), opts.learning_rate);
+  res.config = fixed_learning_rate_config(model.net->config(), opts.learning_rate);
   {
     auto fixed = std::make_unique<Network>(res.config);
     if (fixed->n_params() != model.net->n_params()) fail("train_continuous: parameter layout changed");  // cannot happen
@@ -245,7 +244,7 @@ ContinuousResult train_continuous(Model& model, const std::vector<int>& timestep
   res.probe_voxels = probe.size();
 
   auto sampler = std::make_shared<SwitchableSampler>(view_of(cur));
-  Trainer trainer(net, sampler, opts.train);  // ONE optimizer for the whole run
+  CpuTrainer trainer(net, sampler, opts.train);  // ONE optimizer for the whole run
   int64_t global = 0;
   double last_probe = 0;  // probe PSNR after the latest step, on the current target
   for (size_t k = 0; k < timesteps.size(); ++k) {

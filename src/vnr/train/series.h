@@ -132,7 +132,7 @@ private:
 
 // `config` with the ExponentialDecay wrapper removed (a constant learning rate) and, when
 // learning_rate > 0, Adam's learning rate replaced. The result is in canonical form.
-Json fixed_learning_rate_config(const Json& config, float learning_rate = 0);
+ModelConfig fixed_learning_rate_config(ModelConfig config, float learning_rate = 0);
 
 struct ContinuousOptions {
   TrainOptions train;                 // batch and sampling seed (one stream over the whole run)
@@ -178,7 +178,7 @@ struct ContinuousResult {
   std::vector<float> learning_rate_history;  // the learning rate Adam used at every step
   float learning_rate = 0;                   // the fixed rate
   int64_t probe_voxels = 0;                  // |P| actually used
-  Json config;                               // the fixed-rate config the network was trained with
+  ModelConfig config;                        // the fixed-rate config the network was trained with
 };
 
 // The recovery rule of the header comment on the probes of one window: `probes` holds the probes of

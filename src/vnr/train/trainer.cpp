@@ -53,7 +53,7 @@ Precision resolve_training_precision(const std::string& name, const Network& net
   return Precision::BF16;
 }
 
-Trainer::Trainer(Network& net, std::shared_ptr<Sampler> sampler, TrainOptions opts)
+CpuTrainer::CpuTrainer(Network& net, std::shared_ptr<Sampler> sampler, TrainOptions opts)
     : net_(net), sampler_(std::move(sampler)), opts_(opts),
       adam_(net.config().adam, net.config().decay, net.n_params(), net.mlp().n_params) {
   if (opts_.batch <= 0 || opts_.batch % kChunk != 0)
@@ -87,7 +87,7 @@ Trainer::Trainer(Network& net, std::shared_ptr<Sampler> sampler, TrainOptions op
   if (private_grid_grads_) tail_dEnc_.resize(size_t(n_tail_) * C * m.in_pad);
 }
 
-float Trainer::step() {
+float CpuTrainer::step() {
   const MlpLayout& m = net_.mlp();
   const int64_t C = kChunk;
   const int64_t n_chunks = opts_.batch / C;
@@ -187,7 +187,7 @@ float Trainer::step() {
   return float(loss);
 }
 
-std::array<Trainer::Phase, 3> Trainer::phases() const {
+std::array<CpuTrainer::Phase, 3> CpuTrainer::phases() const {
   if (private_grid_grads_)
     return {{{"sample_encode_mlp_grid_backward", "sample+encode+MLP+grid backward (per chunk)"},
              {"grid_backward_shared_chunks", "grid backward (shared chunks)"},
@@ -195,11 +195,11 @@ std::array<Trainer::Phase, 3> Trainer::phases() const {
   return {{{"sample_encode_mlp", "sample+encode+MLP"}, {"grid_backward", "grid backward"}, {"optimizer", "optimizer"}}};
 }
 
-void Trainer::enable_online_ranges(Int3 dims, int cell_size) {
+void CpuTrainer::enable_online_ranges(Int3 dims, int cell_size) {
   thread_ranges_.assign(size_t(n_threads_), ValueRangeGrid(dims, cell_size));
 }
 
-ValueRangeGrid Trainer::online_ranges() const {
+ValueRangeGrid CpuTrainer::online_ranges() const {
   if (thread_ranges_.empty()) fail("online macro-cells were not enabled for this training run");
   ValueRangeGrid g = thread_ranges_[0];
   for (size_t t = 1; t < thread_ranges_.size(); ++t) g.merge(thread_ranges_[t]);

@@ -51,9 +51,9 @@ Precision resolve_training_precision(const std::string& name, const Network& net
 //     two threads write the same entry (no atomics);
 //  3. the per-thread and per-shared-chunk gradients are summed in a fixed order, then one fused Adam
 //     pass updates all parameters.
-class Trainer {
+class CpuTrainer {
 public:
-  Trainer(Network& net, std::shared_ptr<Sampler> sampler, TrainOptions opts);
+  CpuTrainer(Network& net, std::shared_ptr<Sampler> sampler, TrainOptions opts);
   float step();  // one training step; returns the mean loss of its batch
   uint64_t steps_done() const { return adam_.steps_done(); }
   float current_learning_rate() const { return adam_.current_learning_rate(); }
