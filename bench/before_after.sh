@@ -1,0 +1,53 @@
+#!/bin/sh
+# Two vnr builds side by side on one volume: `vnr bench train|infer` (paper and small configs) and
+# `vnr bench render` (a model trained by the OLD build, rendered by both), alternating OLD and NEW in
+# every round so that the machine's drift hits both alike. Prints per row the medians and NEW/OLD.
+#
+#   sh bench/before_after.sh OLD_VNR NEW_VNR VOLUME.json [ROUNDS] [THREADS]
+#   e.g. sh bench/before_after.sh ../before/build/vnr build/vnr bonsai.json 5 2
+set -eu
+OLD=$1 NEW=$2 VOL=$3 ROUNDS=${4:-5} THREADS=${5:-2}
+for b in "$OLD" "$NEW"; do [ -x "$b" ] || { echo "before_after: no vnr binary at $b" >&2; exit 1; }; done
+DIR=$(mktemp -d)
+trap 'rm -rf "$DIR"' EXIT
+"$OLD" train "$VOL" -o "$DIR/model.vnr" --config paper --steps 300 --threads "$THREADS" -q >/dev/null
+i=1
+while [ "$i" -le "$ROUNDS" ]; do
+  echo "round $i of $ROUNDS" >&2
+  for side in old new; do
+    [ "$side" = old ] && B=$OLD || B=$NEW
+    for cfg in paper small; do
+      for what in train infer; do
+        "$B" bench "$what" "$VOL" --config "$cfg" --seconds ${BENCH_SECONDS:-4} --threads "$THREADS" \
+          --report "$DIR/$side.$cfg.$what.$i.json" >/dev/null 2>&1
+      done
+    done
+    "$B" bench render "$DIR/model.vnr" --size 256x256 --frames 6 --warmup 1 --threads "$THREADS" \
+      --modes raymarch,pathtrace --report "$DIR/$side.render.$i.json" >/dev/null 2>&1
+  done
+  i=$((i + 1))
+done
+/usr/bin/python3 - "$DIR" <<'EOF'
+import glob, json, statistics, sys
+d = sys.argv[1]
+def med(side, key_fn, pattern):
+    vals = {}
+    for f in sorted(glob.glob(f"{d}/{side}.{pattern}.*.json")):
+        for k, v in key_fn(json.load(open(f))):
+            vals.setdefault(k, []).append(v)
+    return {k: statistics.median(v) for k, v in vals.items()}
+rows = []
+for cfg in ("paper", "small"):
+    for what in ("train", "infer"):
+        fn = lambda j: [((cfg, what), j["samples_per_second"] / 1e6)]
+        o, n = med("old", fn, f"{cfg}.{what}"), med("new", fn, f"{cfg}.{what}")
+        rows += [(f"bench {what} --config {cfg} (M samples/s)", o[(cfg, what)], n[(cfg, what)])]
+fn = lambda j: [((r["mode"], r["strategy"], r["macrocells"]), r["fps"]) for r in j["rows"]]
+o, n = med("old", fn, "render"), med("new", fn, "render")
+for k in o:
+    rows.append((f"bench render {' / '.join(k)} (frames/s)", o[k], n.get(k, float("nan"))))
+print("| measurement | before (median) | after (median) | after / before |")
+print("|---|---|---|---|")
+for name, a, b in rows:
+    print(f"| {name} | {a:.3g} | {b:.3g} | {b / a:.2f} |")
+EOF
