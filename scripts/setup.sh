@@ -3,7 +3,7 @@
 set -eu
 PKGS="build-essential cmake ninja-build ccache pkg-config git \
   nlohmann-json3-dev libcli11-dev libfmt-dev libpng-dev zlib1g-dev libhwy-dev \
-  libgtest-dev libgmock-dev libbenchmark-dev liburing-dev"
+  libgtest-dev libgmock-dev libbenchmark-dev"
 missing=""
 for p in $PKGS; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing="$missing $p"
