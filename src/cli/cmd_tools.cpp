@@ -11,7 +11,7 @@
 #include "vnr/core/units.h"
 #include "vnr/cuda/cuda.h"
 #include "vnr/nn/mlp_kernels.h"
-#include "vnr/train/model_io.h"
+#include "vnr/model.h"
 #include "vnr/volume/stream.h"
 #include "vnr/volume/writer.h"
 
@@ -101,7 +101,7 @@ void add_eval(CLI::App& app) {
     if (method == "full") {  // unchanged: load, then decode every voxel
       Volume vol = load_volume(desc, load_opts);
       report.update({{"value_range", {vol.lo, vol.hi}}, {"value_range_source", "volume"}});
-      print_whole(evaluate(*m.net, vol, !a->no_ssim, dev), report);
+      print_whole(evaluate_model(m, vol, !a->no_ssim, dev), report);
       return;
     }
 
@@ -186,8 +186,8 @@ void add_decode(CLI::App& app) {
     check_no_overwrite(volume_output_files(a->output), a->force);
     Model m = load_model(a->model);
     m.net->set_inference_precision(parse_precision(a->precision));
-    Decoder decoder(*m.net, cuda::resolve_device(a->device));
-    const Device dev = decoder.device();
+    ModelQuery query(m, cuda::resolve_device(a->device));
+    const Device dev = query.device();
     Int3 dims = a->dims.empty() ? m.dims : parse_dims(a->dims);
     DType out_t = a->dtype == "source" ? m.source_dtype : parse_dtype(a->dtype);
     // Slabs of ~16 M voxels: memory stays bounded whatever the output size.
@@ -198,12 +198,9 @@ void add_decode(CLI::App& app) {
     std::vector<float> buf(size_t(dims.x * dims.y * std::min<int64_t>(slab, dims.z)));
     Progress bar("decode", double(dims.z), a->quiet);
     auto t0 = std::chrono::steady_clock::now();
-    const double span = m.hi - m.lo;
     for (int64_t z0 = 0; z0 < dims.z; z0 += slab) {
       int64_t z1 = std::min(dims.z, z0 + slab);
-      decoder.slices(dims, z0, z1, buf.data());
-      const size_t cnt = size_t(dims.x * dims.y * (z1 - z0));
-      for (size_t i = 0; i < cnt; ++i) buf[i] = float(m.lo + double(buf[i]) * span);
+      query.slab(dims, z0, z1, buf.data(), ValueUnits::Original);
       w.write_slices(buf.data(), z1 - z0);
       bar.update(double(z1));
     }
@@ -254,8 +251,7 @@ void add_info(CLI::App& app) {
     if (a->model.empty()) return print_system_info(a->json);
     Model m = load_model(a->model);
     const Network& n = *m.net;
-    uint64_t bytes = file_size(a->model);
-    double vol_bytes = double(m.dims.count()) * dtype_size(m.source_dtype);
+    const uint64_t bytes = file_size(a->model);
     Json j = {{"file", a->model},
               {"format", is_instantvnr_path(a->model) ? "instantvnr-bson" : "vnr"},
               {"dims", {m.dims.x, m.dims.y, m.dims.z}},
@@ -265,8 +261,8 @@ void add_info(CLI::App& app) {
               {"n_mlp_params", n.mlp().n_params},
               {"n_grid_params", n.grid_params()},
               {"model_bytes", bytes},
-              {"volume_bytes", uint64_t(vol_bytes)},
-              {"compression_ratio", vol_bytes / double(bytes)},
+              {"volume_bytes", source_bytes(m)},
+              {"compression_ratio", compression_ratio(m, bytes)},
               {"config", n.config_json()},
               {"training", m.training}};
     int64_t occupied = 0;
@@ -298,7 +294,7 @@ void add_info(CLI::App& app) {
                 loss_name(cfg.loss));
     std::printf("parameters: %llu (%s in fp16); file %s; compression ratio %s\n",
                 (unsigned long long)n.n_params(), human_bytes(2.0 * n.n_params()).c_str(), human_bytes(double(bytes)).c_str(),
-                format_ratio(vol_bytes / double(bytes)).c_str());
+                format_ratio(compression_ratio(m, bytes)).c_str());
     if (m.macrocells)
       std::printf("macro-cells: %lldx%lldx%lld cells of %d voxels (%lld with a value range), recorded while training\n",
                   (long long)m.macrocells->cells.x, (long long)m.macrocells->cells.y, (long long)m.macrocells->cells.z,
