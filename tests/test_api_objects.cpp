@@ -262,3 +262,20 @@ TEST(ApiRenderer, OpensRenderInputsFromFiles) {
   EXPECT_STREQ(r.field().kind(), "network");
   EXPECT_GT(field_query_rate(r, 0.01), 0);
 }
+
+TEST(ApiModel, PlansFileEvaluationsByTheMemoryBudget) {
+  VolumeDesc desc;
+  desc.dims = Int3{64, 32, 100};
+  const uint64_t full = desc.dims.count() * 8;
+  EXPECT_EQ(plan_file_evaluation(desc, 0, true, full).method, EvalMethod::Full);
+  EXPECT_EQ(plan_file_evaluation(desc, 1000, true, full).method, EvalMethod::Sampled);
+  FileEvalPlan p = plan_file_evaluation(desc, 0, false, full - 1);
+  EXPECT_EQ(p.method, EvalMethod::Streamed);
+  EXPECT_EQ(p.full_bytes, full);
+  // Without SSIM two slab arrays of floats: (full - 1) / (2 * 4 * slice) slices.
+  EXPECT_EQ(p.slab_slices, int64_t((full - 1) / (2 * 4 * 64 * 32)));
+  FileEvalPlan with_ssim = plan_file_evaluation(desc, 0, true, full - 1);
+  EXPECT_EQ(with_ssim.slab_slices, int64_t((full - 1) / (3 * 4 * 64 * 32)) - 6);
+  EXPECT_EQ(plan_file_evaluation(desc, 0, true, uint64_t(0)).slab_slices, 1);  // at least one slice
+  EXPECT_STREQ(eval_method_name(EvalMethod::Streamed), "streamed");
+}

@@ -5,7 +5,10 @@
 // m.lo/m.hi, m.macrocells. This header adds creating one, queries and decodes on an explicit device,
 // the compression ratio and evaluation against a Volume.
 #include <cstdint>
+#include <functional>
 #include <memory>
+#include <optional>
+#include <string>
 #include <vector>
 #include "vnr/core/device.h"
 #include "vnr/nn/config.h"
@@ -62,5 +65,30 @@ private:
 // PSNR, SSIM (3-D, optional) and max error of the model decoded at the volume's voxel centres against
 // the volume (docs/semantics.md B.4), on the given device.
 EvalResult evaluate_model(const Model& model, const Volume& volume, bool with_ssim = true, Device device = Device::Cpu);
+
+// Evaluation against a volume file of any size, as `vnr eval` runs it: in memory (Full) when the volume
+// and its decoded copy, 8 bytes a voxel, fit the memory budget, else in streamed z-slabs (Streamed); or
+// estimated from randomly sampled voxels (Sampled: PSNR with a 95% interval, no SSIM).
+enum class EvalMethod { Full, Streamed, Sampled };
+const char* eval_method_name(EvalMethod m);  // "full", "streamed", "sampled"
+struct FileEvalPlan {
+  VolumeDesc desc;
+  EvalMethod method = EvalMethod::Full;
+  uint64_t full_bytes = 0;   // the volume and the decoded copy in memory
+  uint64_t budget = 0;       // the memory budget it was planned for
+  int64_t slab_slices = 0;   // Streamed: z-slices per slab
+};
+// samples > 0 asks for Sampled; no memory_budget = half the available memory. Streamed slabs hold the slab
+// as read and decoded (with SSIM also a copy with the 6 slices of window overlap) within the budget, at
+// most 16 M voxels and at least one slice.
+FileEvalPlan plan_file_evaluation(const VolumeDesc& desc, int64_t samples, bool with_ssim,
+                                  std::optional<uint64_t> memory_budget = {});
+// The value range a Streamed or Sampled evaluation normalises the volume with (it never holds the
+// volume): an explicit one (range overrides, sidecar) as load_volume would use it ("volume"), else the
+// range the model was trained with when its file records one ("model"), else one scan of the volume
+// ("scan", reporting progress). *source gets the quoted word.
+ValueRange file_evaluation_range(const FileEvalPlan& plan, const Model& model, bool model_file_records_range,
+                                 const LoadOptions& load, std::string* source,
+                                 const std::function<void(double fraction)>& progress = {});
 
 }  // namespace vnr

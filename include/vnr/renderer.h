@@ -55,7 +55,8 @@ public:
   Renderer(const Model& model, Device device, const Volume* ground_truth = nullptr);
   // Renders the volume itself.
   Renderer(const Volume& volume, Device device);
-  // Renders what the input holds (its model if any), starting from the input's scene.
+  // Renders what the input holds (its model if any), starting from the input's scene; the input must
+  // outlive the renderer and stay where it is.
   Renderer(const RenderInput& input, Device device);
   ~Renderer();
   Renderer(const Renderer&) = delete;

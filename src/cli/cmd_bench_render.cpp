@@ -66,7 +66,7 @@ void add_bench_render(CLI::App& bench) {
     Renderer& r = *cr.renderer;
     const RenderOptions options = r.options();
     const Model* model = r.model();
-    const Volume* volume = cr.input.volume ? &*cr.input.volume : nullptr;
+    const Volume* volume = cr.input->volume ? &*cr.input->volume : nullptr;
     MacroCellMode with =
         a->macrocells.empty() ? default_macrocell_mode(model, volume) : parse_macrocell_mode(a->macrocells);
     if (with == MacroCellMode::Off) with = volume ? MacroCellMode::Grid : MacroCellMode::Off;
@@ -104,7 +104,7 @@ void add_bench_render(CLI::App& bench) {
     };
 
     Json report;
-    report["input"] = cr.input.description;
+    report["input"] = cr.input->description;
     report["field"] = r.field().kind();
     report["size"] = {options.width, options.height};
     report["threads"] = num_threads();
@@ -118,7 +118,7 @@ void add_bench_render(CLI::App& bench) {
             ? cuda::devices().at(0).name
             : fmt::format("{} threads{}", num_threads(),
                           precision.is_null() ? "" : fmt::format(", {} network", precision.get<std::string>()));
-    std::printf("%s (%s field), %dx%d, %s; raw batched field query: %s\n\n", cr.input.description.c_str(),
+    std::printf("%s (%s field), %dx%d, %s; raw batched field query: %s\n\n", cr.input->description.c_str(),
                 r.field().kind(), options.width, options.height, where.c_str(),
                 raw > 0 ? fmt::format("{:.2f} M samples/s", raw / 1e6).c_str() : "not measured");
 

@@ -117,7 +117,7 @@ void add_render(CLI::App& app) {
     }
     if (!a->quiet)
       std::printf("%s: %s %s %s %dx%d, %d frame(s), %.3f s/frame (%.2f frames/s), %.1f M field samples/s%s -> %s\n",
-                  cr.input.description.c_str(), device_name(r.device()), render_mode_name(o.mode),
+                  cr.input->description.c_str(), device_name(r.device()), render_mode_name(o.mode),
                   render_strategy_name(o.strategy), o.width, o.height, st.frames,
                   st.seconds / st.frames, st.frames / st.seconds, double(st.field_samples) / st.seconds / 1e6,
                   cmp.c_str(), a->output.c_str());

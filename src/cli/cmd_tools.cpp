@@ -51,7 +51,7 @@ void add_eval(CLI::App& app) {
     m.net->set_inference_precision(parse_precision(a->precision));
     const Device dev = cuda::resolve_device(a->device);
     if (dev == Device::Cuda) cuda::check_supported(*m.net);  // before reading the volume
-    const VolumeDesc desc = describe_volume(a->volume, a->vol.raw());
+    const VolumeDesc desc = describe_volume_file(a->volume, a->vol.open());
     const LoadOptions load_opts = a->vol.load();
     const Int3 dims = desc.dims;
     if (!(dims == m.dims))
@@ -63,9 +63,7 @@ void add_eval(CLI::App& app) {
     const double ratio = double(volume_bytes) / double(model_bytes);
     const bool sampled = c->count("--sample") > 0;
     if (sampled && a->sample <= 0) fail("--sample expects a positive number of voxels, got {}", a->sample);
-
-    // The in-memory path holds the normalised volume and the decoded copy: 8 bytes per voxel.
-    uint64_t budget = available_memory_bytes() / 2;
+    std::optional<uint64_t> budget;  // none: the library's default, half the available memory
     if (!a->memory_budget.empty()) {
       try {
         budget = parse_byte_size(a->memory_budget);
@@ -73,8 +71,8 @@ void add_eval(CLI::App& app) {
         fail("--memory-budget: {}", e.what());
       }
     }
-    const uint64_t full_bytes = dims.count() * 2 * sizeof(float);
-    const std::string method = sampled ? "sampled" : (full_bytes <= budget ? "full" : "streamed");
+    const FileEvalPlan plan = plan_file_evaluation(desc, sampled ? a->sample : 0, !a->no_ssim, budget);
+
     // The line and report keys of a whole-volume evaluation (in memory or streamed).
     auto print_whole = [&](const EvalResult& ev, Json& report) {
       std::printf("PSNR %.2f dB", ev.psnr);
@@ -92,39 +90,28 @@ void add_eval(CLI::App& app) {
       write_report(a->report, report);
     };
 
-    Json report = {{"method", method},
+    Json report = {{"method", eval_method_name(plan.method)},
                    {"device", device_name(dev)},
                    {"precision", precision_json(m.net.get(), dev)},
                    {"compression_ratio", ratio},
                    {"model_bytes", model_bytes},
                    {"volume_bytes", volume_bytes}};
-    if (method == "full") {  // unchanged: load, then decode every voxel
+    if (plan.method == EvalMethod::Full) {
       Volume vol = load_volume(desc, load_opts);
       report.update({{"value_range", {vol.lo, vol.hi}}, {"value_range_source", "volume"}});
       print_whole(evaluate_model(m, vol, !a->no_ssim, dev), report);
       return;
     }
 
-    // Streamed and sampled evaluation never hold the volume, so they must know its value range up
-    // front: an explicit one (--range, sidecar) as load_volume would use it, else the range the
-    // model was trained with, else one scan of the volume.
-    ValueRange range;
-    std::string range_source = "volume";
-    if (desc.range_lo && desc.range_hi) {
-      range = scan_value_range(desc, load_opts);  // reads nothing
-    } else if (!desc.range_lo && !desc.range_hi && model_file_has_value_range(a->model)) {
-      range = ValueRange{m.lo, m.hi};
-      range_source = "model";
-    } else {
-      Progress bar("value range", 1.0, a->quiet);
-      range = scan_value_range(desc, load_opts, [&](double f) { bar.update(f); });
-      bar.finish();
-      range_source = "scan";
-    }
+    std::string range_source;
+    Progress range_bar("value range", 1.0, a->quiet);
+    const ValueRange range = file_evaluation_range(plan, m, model_file_has_value_range(a->model), load_opts,
+                                                   &range_source, [&](double f) { range_bar.update(f); });
+    if (range_source == "scan") range_bar.finish();
     report["value_range"] = {range.lo, range.hi};
     report["value_range_source"] = range_source;
 
-    if (method == "sampled") {
+    if (plan.method == EvalMethod::Sampled) {
       SampledEval ev = evaluate_sampled(*m.net, desc, range.lo, range.hi, a->sample, a->seed, load_opts, dev);
       std::printf("PSNR %.2f dB (95%% interval %.2f to %.2f dB, from %lld sampled voxels), max |error| seen %.4g "
                   "(%.4g in data units), compression ratio %s, decoded in %.2fs\n",
@@ -144,21 +131,14 @@ void add_eval(CLI::App& app) {
       return;
     }
 
-    // Streamed: slabs sized so that the slab arrays (the slab as read and the decoded slab; with
-    // SSIM also a copy with the 6 slices of window overlap) fit the budget, at most 16 M voxels
-    // each and at least one slice. Buffers of a few MiB per thread come on top.
-    const int64_t slice = dims.x * dims.y;
-    const int64_t arrays = a->no_ssim ? 2 : 3, overlap = a->no_ssim ? 0 : 6;
-    const int64_t budget_slices = int64_t(budget / (uint64_t(arrays) * sizeof(float) * uint64_t(slice))) - overlap;
-    const int64_t slab_slices =
-        std::clamp<int64_t>(std::min(budget_slices, (int64_t(1) << 24) / slice), 1, dims.z);
     std::fprintf(stderr,
                  "note: evaluating in streamed slabs of %lld slices: holding the volume and the decoded copy "
                  "would take %s, over the memory budget of %s\n",
-                 (long long)slab_slices, human_bytes(double(full_bytes)).c_str(), human_bytes(double(budget)).c_str());
+                 (long long)plan.slab_slices, human_bytes(double(plan.full_bytes)).c_str(),
+                 human_bytes(double(plan.budget)).c_str());
     Progress bar("eval", 1.0, a->quiet);
     EvalResult ev = evaluate_streamed(*m.net, desc, range.lo, range.hi, load_opts, !a->no_ssim,
-                                      [&](double f) { bar.update(f); }, slab_slices * slice, dev);
+                                      [&](double f) { bar.update(f); }, plan.slab_slices * dims.x * dims.y, dev);
     bar.finish();
     print_whole(ev, report);
   });

@@ -39,7 +39,7 @@ std::optional<Camera> parse_camera(const RenderArgs& a, const Scene& scene, Vec3
 
 CliRender open_cli_render(const std::string& input, const RenderArgs& a, const VolumeArgs& va) {
   CliRender c;
-  c.input = open_render_input(input, a.volume, va.open(), parse_precision(a.precision));
+  c.input = std::make_unique<RenderInput>(open_render_input(input, a.volume, va.open(), parse_precision(a.precision)));
   RenderOptions o;
   o.mode = parse_render_mode(a.mode);
   o.strategy = parse_render_strategy(a.strategy);
@@ -51,11 +51,11 @@ CliRender open_cli_render(const std::string& input, const RenderArgs& a, const V
   o.shade = a.shade;
   o.ray_packets = a.ray_packets == "on";
   o.density_scale = a.density;
-  const Scene scene = a.scene.empty() ? c.input.scene : load_scene(a.scene);
+  const Scene scene = a.scene.empty() ? c.input->scene : load_scene(a.scene);
   std::optional<TransferFunction> tf;
   if (!a.tf.empty()) tf = load_transfer_function(a.tf);
-  const Model* model = c.input.model ? &*c.input.model : nullptr;
-  const Volume* volume = c.input.volume ? &*c.input.volume : nullptr;
+  const Model* model = c.input->model ? &*c.input->model : nullptr;
+  const Volume* volume = c.input->volume ? &*c.input->volume : nullptr;
   const Int3 dims = model ? model->dims : volume->dims;
   const Vec3f box{float(dims.x), float(dims.y), float(dims.z)};  // Renderer::box() of this input
   const std::optional<Camera> camera = parse_camera(a, scene, box, &c.orbit_elevation);
@@ -71,7 +71,7 @@ CliRender open_cli_render(const std::string& input, const RenderArgs& a, const V
   const cuda::MlpPath mlp = cuda::parse_mlp_path(a.mlp);
   if (a.macrocell_size < 1) fail("--macrocell-size must be at least 1, got {}", a.macrocell_size);
 
-  c.renderer = std::make_unique<Renderer>(c.input, device);
+  c.renderer = std::make_unique<Renderer>(*c.input, device);
   Renderer& r = *c.renderer;
   r.set_scene(scene);  // camera and transfer function; the options below override them
   if (tf) r.set_transfer_function(*tf);

@@ -9,7 +9,7 @@
 namespace vnr::cli {
 
 struct CliRender {
-  RenderInput input;
+  std::unique_ptr<RenderInput> input;  // on the heap: the renderer points into it
   std::unique_ptr<Renderer> renderer;
   float orbit_elevation = 0;  // degrees, from --orbit
 };
