@@ -6,6 +6,7 @@
 #include <fstream>
 #include "render_support.h"
 #include "test_support.h"
+#include "vnr/render_cuda/gpu_renderer.h"
 #include "vnr/vnr.h"
 
 using namespace vnr;
@@ -278,4 +279,32 @@ TEST(ApiModel, PlansFileEvaluationsByTheMemoryBudget) {
   EXPECT_EQ(with_ssim.slab_slices, int64_t((full - 1) / (3 * 4 * 64 * 32)) - 6);
   EXPECT_EQ(plan_file_evaluation(desc, 0, true, uint64_t(0)).slab_slices, 1);  // at least one slice
   EXPECT_STREQ(eval_method_name(EvalMethod::Streamed), "streamed");
+}
+
+// The GPU paths of the objects: the same results as the backends built by hand (skipped without a GPU).
+TEST(ApiGpu, QueriesAndRendersLikeTheBackendsBuiltByHand) {
+  if (cuda::devices().empty()) GTEST_SKIP() << "no CUDA device: " << cuda::no_device_reason();
+  GridScene s;
+  Model m = tiny_model(s.vol);
+  ModelQuery q(m, Device::Cuda);
+  const Int3 d{9, 7, 6};
+  std::vector<float> full(d.count()), want(d.count());
+  q.slab(d, 0, d.z, full.data());
+  Decoder(*m.net, Device::Cuda).slices(d, 0, d.z, want.data());
+  EXPECT_EQ(full, want);
+  std::vector<int64_t> idx = {0, 7, 100, int64_t(d.count()) - 1};
+  std::vector<float> xyz(3 * idx.size()), got(idx.size());
+  for (size_t i = 0; i < idx.size(); ++i) voxel_centre(d, idx[i], &xyz[3 * i], &xyz[3 * i + 1], &xyz[3 * i + 2]);
+  q.points(xyz.data(), int64_t(idx.size()), got.data());
+  for (size_t i = 0; i < idx.size(); ++i) EXPECT_EQ(got[i], full[size_t(idx[i])]) << i;
+
+  Renderer r(s.vol, Device::Cuda);
+  r.set_options(small_options());
+  r.set_camera(s.cam);
+  r.set_macrocells(MacroCellMode::Grid, 8);
+  r.render_frame();
+  r.render_frame();
+  std::unique_ptr<FrameRenderer> hand =
+      make_renderer(Device::Cuda, s.field, box_of(s.vol), s.mc, s.tf, s.cam, small_options());
+  EXPECT_TRUE(same_pixels(r.image(), hand->render(2)));
 }

@@ -69,6 +69,7 @@ public:
   void set_transfer_function(const std::string& preset_or_file);  // a preset name or instantvnr TF JSON
   // Camera, transfer function, light and background from a scene; what it lacks gets the defaults.
   void set_scene(const Scene& scene);
+  void set_scene(const std::string& scene_file);  // instantvnr scene JSON or vnr scene JSON
   void set_mode(RenderMode mode);
   void set_strategy(RenderStrategy strategy);
   void set_macrocells(MacroCellMode mode, int cell_size = 16);

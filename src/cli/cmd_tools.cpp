@@ -17,6 +17,44 @@
 
 namespace vnr::cli {
 
+namespace {
+
+// The line and report keys of a whole-volume evaluation (in memory or streamed).
+void report_whole(const EvalResult& ev, bool with_ssim, const std::string& ratio, int64_t voxels, Json& report) {
+  std::printf("PSNR %.2f dB", ev.psnr);
+  if (with_ssim) std::printf(", SSIM %.4f", ev.ssim);
+  std::printf(", max |error| %.4g (%.4g in data units), compression ratio %s, decoded in %.2fs\n", ev.max_abs_error,
+              ev.max_abs_error_original, ratio.c_str(), ev.decode_seconds);
+  report.update({{"psnr", ev.psnr},
+                 {"psnr_ci95", nullptr},
+                 {"ssim", with_ssim ? Json(ev.ssim) : Json(nullptr)},
+                 {"mse", ev.mse},
+                 {"max_abs_error", ev.max_abs_error},
+                 {"max_abs_error_original", ev.max_abs_error_original},
+                 {"samples", voxels},
+                 {"decode_seconds", ev.decode_seconds}});
+}
+
+// The line and report keys of an evaluation from sampled voxels.
+void report_sampled(const SampledEval& ev, const std::string& ratio, uint64_t seed, Json& report) {
+  std::printf("PSNR %.2f dB (95%% interval %.2f to %.2f dB, from %lld sampled voxels), max |error| seen %.4g "
+              "(%.4g in data units), compression ratio %s, decoded in %.2fs\n",
+              ev.psnr, ev.psnr_ci95_lo, ev.psnr_ci95_hi, (long long)ev.samples, ev.max_abs_error,
+              ev.max_abs_error_original, ratio.c_str(), ev.decode_seconds);
+  report.update({{"psnr", ev.psnr},
+                 {"psnr_ci95", {ev.psnr_ci95_lo, ev.psnr_ci95_hi}},
+                 {"ssim", nullptr},
+                 {"mse", ev.mse},
+                 {"mse_stderr", ev.mse_stderr},
+                 {"max_abs_error", ev.max_abs_error},
+                 {"max_abs_error_original", ev.max_abs_error_original},
+                 {"samples", ev.samples},
+                 {"seed", seed},
+                 {"decode_seconds", ev.decode_seconds}});
+}
+
+}  // namespace
+
 void add_eval(CLI::App& app) {
   struct Args {
     std::string model, volume, report, memory_budget;
@@ -73,20 +111,8 @@ void add_eval(CLI::App& app) {
     }
     const FileEvalPlan plan = plan_file_evaluation(desc, sampled ? a->sample : 0, !a->no_ssim, budget);
 
-    // The line and report keys of a whole-volume evaluation (in memory or streamed).
     auto print_whole = [&](const EvalResult& ev, Json& report) {
-      std::printf("PSNR %.2f dB", ev.psnr);
-      if (!a->no_ssim) std::printf(", SSIM %.4f", ev.ssim);
-      std::printf(", max |error| %.4g (%.4g in data units), compression ratio %s, decoded in %.2fs\n",
-                  ev.max_abs_error, ev.max_abs_error_original, format_ratio(ratio).c_str(), ev.decode_seconds);
-      report.update({{"psnr", ev.psnr},
-                     {"psnr_ci95", nullptr},
-                     {"ssim", a->no_ssim ? Json(nullptr) : Json(ev.ssim)},
-                     {"mse", ev.mse},
-                     {"max_abs_error", ev.max_abs_error},
-                     {"max_abs_error_original", ev.max_abs_error_original},
-                     {"samples", dims.count()},
-                     {"decode_seconds", ev.decode_seconds}});
+      report_whole(ev, !a->no_ssim, format_ratio(ratio), int64_t(dims.count()), report);
       write_report(a->report, report);
     };
 
@@ -113,20 +139,7 @@ void add_eval(CLI::App& app) {
 
     if (plan.method == EvalMethod::Sampled) {
       SampledEval ev = evaluate_sampled(*m.net, desc, range.lo, range.hi, a->sample, a->seed, load_opts, dev);
-      std::printf("PSNR %.2f dB (95%% interval %.2f to %.2f dB, from %lld sampled voxels), max |error| seen %.4g "
-                  "(%.4g in data units), compression ratio %s, decoded in %.2fs\n",
-                  ev.psnr, ev.psnr_ci95_lo, ev.psnr_ci95_hi, (long long)ev.samples, ev.max_abs_error,
-                  ev.max_abs_error_original, format_ratio(ratio).c_str(), ev.decode_seconds);
-      report.update({{"psnr", ev.psnr},
-                     {"psnr_ci95", {ev.psnr_ci95_lo, ev.psnr_ci95_hi}},
-                     {"ssim", nullptr},
-                     {"mse", ev.mse},
-                     {"mse_stderr", ev.mse_stderr},
-                     {"max_abs_error", ev.max_abs_error},
-                     {"max_abs_error_original", ev.max_abs_error_original},
-                     {"samples", ev.samples},
-                     {"seed", a->seed},
-                     {"decode_seconds", ev.decode_seconds}});
+      report_sampled(ev, format_ratio(ratio), a->seed, report);
       write_report(a->report, report);
       return;
     }

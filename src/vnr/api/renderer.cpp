@@ -126,6 +126,7 @@ void Renderer::set_scene(const Scene& scene) {
   options_.background = scene.background ? *scene.background : Vec3f{0, 0, 0};
   invalidate();
 }
+void Renderer::set_scene(const std::string& scene_file) { set_scene(load_scene(scene_file)); }
 void Renderer::set_mode(RenderMode mode) { options_.mode = mode, invalidate(); }
 void Renderer::set_strategy(RenderStrategy strategy) { options_.strategy = strategy, invalidate(); }
 void Renderer::set_macrocells(MacroCellMode mode, int cell_size) {
