@@ -33,6 +33,91 @@ struct Cell {
   MacroCellMode mc;
 };
 
+// Times one cell: `warmup` untimed frames, then `frames` timed ones with the camera orbiting 360 degrees
+// (frame i of n from azimuth 360 i / n); frames/s of the median frame, the statistics summed into *total.
+struct CellTimer {
+  Renderer& r;
+  int macrocell_size, warmup, frames;
+  float elevation, fovy;
+
+  Camera camera_of(int i) const {
+    return orbit_camera(r.box(), 360.0f * float(i) / float(frames), elevation, fovy);
+  }
+  double operator()(const RenderOptions& o, MacroCellMode mc, RenderStats* total) const {
+    r.set_options(o);
+    r.set_macrocells(mc, macrocell_size);
+    r.set_camera(camera_of(0));
+    for (int i = 0; i < warmup; ++i) r.render_frame_resident(uint32_t(i));
+    std::vector<double> times;
+    for (int i = 0; i < frames; ++i) {
+      r.set_camera(camera_of(i));
+      RenderStats st;
+      r.render_frame_resident(uint32_t(i), &st);
+      times.push_back(st.seconds);
+      total->field_samples += st.field_samples;
+      total->host_syncs += st.host_syncs;
+      total->iterations += st.iterations;
+      total->seconds += st.seconds;
+      total->frames += 1;
+    }
+    return 1.0 / median(times);
+  }
+};
+
+// --tune-k: streaming ray-marching frames/s for each K, printed as a table and returned as report rows.
+Json tune_k_rows(const CellTimer& time_cell, const RenderOptions& options, MacroCellMode with,
+                 const std::vector<std::string>& ks) {
+  std::printf("| K | frames/s | field samples/s (M) | samples/frame (M) |\n|---|---|---|---|\n");
+  Json rows = Json::array();
+  for (const std::string& k : ks) {
+    RenderOptions o = options;
+    o.mode = RenderMode::RayMarch;
+    o.strategy = RenderStrategy::Streaming;
+    o.samples_per_iteration = std::stoi(k);
+    RenderStats tot;
+    double fps = time_cell(o, with, &tot);
+    double sps = double(tot.field_samples) / tot.seconds;
+    std::printf("| %s | %.2f | %.2f | %.2f |\n", k.c_str(), fps, sps / 1e6, double(tot.field_samples) / tot.frames / 1e6);
+    std::fflush(stdout);
+    rows.push_back({{"k", std::stoi(k)}, {"fps", fps}, {"field_samples_per_second", sps}});
+  }
+  return rows;
+}
+
+// The table: every mode x strategy, without and with macro-cells; `raw` = the field's batched query rate.
+Json table_rows(const CellTimer& time_cell, const RenderOptions& options, MacroCellMode with, double raw,
+                const std::vector<std::string>& modes, const std::vector<std::string>& strategies) {
+  std::vector<Cell> cells;
+  for (const std::string& m : modes)
+    for (const std::string& s : strategies)
+      for (MacroCellMode mc : {MacroCellMode::Off, with})
+        cells.push_back(Cell{parse_render_mode(m), parse_render_strategy(s), mc});
+  std::printf("| mode | strategy | macro-cells | frames/s | field samples/s (M) | of raw query rate | host syncs/frame |\n"
+              "|---|---|---|---|---|---|---|\n");
+  Json rows = Json::array();
+  for (const Cell& cell : cells) {
+    RenderOptions o = options;
+    o.mode = cell.mode;
+    o.strategy = cell.strategy;
+    RenderStats tot;
+    double fps = time_cell(o, cell.mc, &tot);
+    double sps = double(tot.field_samples) / tot.seconds;
+    const double syncs = double(tot.host_syncs) / tot.frames;
+    std::printf("| %s | %s | %s | %.2f | %.2f | %s | %.0f |\n", render_mode_name(cell.mode),
+                render_strategy_name(cell.strategy), macrocell_mode_name(cell.mc), fps, sps / 1e6,
+                raw > 0 ? fmt::format("{:.0f}%", 100 * sps / raw).c_str() : "-", syncs);
+    std::fflush(stdout);
+    rows.push_back({{"mode", render_mode_name(cell.mode)},
+                    {"strategy", render_strategy_name(cell.strategy)},
+                    {"macrocells", macrocell_mode_name(cell.mc)},
+                    {"fps", fps},
+                    {"field_samples_per_second", sps},
+                    {"host_syncs_per_frame", syncs},
+                    {"iterations_per_frame", double(tot.iterations) / tot.frames}});
+  }
+  return rows;
+}
+
 }  // namespace
 
 void add_bench_render(CLI::App& bench) {
@@ -78,30 +163,7 @@ void add_bench_render(CLI::App& bench) {
     // The raw rate: the CPU's batched query, or on the GPU the network's resident encoding + MLP (what
     // `vnr bench infer --device cuda` reports as resident); 0 = not measured (the grid on the GPU).
     const double raw = field_query_rate(r, 2.0);
-    // The orbit: frame i of n looks from azimuth 360 i / n (elevation from --orbit, or 0).
-    auto camera_of = [&](int i) {
-      return orbit_camera(r.box(), 360.0f * float(i) / float(a->frames), cr.orbit_elevation, a->r.fovy);
-    };
-
-    auto run_cell = [&](const RenderOptions& o, MacroCellMode mc, RenderStats* total) {
-      r.set_options(o);
-      r.set_macrocells(mc, a->r.macrocell_size);
-      r.set_camera(camera_of(0));
-      for (int i = 0; i < a->warmup; ++i) r.render_frame_resident(uint32_t(i));
-      std::vector<double> times;
-      for (int i = 0; i < a->frames; ++i) {
-        r.set_camera(camera_of(i));
-        RenderStats st;
-        r.render_frame_resident(uint32_t(i), &st);
-        times.push_back(st.seconds);
-        total->field_samples += st.field_samples;
-        total->host_syncs += st.host_syncs;
-        total->iterations += st.iterations;
-        total->seconds += st.seconds;
-        total->frames += 1;
-      }
-      return 1.0 / median(times);
-    };
+    const CellTimer time_cell{r, a->r.macrocell_size, a->warmup, a->frames, cr.orbit_elevation, a->r.fovy};
 
     Json report;
     report["input"] = cr.input->description;
@@ -123,55 +185,10 @@ void add_bench_render(CLI::App& bench) {
                 raw > 0 ? fmt::format("{:.2f} M samples/s", raw / 1e6).c_str() : "not measured");
 
     if (!a->tune_k.empty()) {
-      std::printf("| K | frames/s | field samples/s (M) | samples/frame (M) |\n|---|---|---|---|\n");
-      Json rows = Json::array();
-      for (const std::string& ks : split_list(a->tune_k)) {
-        RenderOptions o = options;
-        o.mode = RenderMode::RayMarch;
-        o.strategy = RenderStrategy::Streaming;
-        o.samples_per_iteration = std::stoi(ks);
-        RenderStats tot;
-        double fps = run_cell(o, with, &tot);
-        double sps = double(tot.field_samples) / tot.seconds;
-        std::printf("| %s | %.2f | %.2f | %.2f |\n", ks.c_str(), fps, sps / 1e6,
-                    double(tot.field_samples) / tot.frames / 1e6);
-        std::fflush(stdout);
-        rows.push_back({{"k", std::stoi(ks)}, {"fps", fps}, {"field_samples_per_second", sps}});
-      }
-      report["tune_k"] = rows;
-      write_report(a->report, report);
-      return;
+      report["tune_k"] = tune_k_rows(time_cell, options, with, split_list(a->tune_k));
+    } else {
+      report["rows"] = table_rows(time_cell, options, with, raw, split_list(a->modes), split_list(a->strategies));
     }
-
-    std::vector<Cell> cells;
-    for (const std::string& m : split_list(a->modes))
-      for (const std::string& s : split_list(a->strategies))
-        for (MacroCellMode mc : {MacroCellMode::Off, with})
-          cells.push_back(Cell{parse_render_mode(m), parse_render_strategy(s), mc});
-    std::printf("| mode | strategy | macro-cells | frames/s | field samples/s (M) | of raw query rate | host syncs/frame |\n"
-                "|---|---|---|---|---|---|---|\n");
-    Json rows = Json::array();
-    for (const Cell& cell : cells) {
-      RenderOptions o = options;
-      o.mode = cell.mode;
-      o.strategy = cell.strategy;
-      RenderStats tot;
-      double fps = run_cell(o, cell.mc, &tot);
-      double sps = double(tot.field_samples) / tot.seconds;
-      const double syncs = double(tot.host_syncs) / tot.frames;
-      std::printf("| %s | %s | %s | %.2f | %.2f | %s | %.0f |\n", render_mode_name(cell.mode),
-                  render_strategy_name(cell.strategy), macrocell_mode_name(cell.mc), fps, sps / 1e6,
-                  raw > 0 ? fmt::format("{:.0f}%", 100 * sps / raw).c_str() : "-", syncs);
-      std::fflush(stdout);
-      rows.push_back({{"mode", render_mode_name(cell.mode)},
-                      {"strategy", render_strategy_name(cell.strategy)},
-                      {"macrocells", macrocell_mode_name(cell.mc)},
-                      {"fps", fps},
-                      {"field_samples_per_second", sps},
-                      {"host_syncs_per_frame", syncs},
-                      {"iterations_per_frame", double(tot.iterations) / tot.frames}});
-    }
-    report["rows"] = rows;
     write_report(a->report, report);
   });
 }
