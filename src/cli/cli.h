@@ -4,7 +4,7 @@
 #include "vnr/core/device.h"
 #include "vnr/core/json.h"
 #include "vnr/core/math.h"
-#include "vnr/volume/volume.h"
+#include "vnr/volume.h"
 
 namespace vnr {
 class Network;
@@ -21,6 +21,7 @@ struct VolumeArgs {
   void add(CLI::App* app);
   RawOptions raw() const;
   LoadOptions load() const;
+  VolumeOpenOptions open() const { return VolumeOpenOptions{raw(), load()}; }
 };
 
 // --device auto|cpu|cuda on train, eval, decode and bench (auto: cuda when a device is visible).

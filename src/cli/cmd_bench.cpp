@@ -14,6 +14,7 @@
 #include "vnr/cuda/cuda.h"
 #include "vnr/nn/config.h"
 #include "vnr/nn/mlp_kernels.h"
+#include "vnr/model.h"
 #include "vnr/train/trainer.h"
 
 namespace vnr::cli {
@@ -72,7 +73,8 @@ double mlp_gflops(const Network& net, bool training, Precision train_precision, 
 // The same measurements on the GPU: per-step times from groups of steps between synchronisations
 // (training issues no synchronisation of its own), inference both with host transfers (the batch comes
 // from and goes back to host memory) and resident on the GPU (CUDA events, no transfers).
-void run_bench_cuda(const BenchArgs& a, const Volume& vol, Network& net) {
+void run_bench_cuda(const BenchArgs& a, const Volume& vol, Model& model) {
+  Network& net = *model.net;
   const bool training = a.what == "train";
   const cuda::MlpPath asked = cuda::parse_mlp_path(a.mlp);
   const double flops = net.flops_forward_per_sample() * (training ? 3.0 : 1.0);
@@ -110,15 +112,16 @@ void run_bench_cuda(const BenchArgs& a, const Volume& vol, Network& net) {
     path = cuda::mlp_path_name(tr.mlp_path());
     peak = tr.peak_memory_bytes();
   } else {
-    cuda::GpuNetwork gn(net, asked);
+    ModelQuery query(model, Device::Cuda, asked);
+    cuda::GpuNetwork& gn = *query.gpu();
     std::vector<float> coords(3 * a.batch), out(a.batch);
     Pcg32 rng(7);
     for (auto& c : coords) c = rng.next_float();
-    gn.infer(coords.data(), a.batch, out.data());
+    query.points(coords.data(), a.batch, out.data());
     auto t0 = std::chrono::steady_clock::now();
     while (seconds_since(t0) < a.seconds || times.size() < 3) {
       auto s0 = std::chrono::steady_clock::now();
-      gn.infer(coords.data(), a.batch, out.data());
+      query.points(coords.data(), a.batch, out.data());
       times.push_back(seconds_since(s0));
       bar.update(seconds_since(t0));
     }
@@ -156,9 +159,9 @@ void run_bench(const BenchArgs& a) {
   set_num_threads(a.threads);
   const Device dev = cuda::resolve_device(a.device);
   Volume vol = load_volume(describe_volume(a.volume, a.vol.raw()), a.vol.load());
-  Network net(load_config(a.config));
-  net.init_params(1337);
-  if (dev == Device::Cuda) return run_bench_cuda(a, vol, net);
+  Model model = create_model(load_config(a.config), vol, 1337);
+  Network& net = *model.net;
+  if (dev == Device::Cuda) return run_bench_cuda(a, vol, model);
   const bool training = a.what == "train";
   if (!training) net.set_inference_precision(parse_precision(a.precision));
   const Precision train_precision = training ? resolve_training_precision(a.precision, net) : Precision::FP32;
@@ -184,14 +187,15 @@ void run_bench(const BenchArgs& a) {
     }
     for (int p = 0; p < 3; ++p) phases[p] = median(ph[p]);
   } else {
+    ModelQuery query(model, Device::Cpu);
     std::vector<float> coords(3 * a.batch), out(a.batch);
     Pcg32 rng(7);
     for (auto& c : coords) c = rng.next_float();
-    net.infer(coords.data(), a.batch, out.data());
+    query.points(coords.data(), a.batch, out.data());
     t0 = std::chrono::steady_clock::now();
     while (seconds_since(t0) < a.seconds || times.size() < 3) {
       auto s0 = std::chrono::steady_clock::now();
-      net.infer(coords.data(), a.batch, out.data());
+      query.points(coords.data(), a.batch, out.data());
       times.push_back(seconds_since(s0));
       bar.update(seconds_since(t0));
     }

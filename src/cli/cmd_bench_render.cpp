@@ -10,7 +10,6 @@
 #include "vnr/core/error.h"
 #include "vnr/core/parallel.h"
 #include "vnr/core/progress.h"
-#include "vnr/core/rng.h"
 
 namespace vnr::cli {
 
@@ -28,28 +27,96 @@ std::vector<std::string> split_list(const std::string& s) {
   return out;
 }
 
-// The field's batched query rate on uniformly random points: what `vnr bench infer` measures.
-double raw_query_rate(const Field& field, double seconds) {
-  const int64_t n = 1 << 20;
-  std::vector<float> x(n), y(n), z(n), v(n);
-  Pcg32 rng(42);
-  for (int64_t i = 0; i < n; ++i) x[i] = rng.next_float(), y[i] = rng.next_float(), z[i] = rng.next_float();
-  field.query(x.data(), y.data(), z.data(), n, v.data());  // warm-up
-  std::vector<double> rates;
-  auto t_all = std::chrono::steady_clock::now();
-  while (rates.size() < 3 || (seconds_since(t_all) < seconds && rates.size() < 50)) {
-    auto t0 = std::chrono::steady_clock::now();
-    field.query(x.data(), y.data(), z.data(), n, v.data());
-    rates.push_back(double(n) / seconds_since(t0));
-  }
-  return median(rates);
-}
-
 struct Cell {
   RenderMode mode;
   RenderStrategy strategy;
   MacroCellMode mc;
 };
+
+// Times one cell: `warmup` untimed frames, then `frames` timed ones with the camera orbiting 360 degrees
+// (frame i of n from azimuth 360 i / n); frames/s of the median frame, the statistics summed into *total.
+struct CellTimer {
+  Renderer& r;
+  int macrocell_size, warmup, frames;
+  float elevation, fovy;
+
+  Camera camera_of(int i) const {
+    return orbit_camera(r.box(), 360.0f * float(i) / float(frames), elevation, fovy);
+  }
+  double operator()(const RenderOptions& o, MacroCellMode mc, RenderStats* total) const {
+    r.set_options(o);
+    r.set_macrocells(mc, macrocell_size);
+    r.set_camera(camera_of(0));
+    for (int i = 0; i < warmup; ++i) r.render_frame_resident(uint32_t(i));
+    std::vector<double> times;
+    for (int i = 0; i < frames; ++i) {
+      r.set_camera(camera_of(i));
+      RenderStats st;
+      r.render_frame_resident(uint32_t(i), &st);
+      times.push_back(st.seconds);
+      total->field_samples += st.field_samples;
+      total->host_syncs += st.host_syncs;
+      total->iterations += st.iterations;
+      total->seconds += st.seconds;
+      total->frames += 1;
+    }
+    return 1.0 / median(times);
+  }
+};
+
+// --tune-k: streaming ray-marching frames/s for each K, printed as a table and returned as report rows.
+Json tune_k_rows(const CellTimer& time_cell, const RenderOptions& options, MacroCellMode with,
+                 const std::vector<std::string>& ks) {
+  std::printf("| K | frames/s | field samples/s (M) | samples/frame (M) |\n|---|---|---|---|\n");
+  Json rows = Json::array();
+  for (const std::string& k : ks) {
+    RenderOptions o = options;
+    o.mode = RenderMode::RayMarch;
+    o.strategy = RenderStrategy::Streaming;
+    o.samples_per_iteration = std::stoi(k);
+    RenderStats tot;
+    double fps = time_cell(o, with, &tot);
+    double sps = double(tot.field_samples) / tot.seconds;
+    std::printf("| %s | %.2f | %.2f | %.2f |\n", k.c_str(), fps, sps / 1e6, double(tot.field_samples) / tot.frames / 1e6);
+    std::fflush(stdout);
+    rows.push_back({{"k", std::stoi(k)}, {"fps", fps}, {"field_samples_per_second", sps}});
+  }
+  return rows;
+}
+
+// The table: every mode x strategy, without and with macro-cells; `raw` = the field's batched query rate.
+Json table_rows(const CellTimer& time_cell, const RenderOptions& options, MacroCellMode with, double raw,
+                const std::vector<std::string>& modes, const std::vector<std::string>& strategies) {
+  std::vector<Cell> cells;
+  for (const std::string& m : modes)
+    for (const std::string& s : strategies)
+      for (MacroCellMode mc : {MacroCellMode::Off, with})
+        cells.push_back(Cell{parse_render_mode(m), parse_render_strategy(s), mc});
+  std::printf("| mode | strategy | macro-cells | frames/s | field samples/s (M) | of raw query rate | host syncs/frame |\n"
+              "|---|---|---|---|---|---|---|\n");
+  Json rows = Json::array();
+  for (const Cell& cell : cells) {
+    RenderOptions o = options;
+    o.mode = cell.mode;
+    o.strategy = cell.strategy;
+    RenderStats tot;
+    double fps = time_cell(o, cell.mc, &tot);
+    double sps = double(tot.field_samples) / tot.seconds;
+    const double syncs = double(tot.host_syncs) / tot.frames;
+    std::printf("| %s | %s | %s | %.2f | %.2f | %s | %.0f |\n", render_mode_name(cell.mode),
+                render_strategy_name(cell.strategy), macrocell_mode_name(cell.mc), fps, sps / 1e6,
+                raw > 0 ? fmt::format("{:.0f}%", 100 * sps / raw).c_str() : "-", syncs);
+    std::fflush(stdout);
+    rows.push_back({{"mode", render_mode_name(cell.mode)},
+                    {"strategy", render_strategy_name(cell.strategy)},
+                    {"macrocells", macrocell_mode_name(cell.mc)},
+                    {"fps", fps},
+                    {"field_samples_per_second", sps},
+                    {"host_syncs_per_frame", syncs},
+                    {"iterations_per_frame", double(tot.iterations) / tot.frames}});
+  }
+  return rows;
+}
 
 }  // namespace
 
@@ -80,119 +147,48 @@ void add_bench_render(CLI::App& bench) {
   c->callback([a]() {
     set_num_threads(a->r.threads);
     if (a->frames < 1 || a->warmup < 0) fail("--frames must be at least 1 and --warmup at least 0");
-    RenderSource src = open_render_source(a->input, a->r.volume, a->vol, parse_precision(a->r.precision));
-    RenderSetup setup = make_render_setup(a->r, src);
-    MacroCellMode with = a->macrocells.empty() ? default_macrocell_mode(src) : parse_macrocell_mode(a->macrocells);
-    if (with == MacroCellMode::Off) with = src.volume ? MacroCellMode::Grid : MacroCellMode::Off;
+    CliRender cr = open_cli_render(a->input, a->r, a->vol);
+    Renderer& r = *cr.renderer;
+    const RenderOptions options = r.options();
+    const Model* model = r.model();
+    const Volume* volume = cr.input->volume ? &*cr.input->volume : nullptr;
+    MacroCellMode with =
+        a->macrocells.empty() ? default_macrocell_mode(model, volume) : parse_macrocell_mode(a->macrocells);
+    if (with == MacroCellMode::Off) with = volume ? MacroCellMode::Grid : MacroCellMode::Off;
     if (with == MacroCellMode::Off)
       fail("no macro-cells to compare with: give a model trained by vnr (online ranges) or --volume");
-    MacroCells mc_off = make_macrocells(src, MacroCellMode::Off, a->r.macrocell_size, setup.device);
-    MacroCells mc_on = make_macrocells(src, with, a->r.macrocell_size, setup.device);
-    mc_off.update(setup.tf);
-    mc_on.update(setup.tf);
+    r.set_macrocells(with, a->r.macrocell_size);
+    r.prepare();  // a setting that cannot be rendered fails before the table starts
 
     // The raw rate: the CPU's batched query, or on the GPU the network's resident encoding + MLP (what
     // `vnr bench infer --device cuda` reports as resident); 0 = not measured (the grid on the GPU).
-    double raw = 0;
-    if (setup.device == Device::Cpu) {
-      raw = raw_query_rate(*src.field, 2.0);
-    } else if (src.model) {
-      cuda::GpuNetwork gn(*src.model->net, setup.mlp);
-      const int64_t n = int64_t(1) << 22;
-      raw = double(n) / gn.time_resident(n, 10).seconds;
-    }
-    // The orbit: frame i of n looks from azimuth 360 i / n (elevation from --orbit, or 0).
-    auto camera_of = [&](int i) {
-      return orbit_camera(src.box, 360.0f * float(i) / float(a->frames), setup.orbit_elevation, a->r.fovy);
-    };
-
-    auto run_cell = [&](const RenderOptions& o, const MacroCells& mc, RenderStats* total) {
-      std::unique_ptr<FrameRenderer> r = make_setup_renderer(setup, src, mc, camera_of(0), o);
-      for (int i = 0; i < a->warmup; ++i) r->render_frame_resident(uint32_t(i));
-      std::vector<double> times;
-      for (int i = 0; i < a->frames; ++i) {
-        r->set_camera(camera_of(i));
-        RenderStats st;
-        r->render_frame_resident(uint32_t(i), &st);
-        times.push_back(st.seconds);
-        total->field_samples += st.field_samples;
-        total->host_syncs += st.host_syncs;
-        total->iterations += st.iterations;
-        total->seconds += st.seconds;
-        total->frames += 1;
-      }
-      return 1.0 / median(times);
-    };
+    const double raw = field_query_rate(r, 2.0);
+    const CellTimer time_cell{r, a->r.macrocell_size, a->warmup, a->frames, cr.orbit_elevation, a->r.fovy};
 
     Json report;
-    report["input"] = src.description;
-    report["field"] = src.field->kind();
-    report["size"] = {setup.options.width, setup.options.height};
+    report["input"] = cr.input->description;
+    report["field"] = r.field().kind();
+    report["size"] = {options.width, options.height};
     report["threads"] = num_threads();
-    report["device"] = device_name(setup.device);
-    if (setup.device == Device::Cuda) report["gpu"] = cuda::devices().at(0).name;
+    report["device"] = device_name(r.device());
+    if (r.device() == Device::Cuda) report["gpu"] = cuda::devices().at(0).name;
     report["raw_field_samples_per_second"] = raw;
-    const Json precision = precision_json(src.model ? src.model->net.get() : nullptr, setup.device);
+    const Json precision = precision_json(model ? model->net.get() : nullptr, r.device());
     report["precision"] = precision;
     const std::string where =
-        setup.device == Device::Cuda
+        r.device() == Device::Cuda
             ? cuda::devices().at(0).name
             : fmt::format("{} threads{}", num_threads(),
                           precision.is_null() ? "" : fmt::format(", {} network", precision.get<std::string>()));
-    std::printf("%s (%s field), %dx%d, %s; raw batched field query: %s\n\n", src.description.c_str(),
-                src.field->kind(), setup.options.width, setup.options.height, where.c_str(),
+    std::printf("%s (%s field), %dx%d, %s; raw batched field query: %s\n\n", cr.input->description.c_str(),
+                r.field().kind(), options.width, options.height, where.c_str(),
                 raw > 0 ? fmt::format("{:.2f} M samples/s", raw / 1e6).c_str() : "not measured");
 
     if (!a->tune_k.empty()) {
-      std::printf("| K | frames/s | field samples/s (M) | samples/frame (M) |\n|---|---|---|---|\n");
-      Json rows = Json::array();
-      for (const std::string& ks : split_list(a->tune_k)) {
-        RenderOptions o = setup.options;
-        o.mode = RenderMode::RayMarch;
-        o.strategy = RenderStrategy::Streaming;
-        o.samples_per_iteration = std::stoi(ks);
-        RenderStats tot;
-        double fps = run_cell(o, mc_on, &tot);
-        double sps = double(tot.field_samples) / tot.seconds;
-        std::printf("| %s | %.2f | %.2f | %.2f |\n", ks.c_str(), fps, sps / 1e6,
-                    double(tot.field_samples) / tot.frames / 1e6);
-        std::fflush(stdout);
-        rows.push_back({{"k", std::stoi(ks)}, {"fps", fps}, {"field_samples_per_second", sps}});
-      }
-      report["tune_k"] = rows;
-      write_report(a->report, report);
-      return;
+      report["tune_k"] = tune_k_rows(time_cell, options, with, split_list(a->tune_k));
+    } else {
+      report["rows"] = table_rows(time_cell, options, with, raw, split_list(a->modes), split_list(a->strategies));
     }
-
-    std::vector<Cell> cells;
-    for (const std::string& m : split_list(a->modes))
-      for (const std::string& s : split_list(a->strategies))
-        for (MacroCellMode mc : {MacroCellMode::Off, with})
-          cells.push_back(Cell{parse_render_mode(m), parse_render_strategy(s), mc});
-    std::printf("| mode | strategy | macro-cells | frames/s | field samples/s (M) | of raw query rate | host syncs/frame |\n"
-                "|---|---|---|---|---|---|---|\n");
-    Json rows = Json::array();
-    for (const Cell& cell : cells) {
-      RenderOptions o = setup.options;
-      o.mode = cell.mode;
-      o.strategy = cell.strategy;
-      RenderStats tot;
-      double fps = run_cell(o, cell.mc == MacroCellMode::Off ? mc_off : mc_on, &tot);
-      double sps = double(tot.field_samples) / tot.seconds;
-      const double syncs = double(tot.host_syncs) / tot.frames;
-      std::printf("| %s | %s | %s | %.2f | %.2f | %s | %.0f |\n", render_mode_name(cell.mode),
-                  render_strategy_name(cell.strategy), macrocell_mode_name(cell.mc), fps, sps / 1e6,
-                  raw > 0 ? fmt::format("{:.0f}%", 100 * sps / raw).c_str() : "-", syncs);
-      std::fflush(stdout);
-      rows.push_back({{"mode", render_mode_name(cell.mode)},
-                      {"strategy", render_strategy_name(cell.strategy)},
-                      {"macrocells", macrocell_mode_name(cell.mc)},
-                      {"fps", fps},
-                      {"field_samples_per_second", sps},
-                      {"host_syncs_per_frame", syncs},
-                      {"iterations_per_frame", double(tot.iterations) / tot.frames}});
-    }
-    report["rows"] = rows;
     write_report(a->report, report);
   });
 }

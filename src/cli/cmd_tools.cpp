@@ -11,11 +11,49 @@
 #include "vnr/core/units.h"
 #include "vnr/cuda/cuda.h"
 #include "vnr/nn/mlp_kernels.h"
-#include "vnr/train/model_io.h"
+#include "vnr/model.h"
 #include "vnr/volume/stream.h"
 #include "vnr/volume/writer.h"
 
 namespace vnr::cli {
+
+namespace {
+
+// The line and report keys of a whole-volume evaluation (in memory or streamed).
+void report_whole(const EvalResult& ev, bool with_ssim, const std::string& ratio, int64_t voxels, Json& report) {
+  std::printf("PSNR %.2f dB", ev.psnr);
+  if (with_ssim) std::printf(", SSIM %.4f", ev.ssim);
+  std::printf(", max |error| %.4g (%.4g in data units), compression ratio %s, decoded in %.2fs\n", ev.max_abs_error,
+              ev.max_abs_error_original, ratio.c_str(), ev.decode_seconds);
+  report.update({{"psnr", ev.psnr},
+                 {"psnr_ci95", nullptr},
+                 {"ssim", with_ssim ? Json(ev.ssim) : Json(nullptr)},
+                 {"mse", ev.mse},
+                 {"max_abs_error", ev.max_abs_error},
+                 {"max_abs_error_original", ev.max_abs_error_original},
+                 {"samples", voxels},
+                 {"decode_seconds", ev.decode_seconds}});
+}
+
+// The line and report keys of an evaluation from sampled voxels.
+void report_sampled(const SampledEval& ev, const std::string& ratio, uint64_t seed, Json& report) {
+  std::printf("PSNR %.2f dB (95%% interval %.2f to %.2f dB, from %lld sampled voxels), max |error| seen %.4g "
+              "(%.4g in data units), compression ratio %s, decoded in %.2fs\n",
+              ev.psnr, ev.psnr_ci95_lo, ev.psnr_ci95_hi, (long long)ev.samples, ev.max_abs_error,
+              ev.max_abs_error_original, ratio.c_str(), ev.decode_seconds);
+  report.update({{"psnr", ev.psnr},
+                 {"psnr_ci95", {ev.psnr_ci95_lo, ev.psnr_ci95_hi}},
+                 {"ssim", nullptr},
+                 {"mse", ev.mse},
+                 {"mse_stderr", ev.mse_stderr},
+                 {"max_abs_error", ev.max_abs_error},
+                 {"max_abs_error_original", ev.max_abs_error_original},
+                 {"samples", ev.samples},
+                 {"seed", seed},
+                 {"decode_seconds", ev.decode_seconds}});
+}
+
+}  // namespace
 
 void add_eval(CLI::App& app) {
   struct Args {
@@ -51,7 +89,7 @@ void add_eval(CLI::App& app) {
     m.net->set_inference_precision(parse_precision(a->precision));
     const Device dev = cuda::resolve_device(a->device);
     if (dev == Device::Cuda) cuda::check_supported(*m.net);  // before reading the volume
-    const VolumeDesc desc = describe_volume(a->volume, a->vol.raw());
+    const VolumeDesc desc = describe_volume_file(a->volume, a->vol.open());
     const LoadOptions load_opts = a->vol.load();
     const Int3 dims = desc.dims;
     if (!(dims == m.dims))
@@ -63,9 +101,7 @@ void add_eval(CLI::App& app) {
     const double ratio = double(volume_bytes) / double(model_bytes);
     const bool sampled = c->count("--sample") > 0;
     if (sampled && a->sample <= 0) fail("--sample expects a positive number of voxels, got {}", a->sample);
-
-    // The in-memory path holds the normalised volume and the decoded copy: 8 bytes per voxel.
-    uint64_t budget = available_memory_bytes() / 2;
+    std::optional<uint64_t> budget;  // none: the library's default, half the available memory
     if (!a->memory_budget.empty()) {
       try {
         budget = parse_byte_size(a->memory_budget);
@@ -73,92 +109,49 @@ void add_eval(CLI::App& app) {
         fail("--memory-budget: {}", e.what());
       }
     }
-    const uint64_t full_bytes = dims.count() * 2 * sizeof(float);
-    const std::string method = sampled ? "sampled" : (full_bytes <= budget ? "full" : "streamed");
-    // The line and report keys of a whole-volume evaluation (in memory or streamed).
+    const FileEvalPlan plan = plan_file_evaluation(desc, sampled ? a->sample : 0, !a->no_ssim, budget);
+
     auto print_whole = [&](const EvalResult& ev, Json& report) {
-      std::printf("PSNR %.2f dB", ev.psnr);
-      if (!a->no_ssim) std::printf(", SSIM %.4f", ev.ssim);
-      std::printf(", max |error| %.4g (%.4g in data units), compression ratio %s, decoded in %.2fs\n",
-                  ev.max_abs_error, ev.max_abs_error_original, format_ratio(ratio).c_str(), ev.decode_seconds);
-      report.update({{"psnr", ev.psnr},
-                     {"psnr_ci95", nullptr},
-                     {"ssim", a->no_ssim ? Json(nullptr) : Json(ev.ssim)},
-                     {"mse", ev.mse},
-                     {"max_abs_error", ev.max_abs_error},
-                     {"max_abs_error_original", ev.max_abs_error_original},
-                     {"samples", dims.count()},
-                     {"decode_seconds", ev.decode_seconds}});
+      report_whole(ev, !a->no_ssim, format_ratio(ratio), int64_t(dims.count()), report);
       write_report(a->report, report);
     };
 
-    Json report = {{"method", method},
+    Json report = {{"method", eval_method_name(plan.method)},
                    {"device", device_name(dev)},
                    {"precision", precision_json(m.net.get(), dev)},
                    {"compression_ratio", ratio},
                    {"model_bytes", model_bytes},
                    {"volume_bytes", volume_bytes}};
-    if (method == "full") {  // unchanged: load, then decode every voxel
+    if (plan.method == EvalMethod::Full) {
       Volume vol = load_volume(desc, load_opts);
       report.update({{"value_range", {vol.lo, vol.hi}}, {"value_range_source", "volume"}});
-      print_whole(evaluate(*m.net, vol, !a->no_ssim, dev), report);
+      print_whole(evaluate_model(m, vol, !a->no_ssim, dev), report);
       return;
     }
 
-    // Streamed and sampled evaluation never hold the volume, so they must know its value range up
-    // front: an explicit one (--range, sidecar) as load_volume would use it, else the range the
-    // model was trained with, else one scan of the volume.
-    ValueRange range;
-    std::string range_source = "volume";
-    if (desc.range_lo && desc.range_hi) {
-      range = scan_value_range(desc, load_opts);  // reads nothing
-    } else if (!desc.range_lo && !desc.range_hi && model_file_has_value_range(a->model)) {
-      range = ValueRange{m.lo, m.hi};
-      range_source = "model";
-    } else {
-      Progress bar("value range", 1.0, a->quiet);
-      range = scan_value_range(desc, load_opts, [&](double f) { bar.update(f); });
-      bar.finish();
-      range_source = "scan";
-    }
+    std::string range_source;
+    Progress range_bar("value range", 1.0, a->quiet);
+    const ValueRange range = file_evaluation_range(plan, m, model_file_has_value_range(a->model), load_opts,
+                                                   &range_source, [&](double f) { range_bar.update(f); });
+    if (range_source == "scan") range_bar.finish();
     report["value_range"] = {range.lo, range.hi};
     report["value_range_source"] = range_source;
 
-    if (method == "sampled") {
+    if (plan.method == EvalMethod::Sampled) {
       SampledEval ev = evaluate_sampled(*m.net, desc, range.lo, range.hi, a->sample, a->seed, load_opts, dev);
-      std::printf("PSNR %.2f dB (95%% interval %.2f to %.2f dB, from %lld sampled voxels), max |error| seen %.4g "
-                  "(%.4g in data units), compression ratio %s, decoded in %.2fs\n",
-                  ev.psnr, ev.psnr_ci95_lo, ev.psnr_ci95_hi, (long long)ev.samples, ev.max_abs_error,
-                  ev.max_abs_error_original, format_ratio(ratio).c_str(), ev.decode_seconds);
-      report.update({{"psnr", ev.psnr},
-                     {"psnr_ci95", {ev.psnr_ci95_lo, ev.psnr_ci95_hi}},
-                     {"ssim", nullptr},
-                     {"mse", ev.mse},
-                     {"mse_stderr", ev.mse_stderr},
-                     {"max_abs_error", ev.max_abs_error},
-                     {"max_abs_error_original", ev.max_abs_error_original},
-                     {"samples", ev.samples},
-                     {"seed", a->seed},
-                     {"decode_seconds", ev.decode_seconds}});
+      report_sampled(ev, format_ratio(ratio), a->seed, report);
       write_report(a->report, report);
       return;
     }
 
-    // Streamed: slabs sized so that the slab arrays (the slab as read and the decoded slab; with
-    // SSIM also a copy with the 6 slices of window overlap) fit the budget, at most 16 M voxels
-    // each and at least one slice. Buffers of a few MiB per thread come on top.
-    const int64_t slice = dims.x * dims.y;
-    const int64_t arrays = a->no_ssim ? 2 : 3, overlap = a->no_ssim ? 0 : 6;
-    const int64_t budget_slices = int64_t(budget / (uint64_t(arrays) * sizeof(float) * uint64_t(slice))) - overlap;
-    const int64_t slab_slices =
-        std::clamp<int64_t>(std::min(budget_slices, (int64_t(1) << 24) / slice), 1, dims.z);
     std::fprintf(stderr,
                  "note: evaluating in streamed slabs of %lld slices: holding the volume and the decoded copy "
                  "would take %s, over the memory budget of %s\n",
-                 (long long)slab_slices, human_bytes(double(full_bytes)).c_str(), human_bytes(double(budget)).c_str());
+                 (long long)plan.slab_slices, human_bytes(double(plan.full_bytes)).c_str(),
+                 human_bytes(double(plan.budget)).c_str());
     Progress bar("eval", 1.0, a->quiet);
     EvalResult ev = evaluate_streamed(*m.net, desc, range.lo, range.hi, load_opts, !a->no_ssim,
-                                      [&](double f) { bar.update(f); }, slab_slices * slice, dev);
+                                      [&](double f) { bar.update(f); }, plan.slab_slices * dims.x * dims.y, dev);
     bar.finish();
     print_whole(ev, report);
   });
@@ -186,8 +179,8 @@ void add_decode(CLI::App& app) {
     check_no_overwrite(volume_output_files(a->output), a->force);
     Model m = load_model(a->model);
     m.net->set_inference_precision(parse_precision(a->precision));
-    Decoder decoder(*m.net, cuda::resolve_device(a->device));
-    const Device dev = decoder.device();
+    ModelQuery query(m, cuda::resolve_device(a->device));
+    const Device dev = query.device();
     Int3 dims = a->dims.empty() ? m.dims : parse_dims(a->dims);
     DType out_t = a->dtype == "source" ? m.source_dtype : parse_dtype(a->dtype);
     // Slabs of ~16 M voxels: memory stays bounded whatever the output size.
@@ -198,12 +191,9 @@ void add_decode(CLI::App& app) {
     std::vector<float> buf(size_t(dims.x * dims.y * std::min<int64_t>(slab, dims.z)));
     Progress bar("decode", double(dims.z), a->quiet);
     auto t0 = std::chrono::steady_clock::now();
-    const double span = m.hi - m.lo;
     for (int64_t z0 = 0; z0 < dims.z; z0 += slab) {
       int64_t z1 = std::min(dims.z, z0 + slab);
-      decoder.slices(dims, z0, z1, buf.data());
-      const size_t cnt = size_t(dims.x * dims.y * (z1 - z0));
-      for (size_t i = 0; i < cnt; ++i) buf[i] = float(m.lo + double(buf[i]) * span);
+      query.slab(dims, z0, z1, buf.data(), ValueUnits::Original);
       w.write_slices(buf.data(), z1 - z0);
       bar.update(double(z1));
     }
@@ -254,8 +244,7 @@ void add_info(CLI::App& app) {
     if (a->model.empty()) return print_system_info(a->json);
     Model m = load_model(a->model);
     const Network& n = *m.net;
-    uint64_t bytes = file_size(a->model);
-    double vol_bytes = double(m.dims.count()) * dtype_size(m.source_dtype);
+    const uint64_t bytes = file_size(a->model);
     Json j = {{"file", a->model},
               {"format", is_instantvnr_path(a->model) ? "instantvnr-bson" : "vnr"},
               {"dims", {m.dims.x, m.dims.y, m.dims.z}},
@@ -265,8 +254,8 @@ void add_info(CLI::App& app) {
               {"n_mlp_params", n.mlp().n_params},
               {"n_grid_params", n.grid_params()},
               {"model_bytes", bytes},
-              {"volume_bytes", uint64_t(vol_bytes)},
-              {"compression_ratio", vol_bytes / double(bytes)},
+              {"volume_bytes", source_bytes(m)},
+              {"compression_ratio", compression_ratio(m, bytes)},
               {"config", n.config_json()},
               {"training", m.training}};
     int64_t occupied = 0;
@@ -298,7 +287,7 @@ void add_info(CLI::App& app) {
                 loss_name(cfg.loss));
     std::printf("parameters: %llu (%s in fp16); file %s; compression ratio %s\n",
                 (unsigned long long)n.n_params(), human_bytes(2.0 * n.n_params()).c_str(), human_bytes(double(bytes)).c_str(),
-                format_ratio(vol_bytes / double(bytes)).c_str());
+                format_ratio(compression_ratio(m, bytes)).c_str());
     if (m.macrocells)
       std::printf("macro-cells: %lldx%lldx%lld cells of %d voxels (%lld with a value range), recorded while training\n",
                   (long long)m.macrocells->cells.x, (long long)m.macrocells->cells.y, (long long)m.macrocells->cells.z,

@@ -1,90 +1,85 @@
 #include "render_setup.h"
-#include <cstring>
-#include <fstream>
+#include <cmath>
+#include <cstdio>
 #include "vnr/core/error.h"
-#include "vnr/core/fileio.h"
-#include "vnr/core/json.h"
 
 namespace vnr::cli {
 
-bool is_model_path(const std::string& path) {
-  std::ifstream f(path, std::ios::binary);
-  if (!f) fail("cannot open '{}'", path);
-  char head[8] = {};
-  f.read(head, 8);
-  const std::streamsize got = f.gcount();
-  if (got >= 8 && std::memcmp(head, "VNRMODEL", 8) == 0) return true;
-  const std::string e = extension_of(path);
-  if (e == ".vnr") return true;  // read_model reports what is wrong with it
-  if (e == ".bson") return true;
-  if (e == ".json") {
-    // instantvnr's params.json is BSON (binary, starts with its int32 length); scenes and sidecars are text.
-    for (std::streamsize i = 0; i < got; ++i) {
-      unsigned char c = static_cast<unsigned char>(head[i]);
-      if (c == ' ' || c == '\t' || c == '\n' || c == '\r') continue;
-      return !(c == '{' || c == '/');
-    }
+namespace {
+
+Vec3f parse_vec3(const std::string& s, const char* what) {
+  float v[3];
+  char tail;
+  if (std::sscanf(s.c_str(), "%f,%f,%f%c", &v[0], &v[1], &v[2], &tail) != 3 || !std::isfinite(v[0]) ||
+      !std::isfinite(v[1]) || !std::isfinite(v[2]))
+    fail("{} expects X,Y,Z (three numbers), got '{}'", what, s);
+  return Vec3f{v[0], v[1], v[2]};
+}
+
+// --eye/--center (with --up, --fovy), else --orbit AZIMUTH[,ELEVATION] (or the default orbit when the
+// scene has no camera); nullopt keeps the scene's camera.
+std::optional<Camera> parse_camera(const RenderArgs& a, const Scene& scene, Vec3f box, float* orbit_elevation) {
+  if (!a.eye.empty() || !a.center.empty()) {
+    if (a.eye.empty() || a.center.empty()) fail("--eye and --center go together");
+    return Camera{parse_vec3(a.eye, "--eye"), parse_vec3(a.center, "--center"), parse_vec3(a.up, "--up"), a.fovy};
   }
-  return false;
-}
-
-RenderSource open_render_source(const std::string& input, const std::string& ground_truth, const VolumeArgs& va,
-                                Precision precision) {
-  RenderSource s;
-  if (is_model_path(input)) {
-    s.model = load_model(input);
-    if (s.model->dims.count() == 0) fail("'{}' does not say which volume size it represents", input);
-    s.dims = s.model->dims;
-    s.model->net->set_inference_precision(precision);
-    s.field = std::make_unique<NetworkField>(*s.model->net, s.dims);
-    s.description = "model " + basename_of(input);
-    if (!ground_truth.empty()) {
-      s.volume = load_volume(describe_volume(ground_truth, va.raw()), va.load());
-      if (!(s.volume->dims == s.dims))
-        fail("the model represents {}x{}x{} voxels but '{}' has {}x{}x{}", s.dims.x, s.dims.y, s.dims.z, ground_truth,
-             s.volume->dims.x, s.volume->dims.y, s.volume->dims.z);
-    }
-  } else {
-    if (!ground_truth.empty()) fail("--volume is only for model inputs (the input '{}' is a volume)", input);
-    s.volume = load_volume(describe_volume(input, va.raw()), va.load());
-    s.dims = s.volume->dims;
-    s.field = std::make_unique<GridField>(view_of(*s.volume));
-    s.description = "volume " + basename_of(input);
-    // An instantvnr scene given as the volume also brings its camera and transfer function.
-    if (extension_of(input) == ".json" && parse_json_file(input).contains("dataSource")) s.scene = load_scene(input);
+  if (a.orbit.empty() && scene.camera) return std::nullopt;
+  float az = 0, el = 0;
+  if (!a.orbit.empty()) {
+    char tail;
+    int got = std::sscanf(a.orbit.c_str(), "%f,%f%c", &az, &el, &tail);
+    if (got < 1 || got > 2 || !std::isfinite(az) || !std::isfinite(el) || el <= -90 || el >= 90)
+      fail("--orbit expects AZIMUTH[,ELEVATION] in degrees (elevation in (-90, 90)), got '{}'", a.orbit);
   }
-  s.box = Vec3f{float(s.dims.x), float(s.dims.y), float(s.dims.z)};
-  return s;
+  *orbit_elevation = el;
+  return orbit_camera(box, az, el, a.fovy);
 }
 
-MacroCellMode default_macrocell_mode(const RenderSource& src) {
-  if (src.model && src.model->macrocells) return MacroCellMode::Online;
-  if (src.volume) return MacroCellMode::Grid;
-  return MacroCellMode::Off;
-}
+}  // namespace
 
-MacroCells make_macrocells(const RenderSource& src, MacroCellMode mode, int cell_size, Device device) {
-  switch (mode) {
-    case MacroCellMode::Grid:
-      if (!src.volume)
-        fail("--macrocells grid needs the ground-truth volume: pass it with --volume (or use online/off)");
-      if (device == Device::Cuda) return MacroCells(gpu_value_ranges_from_grid(view_of(*src.volume), cell_size), src.box);
-      return MacroCells(value_ranges_from_grid(view_of(*src.volume), cell_size), src.box);
-    case MacroCellMode::Online:
-      if (!src.model || !src.model->macrocells)
-        fail("--macrocells online needs a model trained by vnr (it records the value ranges of its training "
-             "samples); use grid or off");
-      return MacroCells(*src.model->macrocells, src.box);
-    case MacroCellMode::Off:
-    default:
-      return MacroCells::single(src.dims, src.box);
-  }
-}
+CliRender open_cli_render(const std::string& input, const RenderArgs& a, const VolumeArgs& va) {
+  CliRender c;
+  c.input = std::make_unique<RenderInput>(open_render_input(input, a.volume, va.open(), parse_precision(a.precision)));
+  RenderOptions o;
+  o.mode = parse_render_mode(a.mode);
+  o.strategy = parse_render_strategy(a.strategy);
+  parse_size(a.size, &o.width, &o.height);
+  o.step = a.step;
+  o.step_max = a.step_max;
+  o.seed = a.seed;
+  o.samples_per_iteration = a.k > 0 ? a.k : kDefaultSamplesPerIteration;
+  o.shade = a.shade;
+  o.ray_packets = a.ray_packets == "on";
+  o.density_scale = a.density;
+  const Scene scene = a.scene.empty() ? c.input->scene : load_scene(a.scene);
+  std::optional<TransferFunction> tf;
+  if (!a.tf.empty()) tf = load_transfer_function(a.tf);
+  const Model* model = c.input->model ? &*c.input->model : nullptr;
+  const Volume* volume = c.input->volume ? &*c.input->volume : nullptr;
+  const Int3 dims = model ? model->dims : volume->dims;
+  const Vec3f box{float(dims.x), float(dims.y), float(dims.z)};  // Renderer::box() of this input
+  const std::optional<Camera> camera = parse_camera(a, scene, box, &c.orbit_elevation);
+  o.light = scene.light.value_or(DirectionalLight{});
+  o.background = scene.background.value_or(Vec3f{0, 0, 0});
+  if (!a.light.empty()) o.light.direction = parse_vec3(a.light, "--light");
+  if (!a.background.empty()) o.background = parse_vec3(a.background, "--background");
+  const MacroCellMode mc_mode =
+      a.macrocells.empty() ? default_macrocell_mode(model, volume) : parse_macrocell_mode(a.macrocells);
+  std::string note;
+  const Device device = choose_render_device(a.device, model, &note);
+  if (!note.empty()) std::fprintf(stderr, "note: %s\n", note.c_str());
+  const cuda::MlpPath mlp = cuda::parse_mlp_path(a.mlp);
+  if (a.macrocell_size < 1) fail("--macrocell-size must be at least 1, got {}", a.macrocell_size);
 
-std::unique_ptr<FrameRenderer> make_setup_renderer(const RenderSetup& setup, const RenderSource& src,
-                                                   const MacroCells& mc, const Camera& cam,
-                                                   const RenderOptions& options) {
-  return make_renderer(setup.device, *src.field, src.box, mc, setup.tf, cam, options, setup.mlp);
+  c.renderer = std::make_unique<Renderer>(*c.input, device);
+  Renderer& r = *c.renderer;
+  r.set_scene(scene);  // camera and transfer function; the options below override them
+  if (tf) r.set_transfer_function(*tf);
+  if (camera) r.set_camera(*camera);
+  r.set_options(o);
+  r.set_macrocells(mc_mode, a.macrocell_size);
+  r.set_mlp_path(mlp);
+  return c;
 }
 
 }  // namespace vnr::cli

@@ -1,0 +1,94 @@
+#pragma once
+// vnr::Model: a network together with the volume it represents (dims, source dtype, value range), the
+// train layer's struct (src/vnr/train/model_io.h). There: load_model(path) and save_model(path, m)
+// (.vnr, or instantvnr's BSON for .bson/.json), m.net (the Network: n_params(), config()), m.dims,
+// m.lo/m.hi, m.macrocells. This header adds creating one, queries and decodes on an explicit device,
+// the compression ratio and evaluation against a Volume.
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+#include "vnr/core/device.h"
+#include "vnr/nn/config.h"
+#include "vnr/train/model_io.h"
+#include "vnr/volume.h"
+
+namespace vnr {
+
+// A fresh network of `config` (parameters initialised from seed) for a volume of dims voxels of
+// source_dtype with value range [lo, hi] in original units.
+Model create_model(const ModelConfig& config, Int3 dims, DType source_dtype, double lo, double hi, uint32_t seed = 1337);
+Model create_model(const ModelConfig& config, const Volume& volume, uint32_t seed = 1337);
+
+// Bytes of the source volume: dims x the source dtype's size.
+uint64_t source_bytes(const Model& m);
+// source_bytes / model_bytes, where model_bytes = 0 means the fp16 parameters (Model::param_bytes(); a
+// model file adds a small header: pass its size to get what `vnr info` reports).
+double compression_ratio(const Model& m, uint64_t model_bytes = 0);
+
+// Units of query and decode results: normalised [0, 1], or the model's original units lo + u (hi - lo).
+enum class ValueUnits { Normalised, Original };
+inline float to_original_units(const Model& m, float u) { return float(m.lo + double(u) * (m.hi - m.lo)); }
+
+// Queries and decodes of one model on one device, chosen explicitly. On the GPU the network is copied
+// once, at construction, and runs in half precision (values differ from the CPU's by ~1e-3 relative);
+// on the CPU it infers with the network's inference precision (Network::set_inference_precision).
+// The model must outlive this object and not change while it lives.
+class ModelQuery {
+public:
+  ModelQuery(const Model& model, Device device, cuda::MlpPath mlp = cuda::MlpPath::Auto);
+  ~ModelQuery();
+  ModelQuery(const ModelQuery&) = delete;
+  ModelQuery& operator=(const ModelQuery&) = delete;
+
+  // n points, interleaved x, y, z in normalised coordinates [0, 1)^3 -> out[0..n).
+  void points(const float* xyz, int64_t n, float* out, ValueUnits units = ValueUnits::Normalised);
+  // z-slices [z0, z1) of a grid of dims voxels, sampled at voxel centres ((i + 0.5) / n per axis), x
+  // fastest -> out[0 .. dims.x * dims.y * (z1 - z0)): the same z-range of decode(dims), bit for bit.
+  void slab(Int3 dims, int64_t z0, int64_t z1, float* out, ValueUnits units = ValueUnits::Normalised);
+  // The whole grid at dims (zero dims: the model's own) as a Volume with the model's range and dtype.
+  Volume decode(Int3 dims = {});
+
+  Device device() const { return device_; }
+  const Model& model() const { return model_; }
+  // The GPU copy of the network (null on the CPU): what GPU benchmarks time resident.
+  cuda::GpuNetwork* gpu() { return gpu_.get(); }
+
+private:
+  const Model& model_;
+  Device device_;
+  std::unique_ptr<cuda::GpuNetwork> gpu_;
+};
+
+// PSNR, SSIM (3-D, optional) and max error of the model decoded at the volume's voxel centres against
+// the volume (docs/semantics.md B.4), on the given device.
+EvalResult evaluate_model(const Model& model, const Volume& volume, bool with_ssim = true, Device device = Device::Cpu);
+
+// Evaluation against a volume file of any size, as `vnr eval` runs it: in memory (Full) when the volume
+// and its decoded copy, 8 bytes a voxel, fit the memory budget, else in streamed z-slabs (Streamed); or
+// estimated from randomly sampled voxels (Sampled: PSNR with a 95% interval, no SSIM).
+enum class EvalMethod { Full, Streamed, Sampled };
+const char* eval_method_name(EvalMethod m);  // "full", "streamed", "sampled"
+struct FileEvalPlan {
+  VolumeDesc desc;
+  EvalMethod method = EvalMethod::Full;
+  uint64_t full_bytes = 0;   // the volume and the decoded copy in memory
+  uint64_t budget = 0;       // the memory budget it was planned for
+  int64_t slab_slices = 0;   // Streamed: z-slices per slab
+};
+// samples > 0 asks for Sampled; no memory_budget = half the available memory. Streamed slabs hold the slab
+// as read and decoded (with SSIM also a copy with the 6 slices of window overlap) within the budget, at
+// most 16 M voxels and at least one slice.
+FileEvalPlan plan_file_evaluation(const VolumeDesc& desc, int64_t samples, bool with_ssim,
+                                  std::optional<uint64_t> memory_budget = {});
+// The value range a Streamed or Sampled evaluation normalises the volume with (it never holds the
+// volume): an explicit one (range overrides, sidecar) as load_volume would use it ("volume"), else the
+// range the model was trained with when its file records one ("model"), else one scan of the volume
+// ("scan", reporting progress). *source gets the quoted word.
+ValueRange file_evaluation_range(const FileEvalPlan& plan, const Model& model, bool model_file_records_range,
+                                 const LoadOptions& load, std::string* source,
+                                 const std::function<void(double fraction)>& progress = {});
+
+}  // namespace vnr

@@ -1,0 +1,142 @@
+#pragma once
+// vnr::Renderer: renders a Model or a Volume (the ground truth) on an explicit device, with progressive
+// accumulation. Every setting can change between frames; any change restarts the accumulation, so the
+// image after N frames equals what a fresh renderer with the same settings gives after N frames.
+//   vnr::Renderer r(model, vnr::Device::Cpu);
+//   r.set_transfer_function("cool-warm"); r.set_size(512, 512);
+//   for (int i = 0; i < 16; ++i) r.render_frame();
+//   r.save("out.png");
+// Backends: the CPU's CpuRenderer and the GPU's GpuRenderer (src/vnr/render*), made by make_renderer.
+#include <memory>
+#include <optional>
+#include <string>
+#include "vnr/cuda/cuda.h"
+#include "vnr/model.h"
+#include "vnr/render/camera.h"
+#include "vnr/render/field.h"
+#include "vnr/render/image.h"
+#include "vnr/render/macrocell.h"
+#include "vnr/render/renderer.h"
+#include "vnr/render/scene.h"
+#include "vnr/render/transfer_function.h"
+#include "vnr/volume.h"
+
+namespace vnr {
+
+// True when `path` holds a model (.vnr by its magic, or instantvnr BSON); false for anything that
+// describes a volume (sidecars, scenes, NRRD, raw).
+bool is_model_path(const std::string& path);
+
+// A render input opened from files: a model (with an optional ground-truth volume of the same dims)
+// or a volume; an instantvnr scene given as the volume also brings its camera and transfer function.
+struct RenderInput {
+  std::optional<Model> model;
+  std::optional<Volume> volume;
+  Scene scene;
+  std::string description;  // "model NAME" or "volume NAME", for messages and reports
+};
+// The model's network infers with `precision` (in-shader evaluation and batched queries alike).
+RenderInput open_render_input(const std::string& input, const std::string& ground_truth,
+                              const VolumeOpenOptions& volume_options, Precision precision);
+
+// The device to render a model (null: a volume) on, from "auto", "cpu" or "cuda": auto takes a visible
+// GPU when the field can run there, else the CPU, with the reason in *note; "cuda" for a network the
+// GPU cannot run fails with that reason.
+Device choose_render_device(const std::string& name, const Model* model, std::string* note = nullptr);
+
+// The default macro-cell mode: online for a model that carries ranges, grid when a volume is at hand,
+// else off.
+MacroCellMode default_macrocell_mode(const Model* model, const Volume* volume);
+
+class Renderer {
+public:
+  // Renders the model; ground_truth (same dims) enables MacroCellMode::Grid. Both must outlive the
+  // renderer; the network's inference precision must be set before.
+  Renderer(const Model& model, Device device, const Volume* ground_truth = nullptr);
+  // Renders the volume itself.
+  Renderer(const Volume& volume, Device device);
+  // Renders what the input holds (its model if any), starting from the input's scene; the input must
+  // outlive the renderer and stay where it is.
+  Renderer(const RenderInput& input, Device device);
+  ~Renderer();
+  Renderer(const Renderer&) = delete;
+  Renderer& operator=(const Renderer&) = delete;
+
+  // Settings. Defaults: 768x768, ray marching, streaming, the "ramp" preset, the default macro-cells
+  // (default_macrocell_mode, 16 voxels a cell), orbit_camera(box(), 0, 0, 30).
+  void set_camera(const Camera& camera);
+  void set_transfer_function(const TransferFunction& tf);
+  void set_transfer_function(const std::string& preset_or_file);  // a preset name or instantvnr TF JSON
+  // Camera, transfer function, light and background from a scene; what it lacks gets the defaults.
+  void set_scene(const Scene& scene);
+  void set_scene(const std::string& scene_file);  // instantvnr scene JSON or vnr scene JSON
+  void set_mode(RenderMode mode);
+  void set_strategy(RenderStrategy strategy);
+  void set_macrocells(MacroCellMode mode, int cell_size = 16);
+  void set_step(float step, float step_max = 0);  // voxels; step_max 0 = 16 x step
+  void set_light(const DirectionalLight& light);
+  void set_background(Vec3f rgb);
+  void set_shading(bool shade);
+  void set_size(int width, int height);
+  void set_seed(uint32_t seed);
+  void set_samples_per_iteration(int k);  // streaming: K
+  void set_density(float density_scale);  // path tracing
+  void set_ray_packets(bool on);          // in-shader grid ray marching in SIMD packets (same image)
+  void set_mlp_path(cuda::MlpPath mlp);   // GPU streaming inference
+  // Every RenderOptions field at once.
+  void set_options(const RenderOptions& options);
+
+  const RenderOptions& options() const { return options_; }
+  const Camera& camera() const { return camera_; }
+  const TransferFunction& transfer_function() const { return tf_; }
+  MacroCellMode macrocell_mode() const { return mc_mode_; }
+  Device device() const { return device_; }
+  cuda::MlpPath mlp_path() const { return mlp_; }
+  Vec3f box() const { return box_; }     // world size of the volume box (voxel units)
+  const Field& field() const { return *field_; }
+  const Model* model() const { return model_; }
+
+  // Renders the next frame, adds it to the accumulation and returns the accumulated image (the mean of
+  // the frames since the last change). stats (optional) accumulates the frame's statistics.
+  const Image& render_frame(RenderStats* stats = nullptr);
+  // Builds the macro-cells and the backend now, so that a bad setting fails here rather than at the
+  // first frame (render_frame does it when needed).
+  void prepare() { backend(); }
+  // Renders frame number `frame` and leaves it where it was rendered (GPU memory on the GPU), without
+  // accumulating: what benchmarks time.
+  void render_frame_resident(uint32_t frame, RenderStats* stats = nullptr);
+  const Image& image() const { return accumulated_; }
+  int frames() const { return frames_; }  // accumulated since the last change
+  void save(const std::string& path) const;  // .png (8-bit) or .pfm (float)
+
+private:
+  Renderer(const Model* model, const Volume* volume, Device device);
+  void restart() { frames_ = 0; }
+  void invalidate() { backend_.reset(); restart(); }
+  FrameRenderer& backend();
+  const MacroCells& macrocells();
+
+  const Model* model_ = nullptr;
+  const Volume* volume_ = nullptr;
+  Device device_;
+  std::unique_ptr<Field> field_;
+  Vec3f box_;
+  RenderOptions options_;
+  Camera camera_;
+  TransferFunction tf_;
+  MacroCellMode mc_mode_ = MacroCellMode::Off;
+  int mc_cell_size_ = 16;
+  cuda::MlpPath mlp_ = cuda::MlpPath::Auto;
+  std::optional<MacroCells> mc_;  // for mc_mode_ and mc_cell_size_, opacities for tf_
+  bool mc_tf_current_ = false;
+  std::unique_ptr<FrameRenderer> backend_;
+  Image frame_, accumulated_;
+  int frames_ = 0;
+};
+
+// The field's batched query rate (samples/s) on uniformly random points over about `seconds`: on the
+// CPU the renderer's Field::query, on the GPU the network's resident encoding + MLP; 0 when not
+// measured (a grid on the GPU).
+double field_query_rate(const Renderer& renderer, double seconds);
+
+}  // namespace vnr

@@ -1,0 +1,77 @@
+// vnr::Model's constructors, queries and decodes (the train layer's Model, Network and GpuNetwork).
+#include "vnr/model.h"
+#include "vnr/core/error.h"
+
+namespace vnr {
+
+Model create_model(const ModelConfig& config, Int3 dims, DType source_dtype, double lo, double hi, uint32_t seed) {
+  Model model;
+  model.net = std::make_unique<Network>(config);
+  model.dims = dims;
+  model.source_dtype = source_dtype;
+  model.lo = lo;
+  model.hi = hi;
+  model.net->init_params(seed);
+  return model;
+}
+
+Model create_model(const ModelConfig& config, const Volume& volume, uint32_t seed) {
+  return create_model(config, volume.dims, volume.source_dtype, volume.lo, volume.hi, seed);
+}
+
+uint64_t source_bytes(const Model& m) { return m.dims.count() * dtype_size(m.source_dtype); }
+
+double compression_ratio(const Model& m, uint64_t model_bytes) {
+  return double(source_bytes(m)) / double(model_bytes ? model_bytes : m.param_bytes());
+}
+
+ModelQuery::ModelQuery(const Model& model, Device device, cuda::MlpPath mlp) : model_(model), device_(device) {
+  if (!model.net) fail("the model has no network");
+  if (device == Device::Cuda) gpu_ = std::make_unique<cuda::GpuNetwork>(*model.net, mlp);
+}
+ModelQuery::~ModelQuery() = default;
+
+namespace {
+void convert_units(const Model& m, ValueUnits units, float* v, int64_t n) {
+  if (units != ValueUnits::Original) return;
+  const double lo = m.lo, span = m.hi - m.lo;  // `vnr decode`'s expression, so files match its output
+  for (int64_t i = 0; i < n; ++i) v[i] = float(lo + double(v[i]) * span);
+}
+void check_grid(Int3 dims, int64_t z0, int64_t z1) {
+  if (dims.x < 1 || dims.y < 1 || dims.z < 1) fail("decode dims must be positive, got {}x{}x{}", dims.x, dims.y, dims.z);
+  if (z0 < 0 || z1 > dims.z || z0 > z1) fail("slab [{}, {}) is outside 0..{}", z0, z1, dims.z);
+}
+}  // namespace
+
+void ModelQuery::points(const float* xyz, int64_t n, float* out, ValueUnits units) {
+  if (n <= 0) return;
+  if (gpu_) gpu_->infer(xyz, n, out);
+  else model_.net->infer(xyz, n, out);
+  convert_units(model_, units, out, n);
+}
+
+void ModelQuery::slab(Int3 dims, int64_t z0, int64_t z1, float* out, ValueUnits units) {
+  check_grid(dims, z0, z1);
+  if (z1 == z0) return;
+  if (gpu_) gpu_->decode_slices(dims, z0, z1, out);  // the Decoder's two paths
+  else decode_slices(*model_.net, dims, z0, z1, out);
+  convert_units(model_, units, out, dims.x * dims.y * (z1 - z0));
+}
+
+Volume ModelQuery::decode(Int3 dims) {
+  if (dims.count() == 0) dims = model_.dims;
+  Volume v;
+  v.dims = dims;
+  v.source_dtype = model_.source_dtype;
+  v.lo = model_.lo;
+  v.hi = model_.hi;
+  v.data.resize(dims.count());
+  slab(dims, 0, dims.z, v.data.data());
+  return v;
+}
+
+EvalResult evaluate_model(const Model& model, const Volume& volume, bool with_ssim, Device device) {
+  return evaluate(*model.net, volume, with_ssim, device);
+}
+
+}  // namespace vnr

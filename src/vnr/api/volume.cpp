@@ -1,0 +1,51 @@
+// vnr::Volume's constructors: files through the volume layer, arrays with load_volume's normalisation.
+#include "vnr/volume.h"
+#include <new>
+#include "vnr/core/error.h"
+#include "vnr/volume/sample_io.h"
+
+namespace vnr {
+
+VolumeDesc describe_volume_file(const std::string& path, const VolumeOpenOptions& options) {
+  return describe_volume(path, options.raw);
+}
+
+Volume open_volume(const std::string& path, const VolumeOpenOptions& options) {
+  return load_volume(describe_volume(path, options.raw), options.load);
+}
+
+// load_volume's two steps (keep relative to the pivot, then map with the resolved range) over the
+// caller's floats, so an array and a float32 file of the same values give the same bits.
+Volume volume_from_array(const float* values, Int3 dims, std::optional<double> range_lo,
+                         std::optional<double> range_hi, NonFinitePolicy policy) {
+  using namespace detail;
+  VolumeDesc desc;
+  desc.path = "array";
+  desc.dims = dims;
+  desc.dtype = DType::Float32;
+  desc.range_lo = range_lo;
+  desc.range_hi = range_hi;
+  check_dims(desc);
+  if (!values) fail("volume_from_array: no values given for {}x{}x{} voxels", dims.x, dims.y, dims.z);
+  const int64_t n = int64_t(dims.count());
+  Volume vol;
+  vol.dims = dims;
+  vol.source_dtype = DType::Float32;
+  try {
+    vol.data.resize(size_t(n));
+  } catch (const std::bad_alloc&) {
+    fail("cannot allocate {:.1f} GiB for a {}x{}x{} volume", double(n) * 4 / (1 << 30), dims.x, dims.y, dims.z);
+  }
+  const auto* bytes = reinterpret_cast<const unsigned char*>(values);
+  double pivot = 0;
+  if (!pivot_from_desc(desc, &pivot)) find_pivot<float>(bytes, n, false, &pivot);
+  const Tally t = convert<float>(bytes, n, 0, false, pivot, vol.data.data());
+  if (t.nonfinite > 0 && policy == NonFinitePolicy::Error) nonfinite_error(desc, t.nonfinite, t.first_nonfinite);
+  const ValueRange r = resolve_range(desc, t);
+  vol.lo = r.lo;
+  vol.hi = r.hi;
+  map_in_place(PivotNormaliser(pivot, r.lo, r.hi, policy), vol.data.data(), n);
+  return vol;
+}
+
+}  // namespace vnr
