@@ -213,16 +213,58 @@ int64_t steps_to_recover(const std::vector<ProbePoint>& probes, int64_t switch_s
   return -1;
 }
 
-ContinuousResult train_continuous(Model& model, const std::vector<int>& timesteps, const FrameLoader& load,
-                                  const ContinuousOptions& opts, const SeriesHooks& hooks,
-                                  const std::function<void(const WindowResult&, const Model&)>& done) {
+namespace {
+
+void check_continuous(const Model& model, const std::vector<int>& timesteps, const ContinuousOptions& opts) {
   if (!model.net) fail("train_continuous: the model has no network");
   if (timesteps.empty()) fail("train_continuous: no timesteps selected");
   if (opts.switch_every <= 0) fail("continuous training needs a positive switch interval (steps per timestep), got {}", opts.switch_every);
   if (opts.probe_every <= 0) fail("the probe interval must be positive, got {}", opts.probe_every);
   if (opts.macrocell_size < 0) fail("macro-cell size must be 0 (none) or positive, got {}", opts.macrocell_size);
   if (!(opts.recovery_tolerance_db >= 0)) fail("the recovery tolerance must be >= 0 dB, got {}", opts.recovery_tolerance_db);
+}
 
+// The recovery of the switch into window w from its probes (`mine`, in step order) and the window's
+// training seconds at each of them.
+void measure_recovery(WindowResult& w, const std::vector<ProbePoint>& mine, const std::vector<double>& seconds_at,
+                      double tolerance_db) {
+  w.recovery_steps = steps_to_recover(mine, w.first_step, w.psnr_before - tolerance_db);
+  if (w.recovery_steps >= 0)
+    for (size_t i = 0; i < mine.size(); ++i)
+      if (mine[i].step - w.first_step == w.recovery_steps) {
+        w.recovery_seconds = seconds_at[i];
+        break;
+      }
+}
+
+// model.{dims, source_dtype, lo, hi, training, macrocells} after window k.
+void describe_window(Model& model, const Volume& cur, const WindowResult& w, size_t k, const ContinuousOptions& opts,
+                     float learning_rate, const Trainer& trainer) {
+  describe_model(model, cur);
+  model.training = {{"steps", w.steps},
+                    {"seconds", w.seconds},
+                    {"interrupted", w.interrupted},
+                    {"batch", opts.train.batch},
+                    {"seed", opts.train.seed},
+                    {"final_loss", w.final_loss},
+                    {"psnr", w.eval.psnr},
+                    {"threads", num_threads()},
+                    {"timestep", w.timestep},
+                    {"series_index", k},
+                    {"continuous", true},
+                    {"first_step", w.first_step},
+                    {"learning_rate", learning_rate}};
+  if (opts.ssim) model.training["ssim"] = w.eval.ssim;
+  model.macrocells.reset();
+  if (trainer.has_online_ranges()) model.macrocells = trainer.online_ranges();
+}
+
+}  // namespace
+
+ContinuousResult train_continuous(Model& model, const std::vector<int>& timesteps, const FrameLoader& load,
+                                  const ContinuousOptions& opts, const SeriesHooks& hooks,
+                                  const std::function<void(const WindowResult&, const Model&)>& done) {
+  check_continuous(model, timesteps, opts);
   ContinuousResult res;
   // One network with a constant learning rate, same parameters.
   res.config = fixed_learning_rate_config(model.net->config(), opts.learning_rate);
@@ -301,35 +343,11 @@ ContinuousResult train_continuous(Model& model, const std::vector<int>& timestep
     last_probe = res.probes.back().psnr;
     w.psnr_end = last_probe;
     w.final_loss = loss;
-    if (w.has_switch) {
-      std::vector<ProbePoint> mine(res.probes.begin() + std::ptrdiff_t(probes_before), res.probes.end());
-      w.recovery_steps = steps_to_recover(mine, w.first_step, w.psnr_before - opts.recovery_tolerance_db);
-      if (w.recovery_steps >= 0)
-        for (size_t i = 0; i < mine.size(); ++i)
-          if (mine[i].step - w.first_step == w.recovery_steps) {
-            w.recovery_seconds = seconds_at[i];
-            break;
-          }
-    }
+    if (w.has_switch)
+      measure_recovery(w, std::vector<ProbePoint>(res.probes.begin() + std::ptrdiff_t(probes_before), res.probes.end()),
+                       seconds_at, opts.recovery_tolerance_db);
     w.eval = evaluate(net, cur, opts.ssim);
-
-    describe_model(model, cur);
-    model.training = {{"steps", w.steps},
-                      {"seconds", w.seconds},
-                      {"interrupted", w.interrupted},
-                      {"batch", opts.train.batch},
-                      {"seed", opts.train.seed},
-                      {"final_loss", w.final_loss},
-                      {"psnr", w.eval.psnr},
-                      {"threads", num_threads()},
-                      {"timestep", w.timestep},
-                      {"series_index", k},
-                      {"continuous", true},
-                      {"first_step", w.first_step},
-                      {"learning_rate", res.learning_rate}};
-    if (opts.ssim) model.training["ssim"] = w.eval.ssim;
-    model.macrocells.reset();
-    if (trainer.has_online_ranges()) model.macrocells = trainer.online_ranges();
+    describe_window(model, cur, w, k, opts, res.learning_rate, trainer);
     res.windows.push_back(w);
     if (done) done(res.windows.back(), model);
     if (w.interrupted) break;
