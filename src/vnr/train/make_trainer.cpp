@@ -2,6 +2,7 @@
 #include <algorithm>
 #include <cmath>
 #include "vnr/core/error.h"
+#include "vnr/train/training_data.h"
 
 namespace vnr {
 namespace {
@@ -59,13 +60,6 @@ private:
   std::unique_ptr<cuda::GpuTrainer> gpu_;  // its queries synchronise (non-const); the wrapper's do not change it
 };
 
-std::string bytes_text(double b) {  // as the CLI prints sizes: "1.50 GiB"
-  const char* u[] = {"B", "KiB", "MiB", "GiB", "TiB"};
-  int i = 0;
-  while (b >= 1024 && i < 4) b /= 1024, ++i;
-  return fmt::format("{:.2f} {}", b, u[i]);
-}
-
 }  // namespace
 
 std::unique_ptr<Trainer> make_trainer(Device device, Network& net, std::shared_ptr<Sampler> sampler,
@@ -89,7 +83,7 @@ DeviceChoice choose_training_device(const std::string& asked_name, const Network
   const uint64_t need = cuda::GpuTrainer::bytes_needed(net, dims.count(), batch);
   if (why_not.empty() && cuda::free_memory_bytes() < need)
     why_not = fmt::format("the GPU has {} free, training needs about {} for this volume and batch",
-                          bytes_text(double(cuda::free_memory_bytes())), bytes_text(double(need)));
+                          byte_size_text(double(cuda::free_memory_bytes())), byte_size_text(double(need)));
   if (why_not.empty()) why_not = cuda::unsupported_reason(net);
   if (why_not.empty()) return {Device::Cuda, ""};
   if (asked_name == "cuda") fail("{}; use --device cpu", why_not);

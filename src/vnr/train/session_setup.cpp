@@ -8,17 +8,6 @@
 #include "vnr/train/session.h"
 
 namespace vnr {
-namespace {
-
-std::string bytes_text(double b) {  // as the CLI prints sizes: "1.50 GiB"
-  const char* u[] = {"B", "KiB", "MiB", "GiB", "TiB"};
-  int i = 0;
-  while (b >= 1024 && i < 4) b /= 1024, ++i;
-  return fmt::format("{:.2f} {}", b, u[i]);
-}
-
-}  // namespace
-
 void check_training_setup(const TrainingSetup& s) {
   if (s.batch <= 0 || s.batch % kChunk != 0) fail("--batch must be a positive multiple of {}, got {}", kChunk, s.batch);
   if (s.steps < -1) fail("--steps must be non-negative, got {}", s.steps);
@@ -56,7 +45,7 @@ std::unique_ptr<TrainingSession> open_training_session(const TrainingSetup& s, c
   Network& net = *model.net;
   if (s.target_ratio <= 0 && model.param_bytes() > data->source_bytes())
     say(fmt::format("note: the model ({}) is larger than the volume ({}); use --target-ratio R to compress",
-                    bytes_text(double(model.param_bytes())), bytes_text(double(data->source_bytes()))));
+                    byte_size_text(double(model.param_bytes())), byte_size_text(double(data->source_bytes()))));
 
   const DeviceChoice device = choose_training_device(s.device, net, data->dims, data->vol.has_value(), data->kind,
                                                      s.batch, s.cpu_only_reason);
