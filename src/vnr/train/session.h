@@ -71,7 +71,7 @@ public:
   ~TrainingSession();
 
   // Runs until `steps` more steps are done (< 0: no limit), `seconds` of training time have passed
-  // (0: no limit) or a stop is requested. Returns the steps this call ran.
+  // (0: no limit) or a stop is requested. Returns the steps this call ran. One run() at a time.
   int64_t run(int64_t steps, double seconds = 0);
   float step();  // run(1); the step's loss
 
@@ -81,6 +81,7 @@ public:
   void resume();
   bool paused() const { return paused_.load(); }
 
+  // Callbacks run on the thread of run(), in the order added; add or clear them between runs only.
   void add_step_callback(StepCallback cb) { step_callbacks_.push_back(std::move(cb)); }
   void add_side_work(StepCallback cb) { side_work_.push_back(std::move(cb)); }
   void clear_callbacks() { step_callbacks_.clear(); }
