@@ -17,6 +17,7 @@
 #include "vnr/online/online_loop.h"
 #include "vnr/online/preview.h"
 #include "vnr/train/sampler.h"
+#include "vnr/train/trainer.h"
 #include "vnr/volume/value_range_grid.h"
 #include "vnr/volume/writer.h"
 #include "test_support.h"

@@ -85,6 +85,213 @@ Json eval_row(const EvalResult& ev, bool ssim) {
           {"max_abs_error_original", ev.max_abs_error_original}};
 }
 
+// One `vnr train --timesteps` run: what both modes share.
+struct SeriesRun {
+  SeriesRun(const TrainArgs& args, Model m, std::vector<int> timesteps)
+      : a(args), model(std::move(m)), ts(std::move(timesteps)) {}
+  const TrainArgs& a;
+  Model model;
+  std::vector<int> ts;
+  FrameLoader load;
+  SeriesHooks hooks;
+  Json report;
+  std::string report_path;
+  uint64_t frame_bytes = 0;
+  Precision precision = Precision::FP32;
+  std::chrono::steady_clock::time_point t_all;
+  std::unique_ptr<Progress> bar;
+  int saved = 0;
+  std::string save(const Model& m, int t) {
+    const std::string path = join_path(a.output, timestep_model_name(t));
+    save_model(path, m);
+    ++saved;
+    return path;
+  }
+};
+
+// One model per timestep, warm-started (train_series: a TrainingSession per timestep).
+void train_per_timestep(SeriesRun& run) {
+  const TrainArgs& a = run.a;
+  Json& report = run.report;
+  std::unique_ptr<Progress>& bar = run.bar;
+  SeriesHooks& hooks = run.hooks;
+  const Precision precision = run.precision;
+  const uint64_t frame_bytes = run.frame_bytes;
+  const std::string& report_path = run.report_path;
+  const bool by_time = a.seconds > 0 && a.steps < 0;
+  Json rows = Json::array();
+  auto save = [&](const Model& m, int t) { return run.save(m, t); };
+  SeriesOptions so;
+  so.train = TrainOptions{a.batch, a.seed};
+  so.train.precision = precision;
+  so.steps = a.steps >= 0 ? a.steps : (a.seconds > 0 ? -1 : 1000);
+  so.seconds = a.seconds;
+  so.macrocell_size = a.macrocell_size;
+  so.ssim = !a.no_ssim;
+  report["steps_per_timestep"] = so.steps >= 0 ? Json(so.steps) : Json(nullptr);
+  report["seconds_per_timestep"] = a.seconds;
+  report["config"] = run.model.net->config_json();
+  report["precision"] = precision_name(precision);
+  auto t_start = std::chrono::steady_clock::now();
+  hooks.on_loaded = [&](int t, double) {
+    bar = std::make_unique<Progress>(fmt::format("t{:04d}", t), by_time ? a.seconds : double(so.steps), a.quiet);
+    t_start = std::chrono::steady_clock::now();
+  };
+  hooks.on_step = [&](int, int64_t s, float loss) {
+    bar->update(by_time ? seconds_since(t_start) : double(s), fmt::format("step {} loss {:.5f}", s, loss));
+  };
+  std::printf("timestep  start  steps  seconds  final loss  PSNR (dB)%s  model\n", a.no_ssim ? "" : "   SSIM");
+  auto done = [&](const TimestepResult& r, const Model& m) {
+    bar->finish(fmt::format("({} steps, loss {:.5f})", r.steps, r.final_loss));
+    const std::string path = save(m, r.timestep);
+    const uint64_t bytes = file_size(path);
+    Json row = {{"timestep", r.timestep},
+                {"model", path},
+                {"warm_start", r.warm_started},
+                {"steps", r.steps},
+                {"seconds", r.seconds},
+                {"load_seconds", r.load_seconds},
+                {"final_loss", r.final_loss},
+                {"lo", r.lo},
+                {"hi", r.hi},
+                {"model_bytes", bytes},
+                {"compression_ratio", double(frame_bytes) / double(bytes)},
+                {"interrupted", r.interrupted}};
+    row.update(eval_row(r.eval, !a.no_ssim));
+    rows.push_back(row);
+    report["rows"] = rows;
+    report["complete"] = false;
+    write_report(report_path, report);
+    std::printf("t%04d     %-5s  %5lld  %7.2f  %10.6f  %9.2f%s  %s\n", r.timestep, r.warm_started ? "warm" : "init",
+                (long long)r.steps, r.seconds, r.final_loss, r.eval.psnr,
+                a.no_ssim ? "" : fmt::format("  {:.4f}", r.eval.ssim).c_str(), path.c_str());
+    std::fflush(stdout);
+  };
+  std::vector<TimestepResult> res = train_series(run.model, run.ts, run.load, so, hooks, done);
+  const bool interrupted = !res.empty() && res.back().interrupted;
+  report["interrupted"] = interrupted;
+  report["complete"] = !interrupted;
+  report["total_seconds"] = seconds_since(run.t_all);
+  write_report(report_path, report);
+  if (interrupted)
+    std::fprintf(stderr, "interrupted: stopped after timestep %d (its model is saved; later timesteps were not trained)\n",
+                 res.back().timestep);
+  std::printf("%zu model%s in %s, report %s\n", res.size(), res.size() == 1 ? "" : "s", a.output.c_str(),
+              report_path.c_str());
+}
+
+// The continuous run's tables: per timestep, and per switch with its recovery.
+void print_continuous(const SeriesRun& run, const ContinuousResult& res, const ContinuousOptions& co, int64_t global,
+                      const std::vector<WindowResult>& done_windows, const Json& windows) {
+  const TrainArgs& a = run.a;
+  const std::string& report_path = run.report_path;
+  std::printf("continuous training: %lld steps, %lld per timestep, learning rate fixed at %g; PSNR probe: %lld "
+              "voxels every %lld steps\n",
+              (long long)global, (long long)a.switch_every, double(res.learning_rate), (long long)res.probe_voxels,
+              (long long)co.probe_every);
+  std::printf("timestep  steps  seconds  PSNR (dB)  model\n");
+  for (size_t i = 0; i < done_windows.size(); ++i)
+    std::printf("t%04d     %5lld  %7.2f  %9.2f  %s\n", done_windows[i].timestep, (long long)done_windows[i].steps,
+                done_windows[i].seconds, done_windows[i].eval.psnr, windows[i]["model"].get<std::string>().c_str());
+  if (done_windows.size() > 1) {
+    std::printf("switch          PSNR before  PSNR after  recovered after\n");
+    for (const WindowResult& w : done_windows) {
+      if (!w.has_switch) continue;
+      std::string rec = w.recovery_steps >= 0
+                            ? fmt::format("{} steps ({:.2f} s)", w.recovery_steps, w.recovery_seconds)
+                            : fmt::format("not recovered within {} steps", w.steps);
+      std::printf("t%04d -> t%04d  %8.2f dB  %7.2f dB  %s\n", w.from_timestep, w.timestep, w.psnr_before,
+                  w.psnr_after, rec.c_str());
+    }
+  }
+  std::printf("%zu model%s in %s, report %s\n", done_windows.size(), done_windows.size() == 1 ? "" : "s",
+              a.output.c_str(), report_path.c_str());
+}
+
+// One network trained across the timesteps (train_continuous: one TrainingSession for the run).
+void train_continuously(SeriesRun& run) {
+  const TrainArgs& a = run.a;
+  Json& report = run.report;
+  std::unique_ptr<Progress>& bar = run.bar;
+  SeriesHooks& hooks = run.hooks;
+  const Precision precision = run.precision;
+  const uint64_t frame_bytes = run.frame_bytes;
+  const std::string& report_path = run.report_path;
+  const std::vector<int>& ts = run.ts;
+  auto save = [&](const Model& m, int t) { return run.save(m, t); };
+  ContinuousOptions co;
+  co.train = TrainOptions{a.batch, a.seed};
+  co.train.precision = precision;
+  co.switch_every = a.switch_every;
+  co.macrocell_size = a.macrocell_size;
+  co.ssim = !a.no_ssim;
+  bar = std::make_unique<Progress>("train", double(a.switch_every) * double(ts.size()), a.quiet);
+  int64_t global = 0;
+  hooks.on_step = [&](int t, int64_t, float loss) {
+    ++global;
+    bar->update(double(global), fmt::format("timestep {} step {} loss {:.5f}", t, global, loss));
+  };
+  Json windows = Json::array();
+  std::vector<WindowResult> done_windows;
+  float lr = 0;
+  auto done = [&](const WindowResult& w, const Model& m) {
+    const std::string path = save(m, w.timestep);
+    const uint64_t bytes = file_size(path);
+    lr = m.net->config().adam.learning_rate;
+    Json sw = nullptr;
+    if (w.has_switch)
+      sw = {{"from", w.from_timestep},
+            {"psnr_before", w.psnr_before},
+            {"psnr_after", w.psnr_after},
+            {"recovered", w.recovery_steps >= 0},
+            {"recovery_steps", w.recovery_steps >= 0 ? Json(w.recovery_steps) : Json(nullptr)},
+            {"recovery_seconds", w.recovery_steps >= 0 ? Json(w.recovery_seconds) : Json(nullptr)}};
+    Json row = {{"timestep", w.timestep},
+                {"model", path},
+                {"first_step", w.first_step},
+                {"steps", w.steps},
+                {"seconds", w.seconds},
+                {"load_seconds", w.load_seconds},
+                {"final_loss", w.final_loss},
+                {"probe_psnr_end", w.psnr_end},
+                {"lo", w.lo},
+                {"hi", w.hi},
+                {"model_bytes", bytes},
+                {"compression_ratio", double(frame_bytes) / double(bytes)},
+                {"interrupted", w.interrupted},
+                {"switch", sw}};
+    row.update(eval_row(w.eval, !a.no_ssim));
+    windows.push_back(row);
+    done_windows.push_back(w);
+    report["rows"] = windows;
+    report["complete"] = false;
+    report["switch_every"] = a.switch_every;
+    report["learning_rate"] = lr;
+    report["config"] = m.net->config_json();
+    report["precision"] = precision_name(precision);
+    write_report(report_path, report);
+  };
+  ContinuousResult res = train_continuous(run.model, run.ts, run.load, co, hooks, done);
+  const bool interrupted = !res.windows.empty() && res.windows.back().interrupted;
+  bar->finish(fmt::format("({} steps, loss {:.5f})", global, res.loss_history.empty() ? 0.f : res.loss_history.back()));
+  Json probes = Json::array();
+  for (const ProbePoint& p : res.probes) probes.push_back({p.step, p.timestep, p.psnr});
+  report["probe_voxels"] = res.probe_voxels;
+  report["probe_every"] = co.probe_every;
+  report["recovery_tolerance_db"] = co.recovery_tolerance_db;
+  report["probes"] = probes;
+  report["loss_history"] = res.loss_history;
+  report["interrupted"] = interrupted;
+  report["complete"] = !interrupted;
+  report["total_seconds"] = seconds_since(run.t_all);
+  write_report(report_path, report);
+  if (interrupted)
+    std::fprintf(stderr, "interrupted in timestep %d: its model is saved; later timesteps were not trained\n",
+                 res.windows.back().timestep);
+
+  print_continuous(run, res, co, global, done_windows, windows);
+}
+
 }  // namespace
 
 void run_train_series(const TrainArgs& a) {
@@ -124,194 +331,36 @@ void run_train_series(const TrainArgs& a) {
                  desc0.n_timesteps, ts.size(), a.timesteps.c_str(),
                  a.continuous ? fmt::format(", continuously, {} steps each", a.switch_every).c_str() : "");
 
-  Model model = new_model(config, desc0.dims, desc0.dtype, 0, 1, a.seed);
-  FrameLoader load = [&](int t) {
+  SeriesRun run{a, new_model(config, desc0.dims, desc0.dtype, 0, 1, a.seed), ts};
+  run.report_path = report_path;
+  run.frame_bytes = frame_bytes;
+  run.load = [&](int t) {
     RawOptions r = raw;
     r.timestep = t;
     return load_volume(describe_volume(a.volume, r), load_opts);
   };
-
-  const bool by_time = !a.continuous && a.seconds > 0 && a.steps < 0;
-  std::unique_ptr<Progress> bar;
-  SeriesHooks hooks;
-  hooks.stop = [] { return g_series_interrupted != 0; };
-  Json rows = Json::array();
-  Json report = {{"mode", a.continuous ? "continuous" : "per_timestep"},
-                 {"volume", a.volume},
-                 {"output_dir", a.output},
-                 {"timesteps", ts},
-                 {"n_timesteps", desc0.n_timesteps},
-                 {"batch", a.batch},
-                 {"seed", a.seed},
-                 {"threads", num_threads()},
-                 {"volume_bytes", frame_bytes}};
-  int saved = 0;
-  auto save = [&](const Model& m, int t) {
-    const std::string path = join_path(a.output, timestep_model_name(t));
-    save_model(path, m);
-    ++saved;
-    return path;
-  };
-  auto t_all = std::chrono::steady_clock::now();
-
-  const Precision precision = resolve_training_precision(a.precision, *model.net);
+  run.hooks.stop = [] { return g_series_interrupted != 0; };
+  run.report = {{"mode", a.continuous ? "continuous" : "per_timestep"},
+                {"volume", a.volume},
+                {"output_dir", a.output},
+                {"timesteps", ts},
+                {"n_timesteps", desc0.n_timesteps},
+                {"batch", a.batch},
+                {"seed", a.seed},
+                {"threads", num_threads()},
+                {"volume_bytes", frame_bytes}};
+  run.t_all = std::chrono::steady_clock::now();
+  run.precision = resolve_training_precision(a.precision, *run.model.net);
   try {
     SigintGuard guard;
-    if (!a.continuous) {
-      SeriesOptions so;
-      so.train = TrainOptions{a.batch, a.seed};
-      so.train.precision = precision;
-      so.steps = a.steps >= 0 ? a.steps : (a.seconds > 0 ? -1 : 1000);
-      so.seconds = a.seconds;
-      so.macrocell_size = a.macrocell_size;
-      so.ssim = !a.no_ssim;
-      report["steps_per_timestep"] = so.steps >= 0 ? Json(so.steps) : Json(nullptr);
-      report["seconds_per_timestep"] = a.seconds;
-      report["config"] = model.net->config_json();
-      report["precision"] = precision_name(precision);
-      auto t_start = std::chrono::steady_clock::now();
-      hooks.on_loaded = [&](int t, double) {
-        bar = std::make_unique<Progress>(fmt::format("t{:04d}", t), by_time ? a.seconds : double(so.steps), a.quiet);
-        t_start = std::chrono::steady_clock::now();
-      };
-      hooks.on_step = [&](int, int64_t s, float loss) {
-        bar->update(by_time ? seconds_since(t_start) : double(s), fmt::format("step {} loss {:.5f}", s, loss));
-      };
-      std::printf("timestep  start  steps  seconds  final loss  PSNR (dB)%s  model\n", a.no_ssim ? "" : "   SSIM");
-      auto done = [&](const TimestepResult& r, const Model& m) {
-        bar->finish(fmt::format("({} steps, loss {:.5f})", r.steps, r.final_loss));
-        const std::string path = save(m, r.timestep);
-        const uint64_t bytes = file_size(path);
-        Json row = {{"timestep", r.timestep},
-                    {"model", path},
-                    {"warm_start", r.warm_started},
-                    {"steps", r.steps},
-                    {"seconds", r.seconds},
-                    {"load_seconds", r.load_seconds},
-                    {"final_loss", r.final_loss},
-                    {"lo", r.lo},
-                    {"hi", r.hi},
-                    {"model_bytes", bytes},
-                    {"compression_ratio", double(frame_bytes) / double(bytes)},
-                    {"interrupted", r.interrupted}};
-        row.update(eval_row(r.eval, !a.no_ssim));
-        rows.push_back(row);
-        report["rows"] = rows;
-        report["complete"] = false;
-        write_report(report_path, report);
-        std::printf("t%04d     %-5s  %5lld  %7.2f  %10.6f  %9.2f%s  %s\n", r.timestep, r.warm_started ? "warm" : "init",
-                    (long long)r.steps, r.seconds, r.final_loss, r.eval.psnr,
-                    a.no_ssim ? "" : fmt::format("  {:.4f}", r.eval.ssim).c_str(), path.c_str());
-        std::fflush(stdout);
-      };
-      std::vector<TimestepResult> res = train_series(model, ts, load, so, hooks, done);
-      const bool interrupted = !res.empty() && res.back().interrupted;
-      report["interrupted"] = interrupted;
-      report["complete"] = !interrupted;
-      report["total_seconds"] = seconds_since(t_all);
-      write_report(report_path, report);
-      if (interrupted)
-        std::fprintf(stderr, "interrupted: stopped after timestep %d (its model is saved; later timesteps were not trained)\n",
-                     res.back().timestep);
-      std::printf("%zu model%s in %s, report %s\n", res.size(), res.size() == 1 ? "" : "s", a.output.c_str(),
-                  report_path.c_str());
-    } else {
-      ContinuousOptions co;
-      co.train = TrainOptions{a.batch, a.seed};
-      co.train.precision = precision;
-      co.switch_every = a.switch_every;
-      co.macrocell_size = a.macrocell_size;
-      co.ssim = !a.no_ssim;
-      bar = std::make_unique<Progress>("train", double(a.switch_every) * double(ts.size()), a.quiet);
-      int64_t global = 0;
-      hooks.on_step = [&](int t, int64_t, float loss) {
-        ++global;
-        bar->update(double(global), fmt::format("timestep {} step {} loss {:.5f}", t, global, loss));
-      };
-      Json windows = Json::array();
-      std::vector<WindowResult> done_windows;
-      float lr = 0;
-      auto done = [&](const WindowResult& w, const Model& m) {
-        const std::string path = save(m, w.timestep);
-        const uint64_t bytes = file_size(path);
-        lr = m.net->config().adam.learning_rate;
-        Json sw = nullptr;
-        if (w.has_switch)
-          sw = {{"from", w.from_timestep},
-                {"psnr_before", w.psnr_before},
-                {"psnr_after", w.psnr_after},
-                {"recovered", w.recovery_steps >= 0},
-                {"recovery_steps", w.recovery_steps >= 0 ? Json(w.recovery_steps) : Json(nullptr)},
-                {"recovery_seconds", w.recovery_steps >= 0 ? Json(w.recovery_seconds) : Json(nullptr)}};
-        Json row = {{"timestep", w.timestep},
-                    {"model", path},
-                    {"first_step", w.first_step},
-                    {"steps", w.steps},
-                    {"seconds", w.seconds},
-                    {"load_seconds", w.load_seconds},
-                    {"final_loss", w.final_loss},
-                    {"probe_psnr_end", w.psnr_end},
-                    {"lo", w.lo},
-                    {"hi", w.hi},
-                    {"model_bytes", bytes},
-                    {"compression_ratio", double(frame_bytes) / double(bytes)},
-                    {"interrupted", w.interrupted},
-                    {"switch", sw}};
-        row.update(eval_row(w.eval, !a.no_ssim));
-        windows.push_back(row);
-        done_windows.push_back(w);
-        report["rows"] = windows;
-        report["complete"] = false;
-        report["switch_every"] = a.switch_every;
-        report["learning_rate"] = lr;
-        report["config"] = m.net->config_json();
-        report["precision"] = precision_name(precision);
-        write_report(report_path, report);
-      };
-      ContinuousResult res = train_continuous(model, ts, load, co, hooks, done);
-      const bool interrupted = !res.windows.empty() && res.windows.back().interrupted;
-      bar->finish(fmt::format("({} steps, loss {:.5f})", global, res.loss_history.empty() ? 0.f : res.loss_history.back()));
-      Json probes = Json::array();
-      for (const ProbePoint& p : res.probes) probes.push_back({p.step, p.timestep, p.psnr});
-      report["probe_voxels"] = res.probe_voxels;
-      report["probe_every"] = co.probe_every;
-      report["recovery_tolerance_db"] = co.recovery_tolerance_db;
-      report["probes"] = probes;
-      report["loss_history"] = res.loss_history;
-      report["interrupted"] = interrupted;
-      report["complete"] = !interrupted;
-      report["total_seconds"] = seconds_since(t_all);
-      write_report(report_path, report);
-      if (interrupted)
-        std::fprintf(stderr, "interrupted in timestep %d: its model is saved; later timesteps were not trained\n",
-                     res.windows.back().timestep);
-
-      std::printf("continuous training: %lld steps, %lld per timestep, learning rate fixed at %g; PSNR probe: %lld "
-                  "voxels every %lld steps\n",
-                  (long long)global, (long long)a.switch_every, double(res.learning_rate), (long long)res.probe_voxels,
-                  (long long)co.probe_every);
-      std::printf("timestep  steps  seconds  PSNR (dB)  model\n");
-      for (size_t i = 0; i < done_windows.size(); ++i)
-        std::printf("t%04d     %5lld  %7.2f  %9.2f  %s\n", done_windows[i].timestep, (long long)done_windows[i].steps,
-                    done_windows[i].seconds, done_windows[i].eval.psnr, windows[i]["model"].get<std::string>().c_str());
-      if (done_windows.size() > 1) {
-        std::printf("switch          PSNR before  PSNR after  recovered after\n");
-        for (const WindowResult& w : done_windows) {
-          if (!w.has_switch) continue;
-          std::string rec = w.recovery_steps >= 0
-                                ? fmt::format("{} steps ({:.2f} s)", w.recovery_steps, w.recovery_seconds)
-                                : fmt::format("not recovered within {} steps", w.steps);
-          std::printf("t%04d -> t%04d  %8.2f dB  %7.2f dB  %s\n", w.from_timestep, w.timestep, w.psnr_before,
-                      w.psnr_after, rec.c_str());
-        }
-      }
-      std::printf("%zu model%s in %s, report %s\n", done_windows.size(), done_windows.size() == 1 ? "" : "s",
-                  a.output.c_str(), report_path.c_str());
-    }
+    if (!a.continuous)
+      train_per_timestep(run);
+    else
+      train_continuously(run);
   } catch (const Error& e) {
-    if (saved == 0) throw;
-    fail("{} ({} finished model{} kept in '{}', rows in '{}')", e.what(), saved, saved == 1 ? "" : "s", a.output,
-         report_path);
+    if (run.saved == 0) throw;
+    fail("{} ({} finished model{} kept in '{}', rows in '{}')", e.what(), run.saved, run.saved == 1 ? "" : "s",
+         a.output, report_path);
   }
 }
 

@@ -4,7 +4,7 @@
 #include <string>
 #include "cli.h"
 #include "preview.h"
-#include "vnr/train/model_io.h"
+#include "vnr/train/training_data.h"
 
 namespace vnr::cli {
 
@@ -31,9 +31,6 @@ struct TrainArgs {
   bool continuous = false;
   int64_t switch_every = 0;  // --continuous: steps per timestep
 };
-
-// A fresh model for a volume of these dims/dtype/range, parameters initialised from `seed`.
-Model new_model(const ModelConfig& config, Int3 dims, DType dtype, double lo, double hi, uint32_t seed);
 
 // `vnr train SERIES --timesteps ... -o DIR`, with or without --continuous.
 void run_train_series(const TrainArgs& a);

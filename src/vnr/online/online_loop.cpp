@@ -11,7 +11,7 @@ double seconds_between(std::chrono::steady_clock::time_point a, std::chrono::ste
 }
 }  // namespace
 
-OnlineLoop::OnlineLoop(CpuTrainer& trainer, Int3 dims, const TransferFunction& tf, const Camera& camera,
+OnlineLoop::OnlineLoop(Trainer& trainer, Int3 dims, const TransferFunction& tf, const Camera& camera,
                        const RenderOptions& options, MacroCellMode mc)
     : trainer_(trainer), dims_(dims), box_{float(dims.x), float(dims.y), float(dims.z)}, tf_(tf), camera_(camera),
       opt_(options), mc_mode_(mc) {
@@ -20,7 +20,7 @@ OnlineLoop::OnlineLoop(CpuTrainer& trainer, Int3 dims, const TransferFunction& t
     fail("online rendering builds its macro-cells from the training samples: use online or off, not grid");
   if (mc == MacroCellMode::Online) {
     if (!trainer.has_online_ranges())
-      fail("online macro-cells need the trainer's online value ranges (CpuTrainer::enable_online_ranges)");
+      fail("online macro-cells need the trainer's online value ranges (Trainer::enable_online_ranges)");
     // Checked once here (a merge of empty grids: cheap) so that mistakes fail before any training.
     const ValueRangeGrid g = trainer.online_ranges();
     if (!(g.volume_dims == dims))
@@ -28,7 +28,7 @@ OnlineLoop::OnlineLoop(CpuTrainer& trainer, Int3 dims, const TransferFunction& t
            g.volume_dims.y, g.volume_dims.z, dims.x, dims.y, dims.z);
   }
   if (tf_.table.size() < 2) fail("the transfer function needs at least 2 entries");
-  if (!trainer.loss_history().empty()) last_loss_ = trainer.loss_history().back();
+  last_loss_ = trainer.last_loss();
 }
 
 OnlineLoop::~OnlineLoop() = default;
@@ -36,7 +36,10 @@ OnlineLoop::~OnlineLoop() = default;
 float OnlineLoop::train(int64_t n) {
   if (n < 0) fail("the number of training steps must not be negative (got {})", n);
   auto t0 = std::chrono::steady_clock::now();
-  for (int64_t i = 0; i < n; ++i) last_loss_ = trainer_.step();
+  if (n > 0) {
+    trainer_.run(n);
+    last_loss_ = trainer_.last_loss();
+  }
   pending_train_seconds_ += seconds_between(t0, std::chrono::steady_clock::now());
   return last_loss_;
 }
@@ -46,6 +49,7 @@ bool OnlineLoop::refresh() {
   if (model_dirty_ || step != rendered_step_ || !renderer_) {
     // New parameters (and, online, new samples): everything the renderer refers to is rebuilt.
     renderer_.reset();
+    trainer_.download();
     field_ = std::make_unique<NetworkField>(trainer_.network(), dims_);
     if (mc_mode_ == MacroCellMode::Online)
       mc_ = std::make_unique<MacroCells>(trainer_.online_ranges(), box_);

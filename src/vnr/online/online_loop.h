@@ -6,20 +6,19 @@
 // How it maps to the paper's loop. The original runs, per displayed frame, one training step and one
 // frame on the same GPU stream: sample a batch -> optimise -> widen the macro-cell value ranges with
 // the batch's samples -> recompute the macro-cells' max opacity -> render with the current weights.
-// Here the same loop runs on the CPU, sequentially (both halves use every core):
-//   train(n)        n CpuTrainer::step()s; each step's samples widen the trainer's per-thread
-//                   ValueRangeGrids (CpuTrainer::enable_online_ranges) as they are drawn;
-//   render_frame()  if the model changed since the last frame (CpuTrainer::steps_done() moved, or
-//                   model_changed() was called): merge the per-thread ranges (CpuTrainer::online_ranges,
-//                   O(cells x threads)), rebuild MacroCells from them and recompute their max opacity
-//                   for the transfer function, rebuild the NetworkField (its in-shader PointEvaluator
-//                   copies the weights, so it must see the new ones) and the CpuRenderer; then render one
-//                   frame with the current parameters.
+// Here the same loop runs sequentially (both halves use every core), on any training backend:
+//   train(n)        Trainer::run(n) (trainer_backend.h: the CPU or the GPU); each step's samples widen
+//                   the trainer's online value ranges (Trainer::enable_online_ranges) as they are drawn;
+//   render_frame()  if the model changed since the last frame (Trainer::steps_done() moved, or
+//                   model_changed() was called): bring the parameters into the Network
+//                   (Trainer::download, a no-op on the CPU), merge the online ranges
+//                   (Trainer::online_ranges), rebuild MacroCells from them and recompute their max
+//                   opacity for the transfer function, rebuild the NetworkField (its in-shader
+//                   PointEvaluator copies the weights, so it must see the new ones) and the CpuRenderer;
+//                   then render one frame with the current parameters.
 //   run(T, k, cb)   train(k); render_frame(); cb(...) until T steps are done: k = 1 is the paper's
 //                   one-step-per-frame loop.
-// The per-frame refresh is cheap next to a frame (measured on the 2-core VM: merging 2 per-thread grids
-// of 262,144 cells ~0.1 ms, a paper-config PointEvaluator ~0.02 ms; rebuilding the CpuRenderer made no
-// measurable difference to the frame time), so nothing is updated in place.
+// The per-frame refresh is cheap next to a frame, so nothing is updated in place.
 // train and render stay unaware of each other: the macro-cells pass between them as a ValueRangeGrid.
 //
 // Progressive accumulation: while nothing changes, consecutive frames (frame numbers 0, 1, 2, ...:
@@ -32,16 +31,16 @@
 #include <memory>
 #include <vector>
 #include "vnr/render/renderer.h"
-#include "vnr/train/trainer.h"
+#include "vnr/train/trainer_backend.h"
 
 namespace vnr {
 
 // What one rendered frame cost and showed.
 struct OnlineFrame {
-  uint64_t step = 0;          // training steps done (CpuTrainer::steps_done) when it was rendered
+  uint64_t step = 0;          // training steps done (Trainer::steps_done) when it was rendered
   int accumulated = 0;        // frames averaged into the image (1 right after any change)
   float loss = 0;             // loss of the last training step (0 before any)
-  double train_seconds = 0;   // time in CpuTrainer::step() through train() since the previous frame
+  double train_seconds = 0;   // time in Trainer::run() through train() since the previous frame
   double update_seconds = 0;  // merging the online ranges, macro-cell max opacities, field/renderer rebuild
   double render_seconds = 0;  // CpuRenderer::render_frame + accumulation
 };
@@ -52,7 +51,7 @@ public:
   // box [0, dims], as `vnr render`). mc: Online (the trainer must have online ranges enabled, with the
   // same dims) or Off (one cell over the box; Grid needs a ground truth, which online training does
   // not assume).
-  OnlineLoop(CpuTrainer& trainer, Int3 dims, const TransferFunction& tf, const Camera& camera,
+  OnlineLoop(Trainer& trainer, Int3 dims, const TransferFunction& tf, const Camera& camera,
              const RenderOptions& options, MacroCellMode mc = MacroCellMode::Online);
   OnlineLoop(const OnlineLoop&) = delete;
   OnlineLoop& operator=(const OnlineLoop&) = delete;
@@ -80,9 +79,9 @@ public:
   int accumulated_frames() const { return acc_count_; }
   // Macro-cells of the last frame (null before the first one).
   const MacroCells* macrocells() const { return mc_.get(); }
-  const std::vector<float>& loss_history() const { return trainer_.loss_history(); }
+  std::vector<float> loss_history() const { return trainer_.losses(); }
   const std::vector<OnlineFrame>& frames() const { return frames_; }  // one entry per render_frame()
-  CpuTrainer& trainer() { return trainer_; }
+  Trainer& trainer() { return trainer_; }
   const Camera& camera() const { return camera_; }
   const TransferFunction& transfer_function() const { return tf_; }
   const RenderOptions& options() const { return opt_; }
@@ -92,7 +91,7 @@ private:
   // Brings field, macro-cells and renderer up to date; returns whether anything changed.
   bool refresh();
 
-  CpuTrainer& trainer_;
+  Trainer& trainer_;
   Int3 dims_;
   Vec3f box_;
   TransferFunction tf_;

@@ -41,7 +41,7 @@ std::string preview_path(const std::string& dir, int64_t step) {
   return join_path(dir, fmt::format("step_{:06d}.png", step));
 }
 
-TrainPreview::TrainPreview(const PreviewOptions& o, CpuTrainer& trainer, Int3 dims) : o_(o) {
+TrainPreview::TrainPreview(const PreviewOptions& o, Trainer& trainer, Int3 dims) : o_(o) {
   check_preview_options(o_);
   RenderOptions ro;
   ro.width = o_.width;

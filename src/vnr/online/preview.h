@@ -2,7 +2,7 @@
 // Training previews: the online loop (online_loop.h) without a window. Every `every` training steps
 // the current model is rendered (macro-cells from the training samples so far) and written to
 // DIR/step_NNNNNN.png (step zero-padded to 6 digits, wider past 999999), atomically. `vnr train
-// --preview-every N --preview-dir DIR` drives it from its own training loop.
+// --preview-every N --preview-dir DIR` runs it as side work of its TrainingSession.
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -29,9 +29,9 @@ std::string preview_path(const std::string& dir, int64_t step);
 class TrainPreview {
 public:
   // Checks the options (check_preview_options). Uses the trainer's online value ranges as macro-cells
-  // when it records them (CpuTrainer::enable_online_ranges), else one macro-cell over the box. trainer
+  // when it records them (Trainer::enable_online_ranges), else one macro-cell over the box. trainer
   // must outlive the preview; dims = the volume being trained.
-  TrainPreview(const PreviewOptions& o, CpuTrainer& trainer, Int3 dims);
+  TrainPreview(const PreviewOptions& o, Trainer& trainer, Int3 dims);
   // Call after each training step with the number of steps done: at multiples of `every` renders and
   // writes the preview. Returns the seconds it took (0 when it wrote nothing), so that a caller can
   // leave preview time out of its training throughput.

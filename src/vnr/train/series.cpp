@@ -11,6 +11,8 @@
 #include "vnr/core/progress.h"
 #include "vnr/core/rng.h"
 #include "vnr/nn/config.h"
+#include "vnr/train/make_trainer.h"
+#include "vnr/train/session.h"
 
 namespace vnr {
 namespace {
@@ -126,27 +128,25 @@ std::vector<TimestepResult> train_series(Model& model, const std::vector<int>& t
     // A fresh trainer: fresh Adam state and learning-rate schedule, step counter from 0.
     TrainOptions to = opts.train;
     to.seed = opts.train.seed + uint32_t(i);
-    CpuTrainer trainer(net, std::make_shared<InCoreSampler>(vol), to);
+    SessionOptions so;
+    so.divergence_message = [t](int64_t step, float loss) {
+      return fmt::format("training diverged at step {} of timestep {} (loss {}); try a smaller learning rate", step,
+                         t, loss);
+    };
+    TrainingSession session(model, make_trainer(Device::Cpu, net, std::make_shared<InCoreSampler>(vol), &vol, to),
+                            so);
+    Trainer& trainer = session.trainer();
     if (opts.macrocell_size > 0) trainer.enable_online_ranges(vol.dims, opts.macrocell_size);
-    int64_t budget = r.warm_started && opts.warm_steps >= 0 ? opts.warm_steps : opts.steps;
-    if (budget < 0) budget = INT64_MAX;
-    auto t0 = Clock::now();
-    float loss = 0;
-    while (r.steps < budget) {
-      loss = trainer.step();
-      ++r.steps;
-      if (!std::isfinite(loss))
-        fail("training diverged at step {} of timestep {} (loss {}); try a smaller learning rate", r.steps, t, loss);
-      if (hooks.on_step) hooks.on_step(t, r.steps, loss);
-      if (hooks.stop && hooks.stop()) {
-        r.interrupted = true;
-        break;
-      }
-      if (opts.seconds > 0 && seconds_since(t0) >= opts.seconds) break;
-    }
-    r.seconds = seconds_since(t0);
-    r.final_loss = loss;
-    r.loss_history = trainer.loss_history();
+    const int64_t budget = r.warm_started && opts.warm_steps >= 0 ? opts.warm_steps : opts.steps;
+    session.add_step_callback([&](const TrainingProgress& p) {
+      if (hooks.on_step) hooks.on_step(t, p.step, p.loss);
+      if (hooks.stop && hooks.stop()) session.request_stop();
+    });
+    r.steps = session.run(budget, opts.seconds);
+    r.interrupted = session.stop_requested();
+    r.seconds = session.training_seconds();
+    r.final_loss = session.last_loss();
+    r.loss_history = trainer.losses();
     r.eval = evaluate(net, vol, opts.ssim);
 
     describe_model(model, vol);
@@ -213,16 +213,58 @@ int64_t steps_to_recover(const std::vector<ProbePoint>& probes, int64_t switch_s
   return -1;
 }
 
-ContinuousResult train_continuous(Model& model, const std::vector<int>& timesteps, const FrameLoader& load,
-                                  const ContinuousOptions& opts, const SeriesHooks& hooks,
-                                  const std::function<void(const WindowResult&, const Model&)>& done) {
+namespace {
+
+void check_continuous(const Model& model, const std::vector<int>& timesteps, const ContinuousOptions& opts) {
   if (!model.net) fail("train_continuous: the model has no network");
   if (timesteps.empty()) fail("train_continuous: no timesteps selected");
   if (opts.switch_every <= 0) fail("continuous training needs a positive switch interval (steps per timestep), got {}", opts.switch_every);
   if (opts.probe_every <= 0) fail("the probe interval must be positive, got {}", opts.probe_every);
   if (opts.macrocell_size < 0) fail("macro-cell size must be 0 (none) or positive, got {}", opts.macrocell_size);
   if (!(opts.recovery_tolerance_db >= 0)) fail("the recovery tolerance must be >= 0 dB, got {}", opts.recovery_tolerance_db);
+}
 
+// The recovery of the switch into window w from its probes (`mine`, in step order) and the window's
+// training seconds at each of them.
+void measure_recovery(WindowResult& w, const std::vector<ProbePoint>& mine, const std::vector<double>& seconds_at,
+                      double tolerance_db) {
+  w.recovery_steps = steps_to_recover(mine, w.first_step, w.psnr_before - tolerance_db);
+  if (w.recovery_steps >= 0)
+    for (size_t i = 0; i < mine.size(); ++i)
+      if (mine[i].step - w.first_step == w.recovery_steps) {
+        w.recovery_seconds = seconds_at[i];
+        break;
+      }
+}
+
+// model.{dims, source_dtype, lo, hi, training, macrocells} after window k.
+void describe_window(Model& model, const Volume& cur, const WindowResult& w, size_t k, const ContinuousOptions& opts,
+                     float learning_rate, const Trainer& trainer) {
+  describe_model(model, cur);
+  model.training = {{"steps", w.steps},
+                    {"seconds", w.seconds},
+                    {"interrupted", w.interrupted},
+                    {"batch", opts.train.batch},
+                    {"seed", opts.train.seed},
+                    {"final_loss", w.final_loss},
+                    {"psnr", w.eval.psnr},
+                    {"threads", num_threads()},
+                    {"timestep", w.timestep},
+                    {"series_index", k},
+                    {"continuous", true},
+                    {"first_step", w.first_step},
+                    {"learning_rate", learning_rate}};
+  if (opts.ssim) model.training["ssim"] = w.eval.ssim;
+  model.macrocells.reset();
+  if (trainer.has_online_ranges()) model.macrocells = trainer.online_ranges();
+}
+
+}  // namespace
+
+ContinuousResult train_continuous(Model& model, const std::vector<int>& timesteps, const FrameLoader& load,
+                                  const ContinuousOptions& opts, const SeriesHooks& hooks,
+                                  const std::function<void(const WindowResult&, const Model&)>& done) {
+  check_continuous(model, timesteps, opts);
   ContinuousResult res;
   // One network with a constant learning rate, same parameters.
   res.config = fixed_learning_rate_config(model.net->config(), opts.learning_rate);
@@ -244,7 +286,15 @@ ContinuousResult train_continuous(Model& model, const std::vector<int>& timestep
   res.probe_voxels = probe.size();
 
   auto sampler = std::make_shared<SwitchableSampler>(view_of(cur));
-  CpuTrainer trainer(net, sampler, opts.train);  // ONE optimizer for the whole run
+  // ONE trainer (one optimizer) for the whole run; the session's step loop runs every window.
+  int current_timestep = timesteps[0];
+  SessionOptions so;
+  so.divergence_message = [&](int64_t step, float loss) {
+    return fmt::format("training diverged at step {} (timestep {}, loss {}); try a smaller learning rate", step,
+                       current_timestep, loss);
+  };
+  TrainingSession session(model, make_trainer(Device::Cpu, net, sampler, nullptr, opts.train), so);
+  Trainer& trainer = session.trainer();
   int64_t global = 0;
   double last_probe = 0;  // probe PSNR after the latest step, on the current target
   for (size_t k = 0; k < timesteps.size(); ++k) {
@@ -270,57 +320,34 @@ ContinuousResult train_continuous(Model& model, const std::vector<int>& timestep
     w.psnr_after = p0;
     std::vector<double> seconds_at;  // training seconds of the window at each of its probes
     seconds_at.push_back(0);
-    float loss = 0;
-    for (int64_t s = 1; s <= opts.switch_every; ++s) {
-      auto t0 = Clock::now();
-      loss = trainer.step();
-      w.seconds += seconds_since(t0);
-      ++global;
-      ++w.steps;
-      res.loss_history.push_back(loss);
+    current_timestep = w.timestep;
+    // After every step (side work: the probes are not training time): histories, hooks, the stop poll, probes.
+    session.add_side_work([&](const TrainingProgress& p) {
+      const int64_t s = p.step - w.first_step;
+      w.seconds = p.elapsed;
+      res.loss_history.push_back(p.loss);
       res.learning_rate_history.push_back(trainer.current_learning_rate());
-      if (!std::isfinite(loss))
-        fail("training diverged at step {} (timestep {}, loss {}); try a smaller learning rate", global, w.timestep, loss);
-      if (hooks.on_step) hooks.on_step(w.timestep, s, loss);
+      if (!std::isfinite(p.loss)) return;  // the session fails with the divergence message
+      if (hooks.on_step) hooks.on_step(w.timestep, s, p.loss);
       w.interrupted = hooks.stop && hooks.stop();
       if (s % opts.probe_every == 0 || s == opts.switch_every || w.interrupted) {
-        res.probes.push_back({global, w.timestep, probe.psnr(net, cur)});
+        res.probes.push_back({p.step, w.timestep, probe.psnr(net, cur)});
         seconds_at.push_back(w.seconds);
       }
-      if (w.interrupted) break;
-    }
+      if (w.interrupted) session.request_stop();
+    });
+    w.steps = session.run(opts.switch_every);
+    session.clear_side_work();
+    global = session.steps_done();
+    const float loss = session.last_loss();
     last_probe = res.probes.back().psnr;
     w.psnr_end = last_probe;
     w.final_loss = loss;
-    if (w.has_switch) {
-      std::vector<ProbePoint> mine(res.probes.begin() + std::ptrdiff_t(probes_before), res.probes.end());
-      w.recovery_steps = steps_to_recover(mine, w.first_step, w.psnr_before - opts.recovery_tolerance_db);
-      if (w.recovery_steps >= 0)
-        for (size_t i = 0; i < mine.size(); ++i)
-          if (mine[i].step - w.first_step == w.recovery_steps) {
-            w.recovery_seconds = seconds_at[i];
-            break;
-          }
-    }
+    if (w.has_switch)
+      measure_recovery(w, std::vector<ProbePoint>(res.probes.begin() + std::ptrdiff_t(probes_before), res.probes.end()),
+                       seconds_at, opts.recovery_tolerance_db);
     w.eval = evaluate(net, cur, opts.ssim);
-
-    describe_model(model, cur);
-    model.training = {{"steps", w.steps},
-                      {"seconds", w.seconds},
-                      {"interrupted", w.interrupted},
-                      {"batch", opts.train.batch},
-                      {"seed", opts.train.seed},
-                      {"final_loss", w.final_loss},
-                      {"psnr", w.eval.psnr},
-                      {"threads", num_threads()},
-                      {"timestep", w.timestep},
-                      {"series_index", k},
-                      {"continuous", true},
-                      {"first_step", w.first_step},
-                      {"learning_rate", res.learning_rate}};
-    if (opts.ssim) model.training["ssim"] = w.eval.ssim;
-    model.macrocells.reset();
-    if (trainer.has_online_ranges()) model.macrocells = trainer.online_ranges();
+    describe_window(model, cur, w, k, opts, res.learning_rate, trainer);
     res.windows.push_back(w);
     if (done) done(res.windows.back(), model);
     if (w.interrupted) break;

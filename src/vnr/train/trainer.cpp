@@ -195,6 +195,17 @@ std::array<CpuTrainer::Phase, 3> CpuTrainer::phases() const {
   return {{{"sample_encode_mlp", "sample+encode+MLP"}, {"grid_backward", "grid backward"}, {"optimizer", "optimizer"}}};
 }
 
+void CpuTrainer::run(int64_t n_steps) {
+  for (int64_t i = 0; i < n_steps; ++i) step();
+}
+
+std::vector<Trainer::PhaseTime> CpuTrainer::last_step_phases() const {
+  std::vector<PhaseTime> out;
+  const std::array<Phase, 3> names = phases();
+  for (int p = 0; p < 3; ++p) out.push_back({names[p].key, names[p].name, phase_seconds[p]});
+  return out;
+}
+
 void CpuTrainer::enable_online_ranges(Int3 dims, int cell_size) {
   thread_ranges_.assign(size_t(n_threads_), ValueRangeGrid(dims, cell_size));
 }

@@ -7,6 +7,7 @@
 #include "vnr/nn/network.h"
 #include "vnr/nn/optimizer.h"
 #include "vnr/train/sampler.h"
+#include "vnr/train/trainer_backend.h"
 #include "vnr/volume/value_range_grid.h"
 
 namespace vnr {
@@ -19,8 +20,8 @@ struct TrainOptions {
   // master weights and Adam stay fp32.
   Precision precision = Precision::FP32;
   // Grids whose gradient takes at most this many bytes are scattered by every thread into its own
-  // copy, chunk by chunk while the chunk's data is in cache, and the copies summed (small config:
-  // 5-10 % faster steps than a separate scatter pass); larger grids are scattered after the chunks,
+  // copy, chunk by chunk while the chunk's data is in cache, and the copies summed (faster than a
+  // separate scatter pass for small grids); larger grids are scattered after the chunks,
   // each level by one thread (no private copies of tens of MiB).
   uint64_t private_grid_grad_max_bytes = uint64_t(1) << 20;
   // The step's last chunks go one at a time to whichever thread is free, so a core slowed by another
@@ -31,9 +32,8 @@ struct TrainOptions {
 };
 
 // --precision of training: "fp32", "bf16" (an error where Network::bf16_training_supported() is
-// false) or "auto": bf16 where supported and the MLP is at least kBf16TrainMinWidth wide. (Measured,
-// bonsai steps: 32 wide 1.1x, 64 wide 1.4x, 128 wide 1.4-1.6x faster in bf16; 16 wide 1.6x slower,
-// its layout conversions costing more than its tiny products save. README, "bf16 training".)
+// false) or "auto": bf16 where supported and the MLP is at least kBf16TrainMinWidth wide (narrower
+// MLPs train slower in bf16: their layout conversions cost more than their tiny products save).
 constexpr uint32_t kBf16TrainMinWidth = 32;
 Precision resolve_training_precision(const std::string& name, const Network& net);
 
@@ -51,20 +51,30 @@ Precision resolve_training_precision(const std::string& name, const Network& net
 //     two threads write the same entry (no atomics);
 //  3. the per-thread and per-shared-chunk gradients are summed in a fixed order, then one fused Adam
 //     pass updates all parameters.
-class CpuTrainer {
+class CpuTrainer final : public Trainer {
 public:
   CpuTrainer(Network& net, std::shared_ptr<Sampler> sampler, TrainOptions opts);
   float step();  // one training step; returns the mean loss of its batch
-  uint64_t steps_done() const { return adam_.steps_done(); }
-  float current_learning_rate() const { return adam_.current_learning_rate(); }
+  uint64_t steps_done() const override { return adam_.steps_done(); }
+  float current_learning_rate() const override { return adam_.current_learning_rate(); }
   const std::vector<float>& loss_history() const { return loss_history_; }
-  Network& network() { return net_; }
+  Network& network() override { return net_; }
   const TrainOptions& options() const { return opts_; }
   // Online macro-cells (paper "Macro-Cell Optimization"): from now on every training sample widens the
-  // value range of its macro-cells (compat.md B.6); each thread keeps its own grid, merged on request.
-  void enable_online_ranges(Int3 dims, int cell_size = 16);
-  bool has_online_ranges() const { return !thread_ranges_.empty(); }
-  ValueRangeGrid online_ranges() const;
+  // value range of its macro-cells (docs/semantics.md B.6); each thread keeps its own grid, merged on request.
+  void enable_online_ranges(Int3 dims, int cell_size = 16) override;
+  bool has_online_ranges() const override { return !thread_ranges_.empty(); }
+  ValueRangeGrid online_ranges() const override;
+  // The Trainer interface: run(n) is n step()s; the parameters live in the Network (download: no-op).
+  Device device() const override { return Device::Cpu; }
+  void run(int64_t n_steps) override;
+  float last_loss() const override { return loss_history_.empty() ? 0.f : loss_history_.back(); }
+  std::vector<float> losses() const override { return loss_history_; }
+  void download() override {}
+  int64_t batch() const override { return opts_.batch; }
+  uint32_t seed() const override { return opts_.seed; }
+  std::optional<Precision> mlp_precision() const override { return opts_.precision; }
+  std::vector<PhaseTime> last_step_phases() const override;
   // Seconds spent in each phase of the last step, and what each one holds (report key, printed name):
   // sample+encode+MLP, grid backward, optimizer; a grid scattered per chunk (private copies) counts in
   // the first, except the shared chunks' share, which is the second.

@@ -1,0 +1,93 @@
+#include "vnr/train/make_trainer.h"
+#include <algorithm>
+#include <cmath>
+#include "vnr/core/error.h"
+#include "vnr/train/training_data.h"
+
+namespace vnr {
+namespace {
+
+// The GPU backend: cuda::GpuTrainer (plain C++ API; without CUDA its constructor fails with one line).
+class CudaTrainer final : public Trainer {
+public:
+  CudaTrainer(Network& net, const Volume& vol, const TrainOptions& opts, cuda::MlpPath mlp)
+      : net_(net), batch_(opts.batch), seed_(opts.seed),
+        gpu_(std::make_unique<cuda::GpuTrainer>(net, view_of(vol),
+                                                cuda::GpuTrainOptions{opts.batch, opts.seed, kChunk, mlp})) {}
+  Device device() const override { return Device::Cuda; }
+  bool asynchronous() const override { return true; }
+  void run(int64_t n_steps) override {
+    for (int64_t left = n_steps; left > 0;) {  // GpuTrainer::run takes an int
+      const int k = int(std::min<int64_t>(left, 1 << 30));
+      gpu_->run(k);
+      left -= k;
+    }
+  }
+  float last_loss() const override { return gpu_->steps_done() ? gpu_->last_loss() : 0.f; }
+  std::vector<float> losses() const override { return gpu_->losses(); }
+  uint64_t steps_done() const override { return gpu_->steps_done(); }
+  float current_learning_rate() const override { return gpu_->current_learning_rate(); }
+  void enable_online_ranges(Int3 dims, int cell_size) override { gpu_->enable_online_ranges(dims, cell_size); }
+  bool has_online_ranges() const override { return gpu_->has_online_ranges(); }
+  ValueRangeGrid online_ranges() const override { return gpu_->online_ranges(); }
+  void download() override { gpu_->download(); }
+  Network& network() override { return net_; }
+  int64_t batch() const override { return batch_; }
+  uint32_t seed() const override { return seed_; }
+  std::optional<Precision> mlp_precision() const override { return std::nullopt; }
+  void set_phase_timing(bool on) override {
+    timing_ = on;
+    gpu_->set_profiling(on);
+  }
+  std::vector<PhaseTime> last_step_phases() const override {
+    if (!timing_) return {};
+    const std::vector<double> s = gpu_->phase_seconds();
+    static const char* const keys[] = {"sample_encode", "mlp_forward_loss_backward", "grid_backward", "optimizer"};
+    static const char* const names[] = {"sample+encode", "MLP fwd+loss+bwd", "grid backward", "Adam"};
+    std::vector<PhaseTime> out;
+    for (size_t i = 0; i < s.size() && i < 4; ++i) out.push_back({keys[i], names[i], s[i]});
+    return out;
+  }
+  std::string device_summary() const override {
+    return fmt::format("{} (MLP: {})", cuda::devices().at(0).name, cuda::mlp_path_name(gpu_->mlp_path()));
+  }
+
+private:
+  Network& net_;
+  int64_t batch_;
+  uint32_t seed_;
+  bool timing_ = false;
+  std::unique_ptr<cuda::GpuTrainer> gpu_;  // its queries synchronise (non-const); the wrapper's do not change it
+};
+
+}  // namespace
+
+std::unique_ptr<Trainer> make_trainer(Device device, Network& net, std::shared_ptr<Sampler> sampler,
+                                      const Volume* in_memory, const TrainOptions& opts, cuda::MlpPath mlp) {
+  if (device == Device::Cuda) {
+    if (!in_memory) fail("the GPU trainer trains volumes held in memory");
+    return std::make_unique<CudaTrainer>(net, *in_memory, opts, mlp);
+  }
+  if (!sampler) fail("the CPU trainer needs a sampler");
+  return std::make_unique<CpuTrainer>(net, std::move(sampler), opts);
+}
+
+DeviceChoice choose_training_device(const std::string& asked_name, const Network& net, Int3 dims, bool in_memory,
+                                    const std::string& sampler_name, int64_t batch,
+                                    const std::string& cpu_only_reason) {
+  const Device asked = cuda::resolve_device(asked_name);
+  if (asked == Device::Cpu) return {};
+  std::string why_not;
+  if (!in_memory) why_not = "--device cuda trains volumes held in memory (--sampler incore); this run samples " + sampler_name;
+  if (!cpu_only_reason.empty()) why_not = cpu_only_reason;
+  const uint64_t need = cuda::GpuTrainer::bytes_needed(net, dims.count(), batch);
+  if (why_not.empty() && cuda::free_memory_bytes() < need)
+    why_not = fmt::format("the GPU has {} free, training needs about {} for this volume and batch",
+                          byte_size_text(double(cuda::free_memory_bytes())), byte_size_text(double(need)));
+  if (why_not.empty()) why_not = cuda::unsupported_reason(net);
+  if (why_not.empty()) return {Device::Cuda, ""};
+  if (asked_name == "cuda") fail("{}; use --device cpu", why_not);
+  return {Device::Cpu, "training on the CPU: " + why_not};
+}
+
+}  // namespace vnr

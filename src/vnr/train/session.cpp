@@ -1,0 +1,261 @@
+#include "vnr/train/session.h"
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include "vnr/core/error.h"
+#include "vnr/core/fileio.h"
+#include "vnr/core/parallel.h"
+#include "vnr/core/progress.h"
+
+namespace vnr {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double upper_median(std::vector<double> v) {  // as the CLI's reports: the upper median, 0 for none
+  std::sort(v.begin(), v.end());
+  return v.empty() ? 0 : v[v.size() / 2];
+}
+
+}  // namespace
+
+TrainingSession::TrainingSession(Model& model, std::unique_ptr<Trainer> trainer, SessionOptions opts)
+    : model_(&model), trainer_(std::move(trainer)), opts_(std::move(opts)) {
+  check();
+}
+
+TrainingSession::TrainingSession(Model model, std::shared_ptr<TrainingData> data, std::unique_ptr<Trainer> trainer,
+                                 SessionOptions opts)
+    : owned_model_(std::make_unique<Model>(std::move(model))), model_(owned_model_.get()), data_(std::move(data)),
+      trainer_(std::move(trainer)), opts_(std::move(opts)) {
+  check();
+}
+
+void TrainingSession::check() const {
+  if (!trainer_) fail("a training session needs a trainer");
+  if (!model_->net || &trainer_->network() != model_->net.get()) fail("the trainer must train the session's model");
+  if (opts_.checkpoint_every < 0) fail("--checkpoint-every must be non-negative, got {}", opts_.checkpoint_every);
+  if (opts_.checkpoint_every > 0 && opts_.output.empty()) fail("checkpoints need an output path");
+}
+
+
+TrainingSession::~TrainingSession() = default;
+
+void TrainingSession::pause() { paused_.store(true); }
+
+void TrainingSession::resume() {
+  {
+    std::lock_guard<std::mutex> lock(pause_mutex_);
+    paused_.store(false);
+  }
+  pause_cv_.notify_all();
+}
+
+void TrainingSession::wait_while_paused() {
+  std::unique_lock<std::mutex> lock(pause_mutex_);
+  // request_stop() may come from a signal handler, which cannot notify: poll it.
+  while (paused_.load() && !stop_requested()) pause_cv_.wait_for(lock, std::chrono::milliseconds(20));
+}
+
+void TrainingSession::run_side_work(const std::function<void()>& fn) {
+  auto t0 = Clock::now();
+  fn();
+  side_seconds_ += seconds_since(t0);
+}
+
+float TrainingSession::step() {
+  run(1);
+  return loss_;
+}
+
+int64_t TrainingSession::run(int64_t steps, double seconds) {
+  if (steps < 0) steps = INT64_MAX;
+  int64_t done = 0;
+  auto end_run = [&] {
+    train_seconds_ += run_seconds_;
+    run_seconds_ = 0;
+  };
+  try {
+    run_steps(steps, seconds, &done);
+  } catch (const std::exception& e) {
+    // The data went away under us (or similar): keep the training done so far.
+    run_seconds_ = seconds_since(run_t0_) - run_excluded_;
+    if (steps_ == 0 || opts_.output.empty()) {
+      end_run();
+      throw;
+    }
+    record();
+    model_->training["error"] = e.what();
+    end_run();
+    save_model(opts_.output, *model_);
+    fail("{}; the model after {} steps was saved to {} (not evaluated)", e.what(), steps_, opts_.output);
+  }
+  end_run();
+  return done;
+}
+
+// The loop: step (GPU: a group) -> side work -> divergence check -> callbacks -> checkpoint -> limits.
+void TrainingSession::run_steps(int64_t steps, double seconds, int64_t* done) {
+  run_t0_ = Clock::now();
+  double& excluded = run_excluded_;  // side work and pauses of this run
+  excluded = 0;
+  run_seconds_ = 0;
+  int64_t group = 1;  // GPU: steps enqueued between synchronisations, grown to ~0.1 s
+  const bool async = trainer_->asynchronous();
+  const int64_t every = opts_.checkpoint_every;
+  while (*done < steps && !stop_requested()) {
+    if (paused_.load()) {
+      auto p0 = Clock::now();
+      wait_while_paused();
+      excluded += seconds_since(p0);
+      if (stop_requested()) break;
+    }
+    const auto t_step = Clock::now();
+    int64_t k = async ? std::min(group, steps - *done) : 1;
+    if (every > 0) k = std::min(k, every - steps_ % every);
+    trainer_->run(k);
+    loss_ = trainer_->last_loss();  // synchronises
+    const double per = seconds_since(t_step) / double(k);
+    for (int64_t i = 0; i < k; ++i) step_seconds_.push_back(per);
+    steps_ += k;
+    *done += k;
+    if (async && per * double(group) < 0.1 && group < 1024) group *= 2;
+    TrainingProgress p;
+    p.step = steps_;
+    p.loss = loss_;
+    p.elapsed = run_seconds_ = seconds_since(run_t0_) - excluded;
+    p.samples_per_second = double(*done) * double(trainer_->batch()) / p.elapsed;
+    if (!side_work_.empty()) {
+      const auto s0 = Clock::now();
+      for (const StepCallback& cb : side_work_) cb(p);
+      const double s = seconds_since(s0);
+      excluded += s;
+      side_seconds_ += s;
+    }
+    if (!std::isfinite(loss_))
+      fail("{}", opts_.divergence_message
+                     ? opts_.divergence_message(steps_, loss_)
+                     : fmt::format("training diverged at step {} (loss {}); try a smaller learning rate", steps_, loss_));
+    for (const StepCallback& cb : step_callbacks_) cb(p);
+    if (every > 0 && steps_ % every == 0 && *done < steps) {
+      run_seconds_ = p.elapsed;
+      save_checkpoint();
+    }
+    if (seconds > 0 && p.elapsed >= seconds) break;
+  }
+  run_seconds_ = seconds_since(run_t0_) - excluded;
+}
+
+void TrainingSession::record() {
+  const std::optional<Precision> precision = trainer_->mlp_precision();
+  model_->training = {{"steps", steps_},
+                      {"seconds", train_seconds_ + run_seconds_},
+                      {"interrupted", stop_requested()},
+                      {"batch", trainer_->batch()},
+                      {"seed", trainer_->seed()},
+                      {"final_loss", loss_},
+                      {"threads", num_threads()},
+                      {"sampler", data_ ? data_->kind : opts_.sampler_name},
+                      {"device", device_name(trainer_->device())},
+                      {"precision", precision ? Json(precision_name(*precision)) : Json(nullptr)}};
+  trainer_->download();  // the model file is written from net.params
+  if (trainer_->has_online_ranges()) model_->macrocells = trainer_->online_ranges();
+}
+
+void TrainingSession::save_checkpoint() {
+  if (opts_.output.empty()) fail("checkpoints need an output path");
+  record();
+  model_->training["checkpoint"] = true;
+  save_model(opts_.output, *model_);
+}
+
+TrainingResult TrainingSession::finish(bool with_ssim, int64_t eval_samples) {
+  if (!data_) fail("finish() needs a session opened on training data (open_training_session)");
+  if (opts_.output.empty()) fail("finish() needs an output path");
+  const TrainingData& data = *data_;
+  Network& net = *model_->net;
+  const Device dev = trainer_->device();
+  TrainingResult r;
+  r.steps = steps_;
+  r.seconds = train_seconds_;
+  r.final_loss = loss_;
+  record();
+  // Exact over the volume in memory; a volume that is not in memory gets a PSNR estimate from random
+  // voxels (a full pass can take longer than the training did).
+  Json evaluation;
+  if (data.vol) {
+    EvalResult ev = evaluate(net, *data.vol, with_ssim, dev);
+    r.psnr = ev.psnr;
+    r.max_abs_error = ev.max_abs_error;
+    r.max_abs_error_original = ev.max_abs_error_original;
+    if (with_ssim) r.ssim = ev.ssim;
+    evaluation = {{"method", "full"}};
+  } else if (eval_samples > 0) {
+    const int64_t n = std::min<int64_t>(eval_samples, int64_t(data.dims.count()));
+    SampledEval ev = evaluate_sampled(net, data.desc, data.lo, data.hi, n, trainer_->seed() + 1, data.load, dev);
+    r.psnr = ev.psnr;
+    r.max_abs_error = ev.max_abs_error;
+    r.max_abs_error_original = ev.max_abs_error_original;
+    evaluation = {{"method", "sampled"}, {"samples", ev.samples}, {"psnr_ci95", {ev.psnr_ci95_lo, ev.psnr_ci95_hi}}};
+    r.evaluation_note = fmt::format(" (estimated from {} random voxels, 95% interval {:.2f}..{:.2f}; `vnr eval` for "
+                                    "the full volume)",
+                                    ev.samples, ev.psnr_ci95_lo, ev.psnr_ci95_hi);
+  } else {
+    r.psnr = r.max_abs_error = r.max_abs_error_original = std::nan("");
+    evaluation = {{"method", "none"}};
+    r.evaluation_note = " (not evaluated: --eval-samples 0)";
+  }
+  if (std::isfinite(r.psnr)) model_->training["psnr"] = r.psnr;
+  if (r.ssim) model_->training["ssim"] = *r.ssim;
+  save_model(opts_.output, *model_);
+  r.model_bytes = file_size(opts_.output);
+  r.compression_ratio = double(data.source_bytes()) / double(r.model_bytes);
+  r.samples_per_second = double(r.steps) * double(trainer_->batch()) / r.seconds;
+  r.report = report_json(r, evaluation);
+  return r;
+}
+
+// The keys of `vnr train --report` (tests/test_cli.cpp and the docs rely on them).
+Json TrainingSession::report_json(const TrainingResult& r, const Json& evaluation) const {
+  const TrainingData& data = *data_;
+  const Network& net = *model_->net;
+  const std::optional<Precision> precision = trainer_->mlp_precision();
+  Json report = {{"steps", r.steps},
+                 {"seconds", r.seconds},
+                 {"seconds_per_step", r.steps > 0 ? r.seconds / double(r.steps) : 0.0},
+                 {"median_step_seconds", upper_median(step_seconds_)},
+                 {"step_seconds", step_seconds_},
+                 {"samples_per_second", r.samples_per_second},
+                 {"final_loss", r.final_loss},
+                 {"psnr", r.psnr},
+                 {"ssim", r.ssim ? Json(*r.ssim) : Json(nullptr)},
+                 {"evaluation", evaluation},
+                 {"max_abs_error", r.max_abs_error},
+                 {"n_params", net.n_params()},
+                 {"model_bytes", r.model_bytes},
+                 {"volume_bytes", data.source_bytes()},
+                 {"compression_ratio", r.compression_ratio},
+                 {"batch", trainer_->batch()},
+                 {"threads", num_threads()},
+                 {"sampler", data.kind},
+                 {"memory_budget", data.memory_budget},
+                 {"loss_history", trainer_->losses()},
+                 {"device", device_name(trainer_->device())},
+                 {"precision", precision ? Json(precision_name(*precision)) : Json(nullptr)},
+                 {"preview_seconds", side_seconds_},
+                 {"config", net.config_json()}};
+  if (data.out_of_core) {
+    const OutOfCoreSampler& s = *data.out_of_core;
+    report["out_of_core"] = {{"blocks", s.blocks()},
+                             {"refresh", s.refresh()},
+                             {"block_dims", {s.block_dims().x, s.block_dims().y, s.block_dims().z}},
+                             {"bytes_held", s.bytes_held()},
+                             {"fill_seconds", s.fill_seconds()},
+                             {"io_wait_seconds", s.io_wait_seconds()},
+                             {"blocks_loaded", s.blocks_loaded()},
+                             {"bytes_read", data.raw_file->bytes_read()}};
+  }
+  return report;
+}
+
+}  // namespace vnr

@@ -1,0 +1,160 @@
+#pragma once
+// TrainingSession: the one training loop every front end drives (`vnr train`, time series, online
+// training, a viewer, the Python module). It runs a Trainer backend (CPU or GPU) on a model and:
+//   - step() / run(steps, seconds): until the steps are done, the time is up or a stop is requested;
+//   - pause() / resume() / request_stop(): thread-safe (request_stop is also async-signal-safe, so a
+//     Ctrl-C handler may call it); a stop takes effect after the current step (GPU: step group);
+//   - step callbacks with (step, loss, samples/s, elapsed training seconds), and "side work" callbacks
+//     (previews, probes) whose time is left out of the training time;
+//   - checkpoints: the model written atomically every N steps;
+//   - the error policy: an exception after some steps saves the model so far (with the error in its
+//     training record) and fails with one line saying so;
+//   - finish(): the final evaluation, the model saved and the record of `vnr train --report`.
+// GPU steps are enqueued in groups between synchronisations, the group doubled while it takes under
+// 0.1 s, so callbacks see every group's last step.
+#include <atomic>
+#include <chrono>
+#include <condition_variable>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <vector>
+#include "vnr/core/json.h"
+#include "vnr/train/model_io.h"
+#include "vnr/train/trainer_backend.h"
+#include "vnr/train/training_data.h"
+
+namespace vnr {
+
+struct TrainingProgress {
+  int64_t step = 0;                 // steps done in the session
+  float loss = 0;                   // of the last step
+  double samples_per_second = 0;    // over this run() so far
+  double elapsed = 0;               // training seconds of this run() (no side work, no pauses)
+};
+using StepCallback = std::function<void(const TrainingProgress&)>;
+
+struct SessionOptions {
+  std::string output;            // model file for checkpoints, an error save and finish(); "" = none
+  int64_t checkpoint_every = 0;  // steps between atomic model writes (0: only at the end); needs output
+  std::string sampler_name = "incore";  // the training record's "sampler"
+  // The error message of a non-finite loss; default: "training diverged at step S (loss L); try a
+  // smaller learning rate".
+  std::function<std::string(int64_t step, float loss)> divergence_message;
+};
+
+// What finish() measured, and the record of `vnr train --report`.
+struct TrainingResult {
+  int64_t steps = 0;
+  double seconds = 0, samples_per_second = 0;
+  float final_loss = 0;
+  double psnr = 0, max_abs_error = 0, max_abs_error_original = 0;  // NaN when not evaluated
+  std::optional<double> ssim;
+  std::string evaluation_note;  // " (estimated from N random voxels, ...)" etc., empty for a full evaluation
+  uint64_t model_bytes = 0;
+  double compression_ratio = 0;
+  Json report;
+};
+
+class TrainingSession {
+public:
+  // A session over `model` (its network is the trainer's), which must outlive the session.
+  TrainingSession(Model& model, std::unique_ptr<Trainer> trainer, SessionOptions opts = {});
+  // A session that owns its model and training data (open_training_session).
+  TrainingSession(Model model, std::shared_ptr<TrainingData> data, std::unique_ptr<Trainer> trainer,
+                  SessionOptions opts);
+  TrainingSession(const TrainingSession&) = delete;
+  TrainingSession& operator=(const TrainingSession&) = delete;
+  ~TrainingSession();
+
+  // Runs until `steps` more steps are done (< 0: no limit), `seconds` of training time have passed
+  // (0: no limit) or a stop is requested. Returns the steps this call ran. One run() at a time.
+  int64_t run(int64_t steps, double seconds = 0);
+  float step();  // run(1); the step's loss
+
+  void request_stop() { stop_.store(true, std::memory_order_relaxed); }
+  bool stop_requested() const { return stop_.load(std::memory_order_relaxed); }
+  void pause();
+  void resume();
+  bool paused() const { return paused_.load(); }
+
+  // Callbacks run on the thread of run(), in the order added; add or clear them between runs only.
+  void add_step_callback(StepCallback cb) { step_callbacks_.push_back(std::move(cb)); }
+  void add_side_work(StepCallback cb) { side_work_.push_back(std::move(cb)); }
+  void clear_callbacks() { step_callbacks_.clear(); }
+  void clear_side_work() { side_work_.clear(); }
+  // Runs fn as side work (its time left out of the training time, counted in side_seconds()).
+  void run_side_work(const std::function<void()>& fn);
+
+  int64_t steps_done() const { return steps_; }
+  float last_loss() const { return loss_; }
+  double training_seconds() const { return train_seconds_; }  // all runs so far
+  double side_seconds() const { return side_seconds_; }
+  const std::vector<double>& step_seconds() const { return step_seconds_; }
+  Trainer& trainer() { return *trainer_; }
+  Model& model() { return *model_; }
+  Network& network() { return *model_->net; }
+  const TrainingData* data() const { return data_.get(); }
+  const SessionOptions& options() const { return opts_; }
+
+  // Writes the training record into model().training (steps, seconds, loss, batch, seed, sampler,
+  // device, precision, interrupted) and the trainer's parameters and online ranges into the model.
+  void record();
+  void save_checkpoint();  // record() + "checkpoint": true, written to options().output
+  // The end of `vnr train`: records, evaluates (exactly over a volume in memory, else from
+  // `eval_samples` random voxels, or not at all with 0), saves the model to options().output and
+  // builds the report.
+  TrainingResult finish(bool with_ssim, int64_t eval_samples);
+
+private:
+  void check() const;
+  void run_steps(int64_t steps, double seconds, int64_t* done);
+  void wait_while_paused();
+  Json report_json(const TrainingResult& r, const Json& evaluation) const;
+
+  std::unique_ptr<Model> owned_model_;
+  Model* model_;
+  std::shared_ptr<TrainingData> data_;
+  std::unique_ptr<Trainer> trainer_;
+  SessionOptions opts_;
+  std::vector<StepCallback> step_callbacks_, side_work_;
+  std::atomic<bool> stop_{false}, paused_{false};
+  std::mutex pause_mutex_;
+  std::condition_variable pause_cv_;
+  int64_t steps_ = 0;
+  float loss_ = 0;
+  double train_seconds_ = 0, side_seconds_ = 0;
+  double run_seconds_ = 0, run_excluded_ = 0;  // the current run(): training seconds, side work and pauses
+  std::chrono::steady_clock::time_point run_t0_;
+  std::vector<double> step_seconds_;
+};
+
+// Everything `vnr train VOLUME` needs to set a session up.
+struct TrainingSetup {
+  std::string volume;  // path (also its name in messages)
+  RawOptions raw;
+  LoadOptions load;
+  std::string config = "paper";  // preset or tiny-cuda-nn JSON file
+  double target_ratio = 0;       // > 0: size the grid for this compression ratio
+  int64_t batch = 65536;
+  uint32_t seed = 1337;
+  std::string device = "auto", mlp = "auto", precision = "auto";
+  std::string cpu_only_reason;  // a reason to stay on the CPU (e.g. live previews); "" = none
+  int macrocell_size = 16;      // online macro-cells (0: none)
+  TrainingDataOptions data;     // sampler, budget, out-of-core options (data.seed/steps are set from here)
+  int64_t steps = -1;           // planned steps (coverage note only)
+  SessionOptions session;
+};
+
+// The checks of a setup that need no data (batch, steps, macro-cell size, out-of-core counts, a CUDA
+// device when "cuda" is asked for): one error line, before anything is loaded.
+void check_training_setup(const TrainingSetup& setup);
+
+// Loads the config, opens the training data, sizes the model, creates it and the backend on the chosen
+// device. `message` gets every line for people (volume summary, notes, the device).
+std::unique_ptr<TrainingSession> open_training_session(const TrainingSetup& setup, const MessageFn& message = {});
+
+}  // namespace vnr

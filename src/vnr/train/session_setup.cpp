@@ -1,0 +1,71 @@
+// open_training_session: from `vnr train`'s options to a running session (config, data, model size,
+// device, backend).
+#include "vnr/core/error.h"
+#include "vnr/core/units.h"
+#include "vnr/cuda/cuda.h"
+#include "vnr/nn/config.h"
+#include "vnr/train/make_trainer.h"
+#include "vnr/train/session.h"
+
+namespace vnr {
+void check_training_setup(const TrainingSetup& s) {
+  if (s.batch <= 0 || s.batch % kChunk != 0) fail("--batch must be a positive multiple of {}, got {}", kChunk, s.batch);
+  if (s.steps < -1) fail("--steps must be non-negative, got {}", s.steps);
+  if (s.macrocell_size < 0) fail("--macrocell-size must be 0 (none) or positive, got {}", s.macrocell_size);
+  if (s.session.checkpoint_every < 0)
+    fail("--checkpoint-every must be non-negative, got {}", s.session.checkpoint_every);
+  if (s.data.blocks < 0 || s.data.refresh < 0) fail("--blocks and --refresh must be positive");
+  if (s.device == "cuda") cuda::require_device();
+}
+
+std::unique_ptr<TrainingSession> open_training_session(const TrainingSetup& s, const MessageFn& message) {
+  auto say = [&](const std::string& line) {
+    if (message) message(line);
+  };
+  check_training_setup(s);
+  ModelConfig config = load_config(s.config);
+  const VolumeDesc desc = describe_volume(s.volume, s.raw);
+  TrainingDataOptions dopt = s.data;
+  if (dopt.memory_budget == 0) dopt.memory_budget = available_memory_bytes() / 2;
+  dopt.seed = s.seed;
+  dopt.steps = s.steps;
+  auto data = std::make_shared<TrainingData>(open_training_data(s.volume, desc, s.load, dopt, message));
+  if (data->hi == data->lo)
+    say(fmt::format("note: the volume is constant ({:g}); it is represented as normalised 0", data->lo));
+  std::string note;
+  if (s.target_ratio > 0) {
+    config = size_config_for_ratio(config, data->source_bytes(), s.target_ratio, &note);
+    say(note);
+  }
+  if (data->out_of_core) {
+    config = scale_grid_learning_rate(config, dopt.grid_lr_scale, *data->out_of_core, &note);
+    if (!note.empty()) say(note);
+  }
+  Model model = new_model(config, data->dims, data->dtype, data->lo, data->hi, s.seed);
+  Network& net = *model.net;
+  if (s.target_ratio <= 0 && model.param_bytes() > data->source_bytes())
+    say(fmt::format("note: the model ({}) is larger than the volume ({}); use --target-ratio R to compress",
+                    byte_size_text(double(model.param_bytes())), byte_size_text(double(data->source_bytes()))));
+
+  const DeviceChoice device = choose_training_device(s.device, net, data->dims, data->vol.has_value(), data->kind,
+                                                     s.batch, s.cpu_only_reason);
+  if (!device.note.empty()) say("note: " + device.note);
+  TrainOptions to{s.batch, s.seed};
+  std::unique_ptr<Trainer> trainer;
+  if (device.device == Device::Cuda) {
+    if (s.precision != "auto")
+      say(fmt::format("note: --precision {} applies to CPU training; the GPU trainer keeps its own arithmetic",
+                      s.precision));
+    trainer = make_trainer(Device::Cuda, net, data->sampler, &*data->vol, to, cuda::parse_mlp_path(s.mlp));
+  } else {
+    to.precision = resolve_training_precision(s.precision, net);
+    trainer = make_trainer(Device::Cpu, net, data->sampler, nullptr, to);
+  }
+  if (s.macrocell_size > 0) trainer->enable_online_ranges(data->dims, s.macrocell_size);
+  if (!trainer->device_summary().empty()) say("training on " + trainer->device_summary());
+  SessionOptions so = s.session;
+  so.sampler_name = data->kind;
+  return std::make_unique<TrainingSession>(std::move(model), std::move(data), std::move(trainer), so);
+}
+
+}  // namespace vnr

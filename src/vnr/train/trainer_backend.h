@@ -1,0 +1,56 @@
+#pragma once
+// The training backend: what one training loop (TrainingSession, OnlineLoop) drives, whichever device
+// runs the steps. CpuTrainer (trainer.h) and the CUDA trainer (make_trainer(Device::Cuda, ...), a
+// wrapper of cuda::GpuTrainer) implement it. The calls are per step or per group of steps, never per
+// sample, so a virtual call costs nothing measurable.
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+#include "vnr/core/device.h"
+#include "vnr/core/math.h"
+#include "vnr/nn/network.h"
+#include "vnr/volume/value_range_grid.h"
+
+namespace vnr {
+
+class Trainer {
+public:
+  virtual ~Trainer() = default;
+  virtual Device device() const = 0;
+  // True when run() only enqueues work (the GPU): callers then group steps between synchronisations.
+  virtual bool asynchronous() const { return false; }
+  // Runs (GPU: enqueues) n training steps.
+  virtual void run(int64_t n_steps) = 0;
+  // Mean loss of the last step (0 before any) and of every step so far; both synchronise.
+  virtual float last_loss() const = 0;
+  virtual std::vector<float> losses() const = 0;
+  virtual uint64_t steps_done() const = 0;
+  virtual float current_learning_rate() const = 0;
+  // Online macro-cells (paper "Macro-Cell Optimization"): from now on every training sample widens the
+  // value range of its macro-cells; (re)starts empty.
+  virtual void enable_online_ranges(Int3 dims, int cell_size = 16) = 0;
+  virtual bool has_online_ranges() const = 0;
+  virtual ValueRangeGrid online_ranges() const = 0;
+  // Brings the trained parameters back into network().params (the GPU keeps its own copy; a no-op on
+  // the CPU, which trains the Network in place).
+  virtual void download() = 0;
+  virtual Network& network() = 0;
+  virtual int64_t batch() const = 0;
+  virtual uint32_t seed() const = 0;
+  // The CPU trainer's MLP arithmetic; nullopt on the GPU (tcnn's own half-precision arithmetic).
+  virtual std::optional<Precision> mlp_precision() const = 0;
+  // What runs the steps, for a front end's "training on ..." line; empty where nothing needs saying (CPU).
+  virtual std::string device_summary() const { return {}; }
+  // Seconds of each phase of the last step (report key, printed name). The GPU records them only while
+  // phase timing is on (CUDA events between the phases of every step); the CPU always does.
+  struct PhaseTime {
+    std::string key, name;
+    double seconds = 0;
+  };
+  virtual void set_phase_timing(bool on) {}
+  virtual std::vector<PhaseTime> last_step_phases() const = 0;
+};
+
+}  // namespace vnr
