@@ -5,7 +5,7 @@
 #include <optional>
 #include <string>
 #include "cli.h"
-#include "vnr/render/field.h"
+#include "vnr/fields/fields.h"
 #include "vnr/render/macrocell.h"
 #include "vnr/render/renderer.h"
 #include "vnr/render/scene.h"
@@ -17,7 +17,7 @@ namespace vnr::cli {
 struct RenderSource {
   std::optional<Model> model;    // when the input is a model
   std::optional<Volume> volume;  // the input volume, or the ground truth given with --volume
-  std::unique_ptr<Field> field;  // what is rendered: the model if there is one, else the volume
+  std::unique_ptr<RenderableField> field;  // rendered: the model if there is one, else the volume
   Int3 dims;
   Vec3f box;                     // world size: dims (voxel units)
   Scene scene;                   // from an instantvnr scene given as the input

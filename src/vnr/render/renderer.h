@@ -1,12 +1,12 @@
 #pragma once
 // Frame rendering: the three integrators of integrators.h in two execution strategies.
 //  - in-shader: every pixel's ray runs its whole loop and evaluates the field one point at a time
-//    (GridPointFn / NetworkPointFn), the paper's baseline;
+//    (inshader_loop.h, with the point function the Field hands over), the paper's baseline;
 //  - sample streaming: wavefront ray queues; each iteration a coordinate stage emits up to K samples
 //    per live ray, one batched Field::query evaluates them all, a shading stage consumes them, and
-//    finished rays are compacted away (paper Figs. "Ray marching algorithms using sample-streaming"
+//    finished rays are compacted away (stream_stages.h; paper Figs. "Ray marching algorithms using sample-streaming"
 //    and "path tracing algorithm using sample-streaming"). Shadow rays are a second streaming pass.
-// Both strategies call the same per-ray functions in the same order, so for the same seed they give
+// Both strategies, on both backends, call the same per-ray functions in the same order, so for the same seed they give
 // the same image whenever the two field evaluations agree bit for bit (they do for the grid).
 #include <cstdint>
 #include <string>
@@ -100,8 +100,8 @@ public:
   const RenderParams& params() const { return params_; }
 
 private:
-  template <class PointFn>
-  void inshader(const PointFn& f, Image& img, RenderStats& st);
+  template <class Ops>
+  void stream_pass(const Ops& ops, RenderStats& st);  // one streaming pass over the keep_-flagged pixels
   void stream_march(Image& img, RenderStats& st);
   void stream_path(Image& img, RenderStats& st);
   // Starts a streaming pass: the live queue = pixels whose keep_ flag is set, in 8x8-tile order.
@@ -118,7 +118,7 @@ private:
   std::vector<PathState> path_;
   std::vector<int32_t> live_, next_live_;
   std::vector<uint8_t> keep_;
-  std::vector<int32_t> count_;
+  std::vector<int64_t> count_;
   std::vector<int64_t> offset_;
   std::vector<Vec3f> spos_;
   std::vector<float> sdt_;
