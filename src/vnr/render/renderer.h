@@ -29,8 +29,8 @@ RenderStrategy parse_render_strategy(const std::string& s);
 const char* render_mode_name(RenderMode m);
 const char* render_strategy_name(RenderStrategy s);
 
-// Samples per live ray per streaming iteration (B.7): measured on this backend with
-// `vnr bench render --tune-k` (README, "Rendering").
+// Samples per live ray per streaming iteration (docs/semantics.md B.7); `vnr bench render --tune-k`
+// finds the best K for a machine.
 constexpr int kDefaultSamplesPerIteration = 8;
 
 struct RenderOptions {
@@ -38,7 +38,7 @@ struct RenderOptions {
   RenderStrategy strategy = RenderStrategy::Streaming;
   int width = 768, height = 768;
   float step = 1;             // s1, world units (voxels)
-  float step_max = 0;         // s2; 0 = 16 * step (compat.md B.7 default)
+  float step_max = 0;         // s2; 0 = 16 * step (docs/semantics.md B.7 default)
   float density_scale = 1;    // path tracing
   bool shade = false;         // gradient shading for ray marching
   uint32_t seed = 0;
