@@ -6,7 +6,7 @@
 #include "vnr/core/parallel.h"
 #include "vnr/render/field.h"
 #include "vnr/render/inshader.h"
-#include "vnr/render/stream_stages.h"
+#include "vnr/render/stream_driver.h"
 #include "vnr/render/tiles.h"
 
 namespace vnr {
@@ -80,19 +80,6 @@ Image FrameRenderer::render(int frames, RenderStats* stats) {
   return acc;
 }
 
-CpuRenderer::CpuRenderer(const Field& field, Vec3f box, const MacroCells& mc, const TransferFunction& tf, const Camera& cam,
-                   const RenderOptions& opt)
-    : field_(field), opt_(opt), params_(make_render_params(field.dims(), box, mc, tf, cam, opt)) {}
-
-void CpuRenderer::set_camera(const Camera& cam) { set_render_camera(params_, cam, opt_); }
-
-void CpuRenderer::query(int64_t n, RenderStats& st) {
-  qv_.resize(size_t(n));
-  if (n > 0) field_.query(qx_.data(), qy_.data(), qz_.data(), n, qv_.data());
-  st.field_samples += n;
-  st.iterations += 1;
-}
-
 namespace {
 // All pixel indices of a W x H image in 8x8-tile order (the streaming queues start in this order so
 // that neighbouring queue entries are neighbouring rays).
@@ -101,105 +88,97 @@ void tiled_pixel_order(int W, int H, std::vector<int32_t>& out) {
   TileCursor pixels{W, H, kInshaderTile, 0, 1};
   for (int x, y; pixels.next(&x, &y);) out.push_back(int32_t(y) * W + x);
 }
-// Keeps the live rays whose keep flag is set, in order.
-void compact(std::vector<int32_t>& live, const std::vector<uint8_t>& keep, std::vector<int32_t>& scratch) {
-  scratch.clear();
-  for (size_t r = 0; r < live.size(); ++r)
-    if (keep[r]) scratch.push_back(live[r]);
-  live.swap(scratch);
-}
-// Keeps the pixels (live holds pixel indices) whose keep flag is set.
-void compact_pixels(std::vector<int32_t>& live, const std::vector<uint8_t>& keep, std::vector<int32_t>& scratch) {
-  scratch.clear();
-  for (int32_t i : live)
-    if (keep[i]) scratch.push_back(i);
-  live.swap(scratch);
-}
-constexpr int64_t kGrain = 512;  // rays per parallel work item in the streaming stages
+constexpr int64_t kGrain = 512;  // pixels or queue slots per parallel work item
 }  // namespace
 
-void CpuRenderer::start_queue() {
-  tiled_pixel_order(opt_.width, opt_.height, live_);
-  compact_pixels(live_, keep_, next_live_);
-}
+// The CPU backend of the streaming driver (stream_driver.h): host vectors, stages run by
+// parallel_for_range, a sequential scan and compaction, the Field's batched query.
+struct CpuStreamBackend {
+  CpuStreamBackend(const Field& f, int w, int h) : field(f), width(w), height(h) {}
+  const Field& field;
+  int width, height;
+  std::vector<MarchState> march_;
+  std::vector<ShadowState> shadow_;
+  std::vector<PathState> path_;
+  std::vector<int32_t> live_, next_live_;
+  int n_live_ = 0;
+  std::vector<uint8_t> keep_;
+  std::vector<int64_t> count_, offset_;
+  std::vector<Vec3f> spos_;
+  std::vector<float> sdt_;
+  std::vector<float> qx_, qy_, qz_, qv_;
 
-namespace {
-// Runs a per-slot stage (stream_stages.h) over slots [0, n), `grain` slots per parallel work item.
-template <class Stage>
-void run_stage(int64_t n, int64_t grain, const Stage& stage) {
-  parallel_for_range(n, grain, [&](int64_t b, int64_t e) {
-    for (int64_t r = b; r < e; ++r) stage(r);
-  });
-}
-}  // namespace
-
-template <class Ops>
-void CpuRenderer::stream_pass(const Ops& ops, RenderStats& st) {
-  const RenderParams& p = params_;
-  const int K = opt_.samples_per_iteration;
-  start_queue();
-  while (!live_.empty()) {
-    const int64_t nl = int64_t(live_.size());
-    const int n_live = int(nl);
-    count_.resize(size_t(nl));
-    offset_.resize(size_t(nl) + 1);
-    spos_.resize(size_t(nl) * K);
-    sdt_.resize(size_t(nl) * K);
-    run_stage(nl, kGrain, StreamNext<Ops>{p, ops, live_.data(), &n_live, K, spos_.data(), sdt_.data(), count_.data()});
+  template <class Stage>
+  void run(int64_t n, const Stage& stage) {
+    parallel_for_range(n, kGrain, [&](int64_t b, int64_t e) {
+      for (int64_t r = b; r < e; ++r) stage(r);
+    });
+  }
+  MarchState* march_states(int64_t n) { return resized(march_, n); }
+  ShadowState* shadow_states(int64_t n) { return resized(shadow_, n); }
+  PathState* path_states(int64_t n) { return resized(path_, n); }
+  uint8_t* pixel_keep(int64_t n) { return resized(keep_, n); }
+  // live = the keep-flagged pixels in 8x8-tile order
+  int64_t start_queue() {
+    tiled_pixel_order(width, height, next_live_);
+    live_.clear();
+    for (int32_t i : next_live_)
+      if (keep_[i]) live_.push_back(i);
+    n_live_ = int(live_.size());
+    return n_live_;
+  }
+  int64_t live_count(RenderStats&) const { return n_live_; }
+  int32_t* live() { return live_.data(); }
+  const int* n_live() const { return &n_live_; }
+  uint8_t* keep() { return keep_.data(); }
+  void slots(int64_t cap, int K) {
+    count_.resize(size_t(cap) + 1);
+    offset_.resize(size_t(cap) + 1);
+    spos_.resize(size_t(cap) * K);
+    sdt_.resize(size_t(cap) * K);
+  }
+  Vec3f* spos() { return spos_.data(); }
+  float* sdt() { return sdt_.data(); }
+  int64_t* count() { return count_.data(); }
+  int64_t* offset() { return offset_.data(); }
+  int64_t scan(int64_t cap, int64_t* total, RenderStats&) {
     offset_[0] = 0;
-    for (int64_t r = 0; r < nl; ++r) offset_[r + 1] = offset_[r] + count_[r];
-    const int64_t ns = offset_[nl] * ops.m;
-    qx_.resize(size_t(ns));
-    qy_.resize(size_t(ns));
-    qz_.resize(size_t(ns));
-    run_stage(nl, kGrain,
-              StreamEmit<Ops>{p, ops, K, spos_.data(), count_.data(), offset_.data(),
-                              PointSink{qx_.data(), qy_.data(), qz_.data(), 1}});
-    query(ns, st);  // one batched inference per iteration
-    keep_.resize(size_t(nl));
-    run_stage(nl, kGrain,
-              StreamShade<Ops>{p, ops, live_.data(), K, spos_.data(), sdt_.data(), count_.data(), offset_.data(),
-                               qv_.data(), 1, keep_.data()});
-    compact(live_, keep_, next_live_);
+    for (int64_t r = 0; r < cap; ++r) offset_[r + 1] = offset_[r] + count_[r];
+    *total = offset_[cap];
+    return n_live_;
   }
-}
+  PointSink points(int64_t n) { return PointSink{resized(qx_, n), resized(qy_, n), resized(qz_, n), 1}; }
+  const float* query(int64_t n, int* stride, RenderStats&) {
+    qv_.resize(size_t(n));
+    if (n > 0) field.query(qx_.data(), qy_.data(), qz_.data(), n, qv_.data());
+    *stride = 1;
+    return qv_.data();
+  }
+  void compact(int64_t n) {
+    next_live_.clear();
+    for (int64_t r = 0; r < n; ++r)
+      if (keep_[r]) next_live_.push_back(live_[r]);
+    live_.swap(next_live_);
+    n_live_ = int(live_.size());
+  }
 
-void CpuRenderer::stream_march(Image& img, RenderStats& st) {
-  const RenderParams& p = params_;
-  const int64_t n = int64_t(opt_.width) * opt_.height;
-  const bool shadows = opt_.mode == RenderMode::Shadow;
-  march_.resize(size_t(n));
-  keep_.resize(size_t(n));
-  run_stage(n, 4096, MarchBeginStage{p, march_.data(), keep_.data()});
-  stream_pass(MarchOps{march_.data(), march_points_per_sample(p)}, st);
-  if (shadows) {  // second pass: one shadow ray per pixel from its highest-contribution sample
-    shadow_.resize(size_t(n));
-    keep_.resize(size_t(n));
-    run_stage(n, 4096, ShadowBeginStage{p, march_.data(), shadow_.data(), keep_.data()});
-    stream_pass(ShadowOps{shadow_.data()}, st);
+private:
+  template <class T>
+  static T* resized(std::vector<T>& v, int64_t n) {
+    v.resize(size_t(n));
+    return v.data();
   }
-  run_stage(n, 4096, MarchPixelStage{p, march_.data(), shadows ? shadow_.data() : nullptr, img.pixels.data()});
-}
+};
 
-void CpuRenderer::stream_path(Image& img, RenderStats& st) {
-  const RenderParams& p = params_;
-  const int64_t n = int64_t(opt_.width) * opt_.height;
-  path_.resize(size_t(n));
-  keep_.resize(size_t(n));
-  run_stage(n, 4096, PathBeginStage{p, path_.data(), keep_.data(), img.pixels.data()});
-  start_queue();
-  while (!live_.empty()) {
-    const int64_t nl = int64_t(live_.size());
-    qx_.resize(size_t(nl));
-    qy_.resize(size_t(nl));
-    qz_.resize(size_t(nl));
-    run_stage(nl, kGrain, PathCoords{p, path_.data(), live_.data(), nl, PointSink{qx_.data(), qy_.data(), qz_.data(), 1}});
-    query(nl, st);
-    keep_.resize(size_t(nl));
-    run_stage(nl, kGrain, PathShade{p, path_.data(), live_.data(), qv_.data(), 1, keep_.data(), img.pixels.data()});
-    compact(live_, keep_, next_live_);
-  }
-}
+CpuRenderer::CpuRenderer(const Field& field, Vec3f box, const MacroCells& mc, const TransferFunction& tf,
+                         const Camera& cam, const RenderOptions& opt)
+    : field_(field),
+      opt_(opt),
+      params_(make_render_params(field.dims(), box, mc, tf, cam, opt)),
+      stream_(std::make_unique<CpuStreamBackend>(field, opt.width, opt.height)) {}
+CpuRenderer::~CpuRenderer() = default;
+
+void CpuRenderer::set_camera(const Camera& cam) { set_render_camera(params_, cam, opt_); }
 
 void CpuRenderer::render_frame(uint32_t frame, Image& img, RenderStats* stats) {
   RenderStats local;
@@ -209,9 +188,10 @@ void CpuRenderer::render_frame(uint32_t frame, Image& img, RenderStats* stats) {
   params_.frame = frame;
   if (opt_.strategy == RenderStrategy::Streaming) {
     if (opt_.mode == RenderMode::PathTrace)
-      stream_path(img, st);
+      stream_path_frame(*stream_, params_, img.pixels.data(), st);
     else
-      stream_march(img, st);
+      stream_march_frame(*stream_, params_, opt_.mode == RenderMode::Shadow, opt_.samples_per_iteration,
+                         img.pixels.data(), st);
   } else {
     st.field_samples += field_.render_inshader(InshaderJob{&params_, opt_.mode, opt_.ray_packets, img.pixels.data()});
   }

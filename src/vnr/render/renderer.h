@@ -9,6 +9,7 @@
 // Both strategies, on both backends, call the same per-ray functions in the same order, so for the same seed they give
 // the same image whenever the two field evaluations agree bit for bit (they do for the grid).
 #include <cstdint>
+#include <memory>
 #include <string>
 #include <vector>
 #include "vnr/core/device.h"
@@ -89,40 +90,24 @@ private:
   Image resident_;
 };
 
+struct CpuStreamBackend;  // renderer.cpp: the streaming buffers
+
 class CpuRenderer final : public FrameRenderer {
 public:
   // field, macro-cells and tf must outlive the renderer; box = world size of the volume box.
   CpuRenderer(const Field& field, Vec3f box, const MacroCells& mc, const TransferFunction& tf, const Camera& cam,
-           const RenderOptions& opt);
+              const RenderOptions& opt);
+  ~CpuRenderer() override;
   void render_frame(uint32_t frame, Image& img, RenderStats* stats = nullptr) override;
   void set_camera(const Camera& cam) override;
   Device device() const override { return Device::Cpu; }
   const RenderParams& params() const { return params_; }
 
 private:
-  template <class Ops>
-  void stream_pass(const Ops& ops, RenderStats& st);  // one streaming pass over the keep_-flagged pixels
-  void stream_march(Image& img, RenderStats& st);
-  void stream_path(Image& img, RenderStats& st);
-  // Starts a streaming pass: the live queue = pixels whose keep_ flag is set, in 8x8-tile order.
-  void start_queue();
-  // Evaluates the compacted query buffers.
-  void query(int64_t n, RenderStats& st);
-
   const Field& field_;
   RenderOptions opt_;
   RenderParams params_;
-  // Streaming buffers, kept between frames.
-  std::vector<MarchState> march_;
-  std::vector<ShadowState> shadow_;
-  std::vector<PathState> path_;
-  std::vector<int32_t> live_, next_live_;
-  std::vector<uint8_t> keep_;
-  std::vector<int64_t> count_;
-  std::vector<int64_t> offset_;
-  std::vector<Vec3f> spos_;
-  std::vector<float> sdt_;
-  std::vector<float> qx_, qy_, qz_, qv_;
+  std::unique_ptr<CpuStreamBackend> stream_;  // streaming buffers, kept between frames
 };
 
 }  // namespace vnr

@@ -8,7 +8,7 @@
 #include "vnr/core/parallel.h"
 #include "vnr/cuda/network.cuh"
 #include "vnr/cuda/point_eval.cuh"
-#include "vnr/render/stream_stages.h"
+#include "vnr/render/stream_driver.h"
 #include "vnr/render_cuda/gpu_renderer.h"
 #include "vnr/render_cuda/inshader_kernels.cuh"
 
@@ -229,74 +229,71 @@ struct GpuRenderer::Impl {
     return host->live;
   }
 
-  // One streaming pass (primary or shadow rays) over the rays whose keep flag is set.
-  template <class Ops>
-  void stream_pass(const Ops& ops, RenderStats& st) {
-    const int K = opt.samples_per_iteration;
-    compact(all.data(), n_pixels, live.data());
-    if (spos.size() < size_t(n_pixels) * K) {
-      spos.resize(size_t(n_pixels) * K);
-      sdt.resize(size_t(n_pixels) * K);
+  // The GPU backend of the streaming driver (render/stream_driver.h): the queues in GPU memory, CUB
+  // scan and selection, one host synchronisation per iteration (the coordinate stage of the next
+  // iteration runs over the previous live count, an upper bound, and reads the exact one on the GPU).
+  struct StreamBackend {
+    Impl& I;
+    template <class Stage>
+    void run(int64_t n, const Stage& stage) { I.run(n, stage); }
+    MarchState* march_states(int64_t n) { return resized(I.march, n); }
+    ShadowState* shadow_states(int64_t n) { return resized(I.shadow, n); }
+    PathState* path_states(int64_t n) { return resized(I.path, n); }
+    uint8_t* pixel_keep(int64_t) { return I.keep.data(); }  // n_pixels (ensure_queues)
+    int64_t start_queue() {
+      I.compact(I.all.data(), I.n_pixels, I.live.data());
+      return I.n_pixels;
     }
-    int64_t cap = n_pixels;  // an upper bound of the live rays
-    for (;;) {
-      run(cap + 1, StreamNext<Ops>{p, ops, live.data(), n_live.data(), K, spos.data(), sdt.data(), count.data()});
-      size_t bytes = cub_temp.size();
-      VNR_CUDA_CHECK(cub::DeviceScan::ExclusiveSum(cub_temp.data(), bytes, count.data(), offset.data(), int(cap) + 1,
-                                                   sb.stream));
-      int64_t n_samples = 0;
-      const int64_t nl = read_counts(offset.data() + cap, &n_samples, st);
-      if (nl == 0) break;
-      const int64_t n_points = n_samples * ops.m, n_padded = cuda::round_up(n_points, 16);
-      ensure_points(n_padded);
-      run(nl, StreamEmit<Ops>{p, ops, K, spos.data(), count.data(), offset.data(), interleaved(xyz.data())});
-      if (n_padded > n_points)
-        VNR_CUDA_CHECK(cudaMemsetAsync(xyz.data() + 3 * n_points, 0, size_t(3 * (n_padded - n_points)) * 4, sb.stream));
-      int stride = 1;
-      // every live ray may have ended in its coordinate stage: nothing to evaluate, the shading stage drops them
-      const float* v = n_padded > 0 ? evaluate(n_padded, &stride) : nullptr;
-      run(nl, StreamShade<Ops>{p, ops, live.data(), K, spos.data(), sdt.data(), count.data(), offset.data(), v, stride,
-                               keep.data()});
-      compact(live.data(), nl, next.data());
-      std::swap(live, next);
-      cap = nl;
-      st.field_samples += n_points;
-      st.iterations += 1;
+    int64_t live_count(RenderStats& st) { return I.read_counts(nullptr, nullptr, st); }
+    int32_t* live() { return I.live.data(); }
+    const int* n_live() { return I.n_live.data(); }
+    uint8_t* keep() { return I.keep.data(); }
+    void slots(int64_t, int K) {  // count and offset hold n_pixels + 1 (ensure_queues)
+      if (I.spos.size() < size_t(I.n_pixels) * K) {
+        I.spos.resize(size_t(I.n_pixels) * K);
+        I.sdt.resize(size_t(I.n_pixels) * K);
+      }
     }
-  }
+    Vec3f* spos() { return I.spos.data(); }
+    float* sdt() { return I.sdt.data(); }
+    int64_t* count() { return I.count.data(); }
+    int64_t* offset() { return I.offset.data(); }
+    int64_t scan(int64_t cap, int64_t* total, RenderStats& st) {
+      size_t bytes = I.cub_temp.size();
+      VNR_CUDA_CHECK(cub::DeviceScan::ExclusiveSum(I.cub_temp.data(), bytes, I.count.data(), I.offset.data(),
+                                                   int(cap) + 1, I.sb.stream));
+      return I.read_counts(I.offset.data() + cap, total, st);
+    }
+    PointSink points(int64_t n) {
+      I.ensure_points(cuda::round_up(n, 16));
+      return interleaved(I.xyz.data());
+    }
+    // The batched networks take multiples of 16 points: the rest is padded with zeros.
+    const float* query(int64_t n, int* stride, RenderStats&) {
+      if (n == 0) return nullptr;  // every live ray ended in its coordinate stage: the shading drops them
+      const int64_t n_padded = cuda::round_up(n, 16);
+      if (n_padded > n)
+        VNR_CUDA_CHECK(cudaMemsetAsync(I.xyz.data() + 3 * n, 0, size_t(3 * (n_padded - n)) * 4, I.sb.stream));
+      return I.evaluate(n_padded, stride);
+    }
+    void compact(int64_t n) {
+      I.compact(I.live.data(), n, I.next.data());
+      std::swap(I.live, I.next);
+    }
+    template <class T>
+    static T* resized(DeviceBuffer<T>& b, int64_t n) {
+      b.resize(size_t(n));
+      return b.data();
+    }
+  };
 
-  void stream_march(RenderStats& st) {
-    const int m = march_points_per_sample(p);
-    const bool shadows = opt.mode == RenderMode::Shadow;
-    march.resize(size_t(n_pixels));
-    run(n_pixels, MarchBeginStage{p, march.data(), keep.data()});
-    stream_pass(MarchOps{march.data(), m}, st);
-    if (shadows) {
-      shadow.resize(size_t(n_pixels));
-      run(n_pixels, ShadowBeginStage{p, march.data(), shadow.data(), keep.data()});
-      stream_pass(ShadowOps{shadow.data()}, st);
-    }
-    run(n_pixels, MarchPixelStage{p, march.data(), shadows ? shadow.data() : nullptr, image.data()});
-  }
-
-  void stream_path(RenderStats& st) {
-    path.resize(size_t(n_pixels));
-    run(n_pixels, PathBeginStage{p, path.data(), keep.data(), image.data()});
-    compact(all.data(), n_pixels, live.data());
-    int64_t nl = read_counts(nullptr, nullptr, st);
-    while (nl > 0) {
-      const int64_t n_padded = cuda::round_up(nl, 16);
-      ensure_points(n_padded);
-      run(n_padded, PathCoords{p, path.data(), live.data(), nl, interleaved(xyz.data())});
-      int stride = 1;
-      const float* v = evaluate(n_padded, &stride);
-      run(nl, PathShade{p, path.data(), live.data(), v, stride, keep.data(), image.data()});
-      compact(live.data(), nl, next.data());
-      std::swap(live, next);
-      st.field_samples += nl;
-      st.iterations += 1;
-      nl = read_counts(nullptr, nullptr, st);
-    }
+  void stream(RenderStats& st) {
+    ensure_queues();
+    StreamBackend b{*this};
+    if (opt.mode == RenderMode::PathTrace)
+      stream_path_frame(b, p, image.data(), st);
+    else
+      stream_march_frame(b, p, opt.mode == RenderMode::Shadow, opt.samples_per_iteration, image.data(), st);
   }
 
   template <class Field>
@@ -315,9 +312,7 @@ struct GpuRenderer::Impl {
     const auto t0 = std::chrono::steady_clock::now();
     p.frame = frame;
     if (opt.strategy == RenderStrategy::Streaming) {
-      ensure_queues();
-      if (opt.mode == RenderMode::PathTrace) stream_path(st);
-      else stream_march(st);
+      stream(st);
       VNR_CUDA_CHECK(cudaStreamSynchronize(sb.stream));
       st.host_syncs += 1;
     } else if (dnet) {
