@@ -4,7 +4,7 @@
 
 #include "test_support.h"
 #include "vnr/render/camera.h"
-#include "vnr/render/field.h"
+#include "vnr/fields/fields.h"
 #include "vnr/render/macrocell.h"
 #include "vnr/render/transfer_function.h"
 #include "vnr/volume/value_range_grid.h"

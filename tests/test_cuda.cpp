@@ -8,6 +8,7 @@
 #include "test_support.h"
 #include "vnr/core/rng.h"
 #include "vnr/cuda/cuda.h"
+#include "vnr/fields/fields.h"
 #include "vnr/render_cuda/gpu_renderer.h"
 #include "vnr/nn/loss.h"
 #include "vnr/nn/network.h"
@@ -117,7 +118,7 @@ TEST(CudaCli, RenderOnCudaWithoutAGpuIsOneErrorLineAndAutoUsesTheCpu) {
   Volume vol = test::synth(Int3{8, 8, 8});
   GridField field(view_of(vol));
   MacroCells mc = MacroCells::single(vol.dims, test::box_of(vol));
-  test::expect_error([&] { GpuRenderer(field, test::box_of(vol), mc, tf_preset("ramp"), Camera{}, RenderOptions{}); },
+  test::expect_error([&] { GpuRenderer(field.gpu_source(), test::box_of(vol), mc, tf_preset("ramp"), Camera{}, RenderOptions{}); },
                      {why.c_str()});
 }
 

@@ -45,7 +45,7 @@ void expect_equal_means(const Image& a, const Image& b, const std::string& what)
   EXPECT_GT(mean_a / double(n), 1e-3) << what << ": the image is not empty";
 }
 
-std::unique_ptr<FrameRenderer> renderer_on(Device dev, const Field& f, const Volume& vol, const MacroCells& mc,
+std::unique_ptr<FrameRenderer> renderer_on(Device dev, const RenderableField& f, const Volume& vol, const MacroCells& mc,
                                            const TransferFunction& tf, const Camera& cam, const RenderOptions& o) {
   return make_renderer(dev, f, box_of(vol), mc, tf, cam, o);
 }
@@ -68,7 +68,7 @@ TEST(GpuMacroCells, RangesAndOpacitiesEqualTheCpuExactly) {
   o.width = o.height = 16;
   Camera cam = orbit_camera(box_of(vol), 10, 10, 30);
   TransferFunction ramp = tf_preset("ramp");
-  GpuRenderer r(field, box_of(vol), mc, ramp, cam, o);
+  GpuRenderer r(field.gpu_source(), box_of(vol), mc, ramp, cam, o);
   // the opacities follow the transfer function and the ranges, recomputed on the GPU each time
   for (const std::string& name : tf_preset_names()) {
     TransferFunction tf = tf_preset(name);
@@ -177,7 +177,7 @@ TEST(GpuRender, NetworkImagesMatchTheCpuAndStrategiesAgree) {
     const Image cpu = renderer_on(Device::Cpu, neural, vol, mc, tf, cam, o)->render(4);
     const Image gpu_stream = renderer_on(Device::Cuda, neural, vol, mc, tf, cam, o)->render(4);
     {  // inference in slabs of 256 points: the same values (the fused MLP works per 16-sample tile)
-      GpuRenderer slabbed(neural, box_of(vol), mc, tf, cam, o);
+      GpuRenderer slabbed(neural.gpu_source(), box_of(vol), mc, tf, cam, o);
       slabbed.set_inference_slab(256);
       const Image img = slabbed.render(4);
       for (size_t i = 0; i < img.pixels.size(); ++i)
@@ -216,7 +216,7 @@ TEST(GpuRender, MacroCellsOnAndOffGiveTheSameRayMarchedImage) {
       o.width = o.height = 64;
       o.step_max = 1;  // uniform steps: only the placement of steps at cell boundaries differs
       o.strategy = strategy;
-      return GpuRenderer(field, box_of(vol), mc, tf, cam, o).render(4, st);
+      return GpuRenderer(field.gpu_source(), box_of(vol), mc, tf, cam, o).render(4, st);
     };
     RenderStats on, off;
     EXPECT_GT(image_psnr(render(true, &on), render(false, &off)), 40.0) << render_strategy_name(strategy);

@@ -13,7 +13,7 @@
 #include "vnr/cuda/cuda.h"
 #include "vnr/model.h"
 #include "vnr/render/camera.h"
-#include "vnr/render/field.h"
+#include "vnr/fields/fields.h"
 #include "vnr/render/image.h"
 #include "vnr/render/macrocell.h"
 #include "vnr/render/renderer.h"
@@ -93,7 +93,7 @@ public:
   Device device() const { return device_; }
   cuda::MlpPath mlp_path() const { return mlp_; }
   Vec3f box() const { return box_; }     // world size of the volume box (voxel units)
-  const Field& field() const { return *field_; }
+  const RenderableField& field() const { return *field_; }
   const Model* model() const { return model_; }
 
   // Renders the next frame, adds it to the accumulation and returns the accumulated image (the mean of
@@ -119,7 +119,7 @@ private:
   const Model* model_ = nullptr;
   const Volume* volume_ = nullptr;
   Device device_;
-  std::unique_ptr<Field> field_;
+  std::unique_ptr<RenderableField> field_;
   Vec3f box_;
   RenderOptions options_;
   Camera camera_;

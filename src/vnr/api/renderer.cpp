@@ -10,6 +10,7 @@
 #include "vnr/core/json.h"
 #include "vnr/core/progress.h"
 #include "vnr/core/rng.h"
+#include "vnr/fields/fields.h"
 #include "vnr/render_cuda/gpu_renderer.h"
 
 namespace vnr {

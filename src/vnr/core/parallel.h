@@ -49,3 +49,23 @@ void parallel_threads(F&& f) {
 }
 
 }  // namespace vnr
+
+#if defined(__CUDACC__)
+namespace vnr {
+
+// The CUDA backend's parallel_for: the same per-index functor, f(i) for i in [0, n), as a kernel of one
+// thread per index on `stream` (f is copied to the GPU by value; its operator() is VNR_HD or
+// __device__). The caller checks the launch (VNR_CUDA_LAUNCHED in cuda/common.h).
+template <class F>
+__global__ void parallel_for_kernel(int64_t n, F f) {
+  const int64_t i = int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
+  if (i < n) f(i);
+}
+
+template <class F>
+void parallel_for(cudaStream_t stream, int64_t n, const F& f, int threads = 256) {
+  if (n > 0) parallel_for_kernel<<<unsigned((n + threads - 1) / threads), unsigned(threads), 0, stream>>>(n, f);
+}
+
+}  // namespace vnr
+#endif

@@ -30,6 +30,7 @@
 #include <functional>
 #include <memory>
 #include <vector>
+#include "vnr/fields/fields.h"
 #include "vnr/render/renderer.h"
 #include "vnr/train/trainer_backend.h"
 

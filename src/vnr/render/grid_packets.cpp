@@ -167,8 +167,7 @@ int64_t MarchGridPackets(const RenderParams& p, const GridView& g, TileCursor cu
       finish(r, size_t(__builtin_ctzll(opaque)));
   };
 
-  // (Two packets in flight, so that one's gathers could issue while the other's wait, measured 10%
-  // slower: one packet.)
+  // One packet per thread: a second one in flight to overlap gathers does not pay.
   RayPacket r;
   for (size_t l = 0; l < L && start(r, l); ++l) r.active |= uint64_t(1) << l;
   while (r.active) {

@@ -23,7 +23,7 @@ void write_image(const std::string& path, const Image& img);
 // Reads .png (8-bit or 16-bit, gray/RGB/RGBA, palette) or .pfm; alpha = 1.
 Image read_image(const std::string& path);
 
-// compat.md B.4: PSNR (peak 1) and mean 2-D SSIM (7x7 uniform window, K1 = 0.01, K2 = 0.03, data
+// docs/semantics.md B.4: PSNR (peak 1) and mean 2-D SSIM (7x7 uniform window, K1 = 0.01, K2 = 0.03, data
 // range 1, sample covariance) over the RGB channels clamped to [0,1]; alpha ignored. Sizes must match.
 // mse is over all pixels and the three channels; psnr = 999 when mse == 0 (as for volumes: JSON has
 // no infinity). SSIM is averaged over the 7x7 windows fully inside the image and over R, G, B (volume/metrics.h ssim3d with one

@@ -1,5 +1,5 @@
 #pragma once
-// Per-ray rendering code (paper "Rendering", compat.md B.7-B.9), written once as VNR_HD functions over
+// Per-ray rendering code (paper "Rendering", docs/semantics.md B.7-B.9), written once as VNR_HD functions over
 // POD state so that both execution strategies -- in-shader (one ray loops over its own samples) and
 // sample streaming (wavefront queues, batched field queries) -- run exactly the same arithmetic, and
 // so a GPU backend can launch the same functions. Nothing here allocates, throws or calls virtually.
@@ -136,7 +136,7 @@ VNR_HD VNR_INLINE bool step_next(const RenderParams& p, StepState& s, bool adapt
 // Opacity of a step of length dt from the per-voxel table opacity (B.5).
 VNR_HD VNR_INLINE float corrected_alpha(float alpha, float dt) {
   alpha = alpha < 0 ? 0 : (alpha > 1 ? 1 : alpha);
-  if (dt == 1.0f) return alpha;  // the common uniform step: no pow (a fifth of a grid frame otherwise)
+  if (dt == 1.0f) return alpha;  // the common uniform step: no pow (a costly call per sample)
   return 1 - powf(1 - alpha, dt);
 }
 

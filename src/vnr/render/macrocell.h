@@ -1,5 +1,5 @@
 #pragma once
-// Macro-cells (compat.md B.6, paper "Macro-Cell Optimization"): a coarse grid over the volume box whose
+// Macro-cells (docs/semantics.md B.6, paper "Macro-Cell Optimization"): a coarse grid over the volume box whose
 // cells carry the largest opacity the transfer function can give inside them. Ray marching skips
 // transparent cells and adapts its step to the cell's opacity; the path tracer uses the values as
 // per-cell majorants. `MacroCellView` + the DDA below are the per-ray (VNR_HD) part.

@@ -1,18 +1,15 @@
 #include "vnr/render/renderer.h"
 #include <atomic>
 #include <chrono>
-#include <type_traits>
 #include "vnr/core/error.h"
 #include "vnr/core/json.h"
 #include "vnr/core/parallel.h"
-#include "vnr/render/grid_packets.h"
+#include "vnr/render/field.h"
+#include "vnr/render/inshader.h"
+#include "vnr/render/stream_driver.h"
 #include "vnr/render/tiles.h"
 
 namespace vnr {
-
-namespace {
-constexpr int kTile = 8;  // pixels per side of the tiles rays are grouped in
-}  // namespace
 
 RenderMode parse_render_mode(const std::string& s) {
   std::string l = to_lower(s);
@@ -83,251 +80,105 @@ Image FrameRenderer::render(int frames, RenderStats* stats) {
   return acc;
 }
 
-CpuRenderer::CpuRenderer(const Field& field, Vec3f box, const MacroCells& mc, const TransferFunction& tf, const Camera& cam,
-                   const RenderOptions& opt)
-    : field_(field), opt_(opt), params_(make_render_params(field.dims(), box, mc, tf, cam, opt)) {}
-
-void CpuRenderer::set_camera(const Camera& cam) { set_render_camera(params_, cam, opt_); }
-
-template <class PointFn>
-void CpuRenderer::inshader(const PointFn& f, Image& img, RenderStats& st) {
-  const RenderParams& p = params_;
-  const int W = opt_.width, H = opt_.height;
-  // 8x8 pixel tiles dealt round-robin to threads: neighbouring rays read neighbouring voxels.
-  std::atomic<int64_t> samples{0};
-  const RenderMode mode = opt_.mode;
-  if constexpr (std::is_same_v<PointFn, GridPointFn>) {
-    if (opt_.ray_packets && mode == RenderMode::RayMarch && grid_packets_apply(p, f.g)) {
-      parallel_threads([&](int t, int nt) {
-        samples += march_grid_packets(p, f.g, TileCursor{W, H, kTile, t, nt}, img.pixels.data());
-      });
-      st.field_samples += samples.load();
-      return;
-    }
-  }
-  parallel_threads([&](int t, int nt) {
-    int64_t my_samples = 0;
-    TileCursor pixels{W, H, kTile, t, nt};
-    for (int ix, iy; pixels.next(&ix, &iy);) {
-      const int64_t i = int64_t(iy) * W + ix;
-      if (mode == RenderMode::PathTrace) {
-        PathState s;
-        if (pt_begin(p, ix, iy, s) && pt_sample(p, s)) {
-          for (;;) {
-            Vec3f u = s.pos * p.inv_box;
-            float v = f(u.x, u.y, u.z);
-            ++my_samples;
-            if (!(pt_shade(p, s, v) && pt_sample(p, s))) break;
-          }
-        }
-        img.pixels[i] = pt_pixel(s);
-        continue;
-      }
-      MarchState s;
-      if (!march_begin(p, ix, iy, s)) {
-        img.pixels[i] = march_pixel(p, s);
-        continue;
-      }
-      Vec3f pos;
-      float dt;
-      // M points per sample (1, or 7 with shading); a compile-time M keeps an unshaded sample out of
-      // the 7-point arrays (a fifth of a grid sample's instructions otherwise).
-      auto march = [&](auto points) {
-        constexpr int M = decltype(points)::value;
-        while (march_next(p, s, &pos, &dt)) {
-          float x[M], y[M], z[M], v[M];
-          march_sample_points(p, pos, M, x, y, z);
-          for (int k = 0; k < M; ++k) v[k] = f(x[k], y[k], z[k]);
-          my_samples += M;
-          if (!march_shade(p, s, pos, dt, v, M)) break;
-        }
-      };
-      if (march_points_per_sample(p) == 1) march(std::integral_constant<int, 1>{});
-      else march(std::integral_constant<int, 7>{});
-      if (mode == RenderMode::Shadow) {
-        ShadowState sh;
-        if (shadow_begin(p, s, sh)) {
-          while (shadow_next(p, sh, &pos, &dt)) {
-            Vec3f u = pos * p.inv_box;
-            float v = f(u.x, u.y, u.z);
-            ++my_samples;
-            if (!shadow_shade(p, sh, v, dt)) break;
-          }
-        }
-        img.pixels[i] = shadow_pixel(p, s, sh.T);
-      } else {
-        img.pixels[i] = march_pixel(p, s);
-      }
-    }
-    samples += my_samples;
-  });
-  st.field_samples += samples.load();
-}
-
-void CpuRenderer::query(int64_t n, RenderStats& st) {
-  qv_.resize(size_t(n));
-  if (n > 0) field_.query(qx_.data(), qy_.data(), qz_.data(), n, qv_.data());
-  st.field_samples += n;
-  st.iterations += 1;
-}
-
 namespace {
 // All pixel indices of a W x H image in 8x8-tile order (the streaming queues start in this order so
 // that neighbouring queue entries are neighbouring rays).
 void tiled_pixel_order(int W, int H, std::vector<int32_t>& out) {
   out.clear();
-  TileCursor pixels{W, H, kTile, 0, 1};
+  TileCursor pixels{W, H, kInshaderTile, 0, 1};
   for (int x, y; pixels.next(&x, &y);) out.push_back(int32_t(y) * W + x);
 }
-// Keeps the live rays whose keep flag is set, in order.
-void compact(std::vector<int32_t>& live, const std::vector<uint8_t>& keep, std::vector<int32_t>& scratch) {
-  scratch.clear();
-  for (size_t r = 0; r < live.size(); ++r)
-    if (keep[r]) scratch.push_back(live[r]);
-  live.swap(scratch);
-}
-// Keeps the pixels (live holds pixel indices) whose keep flag is set.
-void compact_pixels(std::vector<int32_t>& live, const std::vector<uint8_t>& keep, std::vector<int32_t>& scratch) {
-  scratch.clear();
-  for (int32_t i : live)
-    if (keep[i]) scratch.push_back(i);
-  live.swap(scratch);
-}
-constexpr int64_t kGrain = 512;  // rays per parallel work item in the streaming stages
+constexpr int64_t kGrain = 512;  // pixels or queue slots per parallel work item
 }  // namespace
 
-void CpuRenderer::start_queue() {
-  tiled_pixel_order(opt_.width, opt_.height, live_);
-  compact_pixels(live_, keep_, next_live_);
-}
+// The CPU backend of the streaming driver (stream_driver.h): host vectors, stages run by
+// parallel_for_range, a sequential scan and compaction, the Field's batched query.
+struct CpuStreamBackend {
+  CpuStreamBackend(const Field& f, int w, int h) : field(f), width(w), height(h) {}
+  const Field& field;
+  int width, height;
+  std::vector<MarchState> march_;
+  std::vector<ShadowState> shadow_;
+  std::vector<PathState> path_;
+  std::vector<int32_t> live_, next_live_;
+  int n_live_ = 0;
+  std::vector<uint8_t> keep_;
+  std::vector<int64_t> count_, offset_;
+  std::vector<Vec3f> spos_;
+  std::vector<float> sdt_;
+  std::vector<float> qx_, qy_, qz_, qv_;
 
-void CpuRenderer::stream_march(Image& img, RenderStats& st) {
-  const RenderParams& p = params_;
-  const int W = opt_.width;
-  const int64_t n = int64_t(W) * opt_.height;
-  const int K = opt_.samples_per_iteration;
-  const int m = march_points_per_sample(p);
-  const bool shadows = opt_.mode == RenderMode::Shadow;
-  march_.resize(size_t(n));
-  keep_.resize(size_t(n));
-  // ray generation
-  parallel_for_range(n, 4096, [&](int64_t b, int64_t e) {
-    for (int64_t i = b; i < e; ++i) keep_[i] = march_begin(p, int(i % W), int(i / W), march_[i]);
-  });
-  start_queue();
-
-  // The streaming loop shared by primary and shadow rays: next(ray, pos, dt) emits samples,
-  // shade(ray, pos, dt, values) consumes them; rays that end are dropped.
-  auto stream = [&](int points, auto&& next, auto&& emit, auto&& shade) {
-    while (!live_.empty()) {
-      const int64_t nl = int64_t(live_.size());
-      count_.resize(size_t(nl));
-      offset_.resize(size_t(nl) + 1);
-      spos_.resize(size_t(nl) * K);
-      sdt_.resize(size_t(nl) * K);
-      // coordinate stage: up to K samples per live ray
-      parallel_for_range(nl, kGrain, [&](int64_t b, int64_t e) {
-        for (int64_t r = b; r < e; ++r) {
-          int c = 0;
-          while (c < K && next(live_[r], &spos_[r * K + c], &sdt_[r * K + c])) ++c;
-          count_[r] = c;
-        }
-      });
-      offset_[0] = 0;
-      for (int64_t r = 0; r < nl; ++r) offset_[r + 1] = offset_[r] + count_[r];
-      const int64_t ns = offset_[nl] * points;
-      qx_.resize(size_t(ns));
-      qy_.resize(size_t(ns));
-      qz_.resize(size_t(ns));
-      parallel_for_range(nl, kGrain, [&](int64_t b, int64_t e) {
-        for (int64_t r = b; r < e; ++r)
-          for (int k = 0; k < count_[r]; ++k) {
-            int64_t q = (offset_[r] + k) * points;
-            emit(spos_[r * K + k], &qx_[q], &qy_[q], &qz_[q]);
-          }
-      });
-      query(ns, st);  // one batched inference per iteration
-      // shading stage
-      keep_.resize(size_t(nl));
-      parallel_for_range(nl, kGrain, [&](int64_t b, int64_t e) {
-        for (int64_t r = b; r < e; ++r) {
-          bool alive = count_[r] == K;
-          for (int k = 0; k < count_[r]; ++k)
-            if (!shade(live_[r], spos_[r * K + k], sdt_[r * K + k], &qv_[(offset_[r] + k) * points])) {
-              alive = false;
-              break;
-            }
-          keep_[r] = alive;
-        }
-      });
-      compact(live_, keep_, next_live_);
-    }
-  };
-
-  stream(
-      m, [&](int32_t i, Vec3f* pos, float* dt) { return march_next(p, march_[i], pos, dt); },
-      [&](Vec3f pos, float* x, float* y, float* z) { march_sample_points(p, pos, m, x, y, z); },
-      [&](int32_t i, Vec3f pos, float dt, const float* v) { return march_shade(p, march_[i], pos, dt, v, m); });
-
-  if (!shadows) {
-    parallel_for(n, [&](int64_t i) { img.pixels[i] = march_pixel(p, march_[i]); });
-    return;
-  }
-  // second pass: one shadow ray per pixel from its highest-contribution sample
-  shadow_.resize(size_t(n));
-  keep_.resize(size_t(n));
-  parallel_for_range(n, 4096, [&](int64_t b, int64_t e) {
-    for (int64_t i = b; i < e; ++i) keep_[i] = shadow_begin(p, march_[i], shadow_[i]);
-  });
-  start_queue();
-  stream(
-      1, [&](int32_t i, Vec3f* pos, float* dt) { return shadow_next(p, shadow_[i], pos, dt); },
-      [&](Vec3f pos, float* x, float* y, float* z) {
-        Vec3f u = pos * p.inv_box;
-        *x = u.x, *y = u.y, *z = u.z;
-      },
-      [&](int32_t i, Vec3f, float dt, const float* v) { return shadow_shade(p, shadow_[i], v[0], dt); });
-  parallel_for(n, [&](int64_t i) { img.pixels[i] = shadow_pixel(p, march_[i], shadow_[i].T); });
-}
-
-void CpuRenderer::stream_path(Image& img, RenderStats& st) {
-  const RenderParams& p = params_;
-  const int W = opt_.width;
-  const int64_t n = int64_t(W) * opt_.height;
-  path_.resize(size_t(n));
-  keep_.resize(size_t(n));
-  // ray generation absorbs the first sample() (paper: raygen_kernel<PT_RAY>)
-  parallel_for_range(n, 4096, [&](int64_t b, int64_t e) {
-    for (int64_t i = b; i < e; ++i) {
-      PathState& s = path_[i];
-      keep_[i] = pt_begin(p, int(i % W), int(i / W), s) && pt_sample(p, s);
-      if (!keep_[i]) img.pixels[i] = pt_pixel(s);
-    }
-  });
-  start_queue();
-  while (!live_.empty()) {
-    const int64_t nl = int64_t(live_.size());
-    qx_.resize(size_t(nl));
-    qy_.resize(size_t(nl));
-    qz_.resize(size_t(nl));
-    parallel_for_range(nl, kGrain, [&](int64_t b, int64_t e) {
-      for (int64_t r = b; r < e; ++r) {
-        Vec3f u = path_[live_[r]].pos * p.inv_box;
-        qx_[r] = u.x, qy_[r] = u.y, qz_[r] = u.z;
-      }
+  template <class Stage>
+  void run(int64_t n, const Stage& stage) {
+    parallel_for_range(n, kGrain, [&](int64_t b, int64_t e) {
+      for (int64_t r = b; r < e; ++r) stage(r);
     });
-    query(nl, st);
-    keep_.resize(size_t(nl));
-    parallel_for_range(nl, kGrain, [&](int64_t b, int64_t e) {
-      for (int64_t r = b; r < e; ++r) {
-        PathState& s = path_[live_[r]];
-        keep_[r] = pt_shade(p, s, qv_[r]) && pt_sample(p, s);
-        if (!keep_[r]) img.pixels[live_[r]] = pt_pixel(s);
-      }
-    });
-    compact(live_, keep_, next_live_);
   }
-}
+  MarchState* march_states(int64_t n) { return resized(march_, n); }
+  ShadowState* shadow_states(int64_t n) { return resized(shadow_, n); }
+  PathState* path_states(int64_t n) { return resized(path_, n); }
+  uint8_t* pixel_keep(int64_t n) { return resized(keep_, n); }
+  // live = the keep-flagged pixels in 8x8-tile order
+  int64_t start_queue() {
+    tiled_pixel_order(width, height, next_live_);
+    live_.clear();
+    for (int32_t i : next_live_)
+      if (keep_[i]) live_.push_back(i);
+    n_live_ = int(live_.size());
+    return n_live_;
+  }
+  int64_t live_count(RenderStats&) const { return n_live_; }
+  int32_t* live() { return live_.data(); }
+  const int* n_live() const { return &n_live_; }
+  uint8_t* keep() { return keep_.data(); }
+  void slots(int64_t cap, int K) {
+    count_.resize(size_t(cap) + 1);
+    offset_.resize(size_t(cap) + 1);
+    spos_.resize(size_t(cap) * K);
+    sdt_.resize(size_t(cap) * K);
+  }
+  Vec3f* spos() { return spos_.data(); }
+  float* sdt() { return sdt_.data(); }
+  int64_t* count() { return count_.data(); }
+  int64_t* offset() { return offset_.data(); }
+  int64_t scan(int64_t cap, int64_t* total, RenderStats&) {
+    offset_[0] = 0;
+    for (int64_t r = 0; r < cap; ++r) offset_[r + 1] = offset_[r] + count_[r];
+    *total = offset_[cap];
+    return n_live_;
+  }
+  PointSink points(int64_t n) { return PointSink{resized(qx_, n), resized(qy_, n), resized(qz_, n), 1}; }
+  const float* query(int64_t n, int* stride, RenderStats&) {
+    qv_.resize(size_t(n));
+    if (n > 0) field.query(qx_.data(), qy_.data(), qz_.data(), n, qv_.data());
+    *stride = 1;
+    return qv_.data();
+  }
+  void compact(int64_t n) {
+    next_live_.clear();
+    for (int64_t r = 0; r < n; ++r)
+      if (keep_[r]) next_live_.push_back(live_[r]);
+    live_.swap(next_live_);
+    n_live_ = int(live_.size());
+  }
+
+private:
+  template <class T>
+  static T* resized(std::vector<T>& v, int64_t n) {
+    v.resize(size_t(n));
+    return v.data();
+  }
+};
+
+CpuRenderer::CpuRenderer(const Field& field, Vec3f box, const MacroCells& mc, const TransferFunction& tf,
+                         const Camera& cam, const RenderOptions& opt)
+    : field_(field),
+      opt_(opt),
+      params_(make_render_params(field.dims(), box, mc, tf, cam, opt)),
+      stream_(std::make_unique<CpuStreamBackend>(field, opt.width, opt.height)) {}
+CpuRenderer::~CpuRenderer() = default;
+
+void CpuRenderer::set_camera(const Camera& cam) { set_render_camera(params_, cam, opt_); }
 
 void CpuRenderer::render_frame(uint32_t frame, Image& img, RenderStats* stats) {
   RenderStats local;
@@ -337,15 +188,12 @@ void CpuRenderer::render_frame(uint32_t frame, Image& img, RenderStats* stats) {
   params_.frame = frame;
   if (opt_.strategy == RenderStrategy::Streaming) {
     if (opt_.mode == RenderMode::PathTrace)
-      stream_path(img, st);
+      stream_path_frame(*stream_, params_, img.pixels.data(), st);
     else
-      stream_march(img, st);
-  } else if (auto* g = dynamic_cast<const GridField*>(&field_)) {
-    inshader(g->point_fn(), img, st);
-  } else if (auto* nf = dynamic_cast<const NetworkField*>(&field_)) {
-    inshader(nf->point_fn(), img, st);
+      stream_march_frame(*stream_, params_, opt_.mode == RenderMode::Shadow, opt_.samples_per_iteration,
+                         img.pixels.data(), st);
   } else {
-    fail("the in-shader strategy needs a grid or network field");
+    st.field_samples += field_.render_inshader(InshaderJob{&params_, opt_.mode, opt_.ray_packets, img.pixels.data()});
   }
   st.frames += 1;
   st.rays += int64_t(opt_.width) * opt_.height;

@@ -1,14 +1,15 @@
 #pragma once
 // Frame rendering: the three integrators of integrators.h in two execution strategies.
 //  - in-shader: every pixel's ray runs its whole loop and evaluates the field one point at a time
-//    (GridPointFn / NetworkPointFn), the paper's baseline;
+//    (inshader_loop.h, with the point function the Field hands over), the paper's baseline;
 //  - sample streaming: wavefront ray queues; each iteration a coordinate stage emits up to K samples
 //    per live ray, one batched Field::query evaluates them all, a shading stage consumes them, and
-//    finished rays are compacted away (paper Figs. "Ray marching algorithms using sample-streaming"
+//    finished rays are compacted away (stream_stages.h; paper Figs. "Ray marching algorithms using sample-streaming"
 //    and "path tracing algorithm using sample-streaming"). Shadow rays are a second streaming pass.
-// Both strategies call the same per-ray functions in the same order, so for the same seed they give
+// Both strategies, on both backends, call the same per-ray functions in the same order, so for the same seed they give
 // the same image whenever the two field evaluations agree bit for bit (they do for the grid).
 #include <cstdint>
+#include <memory>
 #include <string>
 #include <vector>
 #include "vnr/core/device.h"
@@ -29,8 +30,8 @@ RenderStrategy parse_render_strategy(const std::string& s);
 const char* render_mode_name(RenderMode m);
 const char* render_strategy_name(RenderStrategy s);
 
-// Samples per live ray per streaming iteration (B.7): measured on this backend with
-// `vnr bench render --tune-k` (README, "Rendering").
+// Samples per live ray per streaming iteration (docs/semantics.md B.7); `vnr bench render --tune-k`
+// finds the best K for a machine.
 constexpr int kDefaultSamplesPerIteration = 8;
 
 struct RenderOptions {
@@ -38,7 +39,7 @@ struct RenderOptions {
   RenderStrategy strategy = RenderStrategy::Streaming;
   int width = 768, height = 768;
   float step = 1;             // s1, world units (voxels)
-  float step_max = 0;         // s2; 0 = 16 * step (compat.md B.7 default)
+  float step_max = 0;         // s2; 0 = 16 * step (docs/semantics.md B.7 default)
   float density_scale = 1;    // path tracing
   bool shade = false;         // gradient shading for ray marching
   uint32_t seed = 0;
@@ -89,40 +90,24 @@ private:
   Image resident_;
 };
 
+struct CpuStreamBackend;  // renderer.cpp: the streaming buffers
+
 class CpuRenderer final : public FrameRenderer {
 public:
   // field, macro-cells and tf must outlive the renderer; box = world size of the volume box.
   CpuRenderer(const Field& field, Vec3f box, const MacroCells& mc, const TransferFunction& tf, const Camera& cam,
-           const RenderOptions& opt);
+              const RenderOptions& opt);
+  ~CpuRenderer() override;
   void render_frame(uint32_t frame, Image& img, RenderStats* stats = nullptr) override;
   void set_camera(const Camera& cam) override;
   Device device() const override { return Device::Cpu; }
   const RenderParams& params() const { return params_; }
 
 private:
-  template <class PointFn>
-  void inshader(const PointFn& f, Image& img, RenderStats& st);
-  void stream_march(Image& img, RenderStats& st);
-  void stream_path(Image& img, RenderStats& st);
-  // Starts a streaming pass: the live queue = pixels whose keep_ flag is set, in 8x8-tile order.
-  void start_queue();
-  // Evaluates the compacted query buffers.
-  void query(int64_t n, RenderStats& st);
-
   const Field& field_;
   RenderOptions opt_;
   RenderParams params_;
-  // Streaming buffers, kept between frames.
-  std::vector<MarchState> march_;
-  std::vector<ShadowState> shadow_;
-  std::vector<PathState> path_;
-  std::vector<int32_t> live_, next_live_;
-  std::vector<uint8_t> keep_;
-  std::vector<int32_t> count_;
-  std::vector<int64_t> offset_;
-  std::vector<Vec3f> spos_;
-  std::vector<float> sdt_;
-  std::vector<float> qx_, qy_, qz_, qv_;
+  std::unique_ptr<CpuStreamBackend> stream_;  // streaming buffers, kept between frames
 };
 
 }  // namespace vnr

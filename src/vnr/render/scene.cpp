@@ -1,4 +1,4 @@
-// Scene files: instantvnr's scene JSON (instantvnr-formats README section 1; unknown keys ignored,
+// Scene files: instantvnr's scene JSON (unknown keys ignored,
 // as instantvnr does) and vnr's own scene JSON (unknown keys are errors: typo safety).
 #include "vnr/render/scene.h"
 #include <cmath>

@@ -1,6 +1,6 @@
 #pragma once
-// Scene files: instantvnr's scene JSON (instantvnr-formats README section 1) or vnr's own scene
-// JSON. Everything is optional; the renderer fills in defaults (compat.md B.8, B.10).
+// Scene files: instantvnr's scene JSON (the instantvnr scene format) or vnr's own scene
+// JSON. Everything is optional; the renderer fills in defaults (docs/semantics.md B.8, B.10).
 #include <optional>
 #include <string>
 #include "vnr/core/math.h"

@@ -1,4 +1,4 @@
-// Transfer functions: presets, instantvnr's TF JSON (instantvnr-formats README 1.4) and vnr's simple
+// Transfer functions: presets, instantvnr's TF JSON (the instantvnr TF format) and vnr's simple
 // control-point format.
 //
 // vnr's simple format: {"colors": [[v, r, g, b], ...], "opacities": [[v, a], ...], "resolution": N,

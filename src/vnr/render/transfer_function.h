@@ -1,5 +1,5 @@
 #pragma once
-// Transfer functions (compat.md B.5, instantvnr-formats README 1.4): a table of N RGBA entries, entry
+// Transfer functions (docs/semantics.md B.5, the instantvnr TF format): a table of N RGBA entries, entry
 // i at normalised value lo + i/(N-1) * (hi - lo), linearly interpolated, clamped at the ends. Colour
 // is straight (not premultiplied); alpha is the opacity per unit step (one voxel).
 #include <string>

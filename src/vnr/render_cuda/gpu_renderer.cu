@@ -1,419 +1,34 @@
-// GpuRenderer: the kernels and their host orchestration (see gpu_renderer.h). Every per-ray step is a
-// VNR_HD function of render/integrators.h, called in the same order as the CPU renderer calls it.
-#include <mma.h>
+// GpuRenderer: the host orchestration of its kernels (see gpu_renderer.h). The per-pixel and per-slot
+// work is the shared code of render/: the in-shader loop of inshader_loop.h (inshader_kernels.cuh) and
+// the streaming stages of stream_stages.h, launched with core/parallel.h's CUDA parallel_for, in the
+// same order as the CPU renderer runs them.
 #include <algorithm>
 #include <chrono>
 #include <cub/cub.cuh>
-#include "vnr/cuda/grid_device.cuh"
+#include "vnr/core/parallel.h"
 #include "vnr/cuda/network.cuh"
-#include "vnr/nn/loss.h"
-#include "vnr/render/integrators.h"
+#include "vnr/cuda/point_eval.cuh"
+#include "vnr/render/stream_driver.h"
 #include "vnr/render_cuda/gpu_renderer.h"
+#include "vnr/render_cuda/inshader_kernels.cuh"
 
 namespace vnr {
 
 using cuda::DeviceBuffer;
-using cuda::MlpDims;
 using cuda::blocks_for;
 using cuda::cuda_fail_message;
-namespace wmma = nvcuda::wmma;
+using namespace gpu_render;
 
 namespace {
 
-constexpr unsigned kFull = 0xffffffffu;
 constexpr int kThreads = 256;
-// In-shader: a block of 4 warps covers 16 x 8 pixels, each warp 8 x 4 (neighbouring rays, neighbouring
-// samples: coherent hash-grid reads and few idle lanes).
-constexpr int kWarpsPerBlock = 4;
-constexpr int kBlockW = 16, kBlockH = 8;
 // Streaming: points per batched inference call at most, by default (the rest of an iteration's points go
 // in further calls); bounds the network's pass buffers (4M points x 64 encoding columns = 512 MiB of halves).
 constexpr int64_t kDefaultInferSlab = int64_t(1) << 22;
 
-// ---------------------------------------------------------------------------------------------------
-// Fields as seen by one warp of an in-shader kernel. bind() runs once per thread at the start of the
-// kernel (all threads of the block: it may stage data in shared memory); the bound evaluator's
-// operator() is then called by all 32 lanes of a warp together, `active` saying whose sample counts.
-
-struct GridWarpField {
-  GridView g;
-  struct Eval {
-    GridView g;
-    __device__ float operator()(bool active, float x, float y, float z) const {
-      return active ? grid_lookup(g, x, y, z) : 0.0f;
-    }
-  };
-  __device__ Eval bind(unsigned char*) const { return Eval{g}; }
-};
-
-// The grid encoding of one point into one row of halves (the encode kernel's values, one thread doing
-// every level), pad columns zeroed.
-__device__ inline void encode_row(const GridLayout& g, const __half* table, float x, float y, float z, __half* row,
-                                  int in_pad) {
-  const int F = int(g.n_features), L = int(g.n_levels);
-  for (int l = 0; l < L; ++l) {
-    float out[8];
-    switch (F) {
-      case 1: cuda::grid_level_forward_half<1>(g.levels[l], g.interpolation, table, x, y, z, out); break;
-      case 2: cuda::grid_level_forward_half<2>(g.levels[l], g.interpolation, table, x, y, z, out); break;
-      case 4: cuda::grid_level_forward_half<4>(g.levels[l], g.interpolation, table, x, y, z, out); break;
-      default: cuda::grid_level_forward_half<8>(g.levels[l], g.interpolation, table, x, y, z, out); break;
-    }
-    for (int f = 0; f < F; ++f) row[l * F + f] = __float2half_rn(out[f]);
-  }
-  for (int k = L * F; k < in_pad; ++k) row[k] = __float2half_rn(0.0f);
-}
-
-// A network evaluated warp-cooperatively (the paper's appendix "In-Shader Inference Details"): each lane
-// encodes its point into its row of the warp's 32-row activation tile; the warp multiplies the two 16-row
-// halves by each weight matrix with WMMA 16x16x16 (half in, binary32 accumulate, ReLU, rounded to half:
-// the fused kernels' arithmetic), skipping a half whose lanes are all idle.
-struct NetWarpField {
-  GridLayout grid;
-  const __half* table;     // half grid parameters
-  const __half* weights;   // half MLP weights in GPU memory (tcnn order)
-  MlpDims d;
-  int out_act;
-  int ld;                  // row stride of the activation tiles, halves
-  uint32_t n_weights;      // halves
-  int stage;               // 1: the weights are copied to shared memory
-
-  // Shared memory per block: the staged weights, then per warp two 32-row tiles and a 16x16 binary32 tile.
-  __host__ __device__ size_t weight_bytes() const { return stage ? (size_t(n_weights) * 2 + 127) / 128 * 128 : 0; }
-  __host__ __device__ size_t warp_bytes() const { return size_t(2) * 32 * ld * 2 + 256 * 4; }
-  __host__ __device__ size_t smem_bytes() const { return weight_bytes() + kWarpsPerBlock * warp_bytes(); }
-
-  struct Eval {
-    const NetWarpField* F;
-    const __half* w;
-    __half *a0, *a1;
-    float* f;
-    int lane;
-
-    __device__ float operator()(bool active, float x, float y, float z) const {
-      const unsigned act = __ballot_sync(kFull, active);
-      if (act == 0) return 0.0f;
-      const MlpDims& d = F->d;
-      const int ld = F->ld;
-      if (active) encode_row(F->grid, F->table, x, y, z, a0 + lane * ld, d.in_pad);
-      __syncwarp();
-      float result = 0.0f;
-      for (int t = 0; t < 2; ++t) {
-        if (((act >> (16 * t)) & 0xffffu) == 0) continue;  // warp-uniform
-        __half* in = a0 + t * 16 * ld;
-        __half* out = a1 + t * 16 * ld;
-        for (int m = 0; m < d.n_matrices; ++m) {
-          const int rows = d.rows[m], cols = d.cols[m];
-          const bool last = m == d.n_matrices - 1;
-          const __half* wm = w + d.offset[m];
-          const int nbs = last ? 1 : rows / 16;  // the output layer: the first 16 outputs hold the one we need
-          for (int nb = 0; nb < nbs; ++nb) {
-            wmma::fragment<wmma::accumulator, 16, 16, 16, float> acc;
-            wmma::fill_fragment(acc, 0.0f);
-            for (int kb = 0; kb < cols / 16; ++kb) {
-              wmma::fragment<wmma::matrix_a, 16, 16, 16, __half, wmma::row_major> a;
-              wmma::fragment<wmma::matrix_b, 16, 16, 16, __half, wmma::col_major> b;  // (k, j) = W[j][k]
-              wmma::load_matrix_sync(a, in + kb * 16, ld);
-              wmma::load_matrix_sync(b, wm + nb * 16 * cols + kb * 16, cols);
-              wmma::mma_sync(acc, a, b, acc);
-            }
-            if (!last)
-              for (int i = 0; i < acc.num_elements; ++i) acc.x[i] = acc.x[i] > 0.0f ? acc.x[i] : 0.0f;
-            wmma::store_matrix_sync(f, acc, 16, wmma::mem_row_major);
-            __syncwarp();
-            if (last) {
-              if ((lane >> 4) == t) result = f[(lane & 15) * 16];
-            } else {
-              for (int i = lane; i < 256; i += 32) out[(i >> 4) * ld + nb * 16 + (i & 15)] = __float2half_rn(f[i]);
-            }
-            __syncwarp();
-          }
-          __half* tmp = in;
-          in = out;
-          out = tmp;
-        }
-      }
-      return activate(Activation(F->out_act), result);
-    }
-  };
-
-};
-
-// What the in-shader kernels take for a network: the NetWarpField in GPU memory (read through the
-// cache, warp-uniform), not a kernel-parameter copy that dynamic indexing would move to local memory.
-struct NetWarpRef {
-  const NetWarpField* F;
-  using Eval = NetWarpField::Eval;
-  __device__ Eval bind(unsigned char* smem) const {
-    const NetWarpField& f = *F;
-    const int ld = f.ld;
-    Eval e;
-    e.F = F;
-    e.lane = int(threadIdx.x % 32);
-    const int warp = int(threadIdx.x / 32);
-    unsigned char* base = smem + f.weight_bytes() + size_t(warp) * f.warp_bytes();
-    e.a0 = reinterpret_cast<__half*>(base);
-    e.a1 = e.a0 + 32 * ld;
-    e.f = reinterpret_cast<float*>(e.a1 + 32 * ld);
-    // zero the tiles: idle lanes' rows then hold finite values
-    for (int i = e.lane; i < 2 * 32 * ld; i += 32) e.a0[i] = __float2half_rn(0.0f);
-    if (f.stage) {
-      __half* ws = reinterpret_cast<__half*>(smem);
-      const uint4* src = reinterpret_cast<const uint4*>(f.weights);
-      uint4* dst = reinterpret_cast<uint4*>(ws);
-      for (uint32_t i = threadIdx.x; i < f.n_weights / 8; i += blockDim.x) dst[i] = src[i];
-      e.w = ws;
-    } else {
-      e.w = f.weights;
-    }
-    __syncthreads();
-    return e;
-  }
-};
-
-// The pixel of a thread in the in-shader kernels.
-__device__ inline bool inshader_pixel(const RenderParams& p, int* ix, int* iy) {
-  const int warp = int(threadIdx.x / 32), lane = int(threadIdx.x % 32);
-  *ix = int(blockIdx.x) * kBlockW + (warp % 2) * 8 + lane % 8;
-  *iy = int(blockIdx.y) * kBlockH + (warp / 2) * 4 + lane / 8;
-  return *ix < p.cam.width && *iy < p.cam.height;
-}
-
-// The start of every in-shader kernel: the field bound to the block's shared memory and the thread's
-// pixel (out-of-image threads stay, inactive: the field evaluation is warp-cooperative).
-template <class Field>
-struct InshaderThread {
-  typename Field::Eval eval;
-  int ix, iy;
-  bool in_image;
-  __device__ InshaderThread(const RenderParams& p, const Field& field, unsigned char* smem)
-      : eval(field.bind(smem)) {
-    in_image = inshader_pixel(p, &ix, &iy);
-  }
-  __device__ int64_t pixel(const RenderParams& p) const { return int64_t(iy) * p.cam.width + ix; }
-};
-
-__device__ inline void count_samples(unsigned long long my, unsigned long long* total) {
-  for (int off = 16; off > 0; off /= 2) my += __shfl_down_sync(kFull, my, off);
-  if (threadIdx.x % 32 == 0 && my) atomicAdd(total, my);
-}
-
-// In-shader ray marching (shadow = 1: and the single-shot shadow ray), M field points per sample.
-// Every lane stays in the loops until its whole warp is done (the field evaluation is cooperative).
-template <class Field, int M>
-__global__ void __launch_bounds__(kWarpsPerBlock * 32)
-    inshader_march(RenderParams p, Field field, int shadow, Vec4f* __restrict__ img, unsigned long long* samples) {
-  extern __shared__ __align__(128) unsigned char smem[];
-  const InshaderThread<Field> t(p, field, smem);
-  const auto& eval = t.eval;
-  unsigned long long my = 0;
-  MarchState s;
-  bool active = t.in_image && march_begin(p, t.ix, t.iy, s);
-  Vec3f pos{0, 0, 0};
-  float dt = 0;
-  for (;;) {
-    if (active) active = march_next(p, s, &pos, &dt);
-    if (!__any_sync(kFull, active)) break;
-    float x[M], y[M], z[M], v[M];
-    march_sample_points(p, pos, M, x, y, z);
-    for (int k = 0; k < M; ++k) v[k] = eval(active, x[k], y[k], z[k]);
-    if (active) {
-      my += M;
-      active = march_shade(p, s, pos, dt, v, M);
-    }
-  }
-  if (shadow) {
-    ShadowState sh;
-    sh.T = 1;
-    active = t.in_image && shadow_begin(p, s, sh);
-    for (;;) {
-      if (active) active = shadow_next(p, sh, &pos, &dt);
-      if (!__any_sync(kFull, active)) break;
-      const Vec3f u = pos * p.inv_box;
-      const float v = eval(active, u.x, u.y, u.z);
-      if (active) {
-        my += 1;
-        active = shadow_shade(p, sh, v, dt);
-      }
-    }
-    if (t.in_image) img[t.pixel(p)] = shadow_pixel(p, s, sh.T);
-  } else if (t.in_image) {
-    img[t.pixel(p)] = march_pixel(p, s);
-  }
-  count_samples(my, samples);
-}
-
-// In-shader path tracing: the sample()/shade() state machine of one path per thread.
-template <class Field>
-__global__ void __launch_bounds__(kWarpsPerBlock * 32)
-    inshader_path(RenderParams p, Field field, Vec4f* __restrict__ img, unsigned long long* samples) {
-  extern __shared__ __align__(128) unsigned char smem[];
-  const InshaderThread<Field> t(p, field, smem);
-  const auto& eval = t.eval;
-  unsigned long long my = 0;
-  PathState s;
-  bool active = t.in_image && pt_begin(p, t.ix, t.iy, s) && pt_sample(p, s);
-  for (;;) {
-    if (!__any_sync(kFull, active)) break;
-    const Vec3f u = active ? s.pos * p.inv_box : Vec3f{0, 0, 0};
-    const float v = eval(active, u.x, u.y, u.z);
-    if (active) {
-      my += 1;
-      active = pt_shade(p, s, v) && pt_sample(p, s);
-    }
-  }
-  if (t.in_image) img[t.pixel(p)] = pt_pixel(s);
-  count_samples(my, samples);
-}
-
-// ---------------------------------------------------------------------------------------------------
-// Sample streaming. The per-ray work of a pass (primary rays, shadow rays) as a small POD of device
-// pointers; the stages are generic over it.
-
-struct MarchOps {
-  MarchState* s;
-  int m;  // points per sample (1, or 7 with shading)
-  __device__ bool next(const RenderParams& p, int32_t i, Vec3f* pos, float* dt) const {
-    return march_next(p, s[i], pos, dt);
-  }
-  __device__ void points(const RenderParams& p, Vec3f pos, float* x, float* y, float* z) const {
-    march_sample_points(p, pos, m, x, y, z);
-  }
-  __device__ bool shade(const RenderParams& p, int32_t i, Vec3f pos, float dt, const float* v) const {
-    return march_shade(p, s[i], pos, dt, v, m);
-  }
-};
-
-struct ShadowOps {
-  ShadowState* s;
-  static constexpr int m = 1;
-  __device__ bool next(const RenderParams& p, int32_t i, Vec3f* pos, float* dt) const {
-    return shadow_next(p, s[i], pos, dt);
-  }
-  __device__ void points(const RenderParams& p, Vec3f pos, float* x, float* y, float* z) const {
-    const Vec3f u = pos * p.inv_box;
-    *x = u.x, *y = u.y, *z = u.z;
-  }
-  __device__ bool shade(const RenderParams& p, int32_t i, Vec3f, float dt, const float* v) const {
-    return shadow_shade(p, s[i], v[0], dt);
-  }
-};
-
 __global__ void iota_kernel(int32_t* out, int64_t n) {
   const int64_t i = int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
   if (i < n) out[i] = int32_t(i);
-}
-
-__global__ void march_begin_kernel(RenderParams p, MarchState* __restrict__ s, uint8_t* __restrict__ keep) {
-  const int64_t n = int64_t(p.cam.width) * p.cam.height;
-  const int64_t i = int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
-  if (i < n) keep[i] = march_begin(p, int(i % p.cam.width), int(i / p.cam.width), s[i]);
-}
-
-__global__ void shadow_begin_kernel(RenderParams p, const MarchState* __restrict__ m, ShadowState* __restrict__ s,
-                                    uint8_t* __restrict__ keep) {
-  const int64_t n = int64_t(p.cam.width) * p.cam.height;
-  const int64_t i = int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
-  if (i < n) keep[i] = shadow_begin(p, m[i], s[i]);
-}
-
-__global__ void march_pixel_kernel(RenderParams p, const MarchState* __restrict__ m,
-                                   const ShadowState* __restrict__ sh, Vec4f* __restrict__ img) {
-  const int64_t n = int64_t(p.cam.width) * p.cam.height;
-  const int64_t i = int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
-  if (i < n) img[i] = sh ? shadow_pixel(p, m[i], sh[i].T) : march_pixel(p, m[i]);
-}
-
-// Coordinate stage: up to K samples of each live ray r < *n_live (its positions and steps in slots
-// r*K ...), count[r] of them; count[r] = 0 for the rest of [0, cap], so a scan over cap + 1 counts
-// gives the packed offsets and, at [cap], the total.
-template <class Ops>
-__global__ void stream_next_kernel(RenderParams p, Ops ops, const int32_t* __restrict__ live,
-                                   const int* __restrict__ n_live, int64_t cap, int K, Vec3f* __restrict__ spos,
-                                   float* __restrict__ sdt, int64_t* __restrict__ count) {
-  const int64_t r = int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
-  if (r > cap) return;
-  int c = 0;
-  if (r < *n_live) {
-    const int32_t i = live[r];
-    while (c < K && ops.next(p, i, &spos[r * K + c], &sdt[r * K + c])) ++c;
-  }
-  count[r] = c;
-}
-
-// Packs the samples' field points (interleaved xyz) at their scanned offsets.
-template <class Ops>
-__global__ void stream_emit_kernel(RenderParams p, Ops ops, int64_t n_live, int K, const Vec3f* __restrict__ spos,
-                                   const int64_t* __restrict__ count, const int64_t* __restrict__ offset,
-                                   float* __restrict__ xyz) {
-  const int64_t r = int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
-  if (r >= n_live) return;
-  for (int k = 0; k < int(count[r]); ++k) {
-    float x[7], y[7], z[7];
-    ops.points(p, spos[r * K + k], x, y, z);
-    float* q = xyz + (offset[r] + k) * ops.m * 3;
-    for (int j = 0; j < ops.m; ++j) {
-      q[3 * j] = x[j];
-      q[3 * j + 1] = y[j];
-      q[3 * j + 2] = z[j];
-    }
-  }
-}
-
-// Shading stage: consumes each live ray's values; keep[r] = the ray goes on (it used all K slots and
-// did not terminate).
-template <class Ops>
-__global__ void stream_shade_kernel(RenderParams p, Ops ops, const int32_t* __restrict__ live, int64_t n_live, int K,
-                                    const Vec3f* __restrict__ spos, const float* __restrict__ sdt,
-                                    const int64_t* __restrict__ count, const int64_t* __restrict__ offset,
-                                    const float* __restrict__ values, int stride, uint8_t* __restrict__ keep) {
-  const int64_t r = int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
-  if (r >= n_live) return;
-  const int32_t i = live[r];
-  const int c = int(count[r]);
-  bool alive = c == K;
-  for (int k = 0; k < c; ++k) {
-    float v[7];
-    const int64_t q = (offset[r] + k) * ops.m;
-    for (int j = 0; j < ops.m; ++j) v[j] = values[(q + j) * stride];
-    if (!ops.shade(p, i, spos[r * K + k], sdt[r * K + k], v)) {
-      alive = false;
-      break;
-    }
-  }
-  keep[r] = alive;
-}
-
-// Path tracing: ray generation absorbs the first sample() (paper: raygen_kernel<PT_RAY>).
-__global__ void path_begin_kernel(RenderParams p, PathState* __restrict__ s, uint8_t* __restrict__ keep,
-                                  Vec4f* __restrict__ img) {
-  const int64_t n = int64_t(p.cam.width) * p.cam.height;
-  const int64_t i = int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
-  if (i >= n) return;
-  const bool k = pt_begin(p, int(i % p.cam.width), int(i / p.cam.width), s[i]) && pt_sample(p, s[i]);
-  keep[i] = k;
-  if (!k) img[i] = pt_pixel(s[i]);
-}
-
-__global__ void path_coords_kernel(RenderParams p, const PathState* __restrict__ s, const int32_t* __restrict__ live,
-                                   int64_t n_live, int64_t n_padded, float* __restrict__ xyz) {
-  const int64_t r = int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
-  if (r >= n_padded) return;
-  const Vec3f u = r < n_live ? s[live[r]].pos * p.inv_box : Vec3f{0, 0, 0};
-  xyz[3 * r] = u.x;
-  xyz[3 * r + 1] = u.y;
-  xyz[3 * r + 2] = u.z;
-}
-
-__global__ void path_shade_kernel(RenderParams p, PathState* __restrict__ s, const int32_t* __restrict__ live,
-                                  int64_t n_live, const float* __restrict__ values, int stride,
-                                  uint8_t* __restrict__ keep, Vec4f* __restrict__ img) {
-  const int64_t r = int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
-  if (r >= n_live) return;
-  const int32_t i = live[r];
-  const bool k = pt_shade(p, s[i], values[r * stride]) && pt_sample(p, s[i]);
-  keep[r] = k;
-  if (!k) img[i] = pt_pixel(s[i]);
 }
 
 // The ground-truth grid's batched query.
@@ -451,8 +66,8 @@ struct GpuRenderer::Impl {
   DeviceBuffer<float> volume;
   GridView dvol;
   std::unique_ptr<cuda::DeviceNetwork> dnet;
-  NetWarpField netf{};
-  DeviceBuffer<NetWarpField> netf_device;
+  cuda::WarpNetwork netf{};
+  DeviceBuffer<cuda::WarpNetwork> netf_device;
   // transfer function and macro-cells
   DeviceBuffer<Vec4f> tf_table;  // p.tf views it
   float tf_w = 1;                 // hi - lo of the TF window (macrocell_max_opacity divides by it)
@@ -480,21 +95,24 @@ struct GpuRenderer::Impl {
   int64_t n_pixels = 0;
   int64_t infer_slab = kDefaultInferSlab;
 
-  Impl(const Field& field, Vec3f b, const MacroCells& mc, const TransferFunction& tf, const Camera& cam,
+  Impl(const GpuFieldSource& field, Vec3f b, const MacroCells& mc, const TransferFunction& tf, const Camera& cam,
        const RenderOptions& o, cuda::MlpPath mlp)
       : opt(o), box(b) {
-    p = make_render_params(field.dims(), box, mc, tf, cam, opt);
-    if (auto* g = dynamic_cast<const GridField*>(&field)) {
-      const GridView& hv = g->view();
+    p = make_render_params(field.dims, box, mc, tf, cam, opt);
+    if (field.network) {
+      dnet = std::make_unique<cuda::DeviceNetwork>(*field.network, mlp);
+      netf = cuda::make_warp_network(*dnet, kWarpsPerBlock);
+      netf_device.resize(1);
+      netf_device.upload(&netf, 1);
+      allow_inshader_smem(int(netf.smem_bytes()));
+    } else if (field.grid.data) {
+      const GridView& hv = field.grid;
       const size_t voxels = size_t(hv.nx) * hv.ny * hv.nz;
       volume.resize(voxels);
       volume.upload(hv.data, voxels);
       dvol = GridView{volume.data(), hv.nx, hv.ny, hv.nz};
-    } else if (auto* nf = dynamic_cast<const NetworkField*>(&field)) {
-      dnet = std::make_unique<cuda::DeviceNetwork>(nf->network(), mlp);
-      setup_warp_network();
     } else {
-      cuda_fail_message("the GPU renderer needs a grid or network field");
+      cuda_fail_message("the GPU renderer needs a grid or a network");
     }
     n_pixels = int64_t(opt.width) * opt.height;
     VNR_CUDA_CHECK(cudaMallocHost(&host, sizeof(HostCounts)));
@@ -506,36 +124,6 @@ struct GpuRenderer::Impl {
   }
   ~Impl() {
     if (host) cudaFreeHost(host);
-  }
-
-  void setup_warp_network() {
-    const Network& net = dnet->network();
-    const MlpDims& d = dnet->dims();
-    NetWarpField& f = netf;
-    f.grid = net.grid();
-    f.weights = dnet->half_params();
-    f.table = dnet->half_params() + net.mlp().n_params;
-    f.d = d;
-    f.out_act = int(net.config().network.output_activation);
-    f.ld = std::max(d.in_pad, d.width) + 8;  // +8 halves: fewer shared-memory bank conflicts
-    f.n_weights = uint32_t(net.mlp().n_params);
-    int dev = 0, optin = 0;
-    VNR_CUDA_CHECK(cudaGetDevice(&dev));
-    VNR_CUDA_CHECK(cudaDeviceGetAttribute(&optin, cudaDevAttrMaxSharedMemoryPerBlockOptin, dev));
-    f.stage = 1;
-    if (f.smem_bytes() > size_t(optin)) f.stage = 0;  // weights through L1 instead
-    if (f.smem_bytes() > size_t(optin))
-      cuda_fail_message("in-shader inference: the MLP's activation tiles need " + std::to_string(f.smem_bytes()) +
-                        " bytes of shared memory per block, the device has " + std::to_string(optin));
-    netf_device.resize(1);
-    netf_device.upload(&f, 1);
-    const int bytes = int(f.smem_bytes());
-    VNR_CUDA_CHECK(cudaFuncSetAttribute(inshader_march<NetWarpRef, 1>,
-                                        cudaFuncAttributeMaxDynamicSharedMemorySize, bytes));
-    VNR_CUDA_CHECK(cudaFuncSetAttribute(inshader_march<NetWarpRef, 7>,
-                                        cudaFuncAttributeMaxDynamicSharedMemorySize, bytes));
-    VNR_CUDA_CHECK(cudaFuncSetAttribute(inshader_path<NetWarpRef>, cudaFuncAttributeMaxDynamicSharedMemorySize,
-                                        bytes));
   }
 
   void upload_tf(const TransferFunction& tf) {
@@ -592,6 +180,14 @@ struct GpuRenderer::Impl {
     return values.data();
   }
 
+  // A per-slot stage (stream_stages.h) over [0, n) on the renderer's stream.
+  template <class Stage>
+  void run(int64_t n, const Stage& stage) {
+    parallel_for(sb.stream, n, stage, kThreads);
+    VNR_CUDA_LAUNCHED();
+  }
+  static PointSink interleaved(float* xyz) { return PointSink{xyz, xyz + 1, xyz + 2, 3}; }
+
   void ensure_points(int64_t n) {
     if (xyz.size() < size_t(3 * n)) xyz.resize(size_t(3 * std::max<int64_t>(n, 1 << 16)));
   }
@@ -633,92 +229,78 @@ struct GpuRenderer::Impl {
     return host->live;
   }
 
-  // One streaming pass (primary or shadow rays) over the rays whose keep flag is set.
-  template <class Ops>
-  void stream_pass(const Ops& ops, RenderStats& st) {
-    const int K = opt.samples_per_iteration;
-    compact(all.data(), n_pixels, live.data());
-    if (spos.size() < size_t(n_pixels) * K) {
-      spos.resize(size_t(n_pixels) * K);
-      sdt.resize(size_t(n_pixels) * K);
+  // The GPU backend of the streaming driver (render/stream_driver.h): the queues in GPU memory, CUB
+  // scan and selection, one host synchronisation per iteration (the coordinate stage of the next
+  // iteration runs over the previous live count, an upper bound, and reads the exact one on the GPU).
+  struct StreamBackend {
+    Impl& I;
+    template <class Stage>
+    void run(int64_t n, const Stage& stage) { I.run(n, stage); }
+    MarchState* march_states(int64_t n) { return resized(I.march, n); }
+    ShadowState* shadow_states(int64_t n) { return resized(I.shadow, n); }
+    PathState* path_states(int64_t n) { return resized(I.path, n); }
+    uint8_t* pixel_keep(int64_t) { return I.keep.data(); }  // n_pixels (ensure_queues)
+    int64_t start_queue() {
+      I.compact(I.all.data(), I.n_pixels, I.live.data());
+      return I.n_pixels;
     }
-    int64_t cap = n_pixels;  // an upper bound of the live rays
-    for (;;) {
-      VNR_LAUNCH(stream_next_kernel<Ops>, cap + 1, p, ops, live.data(), n_live.data(), cap, K, spos.data(), sdt.data(),
-                 count.data());
-      size_t bytes = cub_temp.size();
-      VNR_CUDA_CHECK(cub::DeviceScan::ExclusiveSum(cub_temp.data(), bytes, count.data(), offset.data(), int(cap) + 1,
-                                                   sb.stream));
-      int64_t n_samples = 0;
-      const int64_t nl = read_counts(offset.data() + cap, &n_samples, st);
-      if (nl == 0) break;
-      const int64_t n_points = n_samples * ops.m, n_padded = cuda::round_up(n_points, 16);
-      ensure_points(n_padded);
-      VNR_LAUNCH(stream_emit_kernel<Ops>, nl, p, ops, nl, K, spos.data(), count.data(), offset.data(), xyz.data());
-      if (n_padded > n_points)
-        VNR_CUDA_CHECK(cudaMemsetAsync(xyz.data() + 3 * n_points, 0, size_t(3 * (n_padded - n_points)) * 4, sb.stream));
-      int stride = 1;
-      // every live ray may have ended in its coordinate stage: nothing to evaluate, the shading stage drops them
-      const float* v = n_padded > 0 ? evaluate(n_padded, &stride) : nullptr;
-      VNR_LAUNCH(stream_shade_kernel<Ops>, nl, p, ops, live.data(), nl, K, spos.data(), sdt.data(), count.data(),
-                 offset.data(), v, stride, keep.data());
-      compact(live.data(), nl, next.data());
-      std::swap(live, next);
-      cap = nl;
-      st.field_samples += n_points;
-      st.iterations += 1;
+    int64_t live_count(RenderStats& st) { return I.read_counts(nullptr, nullptr, st); }
+    int32_t* live() { return I.live.data(); }
+    const int* n_live() { return I.n_live.data(); }
+    uint8_t* keep() { return I.keep.data(); }
+    void slots(int64_t, int K) {  // count and offset hold n_pixels + 1 (ensure_queues)
+      if (I.spos.size() < size_t(I.n_pixels) * K) {
+        I.spos.resize(size_t(I.n_pixels) * K);
+        I.sdt.resize(size_t(I.n_pixels) * K);
+      }
     }
-  }
+    Vec3f* spos() { return I.spos.data(); }
+    float* sdt() { return I.sdt.data(); }
+    int64_t* count() { return I.count.data(); }
+    int64_t* offset() { return I.offset.data(); }
+    int64_t scan(int64_t cap, int64_t* total, RenderStats& st) {
+      size_t bytes = I.cub_temp.size();
+      VNR_CUDA_CHECK(cub::DeviceScan::ExclusiveSum(I.cub_temp.data(), bytes, I.count.data(), I.offset.data(),
+                                                   int(cap) + 1, I.sb.stream));
+      return I.read_counts(I.offset.data() + cap, total, st);
+    }
+    PointSink points(int64_t n) {
+      I.ensure_points(cuda::round_up(n, 16));
+      return interleaved(I.xyz.data());
+    }
+    // The batched networks take multiples of 16 points: the rest is padded with zeros.
+    const float* query(int64_t n, int* stride, RenderStats&) {
+      if (n == 0) return nullptr;  // every live ray ended in its coordinate stage: the shading drops them
+      const int64_t n_padded = cuda::round_up(n, 16);
+      if (n_padded > n)
+        VNR_CUDA_CHECK(cudaMemsetAsync(I.xyz.data() + 3 * n, 0, size_t(3 * (n_padded - n)) * 4, I.sb.stream));
+      return I.evaluate(n_padded, stride);
+    }
+    void compact(int64_t n) {
+      I.compact(I.live.data(), n, I.next.data());
+      std::swap(I.live, I.next);
+    }
+    template <class T>
+    static T* resized(DeviceBuffer<T>& b, int64_t n) {
+      b.resize(size_t(n));
+      return b.data();
+    }
+  };
 
-  void stream_march(RenderStats& st) {
-    const int m = march_points_per_sample(p);
-    const bool shadows = opt.mode == RenderMode::Shadow;
-    march.resize(size_t(n_pixels));
-    VNR_LAUNCH(march_begin_kernel, n_pixels, p, march.data(), keep.data());
-    stream_pass(MarchOps{march.data(), m}, st);
-    if (shadows) {
-      shadow.resize(size_t(n_pixels));
-      VNR_LAUNCH(shadow_begin_kernel, n_pixels, p, march.data(), shadow.data(), keep.data());
-      stream_pass(ShadowOps{shadow.data()}, st);
-    }
-    VNR_LAUNCH(march_pixel_kernel, n_pixels, p, march.data(), shadows ? shadow.data() : nullptr, image.data());
-  }
-
-  void stream_path(RenderStats& st) {
-    path.resize(size_t(n_pixels));
-    VNR_LAUNCH(path_begin_kernel, n_pixels, p, path.data(), keep.data(), image.data());
-    compact(all.data(), n_pixels, live.data());
-    int64_t nl = read_counts(nullptr, nullptr, st);
-    while (nl > 0) {
-      const int64_t n_padded = cuda::round_up(nl, 16);
-      ensure_points(n_padded);
-      VNR_LAUNCH(path_coords_kernel, n_padded, p, path.data(), live.data(), nl, n_padded, xyz.data());
-      int stride = 1;
-      const float* v = evaluate(n_padded, &stride);
-      VNR_LAUNCH(path_shade_kernel, nl, p, path.data(), live.data(), nl, v, stride, keep.data(), image.data());
-      compact(live.data(), nl, next.data());
-      std::swap(live, next);
-      st.field_samples += nl;
-      st.iterations += 1;
-      nl = read_counts(nullptr, nullptr, st);
-    }
+  void stream(RenderStats& st) {
+    ensure_queues();
+    StreamBackend b{*this};
+    if (opt.mode == RenderMode::PathTrace)
+      stream_path_frame(b, p, image.data(), st);
+    else
+      stream_march_frame(b, p, opt.mode == RenderMode::Shadow, opt.samples_per_iteration, image.data(), st);
   }
 
   template <class Field>
   void inshader(const Field& f, size_t smem, RenderStats& st) {
     VNR_CUDA_CHECK(cudaMemsetAsync(samples.data(), 0, sizeof(unsigned long long), sb.stream));
-    const dim3 grid(unsigned((opt.width + kBlockW - 1) / kBlockW), unsigned((opt.height + kBlockH - 1) / kBlockH));
-    const unsigned threads = kWarpsPerBlock * 32;
-    if (opt.mode == RenderMode::PathTrace) {
-      inshader_path<Field><<<grid, threads, smem, sb.stream>>>(p, f, image.data(), samples.data());
-    } else {
-      const int shadow = opt.mode == RenderMode::Shadow;
-      if (march_points_per_sample(p) == 1)
-        inshader_march<Field, 1><<<grid, threads, smem, sb.stream>>>(p, f, shadow, image.data(), samples.data());
-      else
-        inshader_march<Field, 7><<<grid, threads, smem, sb.stream>>>(p, f, shadow, image.data(), samples.data());
-    }
-    VNR_CUDA_LAUNCHED();
+    const int mode = opt.mode == RenderMode::PathTrace ? 2 : (opt.mode == RenderMode::Shadow ? 1 : 0);
+    launch_inshader(p, f, smem, mode, image.data(), samples.data(), sb.stream);
     VNR_CUDA_CHECK(cudaMemcpyAsync(&host->samples, samples.data(), sizeof(unsigned long long), cudaMemcpyDeviceToHost,
                                    sb.stream));
     VNR_CUDA_CHECK(cudaStreamSynchronize(sb.stream));
@@ -730,13 +312,11 @@ struct GpuRenderer::Impl {
     const auto t0 = std::chrono::steady_clock::now();
     p.frame = frame;
     if (opt.strategy == RenderStrategy::Streaming) {
-      ensure_queues();
-      if (opt.mode == RenderMode::PathTrace) stream_path(st);
-      else stream_march(st);
+      stream(st);
       VNR_CUDA_CHECK(cudaStreamSynchronize(sb.stream));
       st.host_syncs += 1;
     } else if (dnet) {
-      inshader(NetWarpRef{netf_device.data()}, netf.smem_bytes(), st);
+      inshader(cuda::WarpNetworkRef{netf_device.data()}, netf.smem_bytes(), st);
     } else {
       inshader(GridWarpField{dvol}, 0, st);
     }
@@ -746,7 +326,7 @@ struct GpuRenderer::Impl {
   }
 };
 
-GpuRenderer::GpuRenderer(const Field& field, Vec3f box, const MacroCells& mc, const TransferFunction& tf,
+GpuRenderer::GpuRenderer(const GpuFieldSource& field, Vec3f box, const MacroCells& mc, const TransferFunction& tf,
                          const Camera& cam, const RenderOptions& opt, cuda::MlpPath mlp)
     : impl_(std::make_unique<Impl>(field, box, mc, tf, cam, opt, mlp)) {}
 GpuRenderer::~GpuRenderer() = default;

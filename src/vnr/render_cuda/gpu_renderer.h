@@ -16,14 +16,24 @@
 #include <vector>
 #include "vnr/cuda/cuda.h"
 #include "vnr/render/renderer.h"
+#include "vnr/volume/volume.h"
 
 namespace vnr {
 
+class Network;
+
+// What a GpuRenderer copies to the GPU: the ground-truth grid (grid.data set) or a trained network.
+struct GpuFieldSource {
+  GridView grid;                     // normalised voxels in host memory
+  const Network* network = nullptr;  // else a network (it must outlive the renderer's construction)
+  Int3 dims;                         // the field's voxels (the central-difference step of shading)
+};
+
 class GpuRenderer final : public FrameRenderer {
 public:
-  // The field must be a GridField or a NetworkField (its network or grid is copied to the GPU); mc gives
-  // the value ranges (the opacities are recomputed on the GPU for tf).
-  GpuRenderer(const Field& field, Vec3f box, const MacroCells& mc, const TransferFunction& tf, const Camera& cam,
+  // The field's grid or network is copied to the GPU; mc gives the value ranges (the opacities are
+  // recomputed on the GPU for tf). fields/fields.h's make_renderer builds one from a field.
+  GpuRenderer(const GpuFieldSource& field, Vec3f box, const MacroCells& mc, const TransferFunction& tf, const Camera& cam,
               const RenderOptions& opt, cuda::MlpPath mlp = cuda::MlpPath::Auto);
   ~GpuRenderer() override;
   GpuRenderer(const GpuRenderer&) = delete;
@@ -55,10 +65,5 @@ private:
 
 // Value ranges of a normalised grid computed on the GPU: value_ranges_from_grid's cells, exactly.
 ValueRangeGrid gpu_value_ranges_from_grid(const GridView& g, int cell_size = 16);
-
-// The renderer of a device: the CpuRenderer or a GpuRenderer.
-std::unique_ptr<FrameRenderer> make_renderer(Device device, const Field& field, Vec3f box, const MacroCells& mc,
-                                             const TransferFunction& tf, const Camera& cam, const RenderOptions& opt,
-                                             cuda::MlpPath mlp = cuda::MlpPath::Auto);
 
 }  // namespace vnr

@@ -11,7 +11,7 @@ namespace {
 }  // namespace
 
 struct GpuRenderer::Impl {};
-GpuRenderer::GpuRenderer(const Field&, Vec3f, const MacroCells&, const TransferFunction&, const Camera&,
+GpuRenderer::GpuRenderer(const GpuFieldSource&, Vec3f, const MacroCells&, const TransferFunction&, const Camera&,
                          const RenderOptions&, cuda::MlpPath) {
   not_built();
 }
