@@ -5,6 +5,7 @@
 #include <cuda_runtime.h>
 #include "vnr/cuda/common.h"
 #include "vnr/cuda/mlp.cuh"
+#include "vnr/nn/adam_update.h"
 #include "vnr/nn/grid_encoding.h"
 #include "vnr/volume/value_range_grid.h"
 #include "vnr/volume/volume.h"
@@ -32,8 +33,7 @@ void sample_in_core(GridView volume, uint64_t seed, uint64_t step, int chunk, in
 void loss_and_grad(LossType t, Activation out_act, const float* out_pre, const float* target, int64_t n, int n_out,
                    int out_pad, float inv_n, __half* dOut, float* loss_slot, cudaStream_t s);
 
-struct AdamArgs {
-  float lr, beta1, beta2, eps, l2, rel, abs_decay, lo, hi;
+struct AdamArgs : AdamHyper {
   int matrix;  // 1: l2 applies, never skipped; 0: skipped where the gradient is exactly 0
 };
 // compat.md A.7.1 on [0, n): reads and zeroes grads, updates w/m/v/c and writes half(w).
