@@ -5,7 +5,7 @@
 
 namespace vnr {
 
-// A model configuration in tiny-cuda-nn's JSON vocabulary (compat.md A.1-A.7), parsed into plain
+// A model configuration in tiny-cuda-nn's JSON vocabulary (docs/semantics.md A.1-A.7), parsed into plain
 // structs. Unknown keys are ignored (as tcnn does); unsupported values are errors that list the
 // accepted ones.
 

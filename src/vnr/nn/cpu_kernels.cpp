@@ -64,8 +64,7 @@ HWY_INLINE void CornersVec(const GridLevel& L, bool smooth, const float* x, cons
 }
 
 // Prefetch into L2 (prefetcht1), not L1: a block issues 128 prefetches, far more than the L1's miss
-// buffers; L1 prefetches were largely lost and the cold-cache paper encode took 231 ns/sample, L2
-// prefetches bring it to 90 ns/sample (measured on Zen 4).
+// buffers, so L1 prefetches are largely lost.
 template <int F, typename P>
 HWY_INLINE void PrefetchCorners(const P* lt, const CornerBlock& cb, size_t N, bool enabled = true) {
   if (!enabled) return;

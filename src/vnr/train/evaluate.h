@@ -8,7 +8,7 @@
 
 namespace vnr {
 
-// Evaluation against the ground truth at voxel centres (compat.md B.4).
+// Evaluation against the ground truth at voxel centres (docs/semantics.md B.4).
 struct EvalResult {
   double psnr = 0, ssim = 0, mse = 0;
   double max_abs_error = 0;           // normalised units
