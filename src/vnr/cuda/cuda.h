@@ -4,7 +4,7 @@
 // with one clear line. CI has the toolkit but no GPU or driver: cudaGetDeviceCount then returns an
 // error, which means "no device", never a failure.
 //
-// Semantics are tiny-cuda-nn's (compat.md): half weights and activations, binary32 accumulation, loss
+// Semantics are tiny-cuda-nn's (docs/semantics.md): half weights and activations, binary32 accumulation, loss
 // scale 128 on the half gradients, Adam on a binary32 master copy with the zero-gradient skip of grid
 // parameters. The per-sample code (sampling, trilinear targets, grid corners, losses) is the same
 // VNR_HD source the CPU runs; only the hot kernels (grid gather/scatter, the MLP, Adam) are CUDA's own.
@@ -63,7 +63,7 @@ struct GpuTrainOptions {
 };
 
 // Trains a Network on the GPU from a normalised volume held in GPU memory (the in-core sampler of
-// compat.md B.3, bit-identical coordinates and targets to the CPU's for the same seed and chunk).
+// docs/semantics.md B.3, bit-identical coordinates and targets to the CPU's for the same seed and chunk).
 class GpuTrainer {
 public:
   GpuTrainer(Network& net, GridView volume, GpuTrainOptions opts);

@@ -1,7 +1,7 @@
 #pragma once
-// Grid-encoding pieces that only the CUDA kernels use (CUDA-only header): an entry's F half features read
-// or written as one vector access, the level forward over the half table built on it, and the vector
-// atomics of the backward.
+// The CUDA layer under grid_encoding.h's shared level code (CUDA-only header): an entry's F half features
+// read or written as one vector access (GridEntryLoad<__half>) and the vector atomics of the backward
+// (GridGradAtomic); the level forward/backward themselves are grid_encoding.h's.
 #include <cuda_fp16.h>
 #include <type_traits>
 #include "vnr/nn/grid_encoding.h"
@@ -9,8 +9,7 @@
 namespace vnr::cuda {
 
 // A grid entry's F features as one vector access (F = 2: 32 bits, 4: 64, 8: 128) instead of F 16-bit
-// ones: the encoder and its backward were bound by the load/store queue (Nsight Compute on an H100: "LG
-// throttle"), not by bandwidth. Entries are F-aligned: the table starts after the MLP weights, a
+// ones: the encoder and its backward are bound by the load/store queue, not by bandwidth. Entries are F-aligned: the table starts after the MLP weights, a
 // multiple of 256 halves.
 template <int F>
 __device__ __forceinline__ void load_halves(const __half* __restrict__ p, float* out) {
@@ -61,21 +60,45 @@ __device__ __forceinline__ void atomic_add_entry(float* gr, const float* v) {
   }
 }
 
-// grid_level_forward<F> over the half table (grid_corners, then FMA in corner order: the CPU's bits
-// before the rounding to half), each corner's features one vector load.
+// The shared level code with this header's accesses: grid_level_forward<F> over the half table (one
+// vector load per corner) and grid_level_backward<F, GridGradAtomic> (vector atomics).
+// (Host passes of nvcc see plain loads and adds: the shared functions are __host__ __device__.)
+struct GridGradAtomic {
+  template <int F>
+  VNR_HD VNR_INLINE void add(float* gr, float w, const float* g) const {
+    float v[F];
+    for (int f = 0; f < F; ++f) v[f] = w * g[f];
+#ifdef __CUDA_ARCH__
+    atomic_add_entry<F>(gr, v);
+#else
+    for (int f = 0; f < F; ++f) gr[f] += v[f];
+#endif
+  }
+};
+
+}  // namespace vnr::cuda
+
+namespace vnr {
+template <>
+struct GridEntryLoad<__half> {
+  template <int F>
+  VNR_HD VNR_INLINE static void load(const __half* entry, float* out) {
+#ifdef __CUDA_ARCH__
+    vnr::cuda::load_halves<F>(entry, out);
+#else
+    for (int f = 0; f < F; ++f) out[f] = __half2float(entry[f]);
+#endif
+  }
+};
+}  // namespace vnr
+
+namespace vnr::cuda {
+
 template <int F>
 __device__ __forceinline__ void grid_level_forward_half(const GridLevel& L, Interpolation interp,
                                                         const __half* __restrict__ table, float x, float y, float z,
                                                         float* out) {
-  GridCorners cr;
-  grid_corners(L, interp, x, y, z, cr);
-  for (int f = 0; f < F; ++f) out[f] = 0.0f;
-  const int kn = interp == Interpolation::Nearest ? 1 : 8;
-  for (int k = 0; k < kn; ++k) {
-    float th[F];
-    load_halves<F>(table + (uint64_t(L.offset) + cr.entry[k]) * F, th);
-    for (int f = 0; f < F; ++f) out[f] = fmaf(cr.weight[k], th[f], out[f]);
-  }
+  grid_level_forward<F>(L, interp, table, x, y, z, out, 1);
 }
 
 }  // namespace vnr::cuda

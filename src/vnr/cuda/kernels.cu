@@ -1,6 +1,7 @@
 #include "vnr/core/rng.h"
 #include "vnr/cuda/grid_device.cuh"
 #include "vnr/cuda/kernels.cuh"
+#include "vnr/nn/adam_update.h"
 #include "vnr/nn/loss.h"
 
 namespace vnr::cuda {
@@ -17,8 +18,8 @@ __global__ void encode_kernel(GridLayout g, const __half* __restrict__ table, Co
   const int level = int(i / n);
   const int64_t s = i - int64_t(level) * n;
   float out[F];
-  grid_level_forward_half<F>(g.levels[level], g.interpolation, table, c.x[s * c.stride], c.y[s * c.stride],
-                             c.z[s * c.stride], out);
+  grid_level_forward<F>(g.levels[level], g.interpolation, table, c.x[s * c.stride], c.y[s * c.stride],
+                        c.z[s * c.stride], out, 1);
   __half* row = X0 + s * in_pad;
   store_halves<F>(out, row + level * F);
   if (level == 0)
@@ -40,15 +41,8 @@ __global__ void grid_backward_kernel(GridLayout g, Coords c, int64_t n, int in_p
     any |= dy[f] != 0.0f;
   }
   if (!any) return;
-  const GridLevel& L = g.levels[level];
-  GridCorners cr;
-  grid_corners(L, g.interpolation, c.x[s * c.stride], c.y[s * c.stride], c.z[s * c.stride], cr);
-  const int kn = g.interpolation == Interpolation::Nearest ? 1 : 8;
-  for (int k = 0; k < kn; ++k) {
-    float v[F];
-    for (int f = 0; f < F; ++f) v[f] = cr.weight[k] * dy[f];
-    atomic_add_entry<F>(grad + (uint64_t(L.offset) + cr.entry[k]) * F, v);
-  }
+  grid_level_backward<F>(g.levels[level], g.interpolation, grad, c.x[s * c.stride], c.y[s * c.stride],
+                         c.z[s * c.stride], dy, 1, GridGradAtomic());
 }
 
 __global__ void sample_kernel(GridView vol, uint64_t seed, uint64_t step, int chunk, int64_t batch, float* x,
@@ -90,10 +84,9 @@ __global__ void loss_kernel(LossType t, Activation out_act, const float* __restr
   }
 }
 
-// The CPU's AdamRange formula operation for operation (this file is built without FMA contraction).
-// kAdamPerThread parameters per thread, every load issued before any arithmetic: with one parameter per
-// thread each warp waited on three dependent memory round trips (gradient, state, bias tables) and the
-// kernel moved ~20 % of the memory bandwidth (Nsight Compute on an H100).
+// adam_update() (nn/adam_update.h), the CPU's update, kAdamPerThread parameters per thread with every
+// load issued before any arithmetic: one parameter per thread leaves each warp waiting on three
+// dependent memory round trips (gradient, state, bias tables).
 constexpr int kAdamPerThread = 4;
 
 __global__ void adam_kernel(AdamArgs a, float* __restrict__ w, float* __restrict__ grads, float* __restrict__ m,
@@ -127,15 +120,8 @@ __global__ void adam_kernel(AdamArgs a, float* __restrict__ w, float* __restrict
   for (int j = 0; j < kAdamPerThread; ++j) {
     const int64_t i = first + int64_t(j) * blockDim.x;
     if (i >= n || (!a.matrix && g[j] == 0.0f)) continue;
-    float gj = g[j];
-    if (a.matrix) gj = gj + a.l2 * wi[j];
-    const float mn = a.beta1 * mi[j] + (1.0f - a.beta1) * gj;
-    const float vn = a.beta2 * vi[j] + ((1.0f - a.beta2) * gj) * gj;
-    const float lr_t = (a.lr * bs[j]) / bd[j];
-    float eff = lr_t / (sqrtf(vn) + a.eps);
-    eff = fminf(fmaxf(eff, a.lo), a.hi);
-    const float wd = (1.0f - a.rel * lr_t) * wi[j] - copysignf(a.abs_decay * lr_t, wi[j]);
-    const float wn = wd - eff * mn;
+    float wn = wi[j], mn = mi[j], vn = vi[j];
+    adam_update(a, a.matrix != 0, g[j], bs[j], bd[j], wn, mn, vn);
     w[i] = wn;
     m[i] = mn;
     v[i] = vn;

@@ -5,6 +5,7 @@
 #include <cuda_runtime.h>
 #include "vnr/cuda/common.h"
 #include "vnr/cuda/mlp.cuh"
+#include "vnr/nn/adam_update.h"
 #include "vnr/nn/grid_encoding.h"
 #include "vnr/volume/value_range_grid.h"
 #include "vnr/volume/volume.h"
@@ -24,7 +25,7 @@ void encode(const GridLayout& g, const __half* table, Coords c, int64_t n, int i
 // correct under hash collisions and between levels.
 void grid_backward(const GridLayout& g, Coords c, int64_t n, int in_pad, const __half* dX0, float* grad,
                    cudaStream_t s);
-// Uniform coordinates of compat.md B.3 (bit-identical to the CPU's for the same seed/step/chunk) and their
+// Uniform coordinates of docs/semantics.md B.3 (bit-identical to the CPU's for the same seed/step/chunk) and their
 // cell-centred trilinear targets from the volume in GPU memory.
 void sample_in_core(GridView volume, uint64_t seed, uint64_t step, int chunk, int64_t batch, float* x, float* y,
                     float* z, float* target, cudaStream_t s);
@@ -32,11 +33,10 @@ void sample_in_core(GridView volume, uint64_t seed, uint64_t step, int chunk, in
 void loss_and_grad(LossType t, Activation out_act, const float* out_pre, const float* target, int64_t n, int n_out,
                    int out_pad, float inv_n, __half* dOut, float* loss_slot, cudaStream_t s);
 
-struct AdamArgs {
-  float lr, beta1, beta2, eps, l2, rel, abs_decay, lo, hi;
+struct AdamArgs : AdamHyper {
   int matrix;  // 1: l2 applies, never skipped; 0: skipped where the gradient is exactly 0
 };
-// compat.md A.7.1 on [0, n): reads and zeroes grads, updates w/m/v/c and writes half(w).
+// docs/semantics.md A.7.1 on [0, n): reads and zeroes grads, updates w/m/v/c and writes half(w).
 void adam(const AdamArgs& a, float* w, float* grads, float* m, float* v, uint32_t* c, __half* half_out, int64_t n,
           const float* bias_sqrt, const float* bias_den, cudaStream_t s);
 // half_out[i] = half(in[i]) (round to nearest even).
@@ -45,7 +45,7 @@ void to_half(const float* in, int64_t n, __half* half_out, cudaStream_t s);
 // copies of the last up to `padded`.
 void voxel_centres(Int3 dims, int64_t first, int64_t count, int64_t padded, float* xyz, cudaStream_t s);
 
-// Macro-cell value ranges (compat.md B.6) in GPU memory, the cells of a ValueRangeGrid (x fastest); empty
+// Macro-cell value ranges (docs/semantics.md B.6) in GPU memory, the cells of a ValueRangeGrid (x fastest); empty
 // cells hold lo = +inf, hi = -inf.
 struct RangeGridDims {
   int32_t nx = 0, ny = 0, nz = 0;  // cells

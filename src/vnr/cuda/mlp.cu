@@ -260,7 +260,7 @@ MlpPath resolve_mlp_path(const Network& net, MlpPath asked) {
   const MlpDims d = mlp_dims(net.mlp());
   const bool width_ok = d.width == 16 || d.width == 32 || d.width == 64 || d.width == 128;
   const bool fits = fused_smem_bytes(d) <= device_smem_optin();
-  // The fused tiles are 16 wide: CutlassMLP configs pad inputs and outputs to 8 (compat.md A.4.3).
+  // The fused tiles are 16 wide: CutlassMLP configs pad inputs and outputs to 8 (docs/semantics.md A.4.3).
   const bool pads_ok = d.in_pad % 16 == 0 && d.out_pad == 16;
   if (asked == MlpPath::Fused) {
     if (!pads_ok) cuda_fail_message("the fused MLP needs inputs and outputs padded to 16 (FullyFusedMLP); this "

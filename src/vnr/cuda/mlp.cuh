@@ -12,7 +12,7 @@
 
 namespace vnr::cuda {
 
-constexpr float kLossScale = 128.0f;  // compat.md A.6: half gradients are scaled by S = 128
+constexpr float kLossScale = 128.0f;  // docs/semantics.md A.6: half gradients are scaled by S = 128
 
 struct MlpDims {
   int in_pad = 0, width = 0, n_matrices = 0, n_out = 1, out_pad = 16;

@@ -43,7 +43,7 @@ std::string backend_summary() {
 }
 
 uint64_t GpuTrainer::bytes_needed(const Network& net, uint64_t voxels, int64_t batch) {
-  // Mirrors the trainer's buffers (engine.cu, PassBuffers::allocate and GpuTrainer::Impl): per sample X0
+  // Mirrors the trainer's buffers (device_network.cu PassBuffers::allocate, gpu_trainer.cu GpuTrainer::Impl): per sample X0
   // and dX0, hidden activations and their gradients, dOut (half); coordinates, target, output and the
   // cuBLAS path's scratch (binary32). Per parameter: master, gradient, two moments, count, half copy.
   const MlpLayout& m = net.mlp();

@@ -3,31 +3,11 @@
 #include <cmath>
 #include "vnr/core/error.h"
 #include "vnr/core/fileio.h"
+#include "vnr/nn/encoding.h"
+#include "vnr/nn/json_get.h"
 
 namespace vnr {
 namespace {
-
-template <typename T>
-T get_or(const Json& j, const char* key, T dflt, const char* where) {
-  if (!j.contains(key)) return dflt;
-  const Json& v = j.at(key);
-  if constexpr (std::is_same_v<T, bool>) {
-    if (!v.is_boolean()) fail("{}: '{}' must be true or false", where, key);
-    return v.get<bool>();
-  } else if constexpr (std::is_same_v<T, std::string>) {
-    if (!v.is_string()) fail("{}: '{}' must be a string", where, key);
-    return v.get<std::string>();
-  } else if constexpr (std::is_floating_point_v<T>) {
-    if (!v.is_number()) fail("{}: '{}' must be a number", where, key);
-    return T(v.get<double>());
-  } else {
-    if (!v.is_number()) fail("{}: '{}' must be a number", where, key);
-    double d = v.get<double>();
-    if (d < 0 || d != std::floor(d) || d > 4294967295.0)
-      fail("{}: '{}' must be a non-negative integer, got {}", where, key, v.dump());
-    return T(d);
-  }
-}
 
 Activation parse_activation(const std::string& s, const char* where) {
   static const std::pair<const char*, Activation> t[] = {
@@ -40,95 +20,33 @@ Activation parse_activation(const std::string& s, const char* where) {
        where, s);
 }
 
-EncodingConfig parse_encoding(const Json& j) {
-  const char* w = "encoding";
-  EncodingConfig e;
-  if (!j.is_object()) fail("config: 'encoding' must be an object");
-  std::string otype = get_or<std::string>(j, "otype", "", w);
-  std::string lo = to_lower(otype);
-  if (lo == "hashgrid" || lo == "grid" || lo == "densegrid" || lo == "tiledgrid") {
-    e.type = EncodingType::Grid;
-    std::string type = lo == "densegrid" ? "dense" : (lo == "tiledgrid" ? "tiled" : "hash");
-    type = to_lower(get_or<std::string>(j, "type", type, w));
-    if (type == "hash") e.grid_type = GridType::Hash;
-    else if (type == "dense") e.grid_type = GridType::Dense;
-    else if (type == "tiled" || type == "tile") e.grid_type = GridType::Tiled;
-    else fail("encoding: unsupported grid type '{}' (allowed: Hash, Dense, Tiled)", type);
-    if (j.contains("n_levels") && j.contains("n_features"))
-      fail("encoding: give either 'n_levels' or 'n_features', not both");
-    e.n_features_per_level = get_or<uint32_t>(j, "n_features_per_level", 2u, w);
-    if (e.n_features_per_level != 1 && e.n_features_per_level != 2 && e.n_features_per_level != 4 &&
-        e.n_features_per_level != 8)
-      fail("encoding: n_features_per_level must be 1, 2, 4 or 8, got {}", e.n_features_per_level);
-    if (j.contains("n_features")) {
-      uint32_t nf = get_or<uint32_t>(j, "n_features", 32u, w);
-      if (nf % e.n_features_per_level) fail("encoding: n_features must be a multiple of n_features_per_level");
-      e.n_levels = nf / e.n_features_per_level;
-    } else {
-      e.n_levels = get_or<uint32_t>(j, "n_levels", 16u, w);
-    }
-    if (e.n_levels < 1 || e.n_levels > 32) fail("encoding: n_levels must be in 1..32, got {}", e.n_levels);
-    e.log2_hashmap_size = get_or<uint32_t>(j, "log2_hashmap_size", 19u, w);
-    if (e.log2_hashmap_size < 1 || e.log2_hashmap_size > 30)
-      fail("encoding: log2_hashmap_size must be in 1..30, got {}", e.log2_hashmap_size);
-    e.base_resolution = get_or<uint32_t>(j, "base_resolution", 16u, w);
-    if (e.base_resolution < 1) fail("encoding: base_resolution must be at least 1");
-    e.per_level_scale = get_or<float>(j, "per_level_scale", 2.0f, w);
-    if (!(e.per_level_scale >= 1.0f)) fail("encoding: per_level_scale must be >= 1");
-    std::string interp = to_lower(get_or<std::string>(j, "interpolation", "Linear", w));
-    if (interp == "linear") e.interpolation = Interpolation::Linear;
-    else if (interp == "nearest") e.interpolation = Interpolation::Nearest;
-    else if (interp == "smoothstep") e.interpolation = Interpolation::Smoothstep;
-    else fail("encoding: unsupported interpolation '{}' (allowed: Nearest, Linear, Smoothstep)", interp);
-  } else if (lo == "frequency") {
-    e.type = EncodingType::Frequency;
-    e.n_frequencies = get_or<uint32_t>(j, "n_frequencies", 12u, w);
-    if (e.n_frequencies < 1 || e.n_frequencies > kMaxFrequencies)
-      fail("encoding: n_frequencies must be in 1..{}, got {}", kMaxFrequencies, e.n_frequencies);
-  } else if (lo == "oneblob") {
-    e.type = EncodingType::OneBlob;
-    e.n_bins = get_or<uint32_t>(j, "n_bins", 16u, w);
-    if (e.n_bins < 1 || e.n_bins > kMaxOneBlobBins || (e.n_bins & (e.n_bins - 1)))
-      fail("encoding: n_bins must be a power of two in 1..{}, got {}", kMaxOneBlobBins, e.n_bins);
-  } else if (lo == "identity") {
-    e.type = EncodingType::Identity;
-    e.scale = get_or<float>(j, "scale", 1.0f, w);
-    e.offset = get_or<float>(j, "offset", 0.0f, w);
-  } else {
-    fail("encoding: unsupported otype '{}' (allowed: HashGrid, DenseGrid, TiledGrid, Grid, Frequency, OneBlob, "
-         "Identity)",
-         otype);
-  }
-  return e;
-}
-
 NetworkConfig parse_network(const Json& j) {
   const char* w = "network";
   if (!j.is_object()) fail("config: 'network' must be an object");
   NetworkConfig n;
-  std::string otype = get_or<std::string>(j, "otype", "", w);
+  std::string otype = json_get<std::string>(j, "otype", "", w);
   if (iequals(otype, "FullyFusedMLP")) n.fully_fused = true;
   else if (iequals(otype, "CutlassMLP") || iequals(otype, "MLP")) n.fully_fused = false;
   else fail("network: unsupported otype '{}' (allowed: FullyFusedMLP, CutlassMLP, MLP)", otype);
-  n.n_neurons = get_or<uint32_t>(j, "n_neurons", 128u, w);
-  n.n_hidden_layers = get_or<uint32_t>(j, "n_hidden_layers", 5u, w);
+  n.n_neurons = json_get<uint32_t>(j, "n_neurons", 128u, w);
+  n.n_hidden_layers = json_get<uint32_t>(j, "n_hidden_layers", 5u, w);
   if (n.fully_fused && n.n_neurons != 16 && n.n_neurons != 32 && n.n_neurons != 64 && n.n_neurons != 128)
     fail("network: FullyFusedMLP supports n_neurons 16, 32, 64 or 128, got {} (use CutlassMLP for other widths)",
          n.n_neurons);
   if (n.n_neurons < 1 || n.n_neurons > 1024) fail("network: n_neurons must be in 1..1024, got {}", n.n_neurons);
   if (n.n_hidden_layers < 1 || n.n_hidden_layers > 32)
     fail("network: n_hidden_layers must be in 1..32, got {}", n.n_hidden_layers);
-  n.activation = parse_activation(get_or<std::string>(j, "activation", "ReLU", w), "network.activation");
+  n.activation = parse_activation(json_get<std::string>(j, "activation", "ReLU", w), "network.activation");
   if (n.activation != Activation::ReLU && n.activation != Activation::None)
     fail("network: unsupported hidden activation '{}' on the CPU backend (allowed: ReLU, None)",
          activation_name(n.activation));
   n.output_activation =
-      parse_activation(get_or<std::string>(j, "output_activation", "None", w), "network.output_activation");
+      parse_activation(json_get<std::string>(j, "output_activation", "None", w), "network.output_activation");
   return n;
 }
 
 LossType parse_loss(const Json& j) {
-  std::string otype = j.is_object() ? get_or<std::string>(j, "otype", "RelativeL2", "loss") : "RelativeL2";
+  std::string otype = j.is_object() ? json_get<std::string>(j, "otype", "RelativeL2", "loss") : "RelativeL2";
   if (iequals(otype, "L1")) return LossType::L1;
   if (iequals(otype, "L2")) return LossType::L2;
   if (iequals(otype, "RelativeL2")) return LossType::RelativeL2;
@@ -138,21 +56,21 @@ LossType parse_loss(const Json& j) {
 
 AdamConfig parse_adam(const Json& j) {
   const char* w = "optimizer";
-  std::string otype = get_or<std::string>(j, "otype", "Adam", w);
+  std::string otype = json_get<std::string>(j, "otype", "Adam", w);
   if (!iequals(otype, "Adam")) fail("optimizer: unsupported otype '{}' (allowed: Adam, ExponentialDecay)", otype);
   AdamConfig a;
-  a.learning_rate = get_or<float>(j, "learning_rate", a.learning_rate, w);
-  a.beta1 = get_or<float>(j, "beta1", a.beta1, w);
-  a.beta2 = get_or<float>(j, "beta2", a.beta2, w);
-  a.epsilon = get_or<float>(j, "epsilon", a.epsilon, w);
-  a.l2_reg = get_or<float>(j, "l2_reg", a.l2_reg, w);
-  a.relative_decay = get_or<float>(j, "relative_decay", a.relative_decay, w);
-  a.absolute_decay = get_or<float>(j, "absolute_decay", a.absolute_decay, w);
-  a.adabound = get_or<bool>(j, "adabound", a.adabound, w);
+  a.learning_rate = json_get<float>(j, "learning_rate", a.learning_rate, w);
+  a.beta1 = json_get<float>(j, "beta1", a.beta1, w);
+  a.beta2 = json_get<float>(j, "beta2", a.beta2, w);
+  a.epsilon = json_get<float>(j, "epsilon", a.epsilon, w);
+  a.l2_reg = json_get<float>(j, "l2_reg", a.l2_reg, w);
+  a.relative_decay = json_get<float>(j, "relative_decay", a.relative_decay, w);
+  a.absolute_decay = json_get<float>(j, "absolute_decay", a.absolute_decay, w);
+  a.adabound = json_get<bool>(j, "adabound", a.adabound, w);
   a.non_matrix_learning_rate_factor =
-      get_or<float>(j, "non_matrix_learning_rate_factor", a.non_matrix_learning_rate_factor, w);
-  a.optimize_matrix_params = get_or<bool>(j, "optimize_matrix_params", true, w);
-  a.optimize_non_matrix_params = get_or<bool>(j, "optimize_non_matrix_params", true, w);
+      json_get<float>(j, "non_matrix_learning_rate_factor", a.non_matrix_learning_rate_factor, w);
+  a.optimize_matrix_params = json_get<bool>(j, "optimize_matrix_params", true, w);
+  a.optimize_non_matrix_params = json_get<bool>(j, "optimize_non_matrix_params", true, w);
   return a;
 }
 
@@ -167,7 +85,7 @@ ModelConfig ModelConfig::from_json(const Json& in) {
   if (!j.contains("encoding")) fail("config: missing 'encoding' object");
   if (!j.contains("network")) fail("config: missing 'network' object");
   ModelConfig c;
-  c.encoding = parse_encoding(j.at("encoding"));
+  c.encoding = parse_encoding_config(j.at("encoding"));
   c.network = parse_network(j.at("network"));
   c.loss = parse_loss(j.value("loss", Json::object()));
   Json opt = j.value("optimizer", Json::object());
@@ -175,10 +93,10 @@ ModelConfig ModelConfig::from_json(const Json& in) {
   if (iequals(opt.value("otype", std::string("Adam")), "ExponentialDecay")) {
     const char* w = "optimizer";
     c.decay.enabled = true;
-    c.decay.decay_base = get_or<float>(opt, "decay_base", 0.1f, w);
-    c.decay.decay_start = get_or<uint32_t>(opt, "decay_start", 10000u, w);
-    c.decay.decay_interval = get_or<uint32_t>(opt, "decay_interval", 10000u, w);
-    c.decay.decay_end = get_or<uint32_t>(opt, "decay_end", 10000000u, w);
+    c.decay.decay_base = json_get<float>(opt, "decay_base", 0.1f, w);
+    c.decay.decay_start = json_get<uint32_t>(opt, "decay_start", 10000u, w);
+    c.decay.decay_interval = json_get<uint32_t>(opt, "decay_interval", 10000u, w);
+    c.decay.decay_end = json_get<uint32_t>(opt, "decay_end", 10000000u, w);
     if (c.decay.decay_interval == 0) fail("optimizer: decay_interval must be positive");
     c.adam = parse_adam(opt.value("nested", Json::object()));
   } else {
@@ -211,24 +129,7 @@ const char* loss_name(LossType l) {
 }
 
 Json ModelConfig::to_json() const {
-  Json enc;
-  const EncodingConfig& e = encoding;
-  switch (e.type) {
-    case EncodingType::Grid:
-      enc = {{"otype", e.grid_type == GridType::Hash ? "HashGrid" : (e.grid_type == GridType::Dense ? "DenseGrid" : "TiledGrid")},
-             {"n_levels", e.n_levels},
-             {"n_features_per_level", e.n_features_per_level},
-             {"log2_hashmap_size", e.log2_hashmap_size},
-             {"base_resolution", e.base_resolution},
-             {"per_level_scale", e.per_level_scale},
-             {"interpolation", e.interpolation == Interpolation::Linear
-                                   ? "Linear"
-                                   : (e.interpolation == Interpolation::Nearest ? "Nearest" : "Smoothstep")}};
-      break;
-    case EncodingType::Frequency: enc = {{"otype", "Frequency"}, {"n_frequencies", e.n_frequencies}}; break;
-    case EncodingType::OneBlob: enc = {{"otype", "OneBlob"}, {"n_bins", e.n_bins}}; break;
-    case EncodingType::Identity: enc = {{"otype", "Identity"}, {"scale", e.scale}, {"offset", e.offset}}; break;
-  }
+  const Json enc = make_encoding(encoding)->to_json();
   Json net = {{"otype", network.fully_fused ? "FullyFusedMLP" : "CutlassMLP"},
               {"activation", activation_name(network.activation)},
               {"output_activation", activation_name(network.output_activation)},

@@ -5,11 +5,13 @@
 
 namespace vnr {
 
-// A model configuration in tiny-cuda-nn's JSON vocabulary (compat.md A.1-A.7), parsed into plain
+// A model configuration in tiny-cuda-nn's JSON vocabulary (docs/semantics.md A.1-A.7), parsed into plain
 // structs. Unknown keys are ignored (as tcnn does); unsupported values are errors that list the
 // accepted ones.
 
-enum class EncodingType { Grid, Frequency, OneBlob, Identity };
+// The built-in encoding families (nn/encodings/); an encoding added later has type Other and is
+// known by EncodingConfig::family.
+enum class EncodingType { Grid, Frequency, OneBlob, Identity, Other };
 enum class GridType { Hash, Dense, Tiled };
 enum class Interpolation { Nearest, Linear, Smoothstep };
 enum class Activation { None, ReLU, Exponential, Sine, Sigmoid, Squareplus, Softplus };
@@ -29,8 +31,10 @@ const char* precision_name(Precision p);
 constexpr uint32_t kMaxFrequencies = 32, kMaxOneBlobBins = 1024;
 constexpr uint32_t kMaxParameterFreeWidth = 3 * kMaxOneBlobBins;  // >= 3 * 2 * kMaxFrequencies
 
+// Parsed by the encoding registry (nn/encoding.h): each family's file reads its own keys.
 struct EncodingConfig {
   EncodingType type = EncodingType::Grid;
+  std::string family = "Grid";  // the registered family that parsed it (EncodingSpec::family)
   // Grid
   GridType grid_type = GridType::Hash;
   uint32_t n_levels = 16, n_features_per_level = 2, log2_hashmap_size = 19, base_resolution = 16;
@@ -40,6 +44,8 @@ struct EncodingConfig {
   uint32_t n_frequencies = 12;
   uint32_t n_bins = 16;
   float scale = 1.0f, offset = 0.0f;
+  // Keys of encodings whose parameters have no typed field here (kept by their parser).
+  Json options;
 };
 
 struct NetworkConfig {

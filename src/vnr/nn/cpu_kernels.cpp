@@ -64,8 +64,7 @@ HWY_INLINE void CornersVec(const GridLevel& L, bool smooth, const float* x, cons
 }
 
 // Prefetch into L2 (prefetcht1), not L1: a block issues 128 prefetches, far more than the L1's miss
-// buffers; L1 prefetches were largely lost and the cold-cache paper encode took 231 ns/sample, L2
-// prefetches bring it to 90 ns/sample (measured on Zen 4).
+// buffers, so L1 prefetches are largely lost.
 template <int F, typename P>
 HWY_INLINE void PrefetchCorners(const P* lt, const CornerBlock& cb, size_t N, bool enabled = true) {
   if (!enabled) return;
@@ -450,9 +449,9 @@ void GridBackwardLevel(const GridLayout& g, uint32_t level, const float* x, cons
   }
 }
 
-// tcnn's Adam element update (compat.md A.7.1), vectorised: the zero-gradient skip of grid
-// parameters is a per-lane select, bias corrections are gathered from tables indexed by the
-// per-parameter step count. Every lane computes exactly the scalar formula (no fused operations).
+// adam_update() (adam_update.h) vectorised: the zero-gradient skip of grid parameters is a per-lane
+// select, bias corrections are gathered from tables indexed by the per-parameter step count. Every
+// lane computes exactly adam_update's operations (no fused ones); tests/test_encodings.cpp checks the bits.
 void AdamRange(const AdamStep& k, float* HWY_RESTRICT w, float* HWY_RESTRICT grads, float* HWY_RESTRICT m,
                float* HWY_RESTRICT v, uint32_t* HWY_RESTRICT c, uint16_t* HWY_RESTRICT half, int64_t n) {
   const hn::Rebind<hwy::float16_t, DF> dh;
@@ -493,20 +492,12 @@ void AdamRange(const AdamStep& k, float* HWY_RESTRICT w, float* HWY_RESTRICT gra
     hn::StoreU(hn::IfThenElse(active, vi, v0), df, v + i);
     hn::StoreU(hn::IfThenElse(hn::RebindMask(di, active), ci, c0), di, reinterpret_cast<int32_t*>(c + i));
   }
-  for (; i < n; ++i) {  // tail: the same formula, one element at a time
-    float g = grads[i];
+  for (; i < n; ++i) {  // tail: the shared scalar update
+    const float g = grads[i];
     grads[i] = 0.0f;
     if (!k.matrix && g == 0.0f) continue;
-    const float wi = w[i];
-    if (k.matrix) g += k.l2 * wi;
-    m[i] = k.beta1 * m[i] + (1.0f - k.beta1) * g;
-    v[i] = k.beta2 * v[i] + (1.0f - k.beta2) * g * g;
     const uint32_t ci = ++c[i];
-    const float lr_t = k.lr * k.bias_sqrt[ci] / k.bias_den[ci];
-    float eff = lr_t / (std::sqrt(v[i]) + k.eps);
-    eff = eff < k.lo ? k.lo : (eff > k.hi ? k.hi : eff);
-    const float wd = (1.0f - k.rel * lr_t) * wi - std::copysign(k.abs_decay * lr_t, wi);
-    w[i] = wd - eff * m[i];
+    adam_update(k, k.matrix, g, k.bias_sqrt[ci], k.bias_den[ci], w[i], m[i], v[i]);
     if (half) half[i] = float_to_half(w[i]);
   }
 }

@@ -3,6 +3,7 @@
 // foreach_target) and chosen at run time. The loop bodies are the single-source VNR_HD functions of
 // grid_encoding.h; per-target compilation lets the compiler use AVX-512/AVX2 for the feature loops.
 #include <cstdint>
+#include "vnr/nn/adam_update.h"
 #include "vnr/nn/grid_encoding.h"
 
 namespace vnr::kernels {
@@ -17,8 +18,7 @@ void grid_backward_level(const GridLayout& g, uint32_t level, const float* x, co
 // x[i], y[i], z[i] = xyz[3i], xyz[3i + 1], xyz[3i + 2] for i in [0, n) (interleaved points to SoA).
 void deinterleave_xyz(const float* xyz, int64_t n, float* x, float* y, float* z);
 
-struct AdamStep {
-  float lr, beta1, beta2, eps, l2, rel, abs_decay, lo, hi;
+struct AdamStep : AdamHyper {
   bool matrix;     // true: l2 applies, never skipped; false: skipped where the gradient is 0
   const float* bias_sqrt;  // sqrtf(1 - beta2^c), by c
   const float* bias_den;   // 1 - beta1^c, by c

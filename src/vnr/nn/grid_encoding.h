@@ -1,6 +1,6 @@
 #pragma once
 // Multi-resolution grid encoding (HashGrid / DenseGrid / TiledGrid) with tiny-cuda-nn's exact
-// level table, position transform, indexing and interpolation weights (compat.md A.2).
+// level table, position transform, indexing and interpolation weights (docs/semantics.md A.2).
 // The per-sample functions are single-source (VNR_HD) over a POD layout.
 #include <cmath>
 #include <cstdint>
@@ -75,8 +75,18 @@ VNR_HD VNR_INLINE void grid_corners(const GridLevel& L, Interpolation interp, fl
   }
 }
 
+// How the F features of one grid entry are read from a table of P: one grid_param() per feature. The
+// CUDA backend specialises it for its half table (one vector load per entry, cuda/grid_device.cuh).
+template <typename P>
+struct GridEntryLoad {
+  template <int F>
+  VNR_HD VNR_INLINE static void load(const P* entry, float* out) {
+    for (int f = 0; f < F; ++f) out[f] = grid_param(entry + f);
+  }
+};
+
 // Forward of one level for one sample: out[f * stride] = sum_k w_k * theta[(offset + entry_k) * F + f],
-// accumulated with FMA in corner order (vnr's binary32 reference, compat.md A.2.7).
+// accumulated with FMA in corner order (vnr's binary32 reference, docs/semantics.md A.2.7).
 template <int F, typename P>
 VNR_HD VNR_INLINE void grid_level_forward(const GridLevel& L, Interpolation interp, const P* params, float x,
                                       float y, float z, float* out, int64_t stride) {
@@ -86,29 +96,36 @@ VNR_HD VNR_INLINE void grid_level_forward(const GridLevel& L, Interpolation inte
   for (int f = 0; f < F; ++f) acc[f] = 0.0f;
   const int kn = interp == Interpolation::Nearest ? 1 : 8;
   for (int k = 0; k < kn; ++k) {
-    const P* th = params + (uint64_t(L.offset) + c.entry[k]) * F;
-    for (int f = 0; f < F; ++f) acc[f] = fmaf(c.weight[k], grid_param(th + f), acc[f]);
+    float th[F];
+    GridEntryLoad<P>::template load<F>(params + (uint64_t(L.offset) + c.entry[k]) * F, th);
+    for (int f = 0; f < F; ++f) acc[f] = fmaf(c.weight[k], th[f], acc[f]);
   }
   for (int f = 0; f < F; ++f) out[f * stride] = acc[f];
 }
 
+// How a corner's gradient reaches the table: gr[f] = fma(w, g[f], gr[f]) (one thread per level, CPU);
+// the CUDA backend adds w * g[f] atomically instead (cuda/grid_device.cuh).
+struct GridGradFma {
+  template <int F>
+  VNR_HD VNR_INLINE void add(float* gr, float w, const float* g) const {
+    for (int f = 0; f < F; ++f) gr[f] = fmaf(w, g[f], gr[f]);
+  }
+};
+
 // Backward of one level for one sample: grad[(offset + entry_k) * F + f] += w_k * dy[f * stride].
-// Not thread-safe by itself: the trainer gives each level to exactly one thread.
-template <int F>
+// With GridGradFma not thread-safe by itself: the trainer gives each level to exactly one thread.
+template <int F, typename Add = GridGradFma>
 VNR_HD VNR_INLINE void grid_level_backward(const GridLevel& L, Interpolation interp, float* grad, float x, float y,
-                                       float z, const float* dy, int64_t stride) {
+                                       float z, const float* dy, int64_t stride, const Add& accumulate = Add()) {
   GridCorners c;
   grid_corners(L, interp, x, y, z, c);
   float g[F];
   for (int f = 0; f < F; ++f) g[f] = dy[f * stride];
   const int kn = interp == Interpolation::Nearest ? 1 : 8;
-  for (int k = 0; k < kn; ++k) {
-    float* gr = grad + (uint64_t(L.offset) + c.entry[k]) * F;
-    for (int f = 0; f < F; ++f) gr[f] = fmaf(c.weight[k], g[f], gr[f]);
-  }
+  for (int k = 0; k < kn; ++k) accumulate.template add<F>(grad + (uint64_t(L.offset) + c.entry[k]) * F, c.weight[k], g);
 }
 
-// d(feature f of level L)/d(x_d) for one sample (compat.md A.2.9), written to dydx[f*3 + d].
+// d(feature f of level L)/d(x_d) for one sample (docs/semantics.md A.2.9), written to dydx[f*3 + d].
 template <int F, typename P>
 VNR_HD VNR_INLINE void grid_level_input_grad(const GridLevel& L, Interpolation interp, const P* params, float x,
                                          float y, float z, float* dydx) {

@@ -6,7 +6,7 @@
 
 namespace vnr {
 
-// Loss value and gradient for one output element (compat.md A.6), with the mean's 1/N folded in.
+// Loss value and gradient for one output element (docs/semantics.md A.6), with the mean's 1/N folded in.
 // The loss scale S cancels exactly in binary32 and is 1 on the CPU.
 VNR_HD inline float loss_value_and_grad(LossType t, float pred, float target, float inv_n, float* grad) {
   float d = pred - target;
@@ -32,7 +32,7 @@ VNR_HD inline float loss_value_and_grad(LossType t, float pred, float target, fl
   return 0;
 }
 
-// Output activations (compat.md A.4.1) and their derivative with respect to the pre-activation.
+// Output activations (docs/semantics.md A.4.1) and their derivative with respect to the pre-activation.
 constexpr float kActivationK = 10.0f;
 
 VNR_HD inline float activate(Activation a, float x) {
@@ -51,8 +51,8 @@ VNR_HD inline float activate(Activation a, float x) {
   return x;
 }
 
-// activate() of n values (y may be x), the activation chosen once: a switch per element costs more
-// than the small configs' whole output layer (it was 10 % of small-config inference).
+// activate() of n values (y may be x), the activation chosen once: a switch per element would cost
+// more than a small config's whole output layer.
 template <Activation kAct>
 inline void activate_n_of(const float* x, int64_t n, float* y) {
   for (int64_t i = 0; i < n; ++i) y[i] = activate(kAct, x[i]);

@@ -1,8 +1,12 @@
 #pragma once
-// The composite model "network with input encoding" (compat.md A.5): an encoding (grid or
-// parameter-free) followed by a bias-free MLP; flat fp32 master parameters in tcnn order
-// (MLP matrices W_0..W_H first, then the grid table).
+// The composite model "network with input encoding" (docs/semantics.md A.5): an encoding object
+// (nn/encoding.h: grid or parameter-free) followed by a bias-free MLP; flat fp32 master parameters in
+// tcnn order (MLP matrices W_0..W_H first, then the encoding's parameters: the grid table).
+// Implementation by concern: network.cpp (parameters, init, encoding), network_mlp.cpp (fp32 MLP),
+// network_bf16.cpp (bf16 inference and training), network_infer.cpp (threaded inference),
+// network_reference.cpp (plain-loop reference).
 #include <atomic>
+#include <memory>
 #include <cstdint>
 #include <type_traits>
 #include <vector>
@@ -11,35 +15,19 @@
 #include "vnr/core/parallel.h"
 #include "vnr/core/rng.h"
 #include "vnr/nn/config.h"
+#include "vnr/nn/encoding.h"
 #include "vnr/nn/grid_encoding.h"
+#include "vnr/nn/mlp_layout.h"
 
 namespace vnr {
 
-// tiny-cuda-nn's GPU uniform fill (compat.md A.2.10): element idx = i + T*j takes stream number
+// tiny-cuda-nn's GPU uniform fill (docs/semantics.md A.2.10): element idx = i + T*j takes stream number
 // 4*i + j counted from rng's state, T = 128 * ceil(ceil(n/4)/128); afterwards rng is advanced by n.
 void tcnn_uniform_fill(Pcg32& rng, float* out, uint64_t n, float lower, float upper);
 
-struct MlpLayout {
-  uint32_t enc_width = 0;  // encoding output width before padding
-  uint32_t in_pad = 0;     // padded MLP input width
-  float pad_value = 0;     // 0 for grids, 1 for parameter-free encodings (acts as a bias input)
-  uint32_t first_cols = 0; // columns of W_0 that see real inputs: zero-padded ones (grids) are skipped
-  uint32_t width = 0, n_hidden = 0;
-  uint32_t n_out = 1, out_pad = 16;
-  uint32_t n_matrices = 0;           // n_hidden + 1
-  uint64_t offset[34], rows[34], cols[34];
-  uint64_t n_params = 0;
-  Activation activation = Activation::ReLU, output_activation = Activation::None;
-};
-
-MlpLayout make_mlp_layout(const ModelConfig& cfg, uint32_t n_output_dims = 1);
-// Total parameter count of a config, without allocating anything.
-uint64_t count_params(const ModelConfig& config, uint32_t n_output_dims = 1);
-
-// Samples are processed in chunks of kChunk, whose MLP activations stay in L2, for every width
-// (training draws its samples per (step, chunk), so the GPU trainer uses the same chunks). (Narrow MLPs once used 1024 against per-chunk overheads; with today's
-// kernels 256 trains the small config 8-30 % faster, the chunk then sharing L2 with the grid
-// tables, and infers within 2 %.) Training batches are multiples of kChunk.
+// Samples are processed in chunks of kChunk, whose MLP activations stay in L2 beside the grid tables,
+// for every width (training draws its samples per (step, chunk), so the GPU trainer uses the same
+// chunks). Training batches are multiples of kChunk.
 constexpr int kChunk = 256;
 
 class Network {
@@ -51,11 +39,12 @@ public:
 
   const ModelConfig& config() const { return cfg_; }
   const Json& config_json() const { return cfg_json_; }
-  bool has_grid() const { return cfg_.encoding.type == EncodingType::Grid; }
+  const Encoding& encoding() const { return *enc_; }
+  bool has_grid() const { return enc_->grid() != nullptr; }
   const GridLayout& grid() const { return grid_; }
   const MlpLayout& mlp() const { return mlp_; }
   uint64_t n_params() const { return mlp_.n_params + grid_params(); }
-  uint64_t grid_params() const { return has_grid() ? grid_.n_params() : 0; }
+  uint64_t grid_params() const { return enc_->n_params(); }
   double flops_forward_per_sample() const;  // 2 * MACs of the unpadded-output MLP
 
   big_vector<float> params;  // fp32 master copy, size n_params()
@@ -68,7 +57,7 @@ public:
   uint16_t* grid_half_mut() { return grid_half_.data(); }
   void sync_half_table();
 
-  // tiny-cuda-nn initialisation (compat.md A.4.1, A.2.10, A.8): Xavier-uniform MLP matrices then the
+  // tiny-cuda-nn initialisation (docs/semantics.md A.4.1, A.2.10, A.8): Xavier-uniform MLP matrices then the
   // grid fill U[-1e-4, 1e-4), all from pcg32 seeded with seed_seq{seed}.
   void init_params(uint32_t seed);
   std::vector<uint16_t> params_half() const;
@@ -142,11 +131,12 @@ private:
   // Inference of n samples takes the in-register 16-wide kernels (fp32 mlp_forward_16 or its bf16 twin).
   bool fused_16(int n) const;
   // This thread's inference scratch, grown as needed and kept, so that the many small calls of the
-  // renderers do not each map and fault in a few hundred KiB (no change measurable at batch 65,536).
+  // renderers do not each map and fault in a few hundred KiB.
   static float* thread_workspace(size_t floats);
 
   ModelConfig cfg_;
   Json cfg_json_;
+  std::shared_ptr<const Encoding> enc_;  // immutable, shared by copies of the Network
   big_vector<uint16_t> grid_half_;
   Precision precision_ = Precision::FP32;
   GridLayout grid_;
@@ -157,11 +147,10 @@ template <typename CoordFn>
 void Network::infer_fn(int64_t n, CoordFn&& coord, float* out) const {
   const int64_t C = kChunk;
   const int64_t n_chunks = (n + C - 1) / C;
-  // Converted per call (17 k weights for the paper config, ~10 us): the parameters may change
-  // between calls (online training).
+  // Converted per call (cheap next to a batch): the parameters may change between calls (online training).
   const std::vector<uint32_t> wp = precision_ == Precision::BF16 ? bf16_weights() : std::vector<uint32_t>();
   // Chunks are claimed as threads get free (a chunk's outputs do not depend on its thread): a static
-  // split left one thread waiting ~7 % of the time whenever the other core was slowed.
+  // split leaves one thread waiting whenever another core is slowed.
   std::atomic<int64_t> next_chunk{0};
   parallel_threads([&](int, int) {
     float* ws = thread_workspace(infer_workspace_floats() + 4 * C);

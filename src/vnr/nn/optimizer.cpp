@@ -48,8 +48,11 @@ void Adam::step(float* params, float* grads, uint16_t* non_matrix_half) {
   // Bias corrections up to c = step_ (a parameter's count never exceeds the global step).
   extend_adam_bias_tables(cfg_, step_ + 1, bias_sqrt_, bias_den_);
   // Matrix (MLP) parameters first: l2 applies and they are never skipped.
-  kernels::AdamStep ks{sc.lr, cfg_.beta1, cfg_.beta2, cfg_.epsilon, cfg_.l2_reg, cfg_.relative_decay,
-                       cfg_.absolute_decay, sc.lo, sc.hi, true, bias_sqrt_.data(), bias_den_.data()};
+  kernels::AdamStep ks{{sc.lr, cfg_.beta1, cfg_.beta2, cfg_.epsilon, cfg_.l2_reg, cfg_.relative_decay,
+                        cfg_.absolute_decay, sc.lo, sc.hi},
+                       true,
+                       bias_sqrt_.data(),
+                       bias_den_.data()};
   if (cfg_.optimize_matrix_params)
     kernels::adam_range(ks, params, grads, m.data(), v.data(), c.data(), nullptr, int64_t(n_matrix_));
   else

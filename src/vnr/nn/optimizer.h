@@ -6,7 +6,7 @@
 
 namespace vnr {
 
-// tiny-cuda-nn's Adam (compat.md A.7.1) wrapped in ExponentialDecay (A.7.2), binary32 master
+// tiny-cuda-nn's Adam (docs/semantics.md A.7.1) wrapped in ExponentialDecay (A.7.2), binary32 master
 // weights, loss scale 1. Parameters [0, n_matrix) are "matrix" params (MLP weights, l2_reg applies);
 // the rest are "non-matrix" (grid) params, skipped when their gradient is exactly zero (lazy Adam:
 // moments, per-parameter step counter and weight stay as they are).
@@ -14,7 +14,7 @@ namespace vnr {
 struct AdamStepScalars {
   float lr, lo, hi;  // learning rate of this step (before the non-matrix factor); AdaBound's clamp
 };
-// For the step after t completed steps: updates the ExponentialDecay factor in place (compat.md A.7.2)
+// For the step after t completed steps: updates the ExponentialDecay factor in place (docs/semantics.md A.7.2)
 // and returns the step's learning rate and clamp (lo = 0, hi = FLT_MAX unless AdaBound).
 AdamStepScalars adam_step_scalars(const AdamConfig& a, const DecayConfig& d, uint64_t t, float* factor);
 // Appends sqrtf(1 - beta2^c) and 1 - beta1^c for c = size() .. n-1 (entry 0 is 0): the bias corrections

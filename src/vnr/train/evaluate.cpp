@@ -1,4 +1,5 @@
-#include "vnr/train/model_io.h"
+#include "vnr/train/evaluate.h"
+#include "vnr/train/decoder.h"
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -15,81 +16,6 @@
 
 namespace vnr {
 
-bool is_instantvnr_path(const std::string& path) {
-  const std::string e = extension_of(path);
-  return e == ".bson" || e == ".json";
-}
-
-void save_model(const std::string& path, const Model& m) {
-  ModelFile f;
-  f.config = m.net->config_json();
-  f.dims = m.dims;
-  f.source_dtype = m.source_dtype;
-  f.lo = m.lo;
-  f.hi = m.hi;
-  f.params = m.net->params_half();
-  f.training = m.training;
-  if (m.macrocells) {
-    f.macrocell_dims = m.macrocells->cells;
-    f.macrocell_ranges = m.macrocells->to_pairs();
-  }
-  if (is_instantvnr_path(path)) write_instantvnr(path, f);
-  else write_vnr(path, f);
-}
-
-Model load_model(const std::string& path) {
-  ModelFile f = read_model(path);
-  Model m;
-  m.net = std::make_unique<Network>(f.config);
-  if (f.params.size() != m.net->n_params())
-    fail("'{}': the file holds {} parameters but its configuration needs {}", path, f.params.size(),
-         m.net->n_params());
-  m.net->set_params_half(f.params);
-  m.dims = f.dims;
-  m.source_dtype = f.source_dtype;
-  m.lo = f.lo;
-  m.hi = f.hi;
-  m.training = f.training;
-  if (!(f.macrocell_dims == Int3{}) && f.dims.count() > 0) {
-    try {
-      m.macrocells = ValueRangeGrid::from_pairs(f.dims, f.macrocell_dims, f.macrocell_ranges);
-    } catch (const Error& e) {
-      fail("'{}': {}", path, e.what());
-    }
-  }
-  return m;
-}
-
-Decoder::Decoder(const Network& net, Device device) : net_(net), device_(device) {
-  if (device == Device::Cuda) gpu_ = std::make_unique<cuda::GpuNetwork>(net);
-}
-Decoder::~Decoder() = default;
-
-void Decoder::slices(Int3 dims, int64_t z0, int64_t z1, float* out) {
-  if (gpu_) return gpu_->decode_slices(dims, z0, z1, out);  // voxel_centre() in kernels.cu
-  const int64_t first = dims.x * dims.y * z0;
-  net_.infer_fn(
-      dims.x * dims.y * (z1 - z0), [&](int64_t i, float* x, float* y, float* z) { voxel_centre(dims, first + i, x, y, z); },
-      out);
-}
-
-void Decoder::voxels(Int3 dims, const int64_t* voxel_index, int64_t n, float* out) {
-  if (gpu_) {
-    std::vector<float> xyz(size_t(3 * n));
-    for (int64_t i = 0; i < n; ++i) voxel_centre(dims, voxel_index[i], &xyz[3 * i], &xyz[3 * i + 1], &xyz[3 * i + 2]);
-    return gpu_->infer(xyz.data(), n, out);
-  }
-  net_.infer_fn(
-      n, [&](int64_t i, float* x, float* y, float* z) { voxel_centre(dims, voxel_index[i], x, y, z); }, out);
-}
-
-void decode_slices(const Network& net, Int3 dims, int64_t z0, int64_t z1, float* out) {
-  Decoder(net, Device::Cpu).slices(dims, z0, z1, out);
-}
-void decode_voxels(const Network& net, Int3 dims, const int64_t* voxel_index, int64_t n, float* out) {
-  Decoder(net, Device::Cpu).voxels(dims, voxel_index, n, out);
-}
-
 EvalResult evaluate(const Network& net, const Volume& vol, bool with_ssim, Device device) {
   EvalResult r;
   std::vector<float> dec(vol.data.size());
@@ -103,16 +29,6 @@ EvalResult evaluate(const Network& net, const Volume& vol, bool with_ssim, Devic
   r.max_abs_error_original = e.max_abs_error * (vol.hi - vol.lo);
   if (with_ssim) r.ssim = ssim3d(vol.data.data(), dec.data(), vol.dims);
   return r;
-}
-
-bool model_file_has_value_range(const std::string& path) {
-  // The .vnr magic (docs/MODEL_FORMAT.md); vnr always writes value_range into that header.
-  char magic[8] = {};
-  std::FILE* f = std::fopen(path.c_str(), "rb");
-  if (!f) return false;
-  size_t got = std::fread(magic, 1, sizeof magic, f);
-  std::fclose(f);
-  return got == sizeof magic && std::memcmp(magic, "VNRMODEL", sizeof magic) == 0;
 }
 
 namespace {
@@ -221,32 +137,6 @@ SampledEval evaluate_sampled(const Network& net, const VolumeDesc& desc, double 
   s.psnr_ci95_hi = psnr_of_mse(s.mse - z95 * s.mse_stderr);
   s.max_abs_error_original = s.max_abs_error * (hi - lo);
   return s;
-}
-
-ModelConfig size_config_for_ratio(const ModelConfig& base, uint64_t volume_bytes, double ratio, std::string* note) {
-  if (!(ratio > 0)) fail("--target-ratio must be positive, got {}", ratio);
-  const double target = double(volume_bytes) / ratio;
-  if (base.encoding.type != EncodingType::Grid || base.encoding.grid_type != GridType::Hash)
-    fail("--target-ratio needs a HashGrid encoding (the config has {})", base.to_json()["encoding"]["otype"].dump());
-  ModelConfig best;
-  double best_err = 1e300;
-  uint64_t best_bytes = 0;
-  const uint32_t L0 = base.encoding.n_levels;
-  for (uint32_t L = L0; L >= 1; --L)
-    for (uint32_t t = 8; t <= 24; ++t) {
-      ModelConfig c = base;
-      c.encoding.n_levels = L;
-      c.encoding.log2_hashmap_size = t;
-      uint64_t bytes = count_params(c) * 2;
-      // Prefer keeping all levels: penalise each dropped level by a factor 1.5 in size error.
-      double err = std::fabs(std::log(double(bytes) / target)) + 0.4 * (L0 - L);
-      if (err < best_err) best_err = err, best = c, best_bytes = bytes;
-    }
-  if (note)
-    *note = fmt::format("--target-ratio {}: {} levels, 2^{} table, {:.2f} MiB model (ratio {:.1f})", ratio,
-                        best.encoding.n_levels, best.encoding.log2_hashmap_size, best_bytes / 1048576.0,
-                        double(volume_bytes) / best_bytes);
-  return best;
 }
 
 }  // namespace vnr

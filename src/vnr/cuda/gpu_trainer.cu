@@ -1,0 +1,209 @@
+// The GpuTrainer: sampling, the gradient pass and Adam on the GPU, steps queued on one stream.
+#include <algorithm>
+#include <cfloat>
+#include <cmath>
+#include <vector>
+#include "vnr/core/rng.h"
+#include "vnr/cuda/cuda.h"
+#include "vnr/cuda/kernels.cuh"
+#include "vnr/cuda/mlp.cuh"
+#include "vnr/cuda/gradient_pass.cuh"
+#include "vnr/cuda/network.cuh"
+#include "vnr/nn/optimizer.h"
+
+
+namespace vnr::cuda {
+
+// ------------------------------------------------------------------------------------------------
+// GpuTrainer
+
+struct GpuTrainer::Impl {
+  Network& net;
+  GpuTrainOptions opts;
+  MlpDims d;
+  MlpPath path;
+  StreamAndBlas sb;
+  DeviceBuffer<float> volume;
+  GridView dvol;
+  DeviceBuffer<float> master, grads, m, v;
+  DeviceBuffer<uint32_t> c;
+  DeviceBuffer<__half> half;
+  DeviceBuffer<float> xs, ys, zs, target;
+  PassBuffers pass;
+  DeviceBuffer<float> loss_slots, bias_sqrt, bias_den;
+  std::vector<float> h_bias_sqrt, h_bias_den;
+  uint64_t step = 0;
+  float factor = 1.0f;  // ExponentialDecay's
+  bool profiling = false;
+  cudaEvent_t events[5] = {};
+  ValueRangeGrid ranges;  // shape of the online ranges (their values live in range_lo/hi; none: off)
+  DeviceBuffer<float> range_lo, range_hi;
+
+  Impl(Network& n, GridView vol, GpuTrainOptions o) : net(n), opts(o) {
+    check_supported(net);
+    if (opts.batch <= 0 || opts.batch % kChunk != 0)
+      cuda_fail_message("batch size must be a positive multiple of " + std::to_string(kChunk) + ", got " +
+                        std::to_string(opts.batch));
+    if (opts.chunk <= 0 || opts.batch % opts.chunk != 0) cuda_fail_message("the sampling chunk must divide the batch");
+    d = mlp_dims(net.mlp());
+    path = resolve_mlp_path(net, opts.mlp);
+    const uint64_t voxels = uint64_t(vol.nx) * vol.ny * vol.nz;
+    const uint64_t need = GpuTrainer::bytes_needed(net, voxels, opts.batch), free_b = free_memory_bytes();
+    if (need > free_b)
+      cuda_fail_message("training this volume on the GPU needs about " + std::to_string(need >> 20) + " MiB, " +
+                        std::to_string(free_b >> 20) + " MiB are free: use --device cpu");
+    volume.resize(voxels);
+    volume.upload(vol.data, voxels);
+    dvol = GridView{volume.data(), vol.nx, vol.ny, vol.nz};
+    const uint64_t P = net.n_params();
+    master.resize(P);
+    master.upload(net.params.data(), P);
+    for (DeviceBuffer<float>* b : {&grads, &m, &v}) {
+      b->resize(P);
+      b->zero_async(sb.stream);
+    }
+    c.resize(P);
+    c.zero_async(sb.stream);
+    upload_half_params(net, half);
+    const int64_t B = opts.batch;
+    xs.resize(B);
+    ys.resize(B);
+    zs.resize(B);
+    target.resize(B);
+    pass.allocate(d, B, true, path);
+    grow_tables(1 << 14);
+    VNR_CUDA_CHECK(cudaStreamSynchronize(sb.stream));
+  }
+
+  // Bias corrections by per-parameter step count (the CPU Adam's tables, same host arithmetic) and one
+  // loss slot per step; grown by doubling, the only synchronising copies of a run.
+  void grow_tables(uint64_t need) {
+    if (need <= h_bias_sqrt.size()) return;
+    const uint64_t cap = std::max<uint64_t>(need, 2 * h_bias_sqrt.size());
+    extend_adam_bias_tables(net.config().adam, cap, h_bias_sqrt, h_bias_den);
+    VNR_CUDA_CHECK(cudaStreamSynchronize(sb.stream));
+    bias_sqrt.resize(cap);
+    bias_den.resize(cap);
+    bias_sqrt.upload(h_bias_sqrt.data(), cap);
+    bias_den.upload(h_bias_den.data(), cap);
+    DeviceBuffer<float> slots(cap);
+    VNR_CUDA_CHECK(cudaMemset(slots.data(), 0, cap * sizeof(float)));
+    if (loss_slots.size())
+      VNR_CUDA_CHECK(cudaMemcpy(slots.data(), loss_slots.data(), loss_slots.size() * sizeof(float),
+                                cudaMemcpyDeviceToDevice));
+    loss_slots = std::move(slots);
+  }
+
+  ~Impl() {
+    for (cudaEvent_t e : events)
+      if (e) cudaEventDestroy(e);
+  }
+  void mark(int i) {
+    if (profiling) VNR_CUDA_CHECK(cudaEventRecord(events[i], sb.stream));
+  }
+
+  void one_step() {
+    const cudaStream_t st = sb.stream;
+    mark(0);
+    const AdamConfig& a = net.config().adam;
+    const AdamStepScalars sc = adam_step_scalars(a, net.config().decay, step, &factor);
+    grow_tables(step + 2);
+    sample_in_core(dvol, opts.seed, step, opts.chunk, opts.batch, xs.data(), ys.data(), zs.data(), target.data(), st);
+    if (range_lo.size())
+      ranges_add_samples(range_grid_dims(ranges), xs.data(), ys.data(), zs.data(), target.data(), opts.batch, range_lo.data(),
+                         range_hi.data(), st);
+    gradient_pass(net, d, path, half.data(), Coords{xs.data(), ys.data(), zs.data(), 1}, target.data(), opts.batch,
+                  pass, grads.data(), loss_slots.data() + step, sb, [&](int i) { mark(i); });
+    mark(3);
+    ++step;
+    AdamArgs args{{sc.lr, a.beta1, a.beta2, a.epsilon, a.l2_reg, a.relative_decay, a.absolute_decay, sc.lo, sc.hi}, 1};
+    const uint64_t n_mlp = net.mlp().n_params;
+    const uint64_t P = net.n_params();
+    if (a.optimize_matrix_params)
+      adam(args, master.data(), grads.data(), m.data(), v.data(), c.data(), half.data(), int64_t(n_mlp),
+           bias_sqrt.data(), bias_den.data(), st);
+    else
+      VNR_CUDA_CHECK(cudaMemsetAsync(grads.data(), 0, n_mlp * sizeof(float), st));
+    args.matrix = 0;
+    args.lr *= a.non_matrix_learning_rate_factor;
+    if (a.optimize_non_matrix_params)
+      adam(args, master.data() + n_mlp, grads.data() + n_mlp, m.data() + n_mlp, v.data() + n_mlp, c.data() + n_mlp,
+           half.data() + n_mlp, int64_t(P - n_mlp), bias_sqrt.data(), bias_den.data(), st);
+    else
+      VNR_CUDA_CHECK(cudaMemsetAsync(grads.data() + n_mlp, 0, (P - n_mlp) * sizeof(float), st));
+    mark(4);
+  }
+};
+
+GpuTrainer::GpuTrainer(Network& net, GridView volume, GpuTrainOptions opts)
+    : impl_(std::make_unique<Impl>(net, volume, opts)) {}
+GpuTrainer::~GpuTrainer() = default;
+
+void GpuTrainer::run(int n_steps) {
+  for (int i = 0; i < n_steps; ++i) impl_->one_step();
+}
+void GpuTrainer::synchronize() { VNR_CUDA_CHECK(cudaStreamSynchronize(impl_->sb.stream)); }
+
+std::vector<float> GpuTrainer::losses() {
+  synchronize();
+  std::vector<float> out(impl_->step);
+  if (!out.empty()) impl_->loss_slots.download(out.data(), out.size());
+  return out;
+}
+uint64_t GpuTrainer::steps_done() const { return impl_->step; }
+float GpuTrainer::last_loss() {
+  if (impl_->step == 0) return 0.0f;
+  synchronize();
+  float l = 0;
+  impl_->loss_slots.download(&l, 1, impl_->step - 1);
+  return l;
+}
+float GpuTrainer::current_learning_rate() const {
+  return impl_->net.config().adam.learning_rate * impl_->factor;
+}
+
+void GpuTrainer::enable_online_ranges(Int3 dims, int cell_size) {
+  Impl& I = *impl_;
+  I.ranges = ValueRangeGrid(dims, cell_size);
+  I.range_lo.resize(size_t(I.ranges.count()));
+  I.range_hi.resize(size_t(I.ranges.count()));
+  ranges_clear(range_grid_dims(I.ranges), I.range_lo.data(), I.range_hi.data(), I.sb.stream);
+}
+bool GpuTrainer::has_online_ranges() const { return impl_->range_lo.size() > 0; }
+ValueRangeGrid GpuTrainer::online_ranges() {
+  Impl& I = *impl_;
+  if (!has_online_ranges()) cuda_fail_message("online macro-cells were not enabled for this training run");
+  synchronize();
+  ValueRangeGrid g = I.ranges;
+  I.range_lo.download(g.lo.data(), g.lo.size());
+  I.range_hi.download(g.hi.data(), g.hi.size());
+  return g;
+}
+
+void GpuTrainer::download() {
+  synchronize();
+  impl_->master.download(impl_->net.params.data(), impl_->net.n_params());
+  impl_->net.sync_half_table();
+}
+MlpPath GpuTrainer::mlp_path() const { return impl_->path; }
+uint64_t GpuTrainer::peak_memory_bytes() const { return device_bytes_peak(); }
+
+void GpuTrainer::set_profiling(bool on) {
+  if (on && !impl_->events[0])
+    for (cudaEvent_t& e : impl_->events) VNR_CUDA_CHECK(cudaEventCreate(&e));
+  impl_->profiling = on;
+}
+
+std::vector<double> GpuTrainer::phase_seconds() {
+  if (!impl_->profiling || impl_->step == 0) return {};
+  synchronize();
+  std::vector<double> out;
+  for (int i = 0; i < 4; ++i) {
+    float ms = 0;
+    VNR_CUDA_CHECK(cudaEventElapsedTime(&ms, impl_->events[i], impl_->events[i + 1]));
+    out.push_back(ms * 1e-3);
+  }
+  return out;
+}
+
+}  // namespace vnr::cuda

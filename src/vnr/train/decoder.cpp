@@ -1,0 +1,48 @@
+#include "vnr/train/decoder.h"
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <vector>
+#include "vnr/core/error.h"
+#include "vnr/core/fileio.h"
+#include "vnr/core/progress.h"
+#include "vnr/core/rng.h"
+#include "vnr/volume/metrics.h"
+#include "vnr/volume/raw_access.h"
+#include "vnr/volume/stream.h"
+
+namespace vnr {
+
+Decoder::Decoder(const Network& net, Device device) : net_(net), device_(device) {
+  if (device == Device::Cuda) gpu_ = std::make_unique<cuda::GpuNetwork>(net);
+}
+Decoder::~Decoder() = default;
+
+void Decoder::slices(Int3 dims, int64_t z0, int64_t z1, float* out) {
+  if (gpu_) return gpu_->decode_slices(dims, z0, z1, out);  // voxel_centre() in kernels.cu
+  const int64_t first = dims.x * dims.y * z0;
+  net_.infer_fn(
+      dims.x * dims.y * (z1 - z0), [&](int64_t i, float* x, float* y, float* z) { voxel_centre(dims, first + i, x, y, z); },
+      out);
+}
+
+void Decoder::voxels(Int3 dims, const int64_t* voxel_index, int64_t n, float* out) {
+  if (gpu_) {
+    std::vector<float> xyz(size_t(3 * n));
+    for (int64_t i = 0; i < n; ++i) voxel_centre(dims, voxel_index[i], &xyz[3 * i], &xyz[3 * i + 1], &xyz[3 * i + 2]);
+    return gpu_->infer(xyz.data(), n, out);
+  }
+  net_.infer_fn(
+      n, [&](int64_t i, float* x, float* y, float* z) { voxel_centre(dims, voxel_index[i], x, y, z); }, out);
+}
+
+void decode_slices(const Network& net, Int3 dims, int64_t z0, int64_t z1, float* out) {
+  Decoder(net, Device::Cpu).slices(dims, z0, z1, out);
+}
+void decode_voxels(const Network& net, Int3 dims, const int64_t* voxel_index, int64_t n, float* out) {
+  Decoder(net, Device::Cpu).voxels(dims, voxel_index, n, out);
+}
+
+}  // namespace vnr

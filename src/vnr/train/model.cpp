@@ -1,0 +1,73 @@
+#include "vnr/train/model.h"
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <vector>
+#include "vnr/core/error.h"
+#include "vnr/core/fileio.h"
+#include "vnr/core/progress.h"
+#include "vnr/core/rng.h"
+#include "vnr/volume/metrics.h"
+#include "vnr/volume/raw_access.h"
+#include "vnr/volume/stream.h"
+
+namespace vnr {
+
+bool is_instantvnr_path(const std::string& path) {
+  const std::string e = extension_of(path);
+  return e == ".bson" || e == ".json";
+}
+
+void save_model(const std::string& path, const Model& m) {
+  ModelFile f;
+  f.config = m.net->config_json();
+  f.dims = m.dims;
+  f.source_dtype = m.source_dtype;
+  f.lo = m.lo;
+  f.hi = m.hi;
+  f.params = m.net->params_half();
+  f.training = m.training;
+  if (m.macrocells) {
+    f.macrocell_dims = m.macrocells->cells;
+    f.macrocell_ranges = m.macrocells->to_pairs();
+  }
+  if (is_instantvnr_path(path)) write_instantvnr(path, f);
+  else write_vnr(path, f);
+}
+
+Model load_model(const std::string& path) {
+  ModelFile f = read_model(path);
+  Model m;
+  m.net = std::make_unique<Network>(f.config);
+  if (f.params.size() != m.net->n_params())
+    fail("'{}': the file holds {} parameters but its configuration needs {}", path, f.params.size(),
+         m.net->n_params());
+  m.net->set_params_half(f.params);
+  m.dims = f.dims;
+  m.source_dtype = f.source_dtype;
+  m.lo = f.lo;
+  m.hi = f.hi;
+  m.training = f.training;
+  if (!(f.macrocell_dims == Int3{}) && f.dims.count() > 0) {
+    try {
+      m.macrocells = ValueRangeGrid::from_pairs(f.dims, f.macrocell_dims, f.macrocell_ranges);
+    } catch (const Error& e) {
+      fail("'{}': {}", path, e.what());
+    }
+  }
+  return m;
+}
+
+bool model_file_has_value_range(const std::string& path) {
+  // The .vnr magic (docs/MODEL_FORMAT.md); vnr always writes value_range into that header.
+  char magic[8] = {};
+  std::FILE* f = std::fopen(path.c_str(), "rb");
+  if (!f) return false;
+  size_t got = std::fread(magic, 1, sizeof magic, f);
+  std::fclose(f);
+  return got == sizeof magic && std::memcmp(magic, "VNRMODEL", sizeof magic) == 0;
+}
+
+}  // namespace vnr

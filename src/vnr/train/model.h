@@ -1,0 +1,38 @@
+#pragma once
+// A Network with what it represents, and its files (.vnr, instantvnr BSON).
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <string>
+#include "vnr/core/dtype.h"
+#include "vnr/core/json.h"
+#include "vnr/core/math.h"
+#include "vnr/nn/model_file.h"
+#include "vnr/nn/network.h"
+#include "vnr/volume/value_range_grid.h"
+
+namespace vnr {
+
+// A network together with what it represents: the bridge between the in-memory Network and the
+// model files.
+struct Model {
+  std::unique_ptr<Network> net;
+  Int3 dims;
+  DType source_dtype = DType::Float32;
+  double lo = 0, hi = 1;
+  Json training;  // summary written by `vnr train`
+  std::optional<ValueRangeGrid> macrocells;  // value ranges built online while training (or imported)
+  uint64_t param_bytes() const { return net->n_params() * 2; }  // fp16, as stored
+};
+
+// Writes .vnr, or instantvnr's BSON when the path ends in .bson or .json (instantvnr names its
+// BSON files params.json).
+void save_model(const std::string& path, const Model& m);
+Model load_model(const std::string& path);
+bool is_instantvnr_path(const std::string& path);
+
+// Whether the model file records the value range of the volume it was trained on: .vnr files do,
+// instantvnr BSON files do not (load_model then gives [0, 1]). Reads only the file's first bytes.
+bool model_file_has_value_range(const std::string& path);
+
+}  // namespace vnr
