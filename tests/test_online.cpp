@@ -17,6 +17,7 @@
 #include "vnr/online/online_loop.h"
 #include "vnr/online/preview.h"
 #include "vnr/train/sampler.h"
+#include "vnr/train/session.h"
 #include "vnr/train/trainer.h"
 #include "vnr/volume/value_range_grid.h"
 #include "vnr/volume/writer.h"
@@ -40,14 +41,29 @@ bool same_pixels(const Image& a, const Image& b) {
          std::memcmp(a.pixels.data(), b.pixels.data(), a.pixels.size() * sizeof(Vec4f)) == 0;
 }
 
-// A network, its trainer with online ranges and the volume it learns.
+Model small_model(Int3 dims, uint32_t seed) {
+  Model m;
+  m.net = std::make_unique<Network>(small_config());
+  m.net->init_params(seed);
+  m.dims = dims;
+  return m;
+}
+
+// A session over a CpuTrainer without online ranges (the loop's refusals).
+std::unique_ptr<TrainingSession> cpu_session(Model& m, const Volume& vol, int64_t batch, uint32_t seed) {
+  return std::make_unique<TrainingSession>(
+      m, std::make_unique<CpuTrainer>(*m.net, std::make_shared<InCoreSampler>(vol), TrainOptions{batch, seed}));
+}
+
+// A model, the training session with online ranges that trains it, its CPU trainer and the volume it learns.
 struct Training {
   Volume vol;
-  Network net;
-  CpuTrainer trainer;
+  Model model;
+  std::unique_ptr<TrainingSession> session;
+  CpuTrainer& trainer;
   Training(Int3 dims, int64_t batch, int cell_size, uint32_t seed = 3)
-      : vol(synth(dims)), net(small_config()),
-        trainer((net.init_params(seed), net), std::make_shared<InCoreSampler>(vol), TrainOptions{batch, seed}) {
+      : vol(synth(dims)), model(small_model(dims, seed)), session(cpu_session(model, vol, batch, seed)),
+        trainer(static_cast<CpuTrainer&>(session->trainer())) {
     trainer.enable_online_ranges(vol.dims, cell_size);
   }
 };
@@ -85,7 +101,7 @@ TEST(OnlineLoop, FramesMatchAFreshRendererBitForBit) {
   for (RenderStrategy strategy : {RenderStrategy::Streaming, RenderStrategy::InShader}) {
     SCOPED_TRACE(render_strategy_name(strategy));
     const RenderOptions o = small_options(RenderMode::RayMarch, strategy);
-    OnlineLoop loop(s.trainer, s.vol.dims, tf, cam, o);
+    OnlineLoop loop(*s.session, s.vol.dims, tf, cam, o);
     loop.train(10);
     const Image a = loop.render_frame();
     EXPECT_EQ(loop.accumulated_frames(), 1);
@@ -105,7 +121,7 @@ TEST(OnlineLoop, FramesMatchAFreshRendererBitForBit) {
   }
   // Path tracing (random numbers per frame number) with accumulation.
   const RenderOptions o = small_options(RenderMode::PathTrace);
-  OnlineLoop loop(s.trainer, s.vol.dims, tf, cam, o);
+  OnlineLoop loop(*s.session, s.vol.dims, tf, cam, o);
   loop.train(3);
   for (int i = 0; i < 4; ++i) loop.render_frame();
   EXPECT_TRUE(same_pixels(loop.image(), fresh_render(s.trainer, s.vol.dims, tf, cam, o, 4)));
@@ -117,7 +133,7 @@ TEST(OnlineLoop, MacroCellsAreTheValueRangesOfTheTrainingSamples) {
   const int k = 3;
   Training s(Int3{64, 64, 64}, batch, 4);  // 16^3 cells
   const TransferFunction tf = tf_preset("ramp");
-  OnlineLoop loop(s.trainer, s.vol.dims, tf, orbit_camera(box_of(s.vol.dims), 0, 0, 30), small_options());
+  OnlineLoop loop(*s.session, s.vol.dims, tf, orbit_camera(box_of(s.vol.dims), 0, 0, 30), small_options());
   loop.train(k);
   loop.render_frame();
   ASSERT_NE(loop.macrocells(), nullptr);
@@ -172,7 +188,7 @@ TEST(OnlineLoop, MacroCellsAreTheValueRangesOfTheTrainingSamples) {
 
 TEST(OnlineLoop, LossHistoryAndFrameTiming) {
   Training s(Int3{16, 16, 16}, 2048, 8);
-  OnlineLoop loop(s.trainer, s.vol.dims, tf_preset("ramp"), orbit_camera(box_of(s.vol.dims), 0, 0, 30),
+  OnlineLoop loop(*s.session, s.vol.dims, tf_preset("ramp"), orbit_camera(box_of(s.vol.dims), 0, 0, 30),
                   small_options());
   loop.train(5);
   EXPECT_EQ(loop.loss_history().size(), 5u);
@@ -209,7 +225,7 @@ TEST(OnlineLoop, ImageQualityImprovesAsTrainingProceeds) {
   MacroCells mc_grid(value_ranges_from_grid(view_of(s.vol), 8), box_of(s.vol.dims));
   mc_grid.update(tf);
   const Image truth = CpuRenderer(grid, box_of(s.vol.dims), mc_grid, tf, cam, o).render(1);
-  OnlineLoop loop(s.trainer, s.vol.dims, tf, cam, o);
+  OnlineLoop loop(*s.session, s.vol.dims, tf, cam, o);
   std::vector<double> psnr;
   for (int steps : {0, 10, 140}) {
     loop.train(steps);
@@ -227,7 +243,7 @@ TEST(OnlineLoop, AccumulationRestartsOnEveryChange) {
   const TransferFunction tf = tf_preset("ramp");
   const Camera cam1 = orbit_camera(box_of(s.vol.dims), 0, 10, 30), cam2 = orbit_camera(box_of(s.vol.dims), 90, 10, 30);
   const RenderOptions o = small_options(RenderMode::PathTrace);
-  OnlineLoop loop(s.trainer, s.vol.dims, tf, cam1, o);
+  OnlineLoop loop(*s.session, s.vol.dims, tf, cam1, o);
   loop.train(20);
   for (int i = 0; i < 3; ++i) loop.render_frame();
   EXPECT_EQ(loop.accumulated_frames(), 3);
@@ -262,9 +278,9 @@ TEST(OnlineLoop, AccumulationRestartsOnEveryChange) {
 
 TEST(OnlineLoop, RejectsWhatCannotWork) {
   Volume vol = synth(Int3{16, 16, 16});
-  Network net(small_config());
-  net.init_params(1);
-  CpuTrainer plain(net, std::make_shared<InCoreSampler>(vol), TrainOptions{1024, 1});
+  Model model = small_model(vol.dims, 1);
+  std::unique_ptr<TrainingSession> plain_session = cpu_session(model, vol, 1024, 1);
+  TrainingSession& plain = *plain_session;
   const TransferFunction tf = tf_preset("ramp");
   const Camera cam = orbit_camera(box_of(vol.dims), 0, 0, 30);
   EXPECT_THROW(OnlineLoop(plain, vol.dims, tf, cam, small_options()), Error) << "no online ranges recorded";
@@ -275,7 +291,7 @@ TEST(OnlineLoop, RejectsWhatCannotWork) {
     off.render_frame();
     EXPECT_EQ(off.macrocells()->ranges().count(), 1);
   }
-  plain.enable_online_ranges(vol.dims, 8);
+  plain.trainer().enable_online_ranges(vol.dims, 8);
   EXPECT_THROW(OnlineLoop(plain, Int3{16, 16, 17}, tf, cam, small_options()), Error) << "dims differ";
 }
 
@@ -287,7 +303,7 @@ TEST(TrainPreview, WritesPngsEveryNSteps) {
   o.dir = tmp / "preview/nested/dir";  // created with its parents
   o.width = 48;
   o.height = 32;
-  TrainPreview preview(o, s.trainer, s.vol.dims);
+  TrainPreview preview(o, *s.session, s.vol.dims);
   for (int64_t step = 1; step <= 10; ++step) {
     s.trainer.step();
     double t = preview.after_step(step);

@@ -32,7 +32,7 @@ struct Fixture {
   Model model;
   std::unique_ptr<TrainingSession> session;
   explicit Fixture(SessionOptions so = {}, std::shared_ptr<Sampler> sampler = nullptr) {
-    model = new_model(ModelConfig::from_json(small_config()), vol.dims, DType::Float32, 0, 1, 5);
+    model = create_model(ModelConfig::from_json(small_config()), vol.dims, DType::Float32, 0, 1, 5);
     if (!sampler) sampler = std::make_shared<InCoreSampler>(vol);
     session = std::make_unique<TrainingSession>(
         model, make_trainer(Device::Cpu, *model.net, sampler, &vol, TrainOptions{1024, 7}), so);
@@ -216,7 +216,7 @@ TEST(TrainingSession, CpuSessionEqualsDrivingCpuTrainerByHand) {
   f.session->run(-1, 0.0001);  // a time-limited run: at least one step
   const int64_t n = f.session->steps_done();
 
-  Model by_hand = new_model(ModelConfig::from_json(small_config()), f.vol.dims, DType::Float32, 0, 1, 5);
+  Model by_hand = create_model(ModelConfig::from_json(small_config()), f.vol.dims, DType::Float32, 0, 1, 5);
   CpuTrainer tr(*by_hand.net, std::make_shared<InCoreSampler>(f.vol), TrainOptions{1024, 7});
   tr.enable_online_ranges(f.vol.dims, 4);
   for (int64_t i = 0; i < n; ++i) tr.step();
@@ -268,7 +268,7 @@ TEST(TrainingSession, OpenFinishAndReportKeys) {
 
 TEST(TrainingSession, GpuSessionUsesTheSameTrainerInterface) {
   Volume vol = synth(Int3{16, 12, 10});
-  Model model = new_model(ModelConfig::from_json(small_config()), vol.dims, DType::Float32, 0, 1, 5);
+  Model model = create_model(ModelConfig::from_json(small_config()), vol.dims, DType::Float32, 0, 1, 5);
   if (cuda::devices().empty()) {
     EXPECT_THROW(make_trainer(Device::Cuda, *model.net, nullptr, &vol, TrainOptions{1024, 7}), Error);
     GTEST_SKIP() << "no CUDA device: " << cuda::no_device_reason();

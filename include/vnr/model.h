@@ -17,9 +17,8 @@
 
 namespace vnr {
 
-// A fresh network of `config` (parameters initialised from seed) for a volume of dims voxels of
-// source_dtype with value range [lo, hi] in original units.
-Model create_model(const ModelConfig& config, Int3 dims, DType source_dtype, double lo, double hi, uint32_t seed = 1337);
+// A fresh model of `config` for `volume` (its dims, source dtype and value range), parameters initialised
+// from seed; create_model(config, dims, dtype, lo, hi, seed) (train/model.h) for a volume not at hand.
 Model create_model(const ModelConfig& config, const Volume& volume, uint32_t seed = 1337);
 
 // Bytes of the source volume: dims x the source dtype's size.

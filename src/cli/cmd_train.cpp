@@ -102,7 +102,7 @@ void run_train(const TrainArgs& a) {
 
   std::unique_ptr<TrainPreview> preview;
   if (preview_opts) {
-    preview = std::make_unique<TrainPreview>(*preview_opts, session->trainer(), data.dims);
+    preview = std::make_unique<TrainPreview>(*preview_opts, *session, data.dims);
     session->add_side_work([&](const TrainingProgress& p) { preview->after_step(p.step); });
   }
   const int64_t steps = a.steps >= 0 ? a.steps : (a.seconds > 0 ? INT64_MAX : 1000);

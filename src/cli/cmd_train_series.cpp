@@ -331,7 +331,7 @@ void run_train_series(const TrainArgs& a) {
                  desc0.n_timesteps, ts.size(), a.timesteps.c_str(),
                  a.continuous ? fmt::format(", continuously, {} steps each", a.switch_every).c_str() : "");
 
-  SeriesRun run{a, new_model(config, desc0.dims, desc0.dtype, 0, 1, a.seed), ts};
+  SeriesRun run{a, create_model(config, desc0.dims, desc0.dtype, 0, 1, a.seed), ts};
   run.report_path = report_path;
   run.frame_bytes = frame_bytes;
   run.load = [&](int t) {

@@ -4,17 +4,6 @@
 
 namespace vnr {
 
-Model create_model(const ModelConfig& config, Int3 dims, DType source_dtype, double lo, double hi, uint32_t seed) {
-  Model model;
-  model.net = std::make_unique<Network>(config);
-  model.dims = dims;
-  model.source_dtype = source_dtype;
-  model.lo = lo;
-  model.hi = hi;
-  model.net->init_params(seed);
-  return model;
-}
-
 Model create_model(const ModelConfig& config, const Volume& volume, uint32_t seed) {
   return create_model(config, volume.dims, volume.source_dtype, volume.lo, volume.hi, seed);
 }

@@ -11,13 +11,14 @@ double seconds_between(std::chrono::steady_clock::time_point a, std::chrono::ste
 }
 }  // namespace
 
-OnlineLoop::OnlineLoop(Trainer& trainer, Int3 dims, const TransferFunction& tf, const Camera& camera,
-                       const RenderOptions& options, MacroCellMode mc)
-    : trainer_(trainer), dims_(dims), box_{float(dims.x), float(dims.y), float(dims.z)}, tf_(tf), camera_(camera),
+OnlineLoop::OnlineLoop(TrainingSession& session, Int3 dims, const TransferFunction& tf, const Camera& camera,
+                       const RenderOptions& options, MacroCellMode mc, Device device)
+    : session_(session), trainer_(session.trainer()), device_(device), dims_(dims), box_{float(dims.x), float(dims.y), float(dims.z)}, tf_(tf), camera_(camera),
       opt_(options), mc_mode_(mc) {
   if (dims.x < 1 || dims.y < 1 || dims.z < 1) fail("online rendering: invalid volume dims");
   if (mc == MacroCellMode::Grid)
     fail("online rendering builds its macro-cells from the training samples: use online or off, not grid");
+  const Trainer& trainer = trainer_;
   if (mc == MacroCellMode::Online) {
     if (!trainer.has_online_ranges())
       fail("online macro-cells need the trainer's online value ranges (Trainer::enable_online_ranges)");
@@ -37,8 +38,8 @@ float OnlineLoop::train(int64_t n) {
   if (n < 0) fail("the number of training steps must not be negative (got {})", n);
   auto t0 = std::chrono::steady_clock::now();
   if (n > 0) {
-    trainer_.run(n);
-    last_loss_ = trainer_.last_loss();
+    session_.run(n);
+    last_loss_ = session_.last_loss();
   }
   pending_train_seconds_ += seconds_between(t0, std::chrono::steady_clock::now());
   return last_loss_;
@@ -56,7 +57,7 @@ bool OnlineLoop::refresh() {
     else
       mc_ = std::make_unique<MacroCells>(MacroCells::single(dims_, box_));
     mc_->update(tf_);
-    renderer_ = std::make_unique<CpuRenderer>(*field_, box_, *mc_, tf_, camera_, opt_);
+    renderer_ = make_renderer(device_, *field_, box_, *mc_, tf_, camera_, opt_, cuda::MlpPath::Auto);
     rendered_step_ = step;
     model_dirty_ = tf_dirty_ = options_dirty_ = camera_dirty_ = false;
     return true;
@@ -65,7 +66,7 @@ bool OnlineLoop::refresh() {
     // The renderer holds views of tf_ and of the macro-cells' opacities: rebuilt after them.
     renderer_.reset();
     if (tf_dirty_) mc_->update(tf_);
-    renderer_ = std::make_unique<CpuRenderer>(*field_, box_, *mc_, tf_, camera_, opt_);
+    renderer_ = make_renderer(device_, *field_, box_, *mc_, tf_, camera_, opt_, cuda::MlpPath::Auto);
     tf_dirty_ = options_dirty_ = camera_dirty_ = false;
     return true;
   }

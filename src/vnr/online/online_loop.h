@@ -32,7 +32,7 @@
 #include <vector>
 #include "vnr/fields/fields.h"
 #include "vnr/render/renderer.h"
-#include "vnr/train/trainer_backend.h"
+#include "vnr/train/session.h"
 
 namespace vnr {
 
@@ -41,24 +41,26 @@ struct OnlineFrame {
   uint64_t step = 0;          // training steps done (Trainer::steps_done) when it was rendered
   int accumulated = 0;        // frames averaged into the image (1 right after any change)
   float loss = 0;             // loss of the last training step (0 before any)
-  double train_seconds = 0;   // time in Trainer::run() through train() since the previous frame
+  double train_seconds = 0;   // time in TrainingSession::run() through train() since the previous frame
   double update_seconds = 0;  // merging the online ranges, macro-cell max opacities, field/renderer rebuild
-  double render_seconds = 0;  // CpuRenderer::render_frame + accumulation
+  double render_seconds = 0;  // FrameRenderer::render_frame + accumulation
 };
 
 class OnlineLoop {
 public:
-  // trainer (and its network) must outlive the loop. dims = the volume the network represents (world
-  // box [0, dims], as `vnr render`). mc: Online (the trainer must have online ranges enabled, with the
-  // same dims) or Off (one cell over the box; Grid needs a ground truth, which online training does
-  // not assume).
-  OnlineLoop(Trainer& trainer, Int3 dims, const TransferFunction& tf, const Camera& camera,
-             const RenderOptions& options, MacroCellMode mc = MacroCellMode::Online);
+  // Trains through `session` (the one training loop: its stop token, pause and callbacks apply) and
+  // renders its network on `device`; the session must outlive the loop. dims = the volume the network
+  // represents (world box [0, dims], as `vnr render`). mc: Online (the session's trainer must have online
+  // ranges enabled, with the same dims) or Off (one cell over the box; Grid needs a ground truth, which
+  // online training does not assume).
+  OnlineLoop(TrainingSession& session, Int3 dims, const TransferFunction& tf, const Camera& camera,
+             const RenderOptions& options, MacroCellMode mc = MacroCellMode::Online, Device device = Device::Cpu);
   OnlineLoop(const OnlineLoop&) = delete;
   OnlineLoop& operator=(const OnlineLoop&) = delete;
   ~OnlineLoop();
 
-  // Runs n training steps; returns the loss of the last one (the last known loss when n = 0).
+  // Runs n training steps (fewer when the session is asked to stop); returns the loss of the last one
+  // (the last known loss when n = 0).
   float train(int64_t n);
   // Renders one frame of the current model and returns the (accumulated) image.
   const Image& render_frame();
@@ -80,9 +82,11 @@ public:
   int accumulated_frames() const { return acc_count_; }
   // Macro-cells of the last frame (null before the first one).
   const MacroCells* macrocells() const { return mc_.get(); }
-  std::vector<float> loss_history() const { return trainer_.losses(); }
+  std::vector<float> loss_history() const { return session_.trainer().losses(); }
   const std::vector<OnlineFrame>& frames() const { return frames_; }  // one entry per render_frame()
-  Trainer& trainer() { return trainer_; }
+  TrainingSession& session() { return session_; }
+  Trainer& trainer() { return session_.trainer(); }
+  Device device() const { return device_; }
   const Camera& camera() const { return camera_; }
   const TransferFunction& transfer_function() const { return tf_; }
   const RenderOptions& options() const { return opt_; }
@@ -92,7 +96,9 @@ private:
   // Brings field, macro-cells and renderer up to date; returns whether anything changed.
   bool refresh();
 
-  Trainer& trainer_;
+  TrainingSession& session_;
+  Trainer& trainer_;  // session_.trainer()
+  Device device_;
   Int3 dims_;
   Vec3f box_;
   TransferFunction tf_;
@@ -102,7 +108,7 @@ private:
   // The renderer refers to the field, the macro-cells and tf_: rebuilt together (renderer last).
   std::unique_ptr<NetworkField> field_;
   std::unique_ptr<MacroCells> mc_;
-  std::unique_ptr<CpuRenderer> renderer_;
+  std::unique_ptr<FrameRenderer> renderer_;
   uint64_t rendered_step_ = 0;  // steps_done() the current field/macro-cells were built at
   bool model_dirty_ = true, tf_dirty_ = true, options_dirty_ = true, camera_dirty_ = true;
   Image frame_, acc_;

@@ -41,7 +41,7 @@ std::string preview_path(const std::string& dir, int64_t step) {
   return join_path(dir, fmt::format("step_{:06d}.png", step));
 }
 
-TrainPreview::TrainPreview(const PreviewOptions& o, Trainer& trainer, Int3 dims) : o_(o) {
+TrainPreview::TrainPreview(const PreviewOptions& o, TrainingSession& session, Int3 dims) : o_(o) {
   check_preview_options(o_);
   RenderOptions ro;
   ro.width = o_.width;
@@ -49,8 +49,8 @@ TrainPreview::TrainPreview(const PreviewOptions& o, Trainer& trainer, Int3 dims)
   ro.mode = o_.mode;
   const Vec3f box{float(dims.x), float(dims.y), float(dims.z)};
   const Camera cam = orbit_camera(box, o_.azimuth, o_.elevation, 30);
-  loop_ = std::make_unique<OnlineLoop>(trainer, dims, o_.tf, cam, ro,
-                                       trainer.has_online_ranges() ? MacroCellMode::Online : MacroCellMode::Off);
+  loop_ = std::make_unique<OnlineLoop>(
+      session, dims, o_.tf, cam, ro, session.trainer().has_online_ranges() ? MacroCellMode::Online : MacroCellMode::Off);
 }
 
 double TrainPreview::write(int64_t step) {

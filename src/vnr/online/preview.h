@@ -28,10 +28,10 @@ std::string preview_path(const std::string& dir, int64_t step);
 
 class TrainPreview {
 public:
-  // Checks the options (check_preview_options). Uses the trainer's online value ranges as macro-cells
-  // when it records them (Trainer::enable_online_ranges), else one macro-cell over the box. trainer
-  // must outlive the preview; dims = the volume being trained.
-  TrainPreview(const PreviewOptions& o, Trainer& trainer, Int3 dims);
+  // Checks the options (check_preview_options). Uses the session trainer's online value ranges as
+  // macro-cells when it records them (Trainer::enable_online_ranges), else one macro-cell over the box.
+  // session must outlive the preview; dims = the volume being trained.
+  TrainPreview(const PreviewOptions& o, TrainingSession& session, Int3 dims);
   // Call after each training step with the number of steps done: at multiples of `every` renders and
   // writes the preview. Returns the seconds it took (0 when it wrote nothing), so that a caller can
   // leave preview time out of its training throughput.

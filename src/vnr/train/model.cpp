@@ -20,6 +20,17 @@ bool is_instantvnr_path(const std::string& path) {
   return e == ".bson" || e == ".json";
 }
 
+Model create_model(const ModelConfig& config, Int3 dims, DType source_dtype, double lo, double hi, uint32_t seed) {
+  Model model;
+  model.net = std::make_unique<Network>(config);
+  model.dims = dims;
+  model.source_dtype = source_dtype;
+  model.lo = lo;
+  model.hi = hi;
+  model.net->init_params(seed);
+  return model;
+}
+
 void save_model(const std::string& path, const Model& m) {
   ModelFile f;
   f.config = m.net->config_json();

@@ -24,6 +24,7 @@
 #include <vector>
 #include "vnr/core/json.h"
 #include "vnr/train/model_io.h"
+#include "vnr/train/trainer.h"
 #include "vnr/train/trainer_backend.h"
 #include "vnr/train/training_data.h"
 
@@ -152,6 +153,13 @@ struct TrainingSetup {
 // The checks of a setup that need no data (batch, steps, macro-cell size, out-of-core counts, a CUDA
 // device when "cuda" is asked for): one error line, before anything is loaded.
 void check_training_setup(const TrainingSetup& setup);
+
+// A session training `model` on `volume`, held in memory (the in-core sampler; the GPU samples its own
+// copy), on an explicit device; model and volume must outlive it. online_cell_size > 0 records online
+// macro-cells of that many voxels (what a renderer of the model then skips empty space with).
+std::unique_ptr<TrainingSession> make_training_session(Model& model, const Volume& volume, Device device,
+                                                       const TrainOptions& options = {}, int online_cell_size = 16,
+                                                       SessionOptions session = {});
 
 // Loads the config, opens the training data, sizes the model, creates it and the backend on the chosen
 // device. `message` gets every line for people (volume summary, notes, the device).

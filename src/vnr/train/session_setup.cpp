@@ -18,6 +18,17 @@ void check_training_setup(const TrainingSetup& s) {
   if (s.device == "cuda") cuda::require_device();
 }
 
+std::unique_ptr<TrainingSession> make_training_session(Model& model, const Volume& volume, Device device,
+                                                       const TrainOptions& options, int online_cell_size,
+                                                       SessionOptions session) {
+  if (!(model.dims == volume.dims))
+    fail("the model represents {}x{}x{} voxels, the volume has {}x{}x{}", model.dims.x, model.dims.y, model.dims.z,
+         volume.dims.x, volume.dims.y, volume.dims.z);
+  auto trainer = make_trainer(device, *model.net, std::make_shared<InCoreSampler>(volume), &volume, options);
+  if (online_cell_size > 0) trainer->enable_online_ranges(volume.dims, online_cell_size);
+  return std::make_unique<TrainingSession>(model, std::move(trainer), std::move(session));
+}
+
 std::unique_ptr<TrainingSession> open_training_session(const TrainingSetup& s, const MessageFn& message) {
   auto say = [&](const std::string& line) {
     if (message) message(line);
@@ -41,7 +52,7 @@ std::unique_ptr<TrainingSession> open_training_session(const TrainingSetup& s, c
     config = scale_grid_learning_rate(config, dopt.grid_lr_scale, *data->out_of_core, &note);
     if (!note.empty()) say(note);
   }
-  Model model = new_model(config, data->dims, data->dtype, data->lo, data->hi, s.seed);
+  Model model = create_model(config, data->dims, data->dtype, data->lo, data->hi, s.seed);
   Network& net = *model.net;
   if (s.target_ratio <= 0 && model.param_bytes() > data->source_bytes())
     say(fmt::format("note: the model ({}) is larger than the volume ({}); use --target-ratio R to compress",

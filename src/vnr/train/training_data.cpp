@@ -131,15 +131,4 @@ ModelConfig scale_grid_learning_rate(ModelConfig config, const std::string& scal
   return config;
 }
 
-Model new_model(const ModelConfig& config, Int3 dims, DType dtype, double lo, double hi, uint32_t seed) {
-  Model model;
-  model.net = std::make_unique<Network>(config);
-  model.dims = dims;
-  model.source_dtype = dtype;
-  model.lo = lo;
-  model.hi = hi;
-  model.net->init_params(seed);
-  return model;
-}
-
 }  // namespace vnr

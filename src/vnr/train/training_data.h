@@ -64,7 +64,4 @@ TrainingData open_training_data(const std::string& name, const VolumeDesc& desc,
 ModelConfig scale_grid_learning_rate(ModelConfig config, const std::string& scale, const OutOfCoreSampler& sampler,
                                      std::string* note);
 
-// A fresh model for a volume of these dims/dtype/range, parameters initialised from `seed`.
-Model new_model(const ModelConfig& config, Int3 dims, DType dtype, double lo, double hi, uint32_t seed);
-
 }  // namespace vnr
