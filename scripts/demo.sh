@@ -24,4 +24,6 @@ $VNR render out/demo/marschner_lobb.vnr -o out/demo/neural_pathtraced.png --size
 $VNR train out/demo/marschner_lobb.json -o out/demo/out_of_core.vnr --target-ratio 20 --steps 500 \
   --sampler outofcore --memory-budget 2MiB --block-dims 32,4,4 \
   --preview-every 100 --preview-dir out/demo/previews
-echo "images in out/demo: ground_truth.png, neural.png, neural_pathtraced.png, previews/step_*.png"
+# The same steps through the C++ library (examples/train_and_render.cpp): a program of 60 lines.
+./build/example_train_and_render out/demo/marschner_lobb.json out/demo 300
+echo "images in out/demo: ground_truth.png, neural.png, neural_pathtraced.png, previews/step_*.png, example.png"
