@@ -535,7 +535,7 @@ TEST(Volume, ConstantVolumeMapsToZero) {
 }
 
 // ---------------------------------------------------------------------------------------------
-// Lookup (compat.md B.2)
+// Lookup (docs/semantics.md B.2)
 
 TEST(Volume, GridLookupReproducesLinearRamp) {
   Volume v;

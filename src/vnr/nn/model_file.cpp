@@ -356,7 +356,7 @@ ModelFile parse_instantvnr(const std::string& path, const std::string& buf, bool
       m.macrocell_dims = d;
       m.macrocell_ranges.resize(size_t(2 * count));
       std::memcpy(m.macrocell_ranges.data(), mb.data(), size_t(8 * count));
-      // Stored as (min - 1, max + 1) against a zero-filled buffer (README section 3.2); undo it in
+      // Stored as (min - 1, max + 1) against a zero-filled buffer (docs/MODEL_FORMAT.md 2.1); undo it in
       // float, as instantvnr does. An untouched (0,0) cell decodes to the empty range (1,-1).
       for (size_t i = 0; i < m.macrocell_ranges.size(); i += 2) {
         m.macrocell_ranges[i] = m.macrocell_ranges[i] + 1.0f;

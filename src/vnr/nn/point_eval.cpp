@@ -250,8 +250,8 @@ HWY_INLINE void StorePanel(const VF (&y)[NV], bool relu, float* HWY_RESTRICT out
 
 // One panel of NV vectors of outputs: out = act(sum_j vals[j] * W[row_of(j) .. +PW]) over n inputs.
 // Dense inputs use row_of(i) = i * PW; compacted ones (vals[j] = x[i_j] != 0) a table of i_j * PW.
-// (`rows` is passed as a pointer: a caller's lambda that captured its row array by value copied the
-// array on every panel and made in-shader inference 1.7x slower.)
+// (`rows` is passed as a pointer: a caller's lambda that captured its row array by value would copy
+// the array on every panel, in the innermost loop of in-shader inference.)
 template <int NV, bool kDense>
 HWY_INLINE void Panel(const float* HWY_RESTRICT W, const float* HWY_RESTRICT vals, const int32_t* HWY_RESTRICT rows,
                       uint32_t n, bool relu, float* HWY_RESTRICT out) {
@@ -488,8 +488,8 @@ PointEvaluator::PointEvaluator(const Network& net, bool skip_zero_activations) {
     finite = finite && std::isfinite(v);
     *w++ = v;
   }
-  // Compaction pays from 64 neurons on (measured: at 16 and 32 the per-layer compaction and the
-  // data-dependent loop cost more than the skipped FMAs).
+  // Compaction pays from 64 neurons on: at 16 and 32 the per-layer compaction and the
+  // data-dependent loop cost more than the skipped FMAs.
   d.skip_zeros = skip_zero_activations && d.relu && finite && m.width > 32;
 
   Kernels k;

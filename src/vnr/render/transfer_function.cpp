@@ -97,7 +97,8 @@ struct Preset {
 
 const std::vector<Preset>& presets() {
   static const std::vector<Preset> p = {
-      // The VTK peer's (shared/peers/vtk_raycast.py) colour and opacity functions.
+      // The colour and opacity functions of the VTK ray-casting comparison (docs/benchmarks.md
+      // "Rendering speed (CPU)"), so both renderers draw the same image.
       {"ramp", {{0.0, {0.0f, 0.0f, 0.3f}}, {0.3, {0.9f, 0.4f, 0.1f}}, {1.0, {1.0f, 1.0f, 0.9f}}}, vtk_opacity()},
       // Grey colour ramp, opacity linear from 0 to 1.
       {"gray", {{0.0, {0.0f, 0.0f, 0.0f}}, {1.0, {1.0f, 1.0f, 1.0f}}}, {{0.0, 0.0f}, {1.0, 1.0f}}},
