@@ -41,6 +41,7 @@ struct RayPacket {
   uint64_t active = 0;
 };
 
+// Long on purpose: the hot SIMD loop keeps every lane's state in registers; split into calls it would spill.
 int64_t MarchGridPackets(const RenderParams& p, const GridView& g, TileCursor cursor, Vec4f* pixels) {
   const hn::ScalableTag<float> df;
   const hn::RebindToSigned<decltype(df)> di;
