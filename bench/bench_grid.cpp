@@ -50,8 +50,8 @@ BENCHMARK(BM_GridEncode)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond);
 
 // Encodes 65,536 random points in chunks of 256 with a layout holding only level `l`. Repeated
 // iterations keep that level's table warm in L2/L3, so this is the cache-resident cost per level;
-// in a training step the tables are cold (Adam and the gradient scatter stream ~700 MB through the
-// caches) and the large levels cost 3-4x more (BM_GridEncode measures all levels together).
+// in a training step the tables are cold (Adam and the gradient scatter stream the whole parameter
+// set through the caches) and the large levels cost more (BM_GridEncode measures all levels together).
 void BM_GridEncodeLevel(benchmark::State& state) {
   Fixture& f = level_fixture(state.range(0));
   vnr::GridLayout one = f.net.grid();

@@ -1,5 +1,5 @@
 #!/bin/sh
-# Re-checks the GPU claims of README ("CUDA backend", "GPU rendering") in one go on a fresh GPU machine:
+# Re-checks the GPU figures of docs/benchmarks.md ("CUDA backend") in one go on a fresh GPU machine:
 # builds with every core, runs the gpu tests, compute-sanitizer (memcheck and racecheck) over them, then
 # the training/inference benchmarks and the rendering table (the paper's frame-rate table: bonsai, engine
 # and chris_t1 at 768x768, neural and grid), and writes the logs, the JSON reports and markdown tables
@@ -13,11 +13,12 @@
 #   VNR_STAGES   which stages to run, of "tests sanitize bench render" (default: all; the build always
 #                runs, incrementally), so the work can be split over several calls of a time-limited
 #                machine that keeps build-gpu between them
-#   VNR_DATA     folder with the real volumes (default ../shared/data, else .data: a copy carried to a
-#                machine that has no ../shared)
+#   VNR_DATA     folder with the real volumes (default: the project's shared data set in ../shared/data,
+#                else .data: a copy that scripts/gpu_carry.sh makes for a machine without ../shared)
 #   VNR_VOLUME   volume to benchmark on (default: DATA/bonsai.json if present, else a generated
 #                256^3 Marschner-Lobb volume)
-#   VNR_PEERS    folder holding torch_vnr.py (default ../shared/peers, else .peers): the PyTorch peer
+#   VNR_PEERS    folder holding torch_vnr.py, the PyTorch reference trainer (default: the shared folder's
+#                ../shared/peers, else .peers; the comparison is skipped without it)
 #   VNR_SECONDS  seconds per benchmark (default 5)
 #   VNR_RENDER   0 skips the rendering benchmarks; VNR_RENDER_STEPS training steps of their models
 #                (default 20000), VNR_RENDER_FRAMES timed frames per cell (default 12)

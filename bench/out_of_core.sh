@@ -7,7 +7,7 @@
 #   sh bench/out_of_core.sh DATA_DIR [STEPS] [DIMS] [BUDGET]
 #   defaults: STEPS 10, DIMS 2048,2048,1600 (25.6 GB of float32), BUDGET 256MiB
 # Needs about 26 GB free in DATA_DIR. Results: DATA_DIR/ooc_{outofcore,mmap}.json and a table.
-# SAMPLERS="outofcore" reruns one sampler only (mmap takes ~5 min per step here); the table then
+# SAMPLERS="outofcore" reruns one sampler only (mmap takes minutes per step); the table then
 # uses the other sampler's report from an earlier run in DATA_DIR and says so.
 set -eu
 DIR=${1:?usage: sh bench/out_of_core.sh DATA_DIR [STEPS] [DIMS] [BUDGET]}

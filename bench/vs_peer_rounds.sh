@@ -1,12 +1,13 @@
 #!/bin/sh
-# README's vs-PyTorch table: ROUNDS runs of ../shared/tools/vs_peer.sh (vnr and the peer side by side,
-# 2 threads each), then per row the range and the median of vnr's rate, the peer's and their ratio.
-# One round takes about a minute; this VM's speed moves by tens of percent within minutes, and vnr
-# and the peer do not move together, so one round says little and the median of five says more.
+# The vs-PyTorch table of docs/benchmarks.md ("Against the PyTorch reference (CPU)"): ROUNDS runs of
+# the side-by-side script (vnr and the PyTorch reference trainer, 2 threads each), then per row the
+# range and the median of vnr's rate, the peer's and their ratio. A shared VM's speed moves within
+# minutes, and vnr and the peer do not move together, so one round says little and a median more.
 #
 #   sh bench/vs_peer_rounds.sh [ROUNDS] [VNR] [VOLUME.json]
-#   defaults: 5 rounds, build/vnr, the script's default volume (../shared/data/bonsai.json)
-# Needs ../shared (the peer and its Debian packages, see ../shared/peers/README.md).
+#   defaults: 5 rounds, build/vnr, the side-by-side script's default volume (bonsai)
+# Needs the project's shared folder checked out beside the repository (../shared): its tools/vs_peer.sh,
+# the PyTorch reference trainer and the Debian packages that trainer runs on.
 set -eu
 ROUNDS=${1:-5}
 VNR=${2:-$(dirname "$0")/../build/vnr}

@@ -6,7 +6,8 @@
 #
 #   scripts/bench_render_vs_vtk.sh VOLUME.json [MODEL.vnr] [FRAMES]
 #
-# Needs the peer (../shared/peers/vtk_raycast.py, or VNR_VTK_PEER=path) and its Debian packages:
+# Needs the VTK peer script vtk_raycast.py (by default from the project's shared folder beside the
+# repository, ../shared/peers; or VNR_VTK_PEER=path) and its Debian packages:
 #   apt-get install python3-vtk9 xvfb xauth libgl1-mesa-dri
 set -eu
 VOL=${1:?usage: $0 VOLUME.json [MODEL.vnr] [FRAMES]}

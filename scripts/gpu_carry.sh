@@ -1,5 +1,6 @@
 #!/bin/sh
-# Prepares what a GPU machine that reaches no package registry and has no ../shared needs from here, in
+# Prepares what a GPU machine that reaches no package registry and has no copy of the project's shared
+# folder (SHARED, default ../shared: its data set and the PyTorch reference trainer) needs from here, in
 # folders of the repo that git ignores (listed in .git/info/exclude) so the device tool can carry them:
 #   .debs   the Debian build dependencies (scripts/gpu_debs.sh)
 #   .data   the real volumes of the rendering table (bonsai, engine, chris_t1; ~33 MB)

@@ -430,7 +430,7 @@ TEST(Cli, TrainingPrecision) {
   const double p32 = parse_json_file(d + "/t32.json")["psnr"].get<double>();
   const double p16 = parse_json_file(d + "/ta.json")["psnr"].get<double>();
   EXPECT_GT(p32, 20.0);
-  EXPECT_GT(p16, p32 - 0.5);  // measured: 22.71 / 22.73 dB against 22.72 / 22.63 (seeds 1, 2)
+  EXPECT_GT(p16, p32 - 0.5);  // bf16 rounding costs far less than the seed-to-seed spread
   // The small config in bf16 on request (slower there, but supported).
   Result sb = run(train + "-o " + d + "/sb.vnr --config small --precision bf16 --report " + d + "/tsb.json");
   ASSERT_EQ(sb.code, 0) << sb.err;

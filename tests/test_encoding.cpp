@@ -1,5 +1,5 @@
-// Grid-encoding semantics against bit-exact vectors from shared/tools/grid_vectors.py
-// (committed as tests/data/grid_vectors.json), parameter counts against the paper's appendix,
+// Grid-encoding semantics against the bit-exact vectors of tests/data/grid_vectors.json
+// (docs/semantics.md A.10), parameter counts against the paper's appendix,
 // and finite-difference checks of every encoding's gradients.
 #include <gtest/gtest.h>
 #include <hwy/targets.h>

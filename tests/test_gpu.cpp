@@ -63,7 +63,7 @@ TEST(GpuEncoding, EqualsTheCpuEncodingRoundedToHalf) {
     net.sync_half_table();
     const int n = 256;
     std::vector<float> pts = random_points(n, 1);
-    pts[0] = 0.0f;  // domain corners: the +0.5 offset and the wrap of dense levels (compat.md A.2.5)
+    pts[0] = 0.0f;  // domain corners: the +0.5 offset and the wrap of dense levels (docs/semantics.md A.2.5)
     pts[1] = 1.0f;
     pts[2] = 0.999999f;
     std::vector<float> gpu = cuda::testing::encode(net, pts.data(), n);

@@ -16,7 +16,7 @@ std::vector<float> random_volume(Int3 d, uint64_t seed) {
   return v;
 }
 
-// compat.md B.4 written out directly: every window, two-pass mean / (n-1) covariance.
+// docs/semantics.md B.4 written out directly: every window, two-pass mean / (n-1) covariance.
 double ssim_brute(const std::vector<float>& a, const std::vector<float>& b, Int3 d) {
   const int64_t w[3] = {std::min<int64_t>(7, d.x), std::min<int64_t>(7, d.y), std::min<int64_t>(7, d.z)};
   const double c1 = 1e-4, c2 = 9e-4;

@@ -194,7 +194,7 @@ double relative_l2_error(const float* a, const float* b, size_t count) {
 // The bf16 training forward and backward against the rounded reference (the kernels differ only by
 // fp32 sums, which may move a value across a bf16 rounding boundary: well under 1 %), and against
 // the fp32 path (bf16 rounding noise). Whether that noise costs quality is a training question:
-// README, "bf16 training".
+// docs/benchmarks.md "bf16 training".
 TEST(Mlp, Bf16TrainingMatchesRoundedReference) {
   struct Case {
     std::string name;
@@ -237,8 +237,9 @@ TEST(Mlp, Bf16TrainingMatchesRoundedReference) {
         dX032(dX0.size(), 0.0f), s32(2 * size_t(m.width) * n);
     net.mlp_forward(X0.data(), n, acts.data(), pre32.data(), out32.data());
     net.mlp_backward(X0.data(), acts.data(), dout.data(), n, dW32.data(), dX032.data(), s32.data());
-    // Measured: outputs 0.3-0.6 %, dW 1-6 %, dX0 2-15 % (sums over 64 samples of random-sign terms
-    // cancel, so 0.4 % per rounding grows; a ReLU mask may flip). A wiring error would be ~100 %.
+    // bf16 rounding noise grows through the layers and more in the gradients (sums over 64 samples
+    // of random-sign terms cancel, and a ReLU mask may flip), hence looser bounds there; a wiring
+    // error would be ~100 %.
     EXPECT_LT(relative_l2_error(pre.data(), pre32.data(), pre.size()), 2e-2);
     EXPECT_LT(relative_l2_error(dW.data(), dW32.data(), m.n_params), 0.1);
     EXPECT_LT(relative_l2_error(dX0.data(), dX032.data(), size_t(m.first_cols) * n), 0.3);

@@ -1,7 +1,7 @@
 // AMX bf16 throughput probe (not part of libvnr): one 64x64 MLP layer (the paper config's hidden layer)
 // over a 256-sample chunk, bf16 weights and activations in vnr's pair layout, fp32 sums, with tile
 // loads and stores, on one thread. Measures what an AMX backend for the batched MLP could reach on an
-// Intel Xeon with AMX (README, "CUDA backend": the GPU machine's CPU). Linux only (asks the kernel for
+// Intel Xeon with AMX (docs/benchmarks.md "CUDA backend": the GPU machine's CPU). Linux only (asks the kernel for
 // the tile state). Build and run:
 //   g++ -O2 -mamx-tile -mamx-bf16 bench/probes/amx_probe.cpp -o amx_probe && ./amx_probe [REPS]
 #include <immintrin.h>

@@ -208,6 +208,35 @@ void print_continuous(const SeriesRun& run, const ContinuousResult& res, const C
               a.output.c_str(), report_path.c_str());
 }
 
+// The report row of one timestep's window of continuous training, its model saved at `path`.
+Json continuous_window_row(const WindowResult& w, const std::string& path, uint64_t frame_bytes, bool ssim) {
+  const uint64_t bytes = file_size(path);
+  Json sw = nullptr;
+  if (w.has_switch)
+    sw = {{"from", w.from_timestep},
+          {"psnr_before", w.psnr_before},
+          {"psnr_after", w.psnr_after},
+          {"recovered", w.recovery_steps >= 0},
+          {"recovery_steps", w.recovery_steps >= 0 ? Json(w.recovery_steps) : Json(nullptr)},
+          {"recovery_seconds", w.recovery_steps >= 0 ? Json(w.recovery_seconds) : Json(nullptr)}};
+  Json row = {{"timestep", w.timestep},
+              {"model", path},
+              {"first_step", w.first_step},
+              {"steps", w.steps},
+              {"seconds", w.seconds},
+              {"load_seconds", w.load_seconds},
+              {"final_loss", w.final_loss},
+              {"probe_psnr_end", w.psnr_end},
+              {"lo", w.lo},
+              {"hi", w.hi},
+              {"model_bytes", bytes},
+              {"compression_ratio", double(frame_bytes) / double(bytes)},
+              {"interrupted", w.interrupted},
+              {"switch", sw}};
+  row.update(eval_row(w.eval, ssim));
+  return row;
+}
+
 // One network trained across the timesteps (train_continuous: one TrainingSession for the run).
 void train_continuously(SeriesRun& run) {
   const TrainArgs& a = run.a;
@@ -236,32 +265,8 @@ void train_continuously(SeriesRun& run) {
   float lr = 0;
   auto done = [&](const WindowResult& w, const Model& m) {
     const std::string path = save(m, w.timestep);
-    const uint64_t bytes = file_size(path);
     lr = m.net->config().adam.learning_rate;
-    Json sw = nullptr;
-    if (w.has_switch)
-      sw = {{"from", w.from_timestep},
-            {"psnr_before", w.psnr_before},
-            {"psnr_after", w.psnr_after},
-            {"recovered", w.recovery_steps >= 0},
-            {"recovery_steps", w.recovery_steps >= 0 ? Json(w.recovery_steps) : Json(nullptr)},
-            {"recovery_seconds", w.recovery_steps >= 0 ? Json(w.recovery_seconds) : Json(nullptr)}};
-    Json row = {{"timestep", w.timestep},
-                {"model", path},
-                {"first_step", w.first_step},
-                {"steps", w.steps},
-                {"seconds", w.seconds},
-                {"load_seconds", w.load_seconds},
-                {"final_loss", w.final_loss},
-                {"probe_psnr_end", w.psnr_end},
-                {"lo", w.lo},
-                {"hi", w.hi},
-                {"model_bytes", bytes},
-                {"compression_ratio", double(frame_bytes) / double(bytes)},
-                {"interrupted", w.interrupted},
-                {"switch", sw}};
-    row.update(eval_row(w.eval, !a.no_ssim));
-    windows.push_back(row);
+    windows.push_back(continuous_window_row(w, path, frame_bytes, !a.no_ssim));
     done_windows.push_back(w);
     report["rows"] = windows;
     report["complete"] = false;

@@ -57,8 +57,8 @@ double median(std::vector<double> v) {
 void add_precision_option(CLI::App* app, std::string& precision) {
   app->add_option("--precision", precision,
                    "CPU network inference arithmetic: bf16 (weights and activations rounded to bf16, sums in fp32; "
-                   "needs AVX512-BF16, ~1.4x faster on AMD Zen 4), fp32, or auto = bf16 on AMD CPUs with AVX512-BF16, where "
-                   "it pays (on Intel ones it measured slower), else fp32")
+                   "needs AVX512-BF16; faster on AMD CPUs), fp32, or auto = bf16 on AMD CPUs with AVX512-BF16, where "
+                   "it pays (on Intel ones it does not), else fp32")
       ->check(CLI::IsMember({"auto", "fp32", "bf16"}))
       ->capture_default_str();
 }
@@ -66,9 +66,9 @@ void add_precision_option(CLI::App* app, std::string& precision) {
 void add_training_precision_option(CLI::App* app, std::string& precision) {
   app->add_option("--precision", precision,
                    "CPU training arithmetic of the MLP: bf16 (weights, activations and gradients rounded to bf16, sums "
-                   "and Adam in fp32; needs AVX512-BF16, 1.3-1.4x faster paper-config steps on AMD Zen 4), fp32, or auto = "
+                   "and Adam in fp32; needs AVX512-BF16; faster steps for wide MLPs on AMD CPUs), fp32, or auto = "
                    "bf16 on AMD CPUs with AVX512-BF16 when the MLP is at least 32 wide (16-wide ones train faster in "
-                   "fp32; on Intel CPUs bf16 measured no faster), else fp32")
+                   "fp32; on Intel CPUs bf16 is no faster), else fp32")
       ->check(CLI::IsMember({"auto", "fp32", "bf16"}))
       ->capture_default_str();
 }

@@ -4,7 +4,7 @@
 
 namespace vnr {
 
-// PCG-XSH-RR 64/32 with tiny-cuda-nn's seeding and next_float (compat.md A.8).
+// PCG-XSH-RR 64/32 with tiny-cuda-nn's seeding and next_float (docs/semantics.md A.8).
 struct Pcg32 {
   static constexpr uint64_t kMult = 0x5851F42D4C957F2DULL;
   uint64_t state = 0x853c49e6748fea9bULL;

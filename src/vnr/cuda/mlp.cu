@@ -37,9 +37,8 @@ namespace {
 constexpr int kMaxWarps = 8;  // warps per block at most; each owns 16 samples
 
 // Warps per block of the fused kernels. Every block loads each weight matrix into shared memory, so more
-// warps share a load; on an H100, 8 against 4 warps: paper config (width 64) training 108.5 -> 114.2 M
-// samples/s and resident inference 813 -> 837 M/s; small config (width 16) training 288 -> 280, within
-// noise, so narrow networks keep 4.
+// warps share a load. That pays from width 64 on; narrow networks have little to share and keep 4
+// (docs/benchmarks.md "History", GPU).
 inline int fused_warps(const MlpDims& d) { return d.width >= 64 ? 8 : 4; }
 
 constexpr int kSkew = 8;   // halves of padding per shared-memory row (bank conflicts); ldm stays a multiple of 8

@@ -360,7 +360,7 @@ HWY_INLINE void ScatterBlock(float* lg, const CornerBlock& cur, size_t N, const 
 // Backward, dense levels with two features, 16 samples: the four gradients of a corner pair (f0, f1
 // of x0, then of x0 + 1) are 16 adjacent bytes, so a pair is one 128-bit load, FMA and store instead
 // of two of each, and the weights and gradients are put in per-sample quads by permutes rather than
-// scalar loads (2.5x fewer instructions per sample). Same weights, entries and per-element FMA as
+// scalar loads (fewer instructions per sample). Same weights, entries and per-element FMA as
 // ScatterBlock, in the same corner order, so the same bits. False (nothing done) when a lane's x0 + 1
 // wraps to entry 0.
 HWY_INLINE bool DensePairBlockBackwardF2(const GridLevel& L, bool smooth, const float* x, const float* y,

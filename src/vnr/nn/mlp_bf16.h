@@ -1,9 +1,9 @@
 #pragma once
 // bf16 inference kernels for the MLP forward pass (AVX512-BF16 `vdpbf16ps`): weights and activations
 // rounded to bf16 (round to nearest even), products summed in fp32. One vdpbf16ps does two
-// multiply-adds per fp32 lane at the rate of one fp32 FMA, so the MLP runs at twice the FMA peak
-// (Zen 4: 233 vs 115 GFLOP/s per core, measured). Inference; training has its own sample-major kernels
-// (mlp_bf16_train.h).
+// multiply-adds per fp32 lane at the rate of one fp32 FMA, so where the CPU runs it at full rate the
+// MLP can reach twice the fp32 FMA peak (docs/benchmarks.md "MLP kernels (CPU)"). Inference;
+// training has its own sample-major kernels (mlp_bf16_train.h).
 //
 // Layout "pairs": an activation matrix X (K x n, feature-major) is stored as P[j * n + s] (uint32)
 // = bf16(X[2j][s]) in the low half, bf16(X[2j + 1][s]) in the high half (0 past K), which is the
@@ -15,10 +15,9 @@ namespace vnr::kernels {
 
 // True when this CPU has AVX512-BF16 (checked once); the callers fall back to fp32 otherwise.
 bool bf16_supported();
-// What `--precision auto` takes: bf16 where it is supported and pays. AMD's AVX512-BF16 cores (Zen 4 on)
-// run vdpbf16ps at the fp32 FMA rate, twice the multiply-adds; on an Intel Xeon with AVX512-BF16
-// (Emerald Rapids, measured) the bf16 kernels were slower than fp32 (inference 0.65-0.77x, CPU
-// rendering 0.6-0.8x, training equal), so auto keeps fp32 on Intel.
+// What `--precision auto` takes: bf16 where it is supported and pays. AMD's AVX512-BF16 cores
+// run vdpbf16ps at the fp32 FMA rate, twice the multiply-adds; on Intel Xeons with AVX512-BF16 the
+// bf16 kernels did not beat fp32 (docs/benchmarks.md "CUDA backend"), so auto keeps fp32 on Intel.
 bool bf16_preferred();
 
 uint16_t to_bf16(float f);  // round to nearest even; NaN stays NaN

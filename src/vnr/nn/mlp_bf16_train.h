@@ -1,7 +1,7 @@
 #pragma once
 // bf16 kernels of the MLP training step (AVX512-BF16 `vdpbf16ps`): weights, the encoded input,
 // activations and gradients rounded to bf16, every sum in fp32 (the master weights, Adam and the
-// grid stay fp32). Quality was measured first by emulation (README, "bf16 training").
+// grid stay fp32). Rounding to bf16 keeps training quality (docs/benchmarks.md "bf16 training").
 //
 // Training works sample-major ("SM": sample s's features contiguous) so that all three products
 // of a layer - forward, data gradient and weight gradient - are one kind of kernel, with no

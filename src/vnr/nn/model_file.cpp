@@ -150,7 +150,9 @@ struct CrcWriter {
 
 // ---- .vnr reading ---------------------------------------------------------------------------
 
-ModelFile parse_vnr(const std::string& path, const std::string& buf) {
+// The preamble's checks, in order: magic, size, version, header size; then the end magic and, for a
+// complete file, the CRC. Returns the header's byte count; *complete says whether the end magic is there.
+uint64_t check_vnr_preamble(const std::string& path, const std::string& buf, bool* complete_out) {
   const uint64_t size = buf.size();
   const uint64_t min_size = kPreambleBytes + kTrailerBytes;
   // A short file that starts like the magic is a truncated model, anything else is not a model.
@@ -181,9 +183,13 @@ ModelFile parse_vnr(const std::string& path, const std::string& buf) {
     if (crc32_of(buf.data(), size_t(size - kTrailerBytes)) != stored)
       fail("'{}' is corrupted (checksum mismatch)", path);
   }
+  *complete_out = complete;
+  return header_bytes;
+}
 
-  // Without the end magic the header may still be intact (the file was cut short later on): parse
-  // it to report the expected size; if it does not parse, the file is damaged either way.
+// Without the end magic the header may still be intact (the file was cut short later on): parse
+// it to report the expected size; if it does not parse, the file is damaged either way.
+Json parse_vnr_header(const std::string& path, const std::string& buf, uint64_t header_bytes, bool complete) {
   const std::string header_text = buf.substr(kPreambleBytes, size_t(header_bytes));
   Json h;
   if (!nesting_ok(header_text)) fail("'{}' is corrupted (header JSON nested too deeply)", path);
@@ -194,7 +200,41 @@ ModelFile parse_vnr(const std::string& path, const std::string& buf) {
     fail("'{}' is corrupted (invalid header JSON: {})", path, one_line(e.what()));
   }
   if (!h.is_object()) fail("'{}' is corrupted (header is not a JSON object)", path);
+  return h;
+}
 
+// The header's descriptive fields: config, dims, and the optional dtype, value_range and training.
+void read_vnr_descriptors(const std::string& path, const Json& h, ModelFile& m) {
+  auto cfg = h.find("config");
+  if (cfg == h.end() || !cfg->is_object()) fail("'{}' has an invalid header: 'config' must be an object", path);
+  m.config = *cfg;
+  auto dims = h.find("dims");
+  if (dims == h.end()) fail("'{}' has an invalid header: 'dims' missing", path);
+  m.dims = parse_int3_array(*dims, path, "dims");
+  if (auto dt = h.find("dtype"); dt != h.end()) {
+    if (!dt->is_string()) fail("'{}' has an invalid header: 'dtype' must be a string", path);
+    try {
+      m.source_dtype = parse_dtype(dt->get<std::string>());
+    } catch (const Error& e) {
+      fail("'{}' has an invalid header: {}", path, e.what());
+    }
+  }
+  auto vr = h.find("value_range");
+  if (vr != h.end()) {
+    if (!vr->is_array() || vr->size() != 2 || !(*vr)[0].is_number() || !(*vr)[1].is_number())
+      fail("'{}' has an invalid header: 'value_range' must be [lo, hi]", path);
+    m.lo = (*vr)[0].get<double>();
+    m.hi = (*vr)[1].get<double>();
+  }
+  auto tr = h.find("training");
+  if (tr != h.end()) m.training = *tr;
+}
+
+ModelFile parse_vnr(const std::string& path, const std::string& buf) {
+  const uint64_t size = buf.size();
+  bool complete = false;
+  const uint64_t header_bytes = check_vnr_preamble(path, buf, &complete);
+  const Json h = parse_vnr_header(path, buf, header_bytes, complete);
   ModelFile m;
   uint64_t n_params = 0, mc_count = 0;
   try {
@@ -231,31 +271,7 @@ ModelFile parse_vnr(const std::string& path, const std::string& buf) {
       fail("'{}' is corrupted (header describes {} bytes, file has {})", path, exp_str, size);
     }
     if (!complete) fail("'{}' is corrupted (end marker missing)", path);
-
-    auto cfg = h.find("config");
-    if (cfg == h.end() || !cfg->is_object()) fail("'{}' has an invalid header: 'config' must be an object", path);
-    m.config = *cfg;
-    auto dims = h.find("dims");
-    if (dims == h.end()) fail("'{}' has an invalid header: 'dims' missing", path);
-    m.dims = parse_int3_array(*dims, path, "dims");
-    if (auto dt = h.find("dtype"); dt != h.end()) {
-      if (!dt->is_string()) fail("'{}' has an invalid header: 'dtype' must be a string", path);
-      try {
-        m.source_dtype = parse_dtype(dt->get<std::string>());
-      } catch (const Error& e) {
-        fail("'{}' has an invalid header: {}", path, e.what());
-      }
-    }
-    auto vr = h.find("value_range");
-    if (vr != h.end()) {
-      if (!vr->is_array() || vr->size() != 2 || !(*vr)[0].is_number() || !(*vr)[1].is_number())
-        fail("'{}' has an invalid header: 'value_range' must be [lo, hi]", path);
-      m.lo = (*vr)[0].get<double>();
-      m.hi = (*vr)[1].get<double>();
-    }
-    auto tr = h.find("training");
-    if (tr != h.end()) m.training = *tr;
-
+    read_vnr_descriptors(path, h, m);
     m.params.resize(size_t(n_params));
     if (n_params) std::memcpy(m.params.data(), buf.data() + size_t(params_off), size_t(2 * n_params));
     m.macrocell_ranges.resize(size_t(2 * mc_count));
@@ -291,6 +307,54 @@ double macrocell_spacing(int64_t vol_dim, int64_t mc_dim) {
   return double(1.0f / float(mc_dim));
 }
 
+// params_binary of n parameters: fp16 ("__half", the pinned fork's untagged default) or binary32
+// ("float", tcnn head's tag), converted to fp16.
+void read_ivnr_params(const std::string& path, const Json& p, uint64_t n, const Json::binary_t& bytes,
+                      ModelFile& m) {
+  std::string ptype = "__half";
+  if (auto pt = p.find("params_type"); pt != p.end()) ptype = pt->get<std::string>();
+  if (ptype == "__half") {
+    if (n > bytes.size() / 2 || bytes.size() != 2 * n)
+      fail("'{}': params_binary holds {} bytes, expected 2*n_params = {}", path, bytes.size(),
+           n > bytes.size() ? std::string("2*") + std::to_string(n) : std::to_string(2 * n));
+    m.params.resize(size_t(n));
+    if (n) std::memcpy(m.params.data(), bytes.data(), size_t(2 * n));
+  } else if (ptype == "float") {
+    if (n > bytes.size() / 4 || bytes.size() != 4 * n)
+      fail("'{}': params_binary holds {} bytes, expected 4*n_params = {}", path, bytes.size(),
+           n > bytes.size() ? std::string("4*") + std::to_string(n) : std::to_string(4 * n));
+    std::vector<float> f(static_cast<size_t>(n));
+    if (n) std::memcpy(f.data(), bytes.data(), size_t(4 * n));
+    m.params.resize(size_t(n));
+    floats_to_halves(f.data(), m.params.data(), size_t(n));
+  } else {
+    fail("'{}': unsupported params_type '{}' (expected \"__half\" or \"float\")", path, ptype);
+  }
+}
+
+// "macrocell": {"dims", "data"}: float32 (min - 1, max + 1) pairs per cell.
+void read_ivnr_macrocells(const std::string& path, const Json& mc, ModelFile& m) {
+  if (!mc.is_object() || !mc.contains("dims") || !mc.contains("data"))
+    fail("'{}': 'macrocell' needs 'dims' and 'data'", path);
+  Int3 d = parse_int3_object(mc["dims"], path, "macrocell.dims");
+  const Json& data = mc["data"];
+  if (!data.is_binary()) fail("'{}': macrocell.data is not a BSON binary", path);
+  const auto& mb = data.get_binary();
+  uint64_t count = 0;
+  if (!cell_count(d, count) || count > mb.size() / 8 || mb.size() != 8 * count)
+    fail("'{}': macrocell.data holds {} bytes, expected 8 per cell for {}x{}x{} cells", path, mb.size(), d.x,
+         d.y, d.z);
+  m.macrocell_dims = d;
+  m.macrocell_ranges.resize(size_t(2 * count));
+  std::memcpy(m.macrocell_ranges.data(), mb.data(), size_t(8 * count));
+  // Stored as (min - 1, max + 1) against a zero-filled buffer (docs/MODEL_FORMAT.md 2.1); undo it in
+  // float, as instantvnr does. An untouched (0,0) cell decodes to the empty range (1,-1).
+  for (size_t i = 0; i < m.macrocell_ranges.size(); i += 2) {
+    m.macrocell_ranges[i] = m.macrocell_ranges[i] + 1.0f;
+    m.macrocell_ranges[i + 1] = m.macrocell_ranges[i + 1] - 1.0f;
+  }
+}
+
 ModelFile parse_instantvnr(const std::string& path, const std::string& buf, bool sniffed) {
   Json root;
   try {
@@ -316,53 +380,14 @@ ModelFile parse_instantvnr(const std::string& path, const std::string& buf, bool
     if (!pb->is_binary()) fail("'{}': params_binary is not a BSON binary", path);
     const uint64_t n = np->get<uint64_t>();
     const auto& bytes = pb->get_binary();
-    // tcnn head may tag the block "float" (binary32); the pinned fork writes fp16 without a tag.
-    std::string ptype = "__half";
-    if (auto pt = p.find("params_type"); pt != p.end()) ptype = pt->get<std::string>();
-    if (ptype == "__half") {
-      if (n > bytes.size() / 2 || bytes.size() != 2 * n)
-        fail("'{}': params_binary holds {} bytes, expected 2*n_params = {}", path, bytes.size(),
-             n > bytes.size() ? std::string("2*") + std::to_string(n) : std::to_string(2 * n));
-      m.params.resize(size_t(n));
-      if (n) std::memcpy(m.params.data(), bytes.data(), size_t(2 * n));
-    } else if (ptype == "float") {
-      if (n > bytes.size() / 4 || bytes.size() != 4 * n)
-        fail("'{}': params_binary holds {} bytes, expected 4*n_params = {}", path, bytes.size(),
-             n > bytes.size() ? std::string("4*") + std::to_string(n) : std::to_string(4 * n));
-      std::vector<float> f(static_cast<size_t>(n));
-      if (n) std::memcpy(f.data(), bytes.data(), size_t(4 * n));
-      m.params.resize(size_t(n));
-      floats_to_halves(f.data(), m.params.data(), size_t(n));
-    } else {
-      fail("'{}': unsupported params_type '{}' (expected \"__half\" or \"float\")", path, ptype);
-    }
+    read_ivnr_params(path, p, n, bytes, m);
 
     if (auto v = root.find("volume"); v != root.end()) {
       if (!v->is_object() || !v->contains("dims")) fail("'{}': 'volume' has no 'dims'", path);
       m.dims = parse_int3_object((*v)["dims"], path, "volume.dims");
     }
 
-    if (auto mc = root.find("macrocell"); mc != root.end()) {
-      if (!mc->is_object() || !mc->contains("dims") || !mc->contains("data"))
-        fail("'{}': 'macrocell' needs 'dims' and 'data'", path);
-      Int3 d = parse_int3_object((*mc)["dims"], path, "macrocell.dims");
-      const Json& data = (*mc)["data"];
-      if (!data.is_binary()) fail("'{}': macrocell.data is not a BSON binary", path);
-      const auto& mb = data.get_binary();
-      uint64_t count = 0;
-      if (!cell_count(d, count) || count > mb.size() / 8 || mb.size() != 8 * count)
-        fail("'{}': macrocell.data holds {} bytes, expected 8 per cell for {}x{}x{} cells", path, mb.size(), d.x,
-             d.y, d.z);
-      m.macrocell_dims = d;
-      m.macrocell_ranges.resize(size_t(2 * count));
-      std::memcpy(m.macrocell_ranges.data(), mb.data(), size_t(8 * count));
-      // Stored as (min - 1, max + 1) against a zero-filled buffer (README section 3.2); undo it in
-      // float, as instantvnr does. An untouched (0,0) cell decodes to the empty range (1,-1).
-      for (size_t i = 0; i < m.macrocell_ranges.size(); i += 2) {
-        m.macrocell_ranges[i] = m.macrocell_ranges[i] + 1.0f;
-        m.macrocell_ranges[i + 1] = m.macrocell_ranges[i + 1] - 1.0f;
-      }
-    }
+    if (auto mc = root.find("macrocell"); mc != root.end()) read_ivnr_macrocells(path, *mc, m);
 
     m.config = Json::object();
     if (auto md = root.find("model"); md != root.end()) {

@@ -28,7 +28,7 @@ struct ModelFile {
 void write_vnr(const std::string& path, const ModelFile& m);
 ModelFile read_vnr(const std::string& path);
 
-// instantvnr's "params.json" (BSON, docs/semantics.md A.5 and instantvnr-formats README section 3).
+// instantvnr's "params.json" (BSON, docs/semantics.md A.5 and docs/MODEL_FORMAT.md section 2).
 // The BSON file does not carry dtype/range or the optimizer: read_instantvnr leaves source_dtype
 // Float32, lo = 0, hi = 1 and takes the paper's default optimizer. A file without "volume" (legacy)
 // leaves dims {0,0,0}; one without "macrocell" leaves macro-cells absent. Macro-cell ranges

@@ -250,8 +250,8 @@ HWY_INLINE void StorePanel(const VF (&y)[NV], bool relu, float* HWY_RESTRICT out
 
 // One panel of NV vectors of outputs: out = act(sum_j vals[j] * W[row_of(j) .. +PW]) over n inputs.
 // Dense inputs use row_of(i) = i * PW; compacted ones (vals[j] = x[i_j] != 0) a table of i_j * PW.
-// (`rows` is passed as a pointer: a caller's lambda that captured its row array by value copied the
-// array on every panel and made in-shader inference 1.7x slower.)
+// (`rows` is passed as a pointer: a caller's lambda that captured its row array by value would copy
+// the array on every panel, in the innermost loop of in-shader inference.)
 template <int NV, bool kDense>
 HWY_INLINE void Panel(const float* HWY_RESTRICT W, const float* HWY_RESTRICT vals, const int32_t* HWY_RESTRICT rows,
                       uint32_t n, bool relu, float* HWY_RESTRICT out) {
@@ -413,6 +413,94 @@ namespace point_eval {
 HWY_EXPORT(SelectKernels);
 }  // namespace point_eval
 
+namespace {
+
+// Inputs of hidden layer k: the encoding's columns for the first, the width after.
+uint32_t K_of(const MlpLayout& m, uint32_t k) { return k == 0 ? m.first_cols : m.width; }
+
+// The grid's per-level constants, padded to kMaxGridLevels with inert levels.
+void fill_grid_levels(const Network& net, PointEvalData& d) {
+  d.table = net.grid_half();
+  d.grid = net.grid();
+  const GridLayout& g = d.grid;
+  const uint32_t F = g.n_features;
+  for (uint32_t l = 0; l < uint32_t(kMaxGridLevels); ++l) {
+    const bool real = l < g.n_levels;
+    const GridLevel L = real ? g.levels[l] : GridLevel{0.0f, 1, 8, 0, 0, 7};
+    d.lvl_scale[l] = L.scale;
+    d.lvl_m1[l] = L.hashed ? 2654435761u : L.res;
+    d.lvl_m2[l] = L.hashed ? 805459861u : L.res * L.res;
+    d.lvl_n[l] = L.n_entries;
+    d.lvl_mask[l] = L.pow2_mask ? L.pow2_mask : ~0u;
+    d.lvl_hashed[l] = L.hashed;
+    d.lvl_offset[l] = L.offset;
+    d.lvl_ptr[l] = d.table + uint64_t(L.offset) * F;
+    // Dense indices of inputs in [0, 1] stay below 2 n_l when n_l >= res^3 (not tiled).
+    d.lvl_vec[l] = (L.hashed || L.pow2_mask || uint64_t(L.n_entries) >= uint64_t(L.res) * L.res * L.res) ? 1 : 0;
+    d.lvl_big[l] = real && uint64_t(L.n_entries) * F * sizeof(uint16_t) > (uint64_t(1) << 18);
+    if (d.lvl_big[l] && d.first_big == kMaxGridLevels) d.first_big = l;
+}
+if (g.n_levels * F > kMaxGridLevels * 8) fail("PointEvaluator: grid encoding too wide");
+}
+
+// Weights: per hidden layer, n_panels blocks of K rows x panel floats (row i = input i), then the
+// first output row padded to width_pad. *finite says whether every weight is finite.
+hwy::AlignedFreeUniquePtr<float[]> pack_fp32_panels(const Network& net, PointEvalData& d, bool* finite) {
+  const MlpLayout& m = net.mlp();
+  size_t total = 0;
+  for (uint32_t k = 0; k < m.n_hidden; ++k) total += size_t(d.n_panels) * K_of(m, k) * d.panel;
+  total += d.width_pad;
+  auto weights = hwy::AllocateAligned<float>(total);
+  float* w = weights.get();
+  const float* P = net.params.data();
+  for (uint32_t k = 0; k < m.n_hidden; ++k) {
+    d.layer[k] = w;
+    const uint32_t K = K_of(m, k);
+    const uint64_t cols = m.cols[k];
+    const float* W = P + m.offset[k];
+    for (uint32_t p = 0; p < d.n_panels; ++p)
+      for (uint32_t i = 0; i < K; ++i)
+        for (uint32_t o = 0; o < d.panel; ++o) {
+          const uint32_t r = p * d.panel + o;
+          const float v = r < m.width ? W[r * cols + i] : 0.0f;
+          *finite = *finite && std::isfinite(v);
+          *w++ = v;
+        }
+  }
+  d.wout = w;
+  const float* Wo = P + m.offset[m.n_hidden];  // row 0 of the output matrix
+  for (uint32_t c = 0; c < d.width_pad; ++c) {
+    const float v = c < m.width ? Wo[c] : 0.0f;
+    *finite = *finite && std::isfinite(v);
+    *w++ = v;
+  }
+  return weights;
+}
+
+// The fp32 panels as bf16 pair panels: row j of a panel holds, per output o, the pair
+// (W[o][2j], W[o][2j + 1]) (zero past K: an odd K's last pair).
+hwy::AlignedFreeUniquePtr<uint32_t[]> pack_bf16_panels(const MlpLayout& m, PointEvalData& d) {
+  size_t words = d.width_pad / 2;
+  for (uint32_t k = 0; k < m.n_hidden; ++k) words += size_t(d.n_panels) * ((K_of(m, k) + 1) / 2) * d.panel;
+  auto weights = hwy::AllocateAligned<uint32_t>(words);
+  uint32_t* wb = weights.get();
+  for (uint32_t k = 0; k < m.n_hidden; ++k) {
+    d.layer_bf16[k] = wb;
+    const uint32_t K = K_of(m, k);
+    for (uint32_t p = 0; p < d.n_panels; ++p) {
+      const float* F = d.layer[k] + size_t(p) * K * d.panel;  // fp32 panel p: row i = input i
+      for (uint32_t j = 0; j < (K + 1) / 2; ++j)
+        for (uint32_t o = 0; o < d.panel; ++o)
+          *wb++ = kernels::bf16_pair(F[2 * j * d.panel + o], 2 * j + 1 < K ? F[(2 * j + 1) * d.panel + o] : 0.0f);
+    }
+  }
+  d.wout_bf16 = wb;
+  for (uint32_t c = 0; c < d.width_pad; c += 2) *wb++ = kernels::bf16_pair(d.wout[c], d.wout[c + 1]);
+  return weights;
+}
+
+}  // namespace
+
 PointEvaluator::PointEvaluator(const Network& net, bool skip_zero_activations) {
   const MlpLayout& m = net.mlp();
   PointEvalData& d = d_;
@@ -421,27 +509,7 @@ PointEvaluator::PointEvaluator(const Network& net, bool skip_zero_activations) {
   if (m.width > PointEvalData::kMaxWidth) fail("PointEvaluator: width {} exceeds {}", m.width, PointEvalData::kMaxWidth);
   if (m.n_hidden < 1 || m.n_hidden > 33) fail("PointEvaluator: unsupported n_hidden {}", m.n_hidden);
   if (d.has_grid) {
-    d.table = net.grid_half();
-    d.grid = net.grid();
-    const GridLayout& g = d.grid;
-    const uint32_t F = g.n_features;
-    for (uint32_t l = 0; l < uint32_t(kMaxGridLevels); ++l) {
-      const bool real = l < g.n_levels;
-      const GridLevel L = real ? g.levels[l] : GridLevel{0.0f, 1, 8, 0, 0, 7};
-      d.lvl_scale[l] = L.scale;
-      d.lvl_m1[l] = L.hashed ? 2654435761u : L.res;
-      d.lvl_m2[l] = L.hashed ? 805459861u : L.res * L.res;
-      d.lvl_n[l] = L.n_entries;
-      d.lvl_mask[l] = L.pow2_mask ? L.pow2_mask : ~0u;
-      d.lvl_hashed[l] = L.hashed;
-      d.lvl_offset[l] = L.offset;
-      d.lvl_ptr[l] = d.table + uint64_t(L.offset) * F;
-      // Dense indices of inputs in [0, 1] stay below 2 n_l when n_l >= res^3 (not tiled).
-      d.lvl_vec[l] = (L.hashed || L.pow2_mask || uint64_t(L.n_entries) >= uint64_t(L.res) * L.res * L.res) ? 1 : 0;
-      d.lvl_big[l] = real && uint64_t(L.n_entries) * F * sizeof(uint16_t) > (uint64_t(1) << 18);
-      if (d.lvl_big[l] && d.first_big == kMaxGridLevels) d.first_big = l;
-    }
-    if (g.n_levels * F > kMaxGridLevels * 8) fail("PointEvaluator: grid encoding too wide");
+    fill_grid_levels(net, d);
   } else if (m.in_pad > kMaxParameterFreeWidth) {
     fail("PointEvaluator: encoding width {} exceeds {}", m.in_pad, kMaxParameterFreeWidth);
   }
@@ -457,39 +525,10 @@ PointEvaluator::PointEvaluator(const Network& net, bool skip_zero_activations) {
   d.n_panels = (m.width + d.panel - 1) / d.panel;
   d.width_pad = d.n_panels * d.panel;
 
-  // Weights: per hidden layer, n_panels blocks of K rows x panel floats (row i = input i), then the
-  // first output row padded to width_pad.
-  auto K_of = [&](uint32_t k) { return k == 0 ? m.first_cols : m.width; };
-  size_t total = 0;
-  for (uint32_t k = 0; k < m.n_hidden; ++k) total += size_t(d.n_panels) * K_of(k) * d.panel;
-  total += d.width_pad;
-  weights_ = hwy::AllocateAligned<float>(total);
-  float* w = weights_.get();
-  const float* P = net.params.data();
   bool finite = true;
-  for (uint32_t k = 0; k < m.n_hidden; ++k) {
-    d.layer[k] = w;
-    const uint32_t K = K_of(k);
-    const uint64_t cols = m.cols[k];
-    const float* W = P + m.offset[k];
-    for (uint32_t p = 0; p < d.n_panels; ++p)
-      for (uint32_t i = 0; i < K; ++i)
-        for (uint32_t o = 0; o < d.panel; ++o) {
-          const uint32_t r = p * d.panel + o;
-          const float v = r < m.width ? W[r * cols + i] : 0.0f;
-          finite = finite && std::isfinite(v);
-          *w++ = v;
-        }
-  }
-  d.wout = w;
-  const float* Wo = P + m.offset[m.n_hidden];  // row 0 of the output matrix
-  for (uint32_t c = 0; c < d.width_pad; ++c) {
-    const float v = c < m.width ? Wo[c] : 0.0f;
-    finite = finite && std::isfinite(v);
-    *w++ = v;
-  }
-  // Compaction pays from 64 neurons on (measured: at 16 and 32 the per-layer compaction and the
-  // data-dependent loop cost more than the skipped FMAs).
+  weights_ = pack_fp32_panels(net, d, &finite);
+  // Compaction pays from 64 neurons on: at 16 and 32 the per-layer compaction and the
+  // data-dependent loop cost more than the skipped FMAs.
   d.skip_zeros = skip_zero_activations && d.relu && finite && m.width > 32;
 
   Kernels k;
@@ -500,24 +539,7 @@ PointEvaluator::PointEvaluator(const Network& net, bool skip_zero_activations) {
   prefetch_ = k.prefetch;
   target_ = k.target;
   if (net.inference_precision() == Precision::BF16 && point_eval::bf16_eval(d.panel)) {
-    // The fp32 panels above as bf16 pair panels: row j of a panel holds, per output o, the pair
-    // (W[o][2j], W[o][2j + 1]) (zero past K: an odd K's last pair).
-    size_t words = d.width_pad / 2;
-    for (uint32_t k = 0; k < m.n_hidden; ++k) words += size_t(d.n_panels) * ((K_of(k) + 1) / 2) * d.panel;
-    weights_bf16_ = hwy::AllocateAligned<uint32_t>(words);
-    uint32_t* wb = weights_bf16_.get();
-    for (uint32_t k = 0; k < m.n_hidden; ++k) {
-      d.layer_bf16[k] = wb;
-      const uint32_t K = K_of(k);
-      for (uint32_t p = 0; p < d.n_panels; ++p) {
-        const float* F = d.layer[k] + size_t(p) * K * d.panel;  // fp32 panel p: row i = input i
-        for (uint32_t j = 0; j < (K + 1) / 2; ++j)
-          for (uint32_t o = 0; o < d.panel; ++o)
-            *wb++ = kernels::bf16_pair(F[2 * j * d.panel + o], 2 * j + 1 < K ? F[(2 * j + 1) * d.panel + o] : 0.0f);
-      }
-    }
-    d.wout_bf16 = wb;
-    for (uint32_t c = 0; c < d.width_pad; c += 2) *wb++ = kernels::bf16_pair(d.wout[c], d.wout[c + 1]);
+    weights_bf16_ = pack_bf16_panels(m, d);
     d.encode = k.encode;
     d.skip_zeros = false;
     eval_ = point_eval::bf16_eval(d.panel);

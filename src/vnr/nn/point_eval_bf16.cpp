@@ -1,8 +1,8 @@
 // The in-shader evaluator's bf16 MLP (PointEvaluator with Precision::BF16): SIMD across a panel of
 // output neurons as in the fp32 version, but each step takes a pair of inputs, so one vdpbf16ps
 // does two multiply-adds per output (AVX512-BF16, x86 only; see mlp_bf16.h for the pair layout).
-// Panels of 32 and 64 outputs only: for 16-wide networks the per-layer overhead outweighs the
-// halved dot products (29 vs 24 ns per small-config MLP, measured), so those stay fp32.
+// Panels of 32 and 64 outputs only: for 16-wide networks the per-layer pair conversion costs more
+// than the halved dot products save, so those stay fp32.
 // The operands are the batched bf16 path's (Network::mlp_forward_bf16): the same bf16 weights, the
 // encoding and every hidden activation rounded to bf16; only the fp32 summation order differs.
 #include "vnr/nn/point_eval.h"
@@ -23,7 +23,7 @@ constexpr uint32_t kWordsMax = PointEvalData::kMaxWidth / 2 + 32;  // width_pad 
 
 // One panel of PW = 16 NV outputs: out (PW / 2 pair words) = pairs(ReLU(sum_j W[row j] . x[j])) over
 // n input pairs. (No compaction of zero inputs as in fp32: at pair granularity few pairs are zero,
-// and the dense loop measured faster, 201 vs 227 ns per paper-config MLP.)
+// so skipping them costs more in the data-dependent loop than it saves.)
 template <int NV>
 VNR_BF16_TARGET inline void Panel(const uint32_t* __restrict W, const uint32_t* __restrict x, uint32_t n, bool relu,
                                   uint32_t* __restrict out) {

@@ -97,7 +97,8 @@ struct Preset {
 
 const std::vector<Preset>& presets() {
   static const std::vector<Preset> p = {
-      // The VTK peer's (shared/peers/vtk_raycast.py) colour and opacity functions.
+      // The colour and opacity functions of the VTK ray-casting comparison (docs/benchmarks.md
+      // "Rendering speed (CPU)"), so both renderers draw the same image.
       {"ramp", {{0.0, {0.0f, 0.0f, 0.3f}}, {0.3, {0.9f, 0.4f, 0.1f}}, {1.0, {1.0f, 1.0f, 0.9f}}}, vtk_opacity()},
       // Grey colour ramp, opacity linear from 0 to 1.
       {"gray", {{0.0, {0.0f, 0.0f, 0.0f}}, {1.0, {1.0f, 1.0f, 1.0f}}}, {{0.0, 0.0f}, {1.0, 1.0f}}},
@@ -208,81 +209,98 @@ float load_f32_le(const char* p) {
 
 // ---- instantvnr TF object ------------------------------------------------------------------------
 
+// "alphaArray": base64 of little-endian float32 opacities in [0, 1].
+std::vector<float> alpha_array_of(const Json& arr, const std::string& where) {
+  const std::string w = where + ": alphaArray";
+  const Json& enc = member(arr, "encoding", w);
+    if (!enc.is_string()) fail("{}: encoding must be a string", w);
+  if (enc.get<std::string>() != "BASE64")
+    fail("{}: encoding \"{}\" is not supported (only \"BASE64\")", w, enc.get<std::string>());
+  const Json& data = member(arr, "data", w);
+  if (!data.is_string()) fail("{}: data must be a base64 string", w);
+  const std::string bytes = base64_decode(data.get<std::string>(), w);
+  if (bytes.size() % 4 != 0) fail("{}: {} decoded bytes is not a whole number of float32 values", w, bytes.size());
+  const size_t count = bytes.size() / 4;
+  if (count < 2) fail("{}: {} entries; a table needs at least 2", w, count);
+  if (count > size_t(kMaxResolution)) fail("{}: {} entries; at most {} are allowed", w, count, kMaxResolution);
+  std::vector<float> alpha_array(count);
+  for (size_t i = 0; i < count; ++i) {
+    const float a = load_f32_le(bytes.data() + 4 * i);
+    if (!std::isfinite(a)) fail("{}: entry {} is not finite", w, i);
+    if (a < 0 || a > 1) fail("{}: entry {} = {} is outside [0, 1]", w, i, a);
+    alpha_array[i] = a;
+  }
+  return alpha_array;
+}
+
+// "colorControls": [{"position": p, "color": {"r", "g", "b"}}, ...], all in [0, 1].
+std::vector<ColorPoint> color_controls_of(const Json& arr, const std::string& where) {
+  std::vector<ColorPoint> colors;
+  const std::string w = where + ": colorControls";
+  for (size_t k = 0; k < array_of(arr, w).size(); ++k) {
+    const std::string wk = fmt::format("{}[{}]", w, k);
+    const Json& cc = arr[k];
+    const double p = unit_number(member(cc, "position", wk), wk + ".position");
+    const Json& col = member(cc, "color", wk);
+    const float r = float(unit_number(member(col, "r", wk + ".color"), wk + ".color.r"));
+    const float g = float(unit_number(member(col, "g", wk + ".color"), wk + ".color.g"));
+    const float b = float(unit_number(member(col, "b", wk + ".color"), wk + ".color.b"));
+    colors.push_back({p, Vec3f{r, g, b}});
+  }
+  return colors;
+}
+
+// "opacityControl": [{"position": {"x": value, "y": opacity}}, ...], all in [0, 1].
+std::vector<AlphaPoint> opacity_controls_of(const Json& arr, const std::string& where) {
+  std::vector<AlphaPoint> opacity;
+  const std::string w = where + ": opacityControl";
+  for (size_t k = 0; k < array_of(arr, w).size(); ++k) {
+    const std::string wk = fmt::format("{}[{}]", w, k);
+    const Json& pos = member(arr[k], "position", wk);
+    const double x = unit_number(member(pos, "x", wk + ".position"), wk + ".position.x");
+    const double a = unit_number(member(pos, "y", wk + ".position"), wk + ".position.y");
+    opacity.push_back({x, float(a)});
+  }
+  return opacity;
+}
+
+struct GaussianBump {
+  double mean, sigma, height;
+};
+
+// "gaussianObjects": [{"mean", "sigma" > 0, "heightFactor"}, ...].
+std::vector<GaussianBump> gaussian_objects_of(const Json& arr, const std::string& where) {
+  std::vector<GaussianBump> gaussians;
+  const std::string w = where + ": gaussianObjects";
+  for (size_t k = 0; k < array_of(arr, w).size(); ++k) {
+    const std::string wk = fmt::format("{}[{}]", w, k);
+    const Json& g = arr[k];
+    const double mean = number(member(g, "mean", wk), wk + ".mean");
+    const double sigma = number(member(g, "sigma", wk), wk + ".sigma");
+    const double h = number(member(g, "heightFactor", wk), wk + ".heightFactor");
+    if (!(sigma > 0)) fail("{}.sigma: {} must be positive", wk, sigma);
+    gaussians.push_back({mean, sigma, h});
+  }
+  return gaussians;
+}
+
+// docs/MODEL_FORMAT.md section 3: the keys are read in this order, so the first bad one is reported.
 TransferFunction tf_from_instantvnr(const Json& j, const std::string& where) {
   if (!j.is_object()) fail("{}: transfer function must be a JSON object, got {}", where, j.type_name());
-
-  std::vector<float> alpha_array;
   int n = kDefaultResolution;
   if (auto it = j.find("resolution"); it != j.end()) n = resolution_of(*it, where + ": resolution");
+  std::vector<float> alpha_array;
   if (auto it = j.find("alphaArray"); it != j.end()) {
-    const std::string w = where + ": alphaArray";
-    const Json& enc = member(*it, "encoding", w);
-    if (!enc.is_string()) fail("{}: encoding must be a string", w);
-    if (enc.get<std::string>() != "BASE64")
-      fail("{}: encoding \"{}\" is not supported (only \"BASE64\")", w, enc.get<std::string>());
-    const Json& data = member(*it, "data", w);
-    if (!data.is_string()) fail("{}: data must be a base64 string", w);
-    const std::string bytes = base64_decode(data.get<std::string>(), w);
-    if (bytes.size() % 4 != 0)
-      fail("{}: {} decoded bytes is not a whole number of float32 values", w, bytes.size());
-    const size_t count = bytes.size() / 4;
-    if (count < 2) fail("{}: {} entries; a table needs at least 2", w, count);
-    if (count > size_t(kMaxResolution)) fail("{}: {} entries; at most {} are allowed", w, count, kMaxResolution);
-    alpha_array.resize(count);
-    for (size_t i = 0; i < count; ++i) {
-      const float a = load_f32_le(bytes.data() + 4 * i);
-      if (!std::isfinite(a)) fail("{}: entry {} is not finite", w, i);
-      if (a < 0 || a > 1) fail("{}: entry {} = {} is outside [0, 1]", w, i, a);
-      alpha_array[i] = a;
-    }
-    n = int(count);  // the alphaArray length overrides "resolution"
+    alpha_array = alpha_array_of(*it, where);
+    n = int(alpha_array.size());  // the alphaArray length overrides "resolution"
   }
-
   std::vector<ColorPoint> colors;
-  if (auto it = j.find("colorControls"); it != j.end()) {
-    const std::string w = where + ": colorControls";
-    for (size_t k = 0; k < array_of(*it, w).size(); ++k) {
-      const std::string wk = fmt::format("{}[{}]", w, k);
-      const Json& cc = (*it)[k];
-      const double p = unit_number(member(cc, "position", wk), wk + ".position");
-      const Json& col = member(cc, "color", wk);
-      const float r = float(unit_number(member(col, "r", wk + ".color"), wk + ".color.r"));
-      const float g = float(unit_number(member(col, "g", wk + ".color"), wk + ".color.g"));
-      const float b = float(unit_number(member(col, "b", wk + ".color"), wk + ".color.b"));
-      colors.push_back({p, Vec3f{r, g, b}});
-    }
-  }
-
+  if (auto it = j.find("colorControls"); it != j.end()) colors = color_controls_of(*it, where);
   std::vector<AlphaPoint> opacity;
   const bool has_opacity = j.contains("opacityControl");
-  if (has_opacity) {
-    const Json& oc = j["opacityControl"];
-    const std::string w = where + ": opacityControl";
-    for (size_t k = 0; k < array_of(oc, w).size(); ++k) {
-      const std::string wk = fmt::format("{}[{}]", w, k);
-      const Json& pos = member(oc[k], "position", wk);
-      const double x = unit_number(member(pos, "x", wk + ".position"), wk + ".position.x");
-      const double a = unit_number(member(pos, "y", wk + ".position"), wk + ".position.y");
-      opacity.push_back({x, float(a)});
-    }
-  }
-
-  struct Gauss {
-    double mean, sigma, height;
-  };
-  std::vector<Gauss> gaussians;
-  if (auto it = j.find("gaussianObjects"); it != j.end()) {
-    const std::string w = where + ": gaussianObjects";
-    for (size_t k = 0; k < array_of(*it, w).size(); ++k) {
-      const std::string wk = fmt::format("{}[{}]", w, k);
-      const Json& g = (*it)[k];
-      const double mean = number(member(g, "mean", wk), wk + ".mean");
-      const double sigma = number(member(g, "sigma", wk), wk + ".sigma");
-      const double h = number(member(g, "heightFactor", wk), wk + ".heightFactor");
-      if (!(sigma > 0)) fail("{}.sigma: {} must be positive", wk, sigma);
-      gaussians.push_back({mean, sigma, h});
-    }
-  }
+  if (has_opacity) opacity = opacity_controls_of(j["opacityControl"], where);
+  std::vector<GaussianBump> gaussians;
+  if (auto it = j.find("gaussianObjects"); it != j.end()) gaussians = gaussian_objects_of(*it, where);
 
   sort_points(colors, opacity);
   TransferFunction tf;
@@ -292,7 +310,7 @@ TransferFunction tf_from_instantvnr(const Json& j, const std::string& where) {
     const double xc = (double(i) + 0.5) / double(n);  // colours and Gaussians: cell centres
     const Vec3f c = eval_color(colors, xc);
     float a = alpha_array.empty() ? 0.0f : alpha_array[size_t(i)];
-    for (const Gauss& g : gaussians) {
+    for (const GaussianBump& g : gaussians) {
       const double d = xc - g.mean;
       const double v = g.height / (g.sigma * sqrt_2pi) * std::exp(-d * d / (2 * g.sigma * g.sigma));
       a = std::max(a, float(std::clamp(v, 0.0, 1.0)));

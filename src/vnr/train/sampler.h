@@ -21,11 +21,11 @@ public:
 // An integer in [0, n) from one draw (multiply-shift; the bias is below n / 2^32).
 VNR_HD inline uint32_t rng_below(Pcg32& rng, uint32_t n) { return uint32_t((uint64_t(rng.next_uint()) * n) >> 32); }
 
-// Uniform coordinates in [0,1)^3 for one chunk (compat.md B.3), shared by every sampler that
+// Uniform coordinates in [0,1)^3 for one chunk (docs/semantics.md B.3), shared by every sampler that
 // draws positions uniformly over the whole volume.
 void uniform_coordinates(uint64_t seed, uint64_t step, uint64_t chunk, int n, float* x, float* y, float* z);
 
-// Uniform coordinates, cell-centred trilinear targets from a volume in memory (compat.md B.3).
+// Uniform coordinates, cell-centred trilinear targets from a volume in memory (docs/semantics.md B.3).
 class InCoreSampler : public Sampler {
 public:
   explicit InCoreSampler(GridView grid) : grid_(grid) {}

@@ -18,8 +18,8 @@ Int3 default_block_dims(Int3 d, DType dtype) {
 }
 
 // S = R/4, at most the paper's 1,024. The paper's R/64 turns a small buffer over too slowly: a short
-// run never sees much of the volume, and the optimiser chases the resident blocks (README,
-// "Out-of-core training": measured on 512^3 noise and on bonsai). The cap keeps the reads per step
+// run never sees much of the volume, and the optimiser chases the resident blocks
+// (docs/benchmarks.md "Out-of-core training"). The cap keeps the reads per step
 // at the paper's ~64 MiB when the buffer is large.
 int64_t OutOfCoreSampler::default_refresh(int64_t blocks) {
   return std::clamp<int64_t>(blocks / 4, 1, kMaxDefaultRefresh);

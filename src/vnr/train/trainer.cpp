@@ -147,23 +147,41 @@ float CpuTrainer::step() {
     });
   });
   auto t1 = std::chrono::steady_clock::now();
-
-  if (grid && (!private_grid_grads_ || n_tail_ > 0)) {
-    // Levels dealt round-robin: thread t owns levels t, t + nt, ... (its writes never overlap another's):
-    // every sample into the batch gradient, or a private grid's shared chunks into thread t's copy.
-    const int64_t s0 = private_grid_grads_ ? n_static * C : 0;
-    const int64_t ns = private_grid_grads_ ? n_tail_ * C : opts_.batch;
-    const float* dEnc = private_grid_grads_ ? tail_dEnc_.data() : dEnc_.data();
-    parallel_threads([&](int t, int nt) {
-      float* ggrid = (private_grid_grads_ ? dW_[t].data() : grads_.data()) + m.n_params;
-      for (uint32_t l = uint32_t(t); l < net_.grid().n_levels; l += uint32_t(nt))
-        net_.grid_backward_level(l, xs_.data() + s0, ys_.data() + s0, zs_.data() + s0, ns, dEnc, int(C), ggrid);
-    });
-  }
+  if (grid && (!private_grid_grads_ || n_tail_ > 0)) scatter_grid_gradients(n_static);
   auto t2 = std::chrono::steady_clock::now();
+  sum_gradients();
+  adam_.step(net_.params.data(), grads_.data(), net_.has_grid() ? net_.grid_half_mut() : nullptr);
+  auto t3 = std::chrono::steady_clock::now();
+  phase_seconds[0] = std::chrono::duration<double>(t1 - t0).count();
+  phase_seconds[1] = std::chrono::duration<double>(t2 - t1).count();
+  phase_seconds[2] = std::chrono::duration<double>(t3 - t2).count();
 
-  // Sum the per-thread gradients in thread order, then the shared chunks' MLP gradients in chunk order
-  // (deterministic for a thread count).
+  double loss = 0;
+  for (double l : chunk_loss_) loss += l;
+  loss_history_.push_back(float(loss));
+  return float(loss);
+}
+
+// The grid backward after the chunks. Levels dealt round-robin: thread t owns levels t, t + nt, ...
+// (its writes never overlap another's): every sample into the batch gradient, or a private grid's
+// shared chunks into thread t's copy.
+void CpuTrainer::scatter_grid_gradients(int64_t n_static) {
+  const MlpLayout& m = net_.mlp();
+  const int64_t C = kChunk;
+  const int64_t s0 = private_grid_grads_ ? n_static * C : 0;
+  const int64_t ns = private_grid_grads_ ? n_tail_ * C : opts_.batch;
+  const float* dEnc = private_grid_grads_ ? tail_dEnc_.data() : dEnc_.data();
+  parallel_threads([&](int t, int nt) {
+    float* ggrid = (private_grid_grads_ ? dW_[t].data() : grads_.data()) + m.n_params;
+    for (uint32_t l = uint32_t(t); l < net_.grid().n_levels; l += uint32_t(nt))
+      net_.grid_backward_level(l, xs_.data() + s0, ys_.data() + s0, zs_.data() + s0, ns, dEnc, int(C), ggrid);
+  });
+}
+
+// Sums the per-thread gradients in thread order into grads_, then the shared chunks' MLP gradients
+// in chunk order (deterministic for a thread count).
+void CpuTrainer::sum_gradients() {
+  const MlpLayout& m = net_.mlp();
   float* gm = grads_.data();
   const int64_t n_summed = int64_t(dW_[0].size()), n_mlp = int64_t(m.n_params);
   parallel_for_range(n_summed, (n_summed + n_threads_ - 1) / n_threads_, [&](int64_t b, int64_t e) {
@@ -175,16 +193,6 @@ float CpuTrainer::step() {
       for (int64_t i = b; i < std::min(e, n_mlp); ++i) gm[i] += tdW[i];
     }
   });
-  adam_.step(net_.params.data(), grads_.data(), net_.has_grid() ? net_.grid_half_mut() : nullptr);
-  auto t3 = std::chrono::steady_clock::now();
-  phase_seconds[0] = std::chrono::duration<double>(t1 - t0).count();
-  phase_seconds[1] = std::chrono::duration<double>(t2 - t1).count();
-  phase_seconds[2] = std::chrono::duration<double>(t3 - t2).count();
-
-  double loss = 0;
-  for (double l : chunk_loss_) loss += l;
-  loss_history_.push_back(float(loss));
-  return float(loss);
 }
 
 std::array<CpuTrainer::Phase, 3> CpuTrainer::phases() const {

@@ -86,6 +86,8 @@ public:
   double phase_seconds[3] = {0, 0, 0};
 
 private:
+  void scatter_grid_gradients(int64_t n_static);  // step()'s grid backward after the chunks
+  void sum_gradients();                            // step()'s per-thread gradients into grads_
   Network& net_;
   std::shared_ptr<Sampler> sampler_;
   TrainOptions opts_;

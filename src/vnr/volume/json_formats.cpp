@@ -198,8 +198,8 @@ Source describe_scene(const std::string& json_path, const Json& j) {
   const std::string dir = dirname_of(json_path);
   const Json& sources = require(j, "dataSource", json_path);
   if (!sources.is_array() || sources.empty()) fail("'{}': \"dataSource\" must be a non-empty array", json_path);
-  // Entries after the first are time steps with the same grid (README 1.1; vnr makes that work
-  // instead of reproducing the original loader's bug, 1.7).
+  // Entries after the first are time steps with the same grid (docs/MODEL_FORMAT.md section 3;
+  // instantvnr's own loader fails on them, vnr reads them).
   for (size_t t = 0; t < sources.size(); ++t) {
     const Json& e = sources[t];
     std::string ctx = fmt::format(" in dataSource[{}]", t);
@@ -235,7 +235,7 @@ Source describe_scene(const std::string& json_path, const Json& j) {
   s.desc.n_timesteps = int(s.files.size());
   if (s.files.size() == 1) s.files.clear();
 
-  // Value range (README 1.3): the unnormalized key is in data units; the plain key is a fraction
+  // Value range (docs/semantics.md B.1): the unnormalized key is in data units; the plain key is a fraction
   // of the type's maximum for integer data.
   if (j.contains("view") && j["view"].is_object() && j["view"].contains("volume")) {
     const Json& vol = j["view"]["volume"];

@@ -1,5 +1,5 @@
 // load_volume: one streaming pass over the file (raw or gzip) that converts every sample and keeps
-// it as float(v - pivot), then normalisation in place once the range is known (compat.md B.1;
+// it as float(v - pivot), then normalisation in place once the range is known (docs/semantics.md B.1;
 // both steps: PivotNormaliser, sample_io.h).
 #include <algorithm>
 #include <new>

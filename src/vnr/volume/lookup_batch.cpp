@@ -22,8 +22,8 @@ int64_t LookupBlocks(const GridView& g, const float* x, const float* y, const fl
   auto prefetch_block = [&](int64_t b) {
     GridPrefetchVec(df, g, hn::LoadU(df, x + b), hn::LoadU(df, y + b), hn::LoadU(df, z + b));
   };
-  // Prefetch kAhead blocks ahead: one block's gathers take about one memory latency (without the
-  // prefetches the lookups inside training steps take 1.7x as long).
+  // Prefetch kAhead blocks ahead: one block's gathers take about one memory latency, which the
+  // prefetches hide behind the blocks before it.
   constexpr int64_t kAhead = 4;
   for (int64_t b = 0; b < kAhead && (b + 1) * N <= n; ++b) prefetch_block(b * N);
   int64_t i = 0;

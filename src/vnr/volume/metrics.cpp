@@ -34,6 +34,57 @@ ErrorStats error_stats(const float* reference, const float* test, Int3 dims) {
   return s;
 }
 
+namespace {
+
+// x pass of ssim3d: running sums of a, b, a^2, b^2, ab over windows of wx along each of `rows_in`
+// rows of slice z starting at row y0; rows[(q * rows_in + r) * ox + x] is sum q of row r's window x.
+void row_window_sums(const float* reference, const float* test, int64_t nx, int64_t ny, int64_t z, int64_t y0,
+                     int64_t rows_in, int64_t wx, int64_t ox, double* rows) {
+  for (int64_t r = 0; r < rows_in; ++r) {
+    const float* a = reference + (z * ny + y0 + r) * nx;
+    const float* b = test + (z * ny + y0 + r) * nx;
+    double s[5] = {0, 0, 0, 0, 0};
+    auto add = [&](int64_t x, double sign) {
+      double va = a[x], vb = b[x];
+      s[0] += sign * va;
+      s[1] += sign * vb;
+      s[2] += sign * va * va;
+      s[3] += sign * vb * vb;
+      s[4] += sign * va * vb;
+    };
+    for (int64_t x = 0; x < wx; ++x) add(x, 1);
+    for (int64_t x = 0; x < ox; ++x) {
+      if (x > 0) {
+        add(x - 1, -1);
+        add(x + wx - 1, 1);
+      }
+      for (int q = 0; q < 5; ++q) rows[size_t((q * rows_in + r) * ox + x)] = s[q];
+    }
+  }
+}
+
+// y pass of ssim3d: running sums of wy rows down the columns into `ny_out` window rows per sum,
+// vectorisable over x; out[q * ny_out * ox + j * ox + x].
+void column_window_sums(const double* rows, int64_t rows_in, int64_t wy, int64_t ox, int64_t ny_out, double* sl) {
+  const int64_t P = ox * ny_out;
+  for (int q = 0; q < 5; ++q) {
+    const double* rq = rows + q * rows_in * ox;
+    double* out = sl + q * P;
+    for (int64_t x = 0; x < ox; ++x) out[x] = 0;
+    for (int64_t r = 0; r < wy; ++r)
+      for (int64_t x = 0; x < ox; ++x) out[x] += rq[r * ox + x];
+    for (int64_t j = 1; j < ny_out; ++j) {
+      const double* prev = out + (j - 1) * ox;
+      const double* leave = rq + (j - 1) * ox;
+      const double* enter = rq + (j + wy - 1) * ox;
+      double* cur = out + j * ox;
+      for (int64_t x = 0; x < ox; ++x) cur[x] = prev[x] - leave[x] + enter[x];
+    }
+  }
+}
+
+}  // namespace
+
 // Box sums of a, b, a^2, b^2, ab over every window position, built separably (x, then y per
 // slice, then a running sum over z slices), so the cost per voxel is independent of the window.
 // The windows are cut into fixed tiles of output rows x output slices: memory per tile stays small
@@ -48,7 +99,7 @@ double ssim3d(const float* reference, const float* test, Int3 dims) {
   const double c1 = 0.01 * 0.01, c2 = 0.03 * 0.03;
   const double inv_n = 1.0 / wn, inv_n1 = wn > 1 ? 1.0 / (wn - 1) : 0.0;
 
-  constexpr int64_t kTileY = 64, kTileZ = 64;  // output windows per tile; overlap costs ~(w-1)/64
+  constexpr int64_t kTileY = 64, kTileZ = 64;  // output windows per tile; the overlap is w - 1 rows per tile
   const int64_t tiles_y = (oy + kTileY - 1) / kTileY, tiles_z = (oz + kTileZ - 1) / kTileZ;
   std::vector<double> sums(size_t(tiles_y * tiles_z), 0.0);
 
@@ -64,43 +115,8 @@ double ssim3d(const float* reference, const float* test, Int3 dims) {
       if (z - z0 >= wz)  // this slot holds the slice that just left the window
         for (int64_t i = 0; i < 5 * P; ++i) acc[size_t(i)] -= sl[i];
 
-      // x pass: running sums along each row.
-      for (int64_t r = 0; r < rows_in; ++r) {
-        const float* a = reference + (z * ny + y0 + r) * nx;
-        const float* b = test + (z * ny + y0 + r) * nx;
-        double s[5] = {0, 0, 0, 0, 0};
-        auto add = [&](int64_t x, double sign) {
-          double va = a[x], vb = b[x];
-          s[0] += sign * va;
-          s[1] += sign * vb;
-          s[2] += sign * va * va;
-          s[3] += sign * vb * vb;
-          s[4] += sign * va * vb;
-        };
-        for (int64_t x = 0; x < wx; ++x) add(x, 1);
-        for (int64_t x = 0; x < ox; ++x) {
-          if (x > 0) {
-            add(x - 1, -1);
-            add(x + wx - 1, 1);
-          }
-          for (int q = 0; q < 5; ++q) rows[size_t((q * rows_in + r) * ox + x)] = s[q];
-        }
-      }
-      // y pass: running sums down the columns, vectorisable over x.
-      for (int q = 0; q < 5; ++q) {
-        const double* rq = rows.data() + q * rows_in * ox;
-        double* out = sl + q * P;
-        for (int64_t x = 0; x < ox; ++x) out[x] = 0;
-        for (int64_t r = 0; r < wy; ++r)
-          for (int64_t x = 0; x < ox; ++x) out[x] += rq[r * ox + x];
-        for (int64_t j = 1; j < y1 - y0; ++j) {
-          const double* prev = out + (j - 1) * ox;
-          const double* leave = rq + (j - 1) * ox;
-          const double* enter = rq + (j + wy - 1) * ox;
-          double* cur = out + j * ox;
-          for (int64_t x = 0; x < ox; ++x) cur[x] = prev[x] - leave[x] + enter[x];
-        }
-      }
+      row_window_sums(reference, test, nx, ny, z, y0, rows_in, wx, ox, rows.data());
+      column_window_sums(rows.data(), rows_in, wy, ox, y1 - y0, sl);
       for (int64_t i = 0; i < 5 * P; ++i) acc[size_t(i)] += sl[i];
 
       if (z - z0 >= wz - 1) {  // windows starting at z - wz + 1 are complete

@@ -4,7 +4,7 @@
 
 namespace vnr {
 
-// Metrics in normalised units (compat.md B.4), over two x-fastest grids of the same dims.
+// Metrics in normalised units (docs/semantics.md B.4), over two x-fastest grids of the same dims.
 struct ErrorStats {
   double mse = 0;
   double psnr = 0;           // 10 log10(1/mse); +inf reported as 999 when mse == 0

@@ -130,21 +130,21 @@ bool is_component_kind(const std::string& k) {
   return !(l == "domain" || l == "space" || l == "time" || l == "none" || l == "???");
 }
 
-}  // namespace
-
-Source describe_nrrd(const std::string& path) {
-  Header h = read_header(path);
-  auto field = [&](const char* name) -> const std::string& {
+// A header's fields, failing with the file's name when a required one is missing.
+struct Fields {
+  const Header& h;
+  const std::string& path;
+  const std::string& operator()(const char* name) const {
     auto it = h.fields.find(name);
     if (it == h.fields.end()) fail("'{}': malformed NRRD header: missing '{}' field", path, name);
     return it->second;
-  };
-  auto has = [&](const char* name) { return h.fields.count(name) > 0; };
+  }
+  bool has(const char* name) const { return h.fields.count(name) > 0; }
+};
 
-  Source s;
-  s.origin = path;
-  VolumeDesc& d = s.desc;
-  d.dtype = parse_dtype(field("type"));
+// dims, spacing and time steps from "dimension", "sizes", "kinds" and "spacings" / "space directions".
+void read_axes(const Fields& field, const std::string& path, VolumeDesc& d) {
+  auto has = [&](const char* name) { return field.has(name); };
   int dim = int(parse_int(field("dimension"), path, "dimension"));
   std::vector<std::string> size_words = words(field("sizes"));
   if (int(size_words.size()) != dim)
@@ -193,18 +193,19 @@ Source describe_nrrd(const std::string& path) {
       fail("'{}': NRRD time axis size {} is invalid", path, sizes[time_axis]);
     d.n_timesteps = int(sizes[time_axis]);
   }
+}
 
-  if (has("endian")) {
-    d.big_endian = parse_byte_order(field("endian"), "'" + path + "': malformed NRRD header: ", "endian");
-  }
-
+// Encoding, and where the data is: after the header, or in a detached file relative to the header,
+// after "line skip" lines and "byte skip" bytes (-1: at the end of the file).
+void locate_data(const Fields& field, const std::string& path, Source& s) {
+  auto has = [&](const char* name) { return field.has(name); };
+  VolumeDesc& d = s.desc;
   std::string enc = to_lower(field("encoding"));
   if (enc == "raw") d.encoding = "raw";
   else if (enc == "gzip" || enc == "gz") d.encoding = "gzip";
   else fail("'{}': NRRD encoding '{}' is not supported (supported: raw, gzip)", path, enc);
 
-  // Where the data is: after the header, or in a detached file relative to the header.
-  uint64_t start = h.data_start;
+  uint64_t start = field.h.data_start;
   d.path = path;
   std::string data_file = has("data file") ? field("data file") : (has("datafile") ? field("datafile") : "");
   if (!data_file.empty()) {
@@ -238,6 +239,21 @@ Source describe_nrrd(const std::string& path) {
   } else {
     d.offset = start + uint64_t(byte_skip);
   }
+}
+
+}  // namespace
+
+Source describe_nrrd(const std::string& path) {
+  const Header h = read_header(path);
+  const Fields field{h, path};
+  Source s;
+  s.origin = path;
+  VolumeDesc& d = s.desc;
+  d.dtype = parse_dtype(field("type"));
+  read_axes(field, path, d);
+  if (field.has("endian"))
+    d.big_endian = parse_byte_order(field("endian"), "'" + path + "': malformed NRRD header: ", "endian");
+  locate_data(field, path, s);
   return s;
 }
 

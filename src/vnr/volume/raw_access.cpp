@@ -154,8 +154,7 @@ void RawVolumeFile::read_bytes(unsigned char* dst, size_t bytes, uint64_t file_o
 
 int64_t RawVolumeFile::rows_per_read(int64_t box_ny) const {
   // One pread covers several rows of a z-slice when the bytes between them are few: a disk pays per
-  // request far more than per byte (cold 256x10 blocks of a 512^3 float file, 10 rows per slice:
-  // 2.6-2.8x faster than one read per row). At most ~1 MiB per read.
+  // request far more than per byte. At most ~1 MiB per read.
   const int64_t row_bytes = int64_t(desc_.dims.x) * int64_t(esize_);
   if (row_bytes > (16 << 10) || box_ny <= 1) return 1;
   return std::clamp<int64_t>((int64_t(1) << 20) / row_bytes, 1, std::min<int64_t>(box_ny, desc_.dims.y));

@@ -1,7 +1,7 @@
 #pragma once
 // Random access to an uncompressed volume file without loading it: the out-of-core and
 // memory-mapped training samplers (paper, "Out-of-Core Sampling") and sampled evaluation read
-// through these. Values are normalised exactly as load_volume normalises them (compat.md B.1), bit
+// through these. Values are normalised exactly as load_volume normalises them (docs/semantics.md B.1), bit
 // for bit: with the same pivot (an explicit range end of the description, else the first finite
 // sample of the timestep, read at construction) and the same arithmetic (sample_io.h).
 #include <atomic>

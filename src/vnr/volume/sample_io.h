@@ -1,7 +1,7 @@
 #pragma once
 // Internal to the volume layer: what every reader of volume samples shares — load_volume
 // (load.cpp), the streaming readers (stream.cpp) and random access (raw_access.cpp) — so that all
-// of them convert and normalise bit for bit alike (compat.md B.1). The functions that are not
+// of them convert and normalise bit for bit alike (docs/semantics.md B.1). The functions that are not
 // inline are defined in stream.cpp.
 #include <algorithm>
 #include <bit>

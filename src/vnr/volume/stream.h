@@ -1,6 +1,6 @@
 #pragma once
 // Streaming volumes that need not fit in memory: the value range from one pass, and the normalised
-// data in z-slabs. Both normalise exactly as load_volume does (compat.md B.1), bit for bit, so a
+// data in z-slabs. Both normalise exactly as load_volume does (docs/semantics.md B.1), bit for bit, so a
 // streamed evaluation sees the same numbers as an in-memory one. (Normalised values at arbitrary
 // voxels: RawVolumeFile, raw_access.h.)
 #include <cstdint>

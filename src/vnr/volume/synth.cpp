@@ -52,8 +52,8 @@ inline double fade(double t) { return t * t * t * (t * (t * 6 - 15) + 10); }  //
 // Six octaves of trilinearly blended lattice values (4 cells per unit at the coarsest, doubling),
 // amplitudes halving; normalised by the amplitude sum so the result stays in [0,1].
 // Evaluated a row of x positions at a time: per octave the (y,z) blend of each lattice column is
-// computed once and shared by all points of the row, which makes a volume ~10x cheaper than
-// point by point. A single point is a row of one, so both paths give bit-identical values.
+// computed once and shared by all points of the row, which is much cheaper than point by point.
+// A single point is a row of one, so both paths give bit-identical values.
 void value_noise_row(const float* ux, int64_t n, float uy, float uz, uint64_t seed, float* out) {
   std::vector<double> sum(size_t(n), 0.0), column;
   double amp_sum = 0, amp = 1, freq = 4;

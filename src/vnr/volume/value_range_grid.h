@@ -1,5 +1,5 @@
 #pragma once
-// Per-macro-cell value ranges (compat.md B.6): cells of `cell_size` voxels per axis
+// Per-macro-cell value ranges (docs/semantics.md B.6): cells of `cell_size` voxels per axis
 // (ceil(N / cell_size) cells per axis), each with the [min, max] of the normalised values that can be
 // interpolated inside it. A value known at world position q (voxel units; voxel i's centre is at
 // i + 0.5) reaches every point within one voxel of q through trilinear interpolation, so it widens

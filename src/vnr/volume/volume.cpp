@@ -84,28 +84,25 @@ void check_gzip_magic(const VolumeDesc& d) {
   if (!ok) fail("'{}': encoding is gzip but the data at byte {} is not a gzip stream", d.path, d.gzip_start);
 }
 
-}  // namespace
-
-VolumeDesc describe_volume(const std::string& path, const RawOptions& opts) {
-  file_size(path);  // missing, unreadable or a directory: says so with the path
+// The descriptor a file carries (sidecar or scene JSON, NRRD header), or for a plain raw file
+// (*plain_raw set) the path alone.
+Source describe_file(const std::string& path, const RawOptions& opts, bool* plain_raw) {
   const std::string ext = extension_of(path);
+  *plain_raw = false;
+  if (ext == ".json") return describe_json(path);
+  if (ext == ".nrrd" || ext == ".nhdr" || has_nrrd_magic(path)) return detail::describe_nrrd(path);
+  *plain_raw = true;
+  if (!opts.dims || !opts.dtype)
+    fail("--dims X,Y,Z and --dtype T are required for raw file '{}' (or describe it with a .json sidecar or .nhdr)",
+         path);
   Source s;
-  bool plain_raw = false;
-  if (ext == ".json") {
-    s = describe_json(path);
-  } else if (ext == ".nrrd" || ext == ".nhdr" || has_nrrd_magic(path)) {
-    s = detail::describe_nrrd(path);
-  } else {
-    plain_raw = true;
-    if (!opts.dims || !opts.dtype)
-      fail("--dims X,Y,Z and --dtype T are required for raw file '{}' (or describe it with a .json sidecar or .nhdr)",
-           path);
-    s.desc.path = path;
-  }
-  VolumeDesc& d = s.desc;
-  const std::string what = s.origin.empty() ? "'" + path + "'" : "'" + s.origin + "'";
+  s.desc.path = path;
+  return s;
+}
 
-  // Command-line overrides win over any descriptor.
+// Command-line overrides win over any descriptor.
+void apply_overrides(const RawOptions& opts, Source& s) {
+  VolumeDesc& d = s.desc;
   if (opts.dims) d.dims = *opts.dims;
   if (opts.dtype) d.dtype = parse_dtype(*opts.dtype);
   if (opts.endian) d.big_endian = detail::parse_byte_order(*opts.endian, "", "--endian");
@@ -115,6 +112,40 @@ VolumeDesc describe_volume(const std::string& path, const RawOptions& opts) {
   }
   if (opts.range_lo) d.range_lo = *opts.range_lo;
   if (opts.range_hi) d.range_hi = *opts.range_hi;
+}
+
+// The data file of time step t (d.path) must hold exactly offset + data_bytes bytes; a "byte skip -1"
+// descriptor (data at the end) gets its offset from the size. Then d.offset moves to step t's frame.
+void check_data_file_size(const Source& s, VolumeDesc& d, uint64_t frame, uint64_t data_bytes, int frames_in_file,
+                          const std::string& what) {
+  uint64_t size = 0;
+  try {
+    size = file_size(d.path);
+  } catch (const Error& e) {
+    if (s.origin.empty()) throw;
+    fail("{} (data file of '{}')", e.what(), s.origin);
+  }
+  if (s.data_at_end) {
+    if (data_bytes > size) fail("'{}' has {} bytes, expected at least {} (byte skip -1)", d.path, size, data_bytes);
+    d.offset = size - data_bytes;
+  }
+  uint64_t expected = 0;
+  if (__builtin_add_overflow(d.offset, data_bytes, &expected)) fail("{}: offset {} is too large", what, d.offset);
+  if (size != expected)
+    fail("'{}' has {} bytes, expected {} ({} {} + offset {})", d.path, size, expected,
+         dims_string(d.dims, frames_in_file), dtype_name(d.dtype), d.offset);
+  if (s.files.empty()) d.offset += uint64_t(d.timestep) * frame;
+}
+
+}  // namespace
+
+VolumeDesc describe_volume(const std::string& path, const RawOptions& opts) {
+  file_size(path);  // missing, unreadable or a directory: says so with the path
+  bool plain_raw = false;
+  Source s = describe_file(path, opts, &plain_raw);
+  VolumeDesc& d = s.desc;
+  const std::string what = s.origin.empty() ? "'" + path + "'" : "'" + s.origin + "'";
+  apply_overrides(opts, s);
 
   const uint64_t frame = checked_frame_bytes(d.dims, d.dtype, what);
   if ((d.range_lo && !std::isfinite(*d.range_lo)) || (d.range_hi && !std::isfinite(*d.range_hi)))
@@ -147,24 +178,7 @@ VolumeDesc describe_volume(const std::string& path, const RawOptions& opts) {
     check_gzip_magic(d);
     return d;  // the decompressed size is checked while loading
   }
-
-  uint64_t size = 0;
-  try {
-    size = file_size(d.path);
-  } catch (const Error& e) {
-    if (s.origin.empty()) throw;
-    fail("{} (data file of '{}')", e.what(), s.origin);
-  }
-  if (s.data_at_end) {
-    if (data_bytes > size) fail("'{}' has {} bytes, expected at least {} (byte skip -1)", d.path, size, data_bytes);
-    d.offset = size - data_bytes;
-  }
-  uint64_t expected = 0;
-  if (__builtin_add_overflow(d.offset, data_bytes, &expected)) fail("{}: offset {} is too large", what, d.offset);
-  if (size != expected)
-    fail("'{}' has {} bytes, expected {} ({} {} + offset {})", d.path, size, expected,
-         dims_string(d.dims, frames_in_file), dtype_name(d.dtype), d.offset);
-  if (s.files.empty()) d.offset += uint64_t(t) * frame;
+  check_data_file_size(s, d, frame, data_bytes, frames_in_file, what);
   return d;
 }
 

@@ -47,7 +47,7 @@ struct RawOptions {
 // overflowing dims, unknown dtype, unreadable file.
 VolumeDesc describe_volume(const std::string& path, const RawOptions& opts = {});
 
-// A volume in memory, normalised to [0,1] with u = clamp((v - lo)/(hi - lo), 0, 1) (compat.md B.1).
+// A volume in memory, normalised to [0,1] with u = clamp((v - lo)/(hi - lo), 0, 1) (docs/semantics.md B.1).
 // A constant volume (hi == lo) maps to 0.
 struct Volume {
   Int3 dims;
@@ -73,7 +73,7 @@ inline GridView view_of(const Volume& v) {
   return GridView{v.data.data(), int32_t(v.dims.x), int32_t(v.dims.y), int32_t(v.dims.z)};
 }
 
-// Cell-centred, clamp-to-edge trilinear interpolation at u in [0,1)^3 (compat.md B.2) over any
+// Cell-centred, clamp-to-edge trilinear interpolation at u in [0,1)^3 (docs/semantics.md B.2) over any
 // voxel accessor at(x, y, z) with global indices: p = u*N - 0.5 clamped to [0, N-1] per axis;
 // trilinear between floor(p) and min(floor(p)+1, N-1). The in-memory grid, out-of-core blocks and
 // memory-mapped files all go through this one function, so they agree bit for bit.

@@ -14,7 +14,7 @@ namespace vnr {
 //   *.nrrd -> NRRD (raw encoding, little endian, "spacings" from spacing);
 //   else   -> raw file at `path` plus a JSON sidecar "<path without extension>.json"
 //             ({"file","dims","dtype","byte_order":"little","spacing","value_range"}), the same
-//             sidecar format vnr reads (and ../shared/data uses). Without an explicit value_range
+//             sidecar format vnr reads. Without an explicit value_range
 //             the sidecar gets the exact min/max of the stored values.
 // Values are given as float in original units and converted to `dtype` (integers: rounded to
 // nearest and clamped to the type's range). Both files are written atomically on commit().
