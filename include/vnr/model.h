@@ -3,7 +3,7 @@
 // train layer's struct (src/vnr/train/model_io.h). There: load_model(path) and save_model(path, m)
 // (.vnr, or instantvnr's BSON for .bson/.json), m.net (the Network: n_params(), config()), m.dims,
 // m.lo/m.hi, m.macrocells. This header adds creating one, queries and decodes on an explicit device,
-// the compression ratio and evaluation against a Volume.
+// the compression ratio and evaluation against a Volume or a volume file.
 #include <cstdint>
 #include <functional>
 #include <memory>
@@ -89,5 +89,45 @@ FileEvalPlan plan_file_evaluation(const VolumeDesc& desc, int64_t samples, bool 
 ValueRange file_evaluation_range(const FileEvalPlan& plan, const Model& model, bool model_file_records_range,
                                  const LoadOptions& load, std::string* source,
                                  const std::function<void(double fraction)>& progress = {});
+
+// A whole `vnr eval`: plan_file_evaluation, file_evaluation_range where the method needs it, then the
+// method on the device. How to read the volume and what to compute:
+struct FileEvalOptions {
+  Device device = Device::Cpu;  // resolved; the GPU's support of the network is checked before any read
+  bool with_ssim = true;        // Full and Streamed
+  int64_t samples = 0;          // > 0: Sampled, from this many random voxels (seeded by seed)
+  uint64_t seed = 0;
+  std::optional<uint64_t> memory_budget;  // none: half the available memory
+  VolumeOpenOptions open;
+  // The file the model was loaded from: its size gives the compression ratio, and it may record the
+  // value range the model was trained with. Empty: the fp16 parameter bytes, no recorded range.
+  std::string model_path;
+};
+// What happens while it runs: progress of a stage, "value range" (one scan of the volume) or "eval"
+// (streamed slabs), its end, and notes for the user as they arise (also kept in FileEvaluation::notes).
+struct FileEvalProgress {
+  std::function<void(const std::string& stage, double fraction)> update;
+  std::function<void(const std::string& stage)> finished;
+  std::function<void(const std::string& text)> note;
+};
+struct FileEvaluation {
+  FileEvalPlan plan;  // plan.method: how it was evaluated
+  Device device = Device::Cpu;
+  double psnr = 0, mse = 0;
+  std::optional<double> ssim;                          // with_ssim and not Sampled
+  std::optional<std::pair<double, double>> psnr_ci95;  // Sampled: the 95% interval
+  double mse_stderr = 0;                               // Sampled
+  double max_abs_error = 0;                            // normalised units (Sampled: among the samples)
+  double max_abs_error_original = 0;                   // the same in original units
+  int64_t samples = 0;                                 // voxels compared
+  double decode_seconds = 0;
+  ValueRange value_range;          // what the volume was normalised with
+  std::string value_range_source;  // "volume", "model" or "scan" (file_evaluation_range)
+  uint64_t model_bytes = 0, volume_bytes = 0;
+  double compression_ratio = 0;    // volume_bytes / model_bytes
+  std::vector<std::string> notes;  // e.g. a resolution other than the model's, streaming and why
+};
+FileEvaluation evaluate_model_file(const Model& model, const std::string& volume_path, const FileEvalOptions& options,
+                                   const FileEvalProgress& progress = {});
 
 }  // namespace vnr

@@ -1,21 +1,13 @@
-// vnr bench train|infer: throughput on a real volume, median over timed steps, plus the MLP alone
-// (GFLOP/s against the per-sample FLOP count) so it can be compared with the machine's FMA peak.
-#include <algorithm>
-#include <chrono>
+// vnr bench train|infer: parses the options, runs the benchmarking API (include/vnr/benchmark.h) and
+// prints its result: throughput on a real volume, median over timed steps, plus the MLP alone.
 #include <cstdio>
-#include <array>
 #include <string>
-#include <vector>
+#include <fmt/format.h>
 #include "cli.h"
-#include "vnr/core/error.h"
+#include "vnr/benchmark.h"
 #include "vnr/core/parallel.h"
 #include "vnr/core/progress.h"
-#include "vnr/core/rng.h"
 #include "vnr/cuda/cuda.h"
-#include "vnr/nn/config.h"
-#include "vnr/nn/mlp_kernels.h"
-#include "vnr/model.h"
-#include "vnr/train/trainer.h"
 
 namespace vnr::cli {
 namespace {
@@ -28,218 +20,110 @@ struct BenchArgs {
   VolumeArgs vol;
 };
 
-// MLP forward (+ backward when training) alone over chunks, all threads: GFLOP/s.
-double mlp_gflops(const Network& net, bool training, Precision train_precision, double seconds) {
-  const MlpLayout& m = net.mlp();
-  const int C = kChunk;
-  double flops_per_chunk = net.flops_forward_per_sample() * C * (training ? 3.0 : 1.0);
-  std::vector<double> per_thread(num_threads(), 0.0);
-  double el = 0;
-  parallel_threads([&](int t, int nt) {
-    std::vector<float> X0(size_t(m.in_pad) * C, 0.5f), acts(net.acts_floats(C)), out(m.n_out * C),
-        dout(m.n_out * C, 1e-3f), dW(m.n_params), dX(size_t(m.in_pad) * C), scratch(2 * m.width * C);
-    Pcg32 rng(t + 1);
-    for (auto& x : X0) x = rng.next_float();
-    const bool bf16 = !training && net.inference_precision() == Precision::BF16;
-    const std::vector<uint32_t> wp = bf16 ? net.bf16_weights() : std::vector<uint32_t>();
-    std::vector<uint32_t> pairs(bf16 ? net.mlp_bf16_scratch(C) : 0);
-    const bool bf16_train = training && train_precision == Precision::BF16;
-    Network::Bf16TrainWeights tw;
-    if (bf16_train) tw = net.bf16_train_weights();
-    std::vector<uint32_t> tws(bf16_train ? net.mlp_train_bf16_scratch(C) : 0);
-    auto t0 = std::chrono::steady_clock::now();
-    int64_t chunks = 0;
-    while (seconds_since(t0) < seconds) {
-      for (int r = 0; r < 16; ++r, ++chunks) {
-        if (bf16) {
-          net.mlp_forward_bf16(X0.data(), C, wp.data(), pairs.data(), out.data());
-          continue;
-        }
-        if (bf16_train) {
-          net.mlp_forward_train_bf16(X0.data(), C, tw, tws.data(), out.data(), out.data());
-          net.mlp_backward_train_bf16(dout.data(), C, tw, tws.data(), dW.data(), dX.data());
-          continue;
-        }
-        net.mlp_forward(X0.data(), C, acts.data(), out.data(), out.data());
-        if (training) net.mlp_backward(X0.data(), acts.data(), dout.data(), C, dW.data(), dX.data(), scratch.data());
-      }
-    }
-    per_thread[t] = chunks * flops_per_chunk / seconds_since(t0);
-  });
-  for (double g : per_thread) el += g;
-  return el / 1e9;
+// "name ms, name ms, ..." of a training benchmark's phases.
+std::string phase_line(const BenchResult& r, int decimals) {
+  std::string line;
+  for (size_t p = 0; p < r.phases.size(); ++p)
+    line += fmt::format("{}{} {:.{}f}", p ? ", " : "", r.phases[p].name, r.phases[p].ms, decimals);
+  return line;
 }
 
-// The same measurements on the GPU: per-step times from groups of steps between synchronisations
-// (training issues no synchronisation of its own), inference both with host transfers (the batch comes
-// from and goes back to host memory) and resident on the GPU (CUDA events, no transfers).
-void run_bench_cuda(const BenchArgs& a, const Volume& vol, Model& model) {
-  Network& net = *model.net;
-  const bool training = a.what == "train";
-  const cuda::MlpPath asked = cuda::parse_mlp_path(a.mlp);
-  const double flops = net.flops_forward_per_sample() * (training ? 3.0 : 1.0);
-  std::vector<double> times;
-  Json report = {{"mode", a.what}, {"device", "cuda"}, {"config", a.config}, {"batch", a.batch},
-                 {"n_params", net.n_params()}, {"gpu", cuda::devices().at(0).name}};
-  Progress bar(std::string("bench ") + a.what + " (cuda)", a.seconds, false);
-  const char* path = "";
-  double mlp_seconds = 0, resident_sps = 0;
-  uint64_t peak = 0;
+Json phase_json(const BenchResult& r) {
+  Json ph = Json::object();
+  for (const BenchPhase& p : r.phases) ph[p.key] = p.ms;
+  return ph;
+}
+
+// The GPU's lines and report keys: per-step times from groups of steps between synchronisations,
+// inference both with host transfers (the batch comes from and goes back to host memory) and resident
+// on the GPU (no transfers).
+void print_bench_cuda(const BenchArgs& a, const BenchResult& r) {
+  const bool training = r.training;
+  const double flops = r.mlp_flops_per_sample, sps = r.samples_per_second;
   if (training) {
-    cuda::GpuTrainer tr(net, view_of(vol), cuda::GpuTrainOptions{a.batch, 1337, kChunk, asked});
-    tr.run(5);  // warm-up
-    tr.synchronize();
-    auto t0 = std::chrono::steady_clock::now();
-    int group = 8;
-    while (seconds_since(t0) < a.seconds || times.size() < 3) {
-      auto s0 = std::chrono::steady_clock::now();
-      tr.run(group);
-      tr.synchronize();
-      const double per = seconds_since(s0) / group;
-      for (int i = 0; i < group; ++i) times.push_back(per);
-      if (per * group < 0.1 && group < 1024) group *= 2;
-      bar.update(seconds_since(t0));
-    }
-    tr.set_profiling(true);
-    tr.run(1);
-    std::vector<double> ph = tr.phase_seconds();
-    mlp_seconds = ph.at(1);
-    report["phase_ms"] = {{"sample_encode", ph[0] * 1e3}, {"mlp_forward_loss_backward", ph[1] * 1e3},
-                          {"grid_backward", ph[2] * 1e3}, {"optimizer", ph[3] * 1e3}};
-    std::printf("phases of one step (ms, CUDA events): sample+encode %.3f, MLP fwd+loss+bwd %.3f, grid backward "
-                "%.3f, Adam %.3f\n",
-                ph[0] * 1e3, ph[1] * 1e3, ph[2] * 1e3, ph[3] * 1e3);
-    path = cuda::mlp_path_name(tr.mlp_path());
-    peak = tr.peak_memory_bytes();
-  } else {
-    ModelQuery query(model, Device::Cuda, asked);
-    cuda::GpuNetwork& gn = *query.gpu();
-    std::vector<float> coords(3 * a.batch), out(a.batch);
-    Pcg32 rng(7);
-    for (auto& c : coords) c = rng.next_float();
-    query.points(coords.data(), a.batch, out.data());
-    auto t0 = std::chrono::steady_clock::now();
-    while (seconds_since(t0) < a.seconds || times.size() < 3) {
-      auto s0 = std::chrono::steady_clock::now();
-      query.points(coords.data(), a.batch, out.data());
-      times.push_back(seconds_since(s0));
-      bar.update(seconds_since(t0));
-    }
-    const int64_t n_res = std::max<int64_t>(a.batch, int64_t(1) << 22);  // enough work to fill the GPU
-    const cuda::GpuNetwork::ResidentTiming rt = gn.time_resident(n_res, 20);
-    resident_sps = double(n_res) / rt.seconds;
-    mlp_seconds = rt.mlp_seconds * double(a.batch) / double(n_res);
-    report["resident_samples_per_second"] = resident_sps;
-    report["resident_batch"] = n_res;
-    path = cuda::mlp_path_name(gn.mlp_path());
-    peak = gn.peak_memory_bytes();
+    std::printf("phases of one step (ms, CUDA events): %s\n", phase_line(r, 3).c_str());
   }
-  bar.finish();
-  const double med = median(times), sps = a.batch / med;
-  const double mlp_tflops = flops * double(a.batch) / mlp_seconds / 1e12;
   std::printf("%s %s on %s: %.1f M samples/s (median of %zu batches of %lld, %.3f ms each)%s\n", a.what.c_str(),
-              a.config.c_str(), cuda::devices().at(0).name.c_str(), sps / 1e6, times.size(), (long long)a.batch,
-              med * 1e3, training ? "" : " with host transfers");
-  if (!training) std::printf("resident on the GPU: %.1f M samples/s\n", resident_sps / 1e6);
+              a.config.c_str(), r.gpu.c_str(), sps / 1e6, r.batch_seconds.size(), (long long)r.batch, r.ms_median,
+              training ? "" : " with host transfers");
+  if (!training) std::printf("resident on the GPU: %.1f M samples/s\n", r.resident_samples_per_second / 1e6);
   std::printf("MLP (%s path): %.1f kFLOP/sample, %.2f TFLOP/s in its kernels; %.2f TFLOP/s end to end; peak GPU "
               "memory %s\n",
-              path, flops / 1e3, mlp_tflops, flops * sps / 1e12, human_bytes(double(peak)).c_str());
-  report.update({{"samples_per_second", sps},
-                 {"batches", times.size()},
-                 {"ms_median", med * 1e3},
-                 {"mlp_path", path},
+              r.mlp_path.c_str(), flops / 1e3, r.mlp_tflops, flops * sps / 1e12,
+              human_bytes(double(r.peak_gpu_memory_bytes)).c_str());
+  Json report = {{"mode", a.what},
+                 {"device", "cuda"},
+                 {"config", a.config},
+                 {"batch", r.batch},
+                 {"n_params", r.n_params},
+                 {"gpu", r.gpu},
+                 {"samples_per_second", sps},
+                 {"batches", r.batch_seconds.size()},
+                 {"ms_median", r.ms_median},
+                 {"mlp_path", r.mlp_path},
                  {"mlp_flops_per_sample", flops},
-                 {"mlp_tflops", mlp_tflops},
+                 {"mlp_tflops", r.mlp_tflops},
                  {"tflops_end_to_end", flops * sps / 1e12},
-                 {"peak_gpu_memory_bytes", peak}});
+                 {"peak_gpu_memory_bytes", r.peak_gpu_memory_bytes}};
+  if (training) {
+    report["phase_ms"] = phase_json(r);
+  } else {
+    report["resident_samples_per_second"] = r.resident_samples_per_second;
+    report["resident_batch"] = r.resident_batch;
+  }
   write_report(a.report, report);
 }
 
-void run_bench(const BenchArgs& a) {
-  set_num_threads(a.threads);
-  const Device dev = cuda::resolve_device(a.device);
-  Volume vol = load_volume(describe_volume(a.volume, a.vol.raw()), a.vol.load());
-  Model model = create_model(load_config(a.config), vol, 1337);
-  Network& net = *model.net;
-  if (dev == Device::Cuda) return run_bench_cuda(a, vol, model);
-  const bool training = a.what == "train";
-  if (!training) net.set_inference_precision(parse_precision(a.precision));
-  const Precision train_precision = training ? resolve_training_precision(a.precision, net) : Precision::FP32;
-  std::vector<double> times;
-  double phases[3] = {0, 0, 0};
-  std::array<CpuTrainer::Phase, 3> phase_names{};
-  auto t0 = std::chrono::steady_clock::now();
-  Progress bar(std::string("bench ") + a.what, a.seconds, false);
-  if (training) {
-    TrainOptions to{a.batch, 1337};
-    to.precision = train_precision;
-    CpuTrainer tr(net, std::make_shared<InCoreSampler>(vol), to);
-    phase_names = tr.phases();
-    for (int w = 0; w < 2; ++w) tr.step();  // warm-up: page-in, caches
-    t0 = std::chrono::steady_clock::now();
-    std::vector<double> ph[3];
-    while (seconds_since(t0) < a.seconds || times.size() < 3) {
-      auto s0 = std::chrono::steady_clock::now();
-      tr.step();
-      times.push_back(seconds_since(s0));
-      for (int p = 0; p < 3; ++p) ph[p].push_back(tr.phase_seconds[p]);
-      bar.update(seconds_since(t0));
-    }
-    for (int p = 0; p < 3; ++p) phases[p] = median(ph[p]);
-  } else {
-    ModelQuery query(model, Device::Cpu);
-    std::vector<float> coords(3 * a.batch), out(a.batch);
-    Pcg32 rng(7);
-    for (auto& c : coords) c = rng.next_float();
-    query.points(coords.data(), a.batch, out.data());
-    t0 = std::chrono::steady_clock::now();
-    while (seconds_since(t0) < a.seconds || times.size() < 3) {
-      auto s0 = std::chrono::steady_clock::now();
-      query.points(coords.data(), a.batch, out.data());
-      times.push_back(seconds_since(s0));
-      bar.update(seconds_since(t0));
-    }
-  }
-  bar.finish();
-  const double med = median(times);
-  const double sps = a.batch / med;
-  const double flops = net.flops_forward_per_sample() * (training ? 3.0 : 1.0);
-  const double mlp_only = mlp_gflops(net, training, train_precision, std::min(3.0, std::max(0.5, a.seconds / 4)));
+// The CPU's lines and report keys: the median over timed batches, the MLP kernels alone, the phases.
+void print_bench_cpu(const BenchArgs& a, const BenchResult& r) {
+  const double flops = r.mlp_flops_per_sample, sps = r.samples_per_second;
   std::printf("%s %s%s: %.3f M samples/s (median of %zu batches of %lld, %.2f ms each; min %.2f, max %.2f)\n",
-              a.what.c_str(), a.config.c_str(),
-              (training ? train_precision : net.inference_precision()) == Precision::BF16 ? " (bf16)" : "",
-              sps / 1e6, times.size(), (long long)a.batch, med * 1e3,
-              *std::min_element(times.begin(), times.end()) * 1e3, *std::max_element(times.begin(), times.end()) * 1e3);
+              a.what.c_str(), a.config.c_str(), r.precision == Precision::BF16 ? " (bf16)" : "", sps / 1e6,
+              r.batch_seconds.size(), (long long)r.batch, r.ms_median, r.ms_min, r.ms_max);
   std::printf("MLP FLOPs: %.1f kFLOP/sample -> %.1f GFLOP/s end to end; MLP kernels alone: %.1f GFLOP/s on %d threads (%s)\n",
-              flops / 1e3, flops * sps / 1e9, mlp_only, num_threads(), kernels::simd_target_name());
-  if (training) {
-    std::string line;
-    for (int p = 0; p < 3; ++p)
-      line += fmt::format("{}{} {:.2f}", p ? ", " : "", phase_names[p].name, phases[p] * 1e3);
-    std::printf("phases (median ms): %s\n", line.c_str());
+              flops / 1e3, flops * sps / 1e9, r.mlp_gflops, r.threads, r.simd.c_str());
+  if (r.training) {
+    std::printf("phases (median ms): %s\n", phase_line(r, 2).c_str());
   }
   Json report = {{"mode", a.what},
                  {"device", "cpu"},
                  {"config", a.config},
                  {"samples_per_second", sps},
-                 {"batch", a.batch},
-                 {"batches", times.size()},
-                 {"ms_median", med * 1e3},
-                 {"ms_min", *std::min_element(times.begin(), times.end()) * 1e3},
-                 {"ms_max", *std::max_element(times.begin(), times.end()) * 1e3},
+                 {"batch", r.batch},
+                 {"batches", r.batch_seconds.size()},
+                 {"ms_median", r.ms_median},
+                 {"ms_min", r.ms_min},
+                 {"ms_max", r.ms_max},
                  {"mlp_flops_per_sample", flops},
                  {"gflops_end_to_end", flops * sps / 1e9},
-                 {"mlp_gflops", mlp_only},
-                 {"threads", num_threads()},
-                 {"simd", kernels::simd_target_name()},
-                 {"precision", precision_name(training ? train_precision : net.inference_precision())},
-                 {"n_params", net.n_params()}};
-  if (training) {
-    Json ph = Json::object();
-    for (int p = 0; p < 3; ++p) ph[phase_names[p].key] = phases[p] * 1e3;
-    report["phase_ms"] = ph;
-  }
+                 {"mlp_gflops", r.mlp_gflops},
+                 {"threads", r.threads},
+                 {"simd", r.simd},
+                 {"precision", precision_name(r.precision)},
+                 {"n_params", r.n_params}};
+  if (r.training) report["phase_ms"] = phase_json(r);
   write_report(a.report, report);
+}
+
+void run_bench(const BenchArgs& a) {
+  set_num_threads(a.threads);
+  BenchOptions o;
+  o.device = cuda::resolve_device(a.device);
+  o.seconds = a.seconds;
+  o.batch = a.batch;
+  o.precision = a.precision;
+  o.mlp = cuda::parse_mlp_path(a.mlp);
+  const Volume vol = open_volume(a.volume, a.vol.open());
+  const ModelConfig config = load_config(a.config);
+  const bool gpu = o.device == Device::Cuda;
+  Progress bar(std::string("bench ") + a.what + (gpu ? " (cuda)" : ""), a.seconds, false);
+  o.progress = [&bar](double seconds, bool finished) {
+    if (finished) bar.finish();
+    else bar.update(seconds);
+  };
+  const BenchResult r = a.what == "train" ? benchmark_training(vol, config, o) : benchmark_inference(vol, config, o);
+  if (gpu) print_bench_cuda(a, r);
+  else print_bench_cpu(a, r);
 }
 
 }  // namespace

@@ -1,8 +1,10 @@
-// eval, decode, info, synth and convert.
+// eval, decode, info, synth and convert: each parses its options, calls the library and prints.
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <map>
+#include <memory>
 #include "cli.h"
 #include "vnr/core/error.h"
 #include "vnr/core/fileio.h"
@@ -19,39 +21,50 @@ namespace vnr::cli {
 
 namespace {
 
-// The line and report keys of a whole-volume evaluation (in memory or streamed).
-void report_whole(const EvalResult& ev, bool with_ssim, const std::string& ratio, int64_t voxels, Json& report) {
-  std::printf("PSNR %.2f dB", ev.psnr);
-  if (with_ssim) std::printf(", SSIM %.4f", ev.ssim);
-  std::printf(", max |error| %.4g (%.4g in data units), compression ratio %s, decoded in %.2fs\n", ev.max_abs_error,
-              ev.max_abs_error_original, ratio.c_str(), ev.decode_seconds);
+// The line and report keys of an evaluation: whole-volume (in memory or streamed) or from sampled voxels.
+void print_evaluation(const FileEvaluation& ev, Json& report) {
+  const std::string ratio = format_ratio(ev.compression_ratio);
+  if (ev.psnr_ci95) {
+    std::printf("PSNR %.2f dB (95%% interval %.2f to %.2f dB, from %lld sampled voxels), max |error| seen %.4g "
+                "(%.4g in data units), compression ratio %s, decoded in %.2fs\n",
+                ev.psnr, ev.psnr_ci95->first, ev.psnr_ci95->second, (long long)ev.samples, ev.max_abs_error,
+                ev.max_abs_error_original, ratio.c_str(), ev.decode_seconds);
+  } else {
+    std::printf("PSNR %.2f dB", ev.psnr);
+    if (ev.ssim) std::printf(", SSIM %.4f", *ev.ssim);
+    std::printf(", max |error| %.4g (%.4g in data units), compression ratio %s, decoded in %.2fs\n", ev.max_abs_error,
+                ev.max_abs_error_original, ratio.c_str(), ev.decode_seconds);
+  }
   report.update({{"psnr", ev.psnr},
-                 {"psnr_ci95", nullptr},
-                 {"ssim", with_ssim ? Json(ev.ssim) : Json(nullptr)},
+                 {"psnr_ci95", ev.psnr_ci95 ? Json{ev.psnr_ci95->first, ev.psnr_ci95->second} : Json(nullptr)},
+                 {"ssim", ev.ssim ? Json(*ev.ssim) : Json(nullptr)},
                  {"mse", ev.mse},
-                 {"max_abs_error", ev.max_abs_error},
-                 {"max_abs_error_original", ev.max_abs_error_original},
-                 {"samples", voxels},
-                 {"decode_seconds", ev.decode_seconds}});
-}
-
-// The line and report keys of an evaluation from sampled voxels.
-void report_sampled(const SampledEval& ev, const std::string& ratio, uint64_t seed, Json& report) {
-  std::printf("PSNR %.2f dB (95%% interval %.2f to %.2f dB, from %lld sampled voxels), max |error| seen %.4g "
-              "(%.4g in data units), compression ratio %s, decoded in %.2fs\n",
-              ev.psnr, ev.psnr_ci95_lo, ev.psnr_ci95_hi, (long long)ev.samples, ev.max_abs_error,
-              ev.max_abs_error_original, ratio.c_str(), ev.decode_seconds);
-  report.update({{"psnr", ev.psnr},
-                 {"psnr_ci95", {ev.psnr_ci95_lo, ev.psnr_ci95_hi}},
-                 {"ssim", nullptr},
-                 {"mse", ev.mse},
-                 {"mse_stderr", ev.mse_stderr},
                  {"max_abs_error", ev.max_abs_error},
                  {"max_abs_error_original", ev.max_abs_error_original},
                  {"samples", ev.samples},
-                 {"seed", seed},
-                 {"decode_seconds", ev.decode_seconds}});
+                 {"decode_seconds", ev.decode_seconds},
+                 {"value_range", {ev.value_range.lo, ev.value_range.hi}},
+                 {"value_range_source", ev.value_range_source}});
+  if (ev.psnr_ci95) report["mse_stderr"] = ev.mse_stderr;
 }
+
+// Progress bars on stderr, one per stage as it starts, and the notes as they arise.
+struct EvalProgressBars {
+  bool quiet = false;
+  std::map<std::string, std::unique_ptr<Progress>> bars;
+  FileEvalProgress callbacks() {
+    FileEvalProgress p;
+    p.update = [this](const std::string& stage, double f) { bar(stage).update(f); };
+    p.finished = [this](const std::string& stage) { bar(stage).finish(); };
+    p.note = [](const std::string& text) { std::fprintf(stderr, "note: %s\n", text.c_str()); };
+    return p;
+  }
+  Progress& bar(const std::string& stage) {
+    std::unique_ptr<Progress>& b = bars[stage];
+    if (!b) b = std::make_unique<Progress>(stage, 1.0, quiet);
+    return *b;
+  }
+};
 
 }  // namespace
 
@@ -87,73 +100,35 @@ void add_eval(CLI::App& app) {
     set_num_threads(a->threads);
     Model m = load_model(a->model);
     m.net->set_inference_precision(parse_precision(a->precision));
-    const Device dev = cuda::resolve_device(a->device);
-    if (dev == Device::Cuda) cuda::check_supported(*m.net);  // before reading the volume
-    const VolumeDesc desc = describe_volume_file(a->volume, a->vol.open());
-    const LoadOptions load_opts = a->vol.load();
-    const Int3 dims = desc.dims;
-    if (!(dims == m.dims))
-      std::fprintf(stderr, "note: model was trained on %lldx%lldx%lld, evaluating at %lldx%lldx%lld\n",
-                   (long long)m.dims.x, (long long)m.dims.y, (long long)m.dims.z, (long long)dims.x,
-                   (long long)dims.y, (long long)dims.z);
-    const uint64_t model_bytes = file_size(a->model);
-    const uint64_t volume_bytes = dims.count() * dtype_size(desc.dtype);
-    const double ratio = double(volume_bytes) / double(model_bytes);
-    const bool sampled = c->count("--sample") > 0;
-    if (sampled && a->sample <= 0) fail("--sample expects a positive number of voxels, got {}", a->sample);
-    std::optional<uint64_t> budget;  // none: the library's default, half the available memory
+    FileEvalOptions o;
+    o.device = cuda::resolve_device(a->device);
+    o.with_ssim = !a->no_ssim;
+    o.seed = a->seed;
+    o.open = a->vol.open();
+    o.model_path = a->model;
+    if (c->count("--sample") > 0) {
+      if (a->sample <= 0) fail("--sample expects a positive number of voxels, got {}", a->sample);
+      o.samples = a->sample;
+    }
     if (!a->memory_budget.empty()) {
       try {
-        budget = parse_byte_size(a->memory_budget);
+        o.memory_budget = parse_byte_size(a->memory_budget);
       } catch (const Error& e) {
         fail("--memory-budget: {}", e.what());
       }
     }
-    const FileEvalPlan plan = plan_file_evaluation(desc, sampled ? a->sample : 0, !a->no_ssim, budget);
-
-    auto print_whole = [&](const EvalResult& ev, Json& report) {
-      report_whole(ev, !a->no_ssim, format_ratio(ratio), int64_t(dims.count()), report);
-      write_report(a->report, report);
-    };
-
-    Json report = {{"method", eval_method_name(plan.method)},
-                   {"device", device_name(dev)},
-                   {"precision", precision_json(m.net.get(), dev)},
-                   {"compression_ratio", ratio},
-                   {"model_bytes", model_bytes},
-                   {"volume_bytes", volume_bytes}};
-    if (plan.method == EvalMethod::Full) {
-      Volume vol = load_volume(desc, load_opts);
-      report.update({{"value_range", {vol.lo, vol.hi}}, {"value_range_source", "volume"}});
-      print_whole(evaluate_model(m, vol, !a->no_ssim, dev), report);
-      return;
-    }
-
-    std::string range_source;
-    Progress range_bar("value range", 1.0, a->quiet);
-    const ValueRange range = file_evaluation_range(plan, m, model_file_has_value_range(a->model), load_opts,
-                                                   &range_source, [&](double f) { range_bar.update(f); });
-    if (range_source == "scan") range_bar.finish();
-    report["value_range"] = {range.lo, range.hi};
-    report["value_range_source"] = range_source;
-
-    if (plan.method == EvalMethod::Sampled) {
-      SampledEval ev = evaluate_sampled(*m.net, desc, range.lo, range.hi, a->sample, a->seed, load_opts, dev);
-      report_sampled(ev, format_ratio(ratio), a->seed, report);
-      write_report(a->report, report);
-      return;
-    }
-
-    std::fprintf(stderr,
-                 "note: evaluating in streamed slabs of %lld slices: holding the volume and the decoded copy "
-                 "would take %s, over the memory budget of %s\n",
-                 (long long)plan.slab_slices, human_bytes(double(plan.full_bytes)).c_str(),
-                 human_bytes(double(plan.budget)).c_str());
-    Progress bar("eval", 1.0, a->quiet);
-    EvalResult ev = evaluate_streamed(*m.net, desc, range.lo, range.hi, load_opts, !a->no_ssim,
-                                      [&](double f) { bar.update(f); }, plan.slab_slices * dims.x * dims.y, dev);
-    bar.finish();
-    print_whole(ev, report);
+    EvalProgressBars bars;
+    bars.quiet = a->quiet;
+    const FileEvaluation ev = evaluate_model_file(m, a->volume, o, bars.callbacks());
+    Json report = {{"method", eval_method_name(ev.plan.method)},
+                   {"device", device_name(ev.device)},
+                   {"precision", precision_json(m.net.get(), ev.device)},
+                   {"compression_ratio", ev.compression_ratio},
+                   {"model_bytes", ev.model_bytes},
+                   {"volume_bytes", ev.volume_bytes}};
+    print_evaluation(ev, report);
+    if (ev.plan.method == EvalMethod::Sampled) report["seed"] = a->seed;
+    write_report(a->report, report);
   });
 }
 

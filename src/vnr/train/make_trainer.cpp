@@ -23,6 +23,7 @@ public:
       left -= k;
     }
   }
+  void synchronize() override { gpu_->synchronize(); }
   float last_loss() const override { return gpu_->steps_done() ? gpu_->last_loss() : 0.f; }
   std::vector<float> losses() const override { return gpu_->losses(); }
   uint64_t steps_done() const override { return gpu_->steps_done(); }
@@ -48,6 +49,8 @@ public:
     for (size_t i = 0; i < s.size() && i < 4; ++i) out.push_back({keys[i], names[i], s[i]});
     return out;
   }
+  std::string mlp_path_name() const override { return cuda::mlp_path_name(gpu_->mlp_path()); }
+  uint64_t peak_device_memory_bytes() const override { return gpu_->peak_memory_bytes(); }
   std::string device_summary() const override {
     return fmt::format("{} (MLP: {})", cuda::devices().at(0).name, cuda::mlp_path_name(gpu_->mlp_path()));
   }

@@ -23,6 +23,8 @@ public:
   virtual bool asynchronous() const { return false; }
   // Runs (GPU: enqueues) n training steps.
   virtual void run(int64_t n_steps) = 0;
+  // Waits until the steps run() enqueued are done (a no-op where run() returns with them done).
+  virtual void synchronize() {}
   // Mean loss of the last step (0 before any) and of every step so far; both synchronise.
   virtual float last_loss() const = 0;
   virtual std::vector<float> losses() const = 0;
@@ -43,6 +45,10 @@ public:
   virtual std::optional<Precision> mlp_precision() const = 0;
   // What runs the steps, for a front end's "training on ..." line; empty where nothing needs saying (CPU).
   virtual std::string device_summary() const { return {}; }
+  // The GPU's MLP implementation ("fused", "cublas") and the most device memory its buffers held at
+  // once, for benchmarks; "" and 0 on the CPU.
+  virtual std::string mlp_path_name() const { return {}; }
+  virtual uint64_t peak_device_memory_bytes() const { return 0; }
   // Seconds of each phase of the last step (report key, printed name). The GPU records them only while
   // phase timing is on (CUDA events between the phases of every step); the CPU always does.
   struct PhaseTime {
