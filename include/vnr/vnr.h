@@ -7,9 +7,11 @@
 //   TrainingSession  the one training loop, on a CPU or GPU Trainer backend           (vnr/trainer.h)
 //   Renderer  camera, transfer function, mode, strategy, macro-cells; progressive     (vnr/renderer.h)
 //   OnlineLoop  training steps and frames of one model interleaved                    (vnr/online.h)
+//   benchmark_training / benchmark_inference: what `vnr bench train|infer` measures  (vnr/benchmark.h)
 #include "vnr/version.h"
 #include "vnr/volume.h"
 #include "vnr/model.h"
 #include "vnr/trainer.h"
 #include "vnr/renderer.h"
 #include "vnr/online.h"
+#include "vnr/benchmark.h"
