@@ -1,5 +1,5 @@
-// The render layer on its own: this executable links vnr_render (and what it depends on: volume, core)
-// and nothing above it, so it fails to link if render ever needs nn, train or the fields layer.
+// The render layer on its own: this executable links vnr_render (and what it depends on: core) and
+// nothing else, so it fails to link if render ever needs volume, nn, train or the fields layer.
 // Through a field view defined here, it checks that the CPU renderer's two strategies drive the one
 // shared per-pixel loop (inshader_loop.h) and per-slot stages (stream_stages.h): with K = 1 both take
 // exactly the same field samples and give the same image, bit for bit.
@@ -7,11 +7,12 @@
 #include <atomic>
 #include <cstring>
 #include "test_support.h"
+#include "vnr/core/grid_view.h"
+#include "vnr/core/value_range_grid.h"
 #include "vnr/render/field.h"
 #include "vnr/render/inshader.h"
 #include "vnr/render/macrocell.h"
 #include "vnr/render/renderer.h"
-#include "vnr/volume/value_range_grid.h"
 
 namespace vnr {
 namespace {
@@ -72,7 +73,8 @@ Frame render_with(const Volume& vol, RenderMode mode, RenderStrategy strategy, b
 }
 
 TEST(RenderLayer, BothStrategiesTakeTheSameSamplesThroughTheSharedFunctions) {
-  const Volume vol = test::synth(Int3{24, 20, 18});
+  // test::blobs, not test::synth: the synthetic fields of volume/synth.cpp are not linked here.
+  const Volume vol = test::blobs(Int3{24, 20, 18});
   struct Case {
     RenderMode mode;
     bool shade;

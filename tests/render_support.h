@@ -3,11 +3,11 @@
 #pragma once
 
 #include "test_support.h"
-#include "vnr/render/camera.h"
+#include "vnr/core/value_range_grid.h"
 #include "vnr/fields/fields.h"
+#include "vnr/render/camera.h"
 #include "vnr/render/macrocell.h"
 #include "vnr/render/transfer_function.h"
-#include "vnr/volume/value_range_grid.h"
 
 namespace vnr::test {
 

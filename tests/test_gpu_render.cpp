@@ -8,12 +8,12 @@
 #include <cmath>
 #include "render_support.h"
 #include "test_support.h"
+#include "vnr/core/value_range_grid.h"
 #include "vnr/cuda/cuda.h"
 #include "vnr/render/renderer.h"
 #include "vnr/render_cuda/gpu_renderer.h"
 #include "vnr/train/sampler.h"
 #include "vnr/train/trainer.h"
-#include "vnr/volume/value_range_grid.h"
 
 using namespace vnr;
 using namespace vnr::test;

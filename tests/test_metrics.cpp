@@ -1,9 +1,9 @@
 #include <gtest/gtest.h>
 #include <cmath>
 #include <vector>
+#include "vnr/core/metrics.h"
 #include "vnr/core/parallel.h"
 #include "vnr/core/rng.h"
-#include "vnr/volume/metrics.h"
 
 using namespace vnr;
 

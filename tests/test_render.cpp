@@ -8,11 +8,11 @@
 #include <functional>
 #include "vnr/core/error.h"
 #include "vnr/core/rng.h"
+#include "vnr/core/value_range_grid.h"
 #include "vnr/render/renderer.h"
 #include "vnr/train/model_io.h"
 #include "vnr/train/sampler.h"
 #include "vnr/train/trainer.h"
-#include "vnr/volume/value_range_grid.h"
 #include "vnr/volume/writer.h"
 #include "render_support.h"
 #include "test_support.h"

@@ -14,11 +14,11 @@
 #include <string>
 #include <vector>
 #include "vnr/core/error.h"
+#include "vnr/core/metrics.h"
 #include "vnr/core/rng.h"
 #include "vnr/nn/config.h"
 #include "vnr/nn/network.h"
 #include "vnr/train/model_io.h"
-#include "vnr/volume/metrics.h"
 #include "vnr/volume/raw_access.h"
 #include "vnr/volume/stream.h"
 #include "vnr/volume/volume.h"

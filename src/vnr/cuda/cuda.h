@@ -14,8 +14,8 @@
 #include <vector>
 #include "vnr/core/device.h"
 #include "vnr/core/math.h"
+#include "vnr/core/value_range_grid.h"
 #include "vnr/nn/network.h"
-#include "vnr/volume/value_range_grid.h"
 #include "vnr/volume/volume.h"
 
 namespace vnr::cuda {

@@ -3,11 +3,11 @@
 // sampler, the loss and Adam. The work inside each thread is the VNR_HD code the CPU runs.
 #include <cuda_fp16.h>
 #include <cuda_runtime.h>
+#include "vnr/core/value_range_grid.h"
 #include "vnr/cuda/common.h"
 #include "vnr/cuda/mlp.cuh"
 #include "vnr/nn/adam_update.h"
 #include "vnr/nn/grid_encoding.h"
-#include "vnr/volume/value_range_grid.h"
 #include "vnr/volume/volume.h"
 
 namespace vnr::cuda {

@@ -1,9 +1,23 @@
 #include "vnr/fields/fields.h"
+#include <atomic>
 #include <cstring>
 #include "vnr/core/parallel.h"
+#include "vnr/fields/grid_packets.h"
 #include "vnr/render/inshader.h"
 
 namespace vnr {
+
+int64_t run_inshader_grid(const InshaderJob& job, const GridView& g) {
+  const RenderParams& p = *job.params;
+  if (job.ray_packets && job.mode == RenderMode::RayMarch && grid_packets_apply(p, g)) {
+    std::atomic<int64_t> samples{0};
+    parallel_threads([&](int t, int nt) {
+      samples += march_grid_packets(p, g, TileCursor{p.cam.width, p.cam.height, kInshaderTile, t, nt}, job.pixels);
+    });
+    return samples.load();
+  }
+  return run_inshader(job, GridPointFn{g});
+}
 
 void GridField::query(const float* x, const float* y, const float* z, int64_t n, float* out) const {
   parallel_for_range(n, 4096, [&](int64_t b, int64_t e) { grid_lookup_batch(g_, x + b, y + b, z + b, e - b, out + b); });

@@ -10,7 +10,7 @@
 #include <limits>
 #include "vnr/core/error.h"
 #include "vnr/core/fileio.h"
-#include "vnr/volume/metrics.h"
+#include "vnr/core/metrics.h"
 
 namespace vnr {
 

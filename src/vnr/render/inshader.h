@@ -8,7 +8,6 @@
 #include "vnr/render/inshader_loop.h"
 #include "vnr/render/renderer.h"
 #include "vnr/render/tiles.h"
-#include "vnr/volume/volume.h"
 
 namespace vnr {
 
@@ -48,15 +47,5 @@ int64_t run_inshader(const InshaderJob& job, const PointFn& f) {
   });
   return samples.load();
 }
-
-// The ground-truth grid's point function.
-struct GridPointFn {
-  GridView g;
-  VNR_HD VNR_INLINE float operator()(float x, float y, float z) const { return grid_lookup(g, x, y, z); }
-};
-
-// The grid's in-shader frame: SIMD ray packets (grid_packets.h) where they apply and the job allows
-// them, else run_inshader with GridPointFn. Returns the number of field samples.
-int64_t run_inshader_grid(const InshaderJob& job, const GridView& g);
 
 }  // namespace vnr

@@ -9,8 +9,8 @@
 #include <vector>
 #include "vnr/core/hd.h"
 #include "vnr/core/math.h"
+#include "vnr/core/value_range_grid.h"
 #include "vnr/render/transfer_function.h"
-#include "vnr/volume/value_range_grid.h"
 
 namespace vnr {
 

@@ -44,7 +44,7 @@ struct RenderOptions {
   bool shade = false;         // gradient shading for ray marching
   uint32_t seed = 0;
   int samples_per_iteration = kDefaultSamplesPerIteration;  // K
-  // In-shader ray marching of a grid runs rays in SIMD packets (grid_packets.h; same image bit for
+  // In-shader ray marching of a grid runs rays in SIMD packets (fields/grid_packets.h; same image bit for
   // bit); false runs the portable per-ray loop, the reference the packets are tested against.
   bool ray_packets = true;
   Vec3f background{0, 0, 0};

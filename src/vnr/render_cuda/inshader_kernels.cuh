@@ -3,9 +3,9 @@
 // per-pixel loop of render/inshader_loop.h, the same function the CPU renderer calls per pixel; a warp's
 // 32 pixels are its lane group (the network evaluation is warp-cooperative: cuda/point_eval.cuh).
 #include <cuda_runtime.h>
+#include "vnr/core/grid_view.h"
 #include "vnr/cuda/point_eval.cuh"
 #include "vnr/render/inshader_loop.h"
-#include "vnr/volume/volume.h"
 
 namespace vnr::gpu_render {
 

@@ -8,9 +8,9 @@
 #include <vector>
 #include "vnr/core/error.h"
 #include "vnr/core/fileio.h"
+#include "vnr/core/metrics.h"
 #include "vnr/core/progress.h"
 #include "vnr/core/rng.h"
-#include "vnr/volume/metrics.h"
 #include "vnr/volume/raw_access.h"
 #include "vnr/volume/stream.h"
 

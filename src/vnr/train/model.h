@@ -7,9 +7,9 @@
 #include "vnr/core/dtype.h"
 #include "vnr/core/json.h"
 #include "vnr/core/math.h"
+#include "vnr/core/value_range_grid.h"
 #include "vnr/nn/model_file.h"
 #include "vnr/nn/network.h"
-#include "vnr/volume/value_range_grid.h"
 
 namespace vnr {
 

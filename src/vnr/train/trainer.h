@@ -4,11 +4,11 @@
 #include <memory>
 #include <string>
 #include <vector>
+#include "vnr/core/value_range_grid.h"
 #include "vnr/nn/network.h"
 #include "vnr/nn/optimizer.h"
 #include "vnr/train/sampler.h"
 #include "vnr/train/trainer_backend.h"
-#include "vnr/volume/value_range_grid.h"
 
 namespace vnr {
 

@@ -7,9 +7,9 @@
 #include <cmath>
 #include <cstdint>
 #include <vector>
+#include "vnr/core/grid_view.h"
 #include "vnr/core/hd.h"
 #include "vnr/core/math.h"
-#include "vnr/volume/volume.h"
 
 namespace vnr {
 

@@ -5,10 +5,11 @@
 // the compositing of march_shade), so the image equals the per-ray loop's bit for bit. A lane whose
 // ray ends takes the next pixel at once, so lanes stay busy. Macro-cell traversal stays scalar per lane.
 #include <cstdint>
+#include "vnr/core/grid_view.h"
 #include "vnr/core/hd.h"
+#include "vnr/render/inshader.h"
 #include "vnr/render/integrators.h"
 #include "vnr/render/tiles.h"
-#include "vnr/volume/volume.h"
 
 namespace vnr {
 
@@ -21,5 +22,15 @@ inline bool grid_packets_apply(const RenderParams& p, const GridView& g) {
 // Ray marches (RenderMode::RayMarch, unshaded) the cursor's pixels into pixels[y * width + x];
 // returns the number of field samples taken.
 int64_t march_grid_packets(const RenderParams& p, const GridView& g, TileCursor cursor, Vec4f* pixels);
+
+// The ground-truth grid's point function.
+struct GridPointFn {
+  GridView g;
+  VNR_HD VNR_INLINE float operator()(float x, float y, float z) const { return grid_lookup(g, x, y, z); }
+};
+
+// The grid's in-shader frame: SIMD ray packets where they apply and the job allows them, else
+// render's run_inshader with GridPointFn. Returns the number of field samples.
+int64_t run_inshader_grid(const InshaderJob& job, const GridView& g);
 
 }  // namespace vnr

@@ -1,4 +1,4 @@
-#include "vnr/volume/value_range_grid.h"
+#include "vnr/core/value_range_grid.h"
 #include <algorithm>
 #include <cmath>
 #include <limits>

@@ -1,13 +1,13 @@
 // Packet ray marching of the grid (see grid_packets.h), compiled per SIMD target.
 #undef HWY_TARGET_INCLUDE
-#define HWY_TARGET_INCLUDE "vnr/render/grid_packets.cpp"
+#define HWY_TARGET_INCLUDE "vnr/fields/grid_packets.cpp"
 #include <hwy/foreach_target.h>  // IWYU pragma: keep
 #include <hwy/highway.h>
 
 #include <cmath>
 #include <cstring>
 #include <vector>
-#include "vnr/render/grid_packets.h"
+#include "vnr/fields/grid_packets.h"
 #include "vnr/volume/lookup-inl.h"
 
 HWY_BEFORE_NAMESPACE();

@@ -1,4 +1,4 @@
-#include "vnr/volume/metrics.h"
+#include "vnr/core/metrics.h"
 #include <algorithm>
 #include <cmath>
 #include <vector>
