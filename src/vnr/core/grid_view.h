@@ -6,7 +6,7 @@
 
 namespace vnr {
 
-// A normalised grid, x fastest (volume.h's view_of gives one of a loaded Volume).
+// A normalised grid, x fastest (volume/volume.h's view_of gives one of a loaded Volume).
 struct GridView {
   const float* data = nullptr;
   int32_t nx = 0, ny = 0, nz = 0;
