@@ -10,16 +10,12 @@
 #include "vnr/core/json.h"
 #include "vnr/core/rng.h"
 #include "vnr/nn/network.h"
+#include "test_support.h"
 
 using namespace vnr;
+using vnr::test::bits;
 
 namespace {
-
-uint32_t bits(float f) {
-  uint32_t u;
-  std::memcpy(&u, &f, 4);
-  return u;
-}
 
 Json vectors() { return parse_json_file(std::string(VNR_TEST_DATA_DIR) + "/grid_vectors.json"); }
 

@@ -15,16 +15,12 @@
 #include "vnr/nn/cpu_kernels.h"
 #include "vnr/nn/encoding.h"
 #include "vnr/nn/network.h"
+#include "test_support.h"
 
 using namespace vnr;
+using vnr::test::bits;
 
 namespace {
-
-uint32_t bits(float f) {
-  uint32_t u;
-  std::memcpy(&u, &f, 4);
-  return u;
-}
 
 // One encoding object of every registered otype (and the grid's interpolations).
 std::vector<Json> every_encoding() {

@@ -34,6 +34,15 @@
 
 namespace vnr::test {
 
+// ---- floats --------------------------------------------------------------------------------------
+
+// The bit pattern of f, for bit-exact comparisons of floats (NaNs and signed zeros included).
+inline uint32_t bits(float f) {
+  uint32_t u;
+  std::memcpy(&u, &f, 4);
+  return u;
+}
+
 // ---- temporary directories ----------------------------------------------------------------------
 
 // A fresh, empty directory for one test, removed with its contents when this goes out of scope:
