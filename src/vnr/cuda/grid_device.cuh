@@ -9,8 +9,8 @@
 namespace vnr::cuda {
 
 // A grid entry's F features as one vector access (F = 2: 32 bits, 4: 64, 8: 128) instead of F 16-bit
-// ones: the encoder and its backward are bound by the load/store queue, not by bandwidth. Entries are F-aligned: the table starts after the MLP weights, a
-// multiple of 256 halves.
+// ones: the encoder and its backward are bound by the load/store queue, not by bandwidth. Entries are
+// F-aligned: the table starts after the MLP weights, a multiple of 256 halves.
 template <int F>
 __device__ __forceinline__ void load_halves(const __half* __restrict__ p, float* out) {
   if constexpr (F == 1) {
@@ -91,14 +91,3 @@ struct GridEntryLoad<__half> {
   }
 };
 }  // namespace vnr
-
-namespace vnr::cuda {
-
-template <int F>
-__device__ __forceinline__ void grid_level_forward_half(const GridLevel& L, Interpolation interp,
-                                                        const __half* __restrict__ table, float x, float y, float z,
-                                                        float* out) {
-  grid_level_forward<F>(L, interp, table, x, y, z, out, 1);
-}
-
-}  // namespace vnr::cuda

@@ -2,9 +2,10 @@
 // In-shader network evaluation on the GPU (CUDA-only header), the counterpart of nn/point_eval on the
 // CPU: the field value of one point per lane, evaluated warp-cooperatively (the paper's appendix
 // "In-Shader Inference Details"). Each lane encodes its point into its row of the warp's 32-row
-// activation tile (grid_level_forward_half per level, the encode kernel's values); the warp multiplies
-// the two 16-row halves by each weight matrix with WMMA 16x16x16 (half in, binary32 accumulate, ReLU,
-// rounded to half: the fused kernels' arithmetic), skipping a half whose lanes are all idle.
+// activation tile (grid_level_forward over the half table per level, the encode kernel's values); the
+// warp multiplies the two 16-row halves by each weight matrix with WMMA 16x16x16 (half in, binary32
+// accumulate, ReLU, rounded to half: the fused kernels' arithmetic), skipping a half whose lanes are
+// all idle.
 #include <mma.h>
 #include <cuda_fp16.h>
 #include <string>
@@ -26,10 +27,10 @@ __device__ inline void encode_row(const GridLayout& g, const __half* table, floa
   for (int l = 0; l < L; ++l) {
     float out[8];
     switch (F) {
-      case 1: grid_level_forward_half<1>(g.levels[l], g.interpolation, table, x, y, z, out); break;
-      case 2: grid_level_forward_half<2>(g.levels[l], g.interpolation, table, x, y, z, out); break;
-      case 4: grid_level_forward_half<4>(g.levels[l], g.interpolation, table, x, y, z, out); break;
-      default: grid_level_forward_half<8>(g.levels[l], g.interpolation, table, x, y, z, out); break;
+      case 1: grid_level_forward<1>(g.levels[l], g.interpolation, table, x, y, z, out, 1); break;
+      case 2: grid_level_forward<2>(g.levels[l], g.interpolation, table, x, y, z, out, 1); break;
+      case 4: grid_level_forward<4>(g.levels[l], g.interpolation, table, x, y, z, out, 1); break;
+      default: grid_level_forward<8>(g.levels[l], g.interpolation, table, x, y, z, out, 1); break;
     }
     for (int f = 0; f < F; ++f) row[l * F + f] = __float2half_rn(out[f]);
   }
