@@ -130,11 +130,6 @@ __global__ void adam_kernel(AdamArgs a, float* __restrict__ w, float* __restrict
   }
 }
 
-__global__ void to_half_kernel(const float* __restrict__ in, int64_t n, __half* __restrict__ out) {
-  const int64_t i = int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
-  if (i < n) out[i] = __float2half_rn(in[i]);
-}
-
 __global__ void voxel_centres_kernel(Int3 dims, int64_t first, int64_t count, int64_t padded, float* xyz) {
   const int64_t i = int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
   if (i >= padded) return;
@@ -189,12 +184,6 @@ void adam(const AdamArgs& a, float* w, float* grads, float* m, float* v, uint32_
   if (n <= 0) return;
   adam_kernel<<<blocks_for(n, kThreads * kAdamPerThread), kThreads, 0, s>>>(a, w, grads, m, v, c, half_out, n,
                                                                           bias_sqrt, bias_den);
-  VNR_CUDA_LAUNCHED();
-}
-
-void to_half(const float* in, int64_t n, __half* half_out, cudaStream_t s) {
-  if (n <= 0) return;
-  to_half_kernel<<<blocks_for(n, kThreads), kThreads, 0, s>>>(in, n, half_out);
   VNR_CUDA_LAUNCHED();
 }
 

@@ -39,8 +39,6 @@ struct AdamArgs : AdamHyper {
 // docs/semantics.md A.7.1 on [0, n): reads and zeroes grads, updates w/m/v/c and writes half(w).
 void adam(const AdamArgs& a, float* w, float* grads, float* m, float* v, uint32_t* c, __half* half_out, int64_t n,
           const float* bias_sqrt, const float* bias_den, cudaStream_t s);
-// half_out[i] = half(in[i]) (round to nearest even).
-void to_half(const float* in, int64_t n, __half* half_out, cudaStream_t s);
 // Voxel centres of slices [z0, z0 + count / (nx*ny)) as interleaved xyz, the first `count` points then
 // copies of the last up to `padded`.
 void voxel_centres(Int3 dims, int64_t first, int64_t count, int64_t padded, float* xyz, cudaStream_t s);
