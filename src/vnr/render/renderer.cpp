@@ -154,12 +154,13 @@ struct CpuStreamBackend {
     *stride = 1;
     return qv_.data();
   }
-  void compact(int64_t n) {
+  int64_t compact(int64_t n) {
     next_live_.clear();
     for (int64_t r = 0; r < n; ++r)
       if (keep_[r]) next_live_.push_back(live_[r]);
     live_.swap(next_live_);
     n_live_ = int(live_.size());
+    return n_live_;
   }
 
 private:

@@ -16,7 +16,9 @@
 //   scan(cap, &total, st) -> n     offsets of count[0, cap], their total; the exact live count
 //   points(n) -> PointSink         packed query buffers for n points
 //   query(n, &stride, st) -> v     the field at the n packed points (value q at v[q * stride])
-//   compact(n)                     live = the slots r < n whose keep flag is set, in order
+//   compact(n) -> cap              live = the slots r < n whose keep flag is set, in order; an upper
+//                                  bound of their count (exact where known: the next coordinate stage
+//                                  runs over it, and a static schedule splits it evenly only then)
 #include <cstdint>
 #include "vnr/render/renderer.h"
 #include "vnr/render/stream_stages.h"
@@ -39,8 +41,7 @@ void stream_pass(B& b, const RenderParams& p, const Ops& ops, int K, RenderStats
     int stride = 1;
     const float* v = b.query(n_points, &stride, st);  // one batched inference per iteration
     b.run(nl, StreamShade<Ops>{p, ops, b.live(), K, b.spos(), b.sdt(), b.count(), b.offset(), v, stride, b.keep()});
-    b.compact(nl);
-    cap = nl;
+    cap = b.compact(nl);
     st.field_samples += n_points;
     st.iterations += 1;
   }

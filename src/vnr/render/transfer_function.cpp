@@ -233,35 +233,34 @@ std::vector<float> alpha_array_of(const Json& arr, const std::string& where) {
   return alpha_array;
 }
 
+// The elements of the JSON array `arr` (named `w` in errors), each read by element(value, "w[k]").
+template <class T, class Element>
+std::vector<T> elements_of(const Json& arr, const std::string& w, const Element& element) {
+  std::vector<T> out;
+  for (size_t k = 0; k < array_of(arr, w).size(); ++k) out.push_back(element(arr[k], fmt::format("{}[{}]", w, k)));
+  return out;
+}
+
 // "colorControls": [{"position": p, "color": {"r", "g", "b"}}, ...], all in [0, 1].
 std::vector<ColorPoint> color_controls_of(const Json& arr, const std::string& where) {
-  std::vector<ColorPoint> colors;
-  const std::string w = where + ": colorControls";
-  for (size_t k = 0; k < array_of(arr, w).size(); ++k) {
-    const std::string wk = fmt::format("{}[{}]", w, k);
-    const Json& cc = arr[k];
+  return elements_of<ColorPoint>(arr, where + ": colorControls", [](const Json& cc, const std::string& wk) {
     const double p = unit_number(member(cc, "position", wk), wk + ".position");
     const Json& col = member(cc, "color", wk);
     const float r = float(unit_number(member(col, "r", wk + ".color"), wk + ".color.r"));
     const float g = float(unit_number(member(col, "g", wk + ".color"), wk + ".color.g"));
     const float b = float(unit_number(member(col, "b", wk + ".color"), wk + ".color.b"));
-    colors.push_back({p, Vec3f{r, g, b}});
-  }
-  return colors;
+    return ColorPoint{p, Vec3f{r, g, b}};
+  });
 }
 
 // "opacityControl": [{"position": {"x": value, "y": opacity}}, ...], all in [0, 1].
 std::vector<AlphaPoint> opacity_controls_of(const Json& arr, const std::string& where) {
-  std::vector<AlphaPoint> opacity;
-  const std::string w = where + ": opacityControl";
-  for (size_t k = 0; k < array_of(arr, w).size(); ++k) {
-    const std::string wk = fmt::format("{}[{}]", w, k);
-    const Json& pos = member(arr[k], "position", wk);
+  return elements_of<AlphaPoint>(arr, where + ": opacityControl", [](const Json& oc, const std::string& wk) {
+    const Json& pos = member(oc, "position", wk);
     const double x = unit_number(member(pos, "x", wk + ".position"), wk + ".position.x");
     const double a = unit_number(member(pos, "y", wk + ".position"), wk + ".position.y");
-    opacity.push_back({x, float(a)});
-  }
-  return opacity;
+    return AlphaPoint{x, float(a)};
+  });
 }
 
 struct GaussianBump {
@@ -270,18 +269,13 @@ struct GaussianBump {
 
 // "gaussianObjects": [{"mean", "sigma" > 0, "heightFactor"}, ...].
 std::vector<GaussianBump> gaussian_objects_of(const Json& arr, const std::string& where) {
-  std::vector<GaussianBump> gaussians;
-  const std::string w = where + ": gaussianObjects";
-  for (size_t k = 0; k < array_of(arr, w).size(); ++k) {
-    const std::string wk = fmt::format("{}[{}]", w, k);
-    const Json& g = arr[k];
+  return elements_of<GaussianBump>(arr, where + ": gaussianObjects", [](const Json& g, const std::string& wk) {
     const double mean = number(member(g, "mean", wk), wk + ".mean");
     const double sigma = number(member(g, "sigma", wk), wk + ".sigma");
     const double h = number(member(g, "heightFactor", wk), wk + ".heightFactor");
     if (!(sigma > 0)) fail("{}.sigma: {} must be positive", wk, sigma);
-    gaussians.push_back({mean, sigma, h});
-  }
-  return gaussians;
+    return GaussianBump{mean, sigma, h};
+  });
 }
 
 // docs/MODEL_FORMAT.md section 3: the keys are read in this order, so the first bad one is reported.

@@ -276,9 +276,10 @@ struct GpuRenderer::Impl {
         VNR_CUDA_CHECK(cudaMemsetAsync(I.xyz.data() + 3 * n, 0, size_t(3 * (n_padded - n)) * 4, I.sb.stream));
       return I.evaluate(n_padded, stride);
     }
-    void compact(int64_t n) {
+    int64_t compact(int64_t n) {  // the exact count stays on the GPU until the next scan
       I.compact(I.live.data(), n, I.next.data());
       std::swap(I.live, I.next);
+      return n;
     }
     template <class T>
     static T* resized(DeviceBuffer<T>& b, int64_t n) {
