@@ -211,6 +211,10 @@ TEST(ApiRenderer, AnyChangeRestartsAndGivesAFreshRenderersImage) {
   EXPECT_TRUE(same_pixels(r.image(), fresh(cam2, tf2, RenderMode::Shadow, 2)));
 }
 
+TEST(ApiRenderer, AnEmptyRenderInputFailsWithOneError) {
+  expect_error([] { Renderer r(RenderInput{}, Device::Cpu); }, {"neither a model nor a volume"});
+}
+
 TEST(ApiRenderer, RendersAModelAndChecksItsMacroCells) {
   GridScene s;
   Model m = tiny_model(s.vol);

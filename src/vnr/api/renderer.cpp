@@ -79,6 +79,7 @@ MacroCellMode default_macrocell_mode(const Model* model, const Volume* volume) {
 
 Renderer::Renderer(const Model* model, const Volume* volume, Device device)
     : model_(model), volume_(volume), device_(device) {
+  if (!model && !volume) fail("the render input holds neither a model nor a volume");
   Int3 dims;
   if (model) {
     if (!model->net) fail("the model has no network");
@@ -102,7 +103,6 @@ Renderer::Renderer(const Model& model, Device device, const Volume* ground_truth
 Renderer::Renderer(const Volume& volume, Device device) : Renderer(nullptr, &volume, device) {}
 Renderer::Renderer(const RenderInput& input, Device device)
     : Renderer(input.model ? &*input.model : nullptr, input.volume ? &*input.volume : nullptr, device) {
-  if (!input.model && !input.volume) fail("the render input holds neither a model nor a volume");
   set_scene(input.scene);
 }
 Renderer::~Renderer() = default;
