@@ -132,6 +132,7 @@ void Renderer::set_mode(RenderMode mode) { options_.mode = mode, invalidate(); }
 void Renderer::set_strategy(RenderStrategy strategy) { options_.strategy = strategy, invalidate(); }
 void Renderer::set_macrocells(MacroCellMode mode, int cell_size) {
   if (cell_size < 1) fail("--macrocell-size must be at least 1, got {}", cell_size);
+  if (cell_size != mc_cell_size_) grid_ranges_.reset();
   if (mode != mc_mode_ || (mode == MacroCellMode::Grid && cell_size != mc_cell_size_)) mc_.reset();
   mc_mode_ = mode;
   mc_cell_size_ = cell_size;
@@ -158,16 +159,18 @@ void Renderer::set_mlp_path(cuda::MlpPath mlp) { mlp_ = mlp, invalidate(); }
 void Renderer::set_options(const RenderOptions& options) { options_ = options, invalidate(); }
 
 // Macro-cells of the mode: grid needs a volume, online a model trained by vnr (its recorded value
-// ranges), off is one cell. Grid ranges are computed on the device that renders.
+// ranges), off is one cell. Grid ranges are computed on the device that renders, once per cell size:
+// switching modes back and forth (bench render's cells) does not scan the volume again.
 const MacroCells& Renderer::macrocells() {
   if (!mc_) {
     switch (mc_mode_) {
       case MacroCellMode::Grid:
         if (!volume_)
           fail("--macrocells grid needs the ground-truth volume: pass it with --volume (or use online/off)");
-        mc_.emplace(device_ == Device::Cuda ? gpu_value_ranges_from_grid(view_of(*volume_), mc_cell_size_)
-                                            : value_ranges_from_grid(view_of(*volume_), mc_cell_size_),
-                    box_);
+        if (!grid_ranges_)
+          grid_ranges_ = device_ == Device::Cuda ? gpu_value_ranges_from_grid(view_of(*volume_), mc_cell_size_)
+                                                 : value_ranges_from_grid(view_of(*volume_), mc_cell_size_);
+        mc_.emplace(*grid_ranges_, box_);
         break;
       case MacroCellMode::Online:
         if (!model_ || !model_->macrocells)
