@@ -1,7 +1,6 @@
 // vnr::Renderer: the field, macro-cells and settings behind one object; the backend (CpuRenderer or
 // GpuRenderer) is rebuilt lazily after a change, and only a new camera is handed to the live backend.
 #include "vnr/renderer.h"
-#include <algorithm>
 #include <chrono>
 #include <cstring>
 #include <fstream>
@@ -217,13 +216,6 @@ void Renderer::save(const std::string& path) const {
   if (frames_ == 0) fail("nothing rendered to save to '{}'", path);
   write_image(path, accumulated_);
 }
-
-namespace {
-double upper_median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  return v.empty() ? 0 : v[v.size() / 2];
-}
-}  // namespace
 
 double field_query_rate(const Renderer& renderer, double seconds) {
   if (renderer.device() == Device::Cuda) {
