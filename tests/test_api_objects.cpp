@@ -211,6 +211,35 @@ TEST(ApiRenderer, AnyChangeRestartsAndGivesAFreshRenderersImage) {
   EXPECT_TRUE(same_pixels(r.image(), fresh(cam2, tf2, RenderMode::Shadow, 2)));
 }
 
+// Macro-cells switched off and back (as bench render's cells do) give the grid mode's image again, and
+// a new cell size its own.
+TEST(ApiRenderer, MacroCellsSwitchedOffAndBackRenderAsBefore) {
+  GridScene s;
+  Renderer r(s.vol, Device::Cpu);
+  r.set_options(small_options());
+  r.set_camera(s.cam);
+  r.set_macrocells(MacroCellMode::Grid, 8);
+  const Image grid = r.render_frame();
+  r.set_macrocells(MacroCellMode::Off);
+  r.render_frame();
+  r.set_macrocells(MacroCellMode::Grid, 8);
+  EXPECT_TRUE(same_pixels(r.render_frame(), grid));
+  CpuRenderer hand(s.field, box_of(s.vol), s.mc, s.tf, s.cam, small_options());
+  EXPECT_TRUE(same_pixels(grid, hand.render(1)));
+
+  r.set_macrocells(MacroCellMode::Grid, 4);
+  Renderer fresh(s.vol, Device::Cpu);
+  fresh.set_options(small_options());
+  fresh.set_camera(s.cam);
+  fresh.set_macrocells(MacroCellMode::Grid, 4);
+  EXPECT_TRUE(same_pixels(r.render_frame(), fresh.render_frame()));
+  EXPECT_EQ(r.macrocell_mode(), MacroCellMode::Grid);
+}
+
+TEST(ApiRenderer, AnEmptyRenderInputFailsWithOneError) {
+  expect_error([] { Renderer r(RenderInput{}, Device::Cpu); }, {"neither a model nor a volume"});
+}
+
 TEST(ApiRenderer, RendersAModelAndChecksItsMacroCells) {
   GridScene s;
   Model m = tiny_model(s.vol);

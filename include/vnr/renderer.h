@@ -127,6 +127,7 @@ private:
   MacroCellMode mc_mode_ = MacroCellMode::Off;
   int mc_cell_size_ = 16;
   cuda::MlpPath mlp_ = cuda::MlpPath::Auto;
+  std::optional<ValueRangeGrid> grid_ranges_;  // Grid mode's value ranges for mc_cell_size_
   std::optional<MacroCells> mc_;  // for mc_mode_ and mc_cell_size_, opacities for tf_
   bool mc_tf_current_ = false;
   std::unique_ptr<FrameRenderer> backend_;

@@ -43,7 +43,6 @@ std::string human_bytes(double bytes);
 // A compression ratio for people: two decimals, or two significant digits below 0.01 (a model larger
 // than a tiny volume would otherwise read "0.00").
 std::string format_ratio(double ratio);
-double median(std::vector<double> v);  // upper median; 0 for none
 
 void add_train(CLI::App& app);
 void add_eval(CLI::App& app);

@@ -2,7 +2,6 @@
 // {ray marching, shadows, path tracing} x {in-shader, streaming} x {without, with macro-cells} -- and
 // how much of the field's raw batched query rate each renderer keeps. The camera orbits the volume
 // (360 degrees over the timed frames, like the VTK peer) so every cell sees the same views.
-#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include "cli.h"
@@ -60,7 +59,7 @@ struct CellTimer {
       total->seconds += st.seconds;
       total->frames += 1;
     }
-    return 1.0 / median(times);
+    return 1.0 / upper_median(times);
   }
 };
 

@@ -1,6 +1,5 @@
 // vnr: command-line front end of libvnr. Each subcommand lives in its own file; errors from the
 // library arrive as vnr::Error and are printed as one line with a non-zero exit status.
-#include <algorithm>
 #include <cstdio>
 #include <cstdlib>
 #include "cli.h"
@@ -47,11 +46,6 @@ LoadOptions VolumeArgs::load() const {
                  : nan_policy == "clamp" ? NonFinitePolicy::Clamp
                                          : NonFinitePolicy::Error;
   return o;
-}
-
-double median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  return v.empty() ? 0 : v[v.size() / 2];
 }
 
 void add_precision_option(CLI::App* app, std::string& precision) {

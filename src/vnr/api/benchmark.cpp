@@ -16,11 +16,6 @@
 namespace vnr {
 namespace {
 
-double upper_median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  return v.empty() ? 0 : v[v.size() / 2];
-}
-
 void check_options(const BenchOptions& o) {
   if (o.batch <= 0) fail("the benchmark's batch must be a positive number of samples, got {}", o.batch);
   if (!std::isfinite(o.seconds) || o.seconds < 0)

@@ -23,8 +23,7 @@ ModelQuery::~ModelQuery() = default;
 namespace {
 void convert_units(const Model& m, ValueUnits units, float* v, int64_t n) {
   if (units != ValueUnits::Original) return;
-  const double lo = m.lo, span = m.hi - m.lo;  // `vnr decode`'s expression, so files match its output
-  for (int64_t i = 0; i < n; ++i) v[i] = float(lo + double(v[i]) * span);
+  for (int64_t i = 0; i < n; ++i) v[i] = to_original_units(m, v[i]);  // `vnr decode`'s expression
 }
 void check_grid(Int3 dims, int64_t z0, int64_t z1) {
   if (dims.x < 1 || dims.y < 1 || dims.z < 1) fail("decode dims must be positive, got {}x{}x{}", dims.x, dims.y, dims.z);

@@ -1,7 +1,6 @@
 // vnr::Renderer: the field, macro-cells and settings behind one object; the backend (CpuRenderer or
 // GpuRenderer) is rebuilt lazily after a change, and only a new camera is handed to the live backend.
 #include "vnr/renderer.h"
-#include <algorithm>
 #include <chrono>
 #include <cstring>
 #include <fstream>
@@ -79,6 +78,7 @@ MacroCellMode default_macrocell_mode(const Model* model, const Volume* volume) {
 
 Renderer::Renderer(const Model* model, const Volume* volume, Device device)
     : model_(model), volume_(volume), device_(device) {
+  if (!model && !volume) fail("the render input holds neither a model nor a volume");
   Int3 dims;
   if (model) {
     if (!model->net) fail("the model has no network");
@@ -102,7 +102,6 @@ Renderer::Renderer(const Model& model, Device device, const Volume* ground_truth
 Renderer::Renderer(const Volume& volume, Device device) : Renderer(nullptr, &volume, device) {}
 Renderer::Renderer(const RenderInput& input, Device device)
     : Renderer(input.model ? &*input.model : nullptr, input.volume ? &*input.volume : nullptr, device) {
-  if (!input.model && !input.volume) fail("the render input holds neither a model nor a volume");
   set_scene(input.scene);
 }
 Renderer::~Renderer() = default;
@@ -132,6 +131,7 @@ void Renderer::set_mode(RenderMode mode) { options_.mode = mode, invalidate(); }
 void Renderer::set_strategy(RenderStrategy strategy) { options_.strategy = strategy, invalidate(); }
 void Renderer::set_macrocells(MacroCellMode mode, int cell_size) {
   if (cell_size < 1) fail("--macrocell-size must be at least 1, got {}", cell_size);
+  if (cell_size != mc_cell_size_) grid_ranges_.reset();
   if (mode != mc_mode_ || (mode == MacroCellMode::Grid && cell_size != mc_cell_size_)) mc_.reset();
   mc_mode_ = mode;
   mc_cell_size_ = cell_size;
@@ -158,16 +158,18 @@ void Renderer::set_mlp_path(cuda::MlpPath mlp) { mlp_ = mlp, invalidate(); }
 void Renderer::set_options(const RenderOptions& options) { options_ = options, invalidate(); }
 
 // Macro-cells of the mode: grid needs a volume, online a model trained by vnr (its recorded value
-// ranges), off is one cell. Grid ranges are computed on the device that renders.
+// ranges), off is one cell. Grid ranges are computed on the device that renders, once per cell size:
+// switching modes back and forth (bench render's cells) does not scan the volume again.
 const MacroCells& Renderer::macrocells() {
   if (!mc_) {
     switch (mc_mode_) {
       case MacroCellMode::Grid:
         if (!volume_)
           fail("--macrocells grid needs the ground-truth volume: pass it with --volume (or use online/off)");
-        mc_.emplace(device_ == Device::Cuda ? gpu_value_ranges_from_grid(view_of(*volume_), mc_cell_size_)
-                                            : value_ranges_from_grid(view_of(*volume_), mc_cell_size_),
-                    box_);
+        if (!grid_ranges_)
+          grid_ranges_ = device_ == Device::Cuda ? gpu_value_ranges_from_grid(view_of(*volume_), mc_cell_size_)
+                                                 : value_ranges_from_grid(view_of(*volume_), mc_cell_size_);
+        mc_.emplace(*grid_ranges_, box_);
         break;
       case MacroCellMode::Online:
         if (!model_ || !model_->macrocells)
@@ -214,13 +216,6 @@ void Renderer::save(const std::string& path) const {
   if (frames_ == 0) fail("nothing rendered to save to '{}'", path);
   write_image(path, accumulated_);
 }
-
-namespace {
-double upper_median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  return v.empty() ? 0 : v[v.size() / 2];
-}
-}  // namespace
 
 double field_query_rate(const Renderer& renderer, double seconds) {
   if (renderer.device() == Device::Cuda) {

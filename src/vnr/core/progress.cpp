@@ -1,5 +1,6 @@
 #include "vnr/core/progress.h"
 #include <unistd.h>
+#include <algorithm>
 #include <cstdio>
 #include <fmt/format.h>
 
@@ -7,6 +8,11 @@ namespace vnr {
 
 double seconds_since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+double upper_median(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  return v.empty() ? 0 : v[v.size() / 2];
 }
 
 std::string eta_text(double frac, double elapsed) {

@@ -1,6 +1,7 @@
 #pragma once
 #include <chrono>
 #include <string>
+#include <vector>
 
 namespace vnr {
 
@@ -21,6 +22,8 @@ private:
 };
 
 double seconds_since(std::chrono::steady_clock::time_point t0);
+// The upper median of timings (v[n / 2] sorted), 0 for none: what every timing report takes.
+double upper_median(std::vector<double> v);
 
 // "ETA 12s" from the fraction done and the seconds elapsed; "ETA ?" while too little is done to say.
 std::string eta_text(double frac, double elapsed);

@@ -12,11 +12,6 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-double upper_median(std::vector<double> v) {  // as the CLI's reports: the upper median, 0 for none
-  std::sort(v.begin(), v.end());
-  return v.empty() ? 0 : v[v.size() / 2];
-}
-
 }  // namespace
 
 TrainingSession::TrainingSession(Model& model, std::unique_ptr<Trainer> trainer, SessionOptions opts)
