@@ -3,9 +3,9 @@
 //
 //   example_train_and_render [VOLUME [OUT_DIR [STEPS]]]
 //
-// VOLUME is any file `vnr train` reads (JSON sidecar, instantvnr scene, NRRD); without one the program
-// (or with an empty VOLUME argument) makes a 64^3 Marschner-Lobb volume in memory. Build it against an installed vnr with
-// find_package(vnr) and target_link_libraries(app vnr::vnr).
+// VOLUME is any file `vnr train` reads (JSON sidecar, instantvnr scene, NRRD); without one (or with an
+// empty VOLUME argument) the program makes a 64^3 Marschner-Lobb volume in memory. Build it against an
+// installed vnr with find_package(vnr) and target_link_libraries(app vnr::vnr).
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>

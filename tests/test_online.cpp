@@ -28,13 +28,7 @@ using namespace vnr::test;
 
 namespace {
 
-Json small_config() {
-  return {{"encoding", {{"otype", "HashGrid"}, {"n_levels", 4}, {"n_features_per_level", 2},
-                        {"log2_hashmap_size", 14}, {"base_resolution", 4}}},
-          {"network", {{"otype", "FullyFusedMLP"}, {"n_neurons", 32}, {"n_hidden_layers", 2}}},
-          {"loss", {{"otype", "L2"}}},
-          {"optimizer", {{"otype", "Adam"}, {"learning_rate", 1e-2}}}};
-}
+Json small_config() { return small_hash_config(14, 32, 2); }
 
 bool same_pixels(const Image& a, const Image& b) {
   return a.width == b.width && a.height == b.height &&

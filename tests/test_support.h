@@ -233,6 +233,19 @@ inline Json mlp_model_config(Json encoding, int width, int hidden, const std::st
               {"loss", {{"otype", loss}}}};
 }
 
+// A small hash-grid model config (4 levels of 2 features from resolution 4, 2^log2_table entries per
+// level), an MLP of `hidden` layers of `width` neurons, L2 loss and Adam at learning rate 1e-2.
+inline Json small_hash_config(int log2_table, int width, int hidden) {
+  Json c = mlp_model_config({{"otype", "HashGrid"},
+                             {"n_levels", 4},
+                             {"n_features_per_level", 2},
+                             {"log2_hashmap_size", log2_table},
+                             {"base_resolution", 4}},
+                            width, hidden);
+  c["optimizer"] = {{"otype", "Adam"}, {"learning_rate", 1e-2}};
+  return c;
+}
+
 // ---- the vnr command line -----------------------------------------------------------------------
 
 struct Result {

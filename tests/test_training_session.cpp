@@ -18,13 +18,7 @@ using namespace vnr::test;
 
 namespace {
 
-Json small_config() {
-  return {{"encoding", {{"otype", "HashGrid"}, {"n_levels", 4}, {"n_features_per_level", 2},
-                        {"log2_hashmap_size", 12}, {"base_resolution", 4}}},
-          {"network", {{"otype", "FullyFusedMLP"}, {"n_neurons", 16}, {"n_hidden_layers", 1}}},
-          {"loss", {{"otype", "L2"}}},
-          {"optimizer", {{"otype", "Adam"}, {"learning_rate", 1e-2}}}};
-}
+Json small_config() { return small_hash_config(12, 16, 1); }
 
 // A model of a small volume and a CPU session training it.
 struct Fixture {

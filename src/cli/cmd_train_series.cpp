@@ -19,6 +19,7 @@
 #include "vnr/nn/config.h"
 #include "vnr/train/model_io.h"
 #include "vnr/train/series.h"
+#include "vnr/train/session.h"
 
 namespace vnr::cli {
 namespace {
@@ -43,10 +44,12 @@ struct SigintGuard {
 };
 
 void check_series_args(const TrainArgs& a) {
-  if (a.batch <= 0 || a.batch % kChunk != 0) fail("--batch must be a positive multiple of {}, got {}", kChunk, a.batch);
-  if (a.steps < -1) fail("--steps must be non-negative, got {}", a.steps);
+  TrainingSetup shared;  // --batch, --steps and --macrocell-size: checked as for one volume
+  shared.batch = a.batch;
+  shared.steps = a.steps;
+  shared.macrocell_size = a.macrocell_size;
+  check_training_setup(shared);
   if (a.seconds < 0) fail("--seconds must not be negative, got {}", a.seconds);
-  if (a.macrocell_size < 0) fail("--macrocell-size must be 0 (none) or positive, got {}", a.macrocell_size);
   if (a.vol.timestep >= 0)
     fail("--timestep picks one timestep of a single-volume run; with --timesteps give the selection there "
          "(e.g. --timesteps {})",
@@ -80,11 +83,6 @@ void make_output_dir(const std::string& dir) {
   if (ec || !fs::is_directory(dir)) fail("cannot create output directory '{}': {}", dir, ec ? ec.message() : "unknown error");
 }
 
-Json eval_row(const EvalResult& ev, bool ssim) {
-  return {{"psnr", ev.psnr}, {"ssim", ssim ? Json(ev.ssim) : Json(nullptr)}, {"max_abs_error", ev.max_abs_error},
-          {"max_abs_error_original", ev.max_abs_error_original}};
-}
-
 // One `vnr train --timesteps` run: what both modes share.
 struct SeriesRun {
   SeriesRun(const TrainArgs& args, Model m, std::vector<int> timesteps)
@@ -95,59 +93,29 @@ struct SeriesRun {
   FrameLoader load;
   SeriesHooks hooks;
   Json report;
+  Json rows = Json::array();  // report["rows"]: one per saved model
   std::string report_path;
   uint64_t frame_bytes = 0;
   Precision precision = Precision::FP32;
   std::chrono::steady_clock::time_point t_all;
   std::unique_ptr<Progress> bar;
   int saved = 0;
-  std::string save(const Model& m, int t) {
-    const std::string path = join_path(a.output, timestep_model_name(t));
+
+  TrainOptions train_options() const {
+    TrainOptions t{a.batch, a.seed};
+    t.precision = precision;
+    return t;
+  }
+  // Saves the model of r's timestep (a TimestepResult or a WindowResult) and returns its report row
+  // with the keys both modes share.
+  template <class Result>
+  Json save(const Model& m, const Result& r) {
+    const std::string path = join_path(a.output, timestep_model_name(r.timestep));
     save_model(path, m);
     ++saved;
-    return path;
-  }
-};
-
-// One model per timestep, warm-started (train_series: a TrainingSession per timestep).
-void train_per_timestep(SeriesRun& run) {
-  const TrainArgs& a = run.a;
-  Json& report = run.report;
-  std::unique_ptr<Progress>& bar = run.bar;
-  SeriesHooks& hooks = run.hooks;
-  const Precision precision = run.precision;
-  const uint64_t frame_bytes = run.frame_bytes;
-  const std::string& report_path = run.report_path;
-  const bool by_time = a.seconds > 0 && a.steps < 0;
-  Json rows = Json::array();
-  auto save = [&](const Model& m, int t) { return run.save(m, t); };
-  SeriesOptions so;
-  so.train = TrainOptions{a.batch, a.seed};
-  so.train.precision = precision;
-  so.steps = a.steps >= 0 ? a.steps : (a.seconds > 0 ? -1 : 1000);
-  so.seconds = a.seconds;
-  so.macrocell_size = a.macrocell_size;
-  so.ssim = !a.no_ssim;
-  report["steps_per_timestep"] = so.steps >= 0 ? Json(so.steps) : Json(nullptr);
-  report["seconds_per_timestep"] = a.seconds;
-  report["config"] = run.model.net->config_json();
-  report["precision"] = precision_name(precision);
-  auto t_start = std::chrono::steady_clock::now();
-  hooks.on_loaded = [&](int t, double) {
-    bar = std::make_unique<Progress>(fmt::format("t{:04d}", t), by_time ? a.seconds : double(so.steps), a.quiet);
-    t_start = std::chrono::steady_clock::now();
-  };
-  hooks.on_step = [&](int, int64_t s, float loss) {
-    bar->update(by_time ? seconds_since(t_start) : double(s), fmt::format("step {} loss {:.5f}", s, loss));
-  };
-  std::printf("timestep  start  steps  seconds  final loss  PSNR (dB)%s  model\n", a.no_ssim ? "" : "   SSIM");
-  auto done = [&](const TimestepResult& r, const Model& m) {
-    bar->finish(fmt::format("({} steps, loss {:.5f})", r.steps, r.final_loss));
-    const std::string path = save(m, r.timestep);
     const uint64_t bytes = file_size(path);
     Json row = {{"timestep", r.timestep},
                 {"model", path},
-                {"warm_start", r.warm_started},
                 {"steps", r.steps},
                 {"seconds", r.seconds},
                 {"load_seconds", r.load_seconds},
@@ -156,46 +124,88 @@ void train_per_timestep(SeriesRun& run) {
                 {"hi", r.hi},
                 {"model_bytes", bytes},
                 {"compression_ratio", double(frame_bytes) / double(bytes)},
-                {"interrupted", r.interrupted}};
-    row.update(eval_row(r.eval, !a.no_ssim));
-    rows.push_back(row);
+                {"interrupted", r.interrupted},
+                {"psnr", r.eval.psnr},
+                {"ssim", a.no_ssim ? Json(nullptr) : Json(r.eval.ssim)},
+                {"max_abs_error", r.eval.max_abs_error},
+                {"max_abs_error_original", r.eval.max_abs_error_original}};
+    return row;
+  }
+  // Appends a row and rewrites the report, marked incomplete until finish().
+  void add_row(Json row) {
+    rows.push_back(std::move(row));
     report["rows"] = rows;
     report["complete"] = false;
     write_report(report_path, report);
+  }
+  void finish(bool interrupted) {
+    report["interrupted"] = interrupted;
+    report["complete"] = !interrupted;
+    report["total_seconds"] = seconds_since(t_all);
+    write_report(report_path, report);
+  }
+  void print_models_line() const {
+    std::printf("%zu model%s in %s, report %s\n", rows.size(), rows.size() == 1 ? "" : "s", a.output.c_str(),
+                report_path.c_str());
+  }
+};
+
+// One model per timestep, warm-started (train_series: a TrainingSession per timestep).
+void train_per_timestep(SeriesRun& run) {
+  const TrainArgs& a = run.a;
+  const bool by_time = a.seconds > 0 && a.steps < 0;
+  SeriesOptions so;
+  so.train = run.train_options();
+  so.steps = a.steps >= 0 ? a.steps : (a.seconds > 0 ? -1 : 1000);
+  so.seconds = a.seconds;
+  so.macrocell_size = a.macrocell_size;
+  so.ssim = !a.no_ssim;
+  run.report["steps_per_timestep"] = so.steps >= 0 ? Json(so.steps) : Json(nullptr);
+  run.report["seconds_per_timestep"] = a.seconds;
+  run.report["config"] = run.model.net->config_json();
+  run.report["precision"] = precision_name(run.precision);
+  auto t_start = std::chrono::steady_clock::now();
+  run.hooks.on_loaded = [&](int t, double) {
+    run.bar = std::make_unique<Progress>(fmt::format("t{:04d}", t), by_time ? a.seconds : double(so.steps), a.quiet);
+    t_start = std::chrono::steady_clock::now();
+  };
+  run.hooks.on_step = [&](int, int64_t s, float loss) {
+    run.bar->update(by_time ? seconds_since(t_start) : double(s), fmt::format("step {} loss {:.5f}", s, loss));
+  };
+  std::printf("timestep  start  steps  seconds  final loss  PSNR (dB)%s  model\n", a.no_ssim ? "" : "   SSIM");
+  auto done = [&](const TimestepResult& r, const Model& m) {
+    run.bar->finish(fmt::format("({} steps, loss {:.5f})", r.steps, r.final_loss));
+    Json row = run.save(m, r);
+    row["warm_start"] = r.warm_started;
+    const std::string path = row["model"].get<std::string>();
+    run.add_row(std::move(row));
     std::printf("t%04d     %-5s  %5lld  %7.2f  %10.6f  %9.2f%s  %s\n", r.timestep, r.warm_started ? "warm" : "init",
                 (long long)r.steps, r.seconds, r.final_loss, r.eval.psnr,
                 a.no_ssim ? "" : fmt::format("  {:.4f}", r.eval.ssim).c_str(), path.c_str());
     std::fflush(stdout);
   };
-  std::vector<TimestepResult> res = train_series(run.model, run.ts, run.load, so, hooks, done);
+  std::vector<TimestepResult> res = train_series(run.model, run.ts, run.load, so, run.hooks, done);
   const bool interrupted = !res.empty() && res.back().interrupted;
-  report["interrupted"] = interrupted;
-  report["complete"] = !interrupted;
-  report["total_seconds"] = seconds_since(run.t_all);
-  write_report(report_path, report);
+  run.finish(interrupted);
   if (interrupted)
     std::fprintf(stderr, "interrupted: stopped after timestep %d (its model is saved; later timesteps were not trained)\n",
                  res.back().timestep);
-  std::printf("%zu model%s in %s, report %s\n", res.size(), res.size() == 1 ? "" : "s", a.output.c_str(),
-              report_path.c_str());
+  run.print_models_line();
 }
 
 // The continuous run's tables: per timestep, and per switch with its recovery.
-void print_continuous(const SeriesRun& run, const ContinuousResult& res, const ContinuousOptions& co, int64_t global,
-                      const std::vector<WindowResult>& done_windows, const Json& windows) {
-  const TrainArgs& a = run.a;
-  const std::string& report_path = run.report_path;
+void print_continuous(const SeriesRun& run, const ContinuousResult& res, const ContinuousOptions& co, int64_t global) {
   std::printf("continuous training: %lld steps, %lld per timestep, learning rate fixed at %g; PSNR probe: %lld "
               "voxels every %lld steps\n",
-              (long long)global, (long long)a.switch_every, double(res.learning_rate), (long long)res.probe_voxels,
+              (long long)global, (long long)run.a.switch_every, double(res.learning_rate), (long long)res.probe_voxels,
               (long long)co.probe_every);
   std::printf("timestep  steps  seconds  PSNR (dB)  model\n");
-  for (size_t i = 0; i < done_windows.size(); ++i)
-    std::printf("t%04d     %5lld  %7.2f  %9.2f  %s\n", done_windows[i].timestep, (long long)done_windows[i].steps,
-                done_windows[i].seconds, done_windows[i].eval.psnr, windows[i]["model"].get<std::string>().c_str());
-  if (done_windows.size() > 1) {
+  for (size_t i = 0; i < res.windows.size(); ++i)
+    std::printf("t%04d     %5lld  %7.2f  %9.2f  %s\n", res.windows[i].timestep, (long long)res.windows[i].steps,
+                res.windows[i].seconds, res.windows[i].eval.psnr, run.rows[i]["model"].get<std::string>().c_str());
+  if (res.windows.size() > 1) {
     std::printf("switch          PSNR before  PSNR after  recovered after\n");
-    for (const WindowResult& w : done_windows) {
+    for (const WindowResult& w : res.windows) {
       if (!w.has_switch) continue;
       std::string rec = w.recovery_steps >= 0
                             ? fmt::format("{} steps ({:.2f} s)", w.recovery_steps, w.recovery_seconds)
@@ -204,97 +214,61 @@ void print_continuous(const SeriesRun& run, const ContinuousResult& res, const C
                   w.psnr_after, rec.c_str());
     }
   }
-  std::printf("%zu model%s in %s, report %s\n", done_windows.size(), done_windows.size() == 1 ? "" : "s",
-              a.output.c_str(), report_path.c_str());
 }
 
-// The report row of one timestep's window of continuous training, its model saved at `path`.
-Json continuous_window_row(const WindowResult& w, const std::string& path, uint64_t frame_bytes, bool ssim) {
-  const uint64_t bytes = file_size(path);
-  Json sw = nullptr;
-  if (w.has_switch)
-    sw = {{"from", w.from_timestep},
+// The switch into a window of continuous training, for its report row (null for the first window).
+Json switch_json(const WindowResult& w) {
+  if (!w.has_switch) return nullptr;
+  return {{"from", w.from_timestep},
           {"psnr_before", w.psnr_before},
           {"psnr_after", w.psnr_after},
           {"recovered", w.recovery_steps >= 0},
           {"recovery_steps", w.recovery_steps >= 0 ? Json(w.recovery_steps) : Json(nullptr)},
           {"recovery_seconds", w.recovery_steps >= 0 ? Json(w.recovery_seconds) : Json(nullptr)}};
-  Json row = {{"timestep", w.timestep},
-              {"model", path},
-              {"first_step", w.first_step},
-              {"steps", w.steps},
-              {"seconds", w.seconds},
-              {"load_seconds", w.load_seconds},
-              {"final_loss", w.final_loss},
-              {"probe_psnr_end", w.psnr_end},
-              {"lo", w.lo},
-              {"hi", w.hi},
-              {"model_bytes", bytes},
-              {"compression_ratio", double(frame_bytes) / double(bytes)},
-              {"interrupted", w.interrupted},
-              {"switch", sw}};
-  row.update(eval_row(w.eval, ssim));
-  return row;
 }
 
 // One network trained across the timesteps (train_continuous: one TrainingSession for the run).
 void train_continuously(SeriesRun& run) {
   const TrainArgs& a = run.a;
-  Json& report = run.report;
-  std::unique_ptr<Progress>& bar = run.bar;
-  SeriesHooks& hooks = run.hooks;
-  const Precision precision = run.precision;
-  const uint64_t frame_bytes = run.frame_bytes;
-  const std::string& report_path = run.report_path;
-  const std::vector<int>& ts = run.ts;
-  auto save = [&](const Model& m, int t) { return run.save(m, t); };
   ContinuousOptions co;
-  co.train = TrainOptions{a.batch, a.seed};
-  co.train.precision = precision;
+  co.train = run.train_options();
   co.switch_every = a.switch_every;
   co.macrocell_size = a.macrocell_size;
   co.ssim = !a.no_ssim;
-  bar = std::make_unique<Progress>("train", double(a.switch_every) * double(ts.size()), a.quiet);
+  run.bar = std::make_unique<Progress>("train", double(a.switch_every) * double(run.ts.size()), a.quiet);
   int64_t global = 0;
-  hooks.on_step = [&](int t, int64_t, float loss) {
+  run.hooks.on_step = [&](int t, int64_t, float loss) {
     ++global;
-    bar->update(double(global), fmt::format("timestep {} step {} loss {:.5f}", t, global, loss));
+    run.bar->update(double(global), fmt::format("timestep {} step {} loss {:.5f}", t, global, loss));
   };
-  Json windows = Json::array();
-  std::vector<WindowResult> done_windows;
-  float lr = 0;
   auto done = [&](const WindowResult& w, const Model& m) {
-    const std::string path = save(m, w.timestep);
-    lr = m.net->config().adam.learning_rate;
-    windows.push_back(continuous_window_row(w, path, frame_bytes, !a.no_ssim));
-    done_windows.push_back(w);
-    report["rows"] = windows;
-    report["complete"] = false;
-    report["switch_every"] = a.switch_every;
-    report["learning_rate"] = lr;
-    report["config"] = m.net->config_json();
-    report["precision"] = precision_name(precision);
-    write_report(report_path, report);
+    Json row = run.save(m, w);
+    row["first_step"] = w.first_step;
+    row["probe_psnr_end"] = w.psnr_end;
+    row["switch"] = switch_json(w);
+    run.report["switch_every"] = a.switch_every;
+    run.report["learning_rate"] = m.net->config().adam.learning_rate;
+    run.report["config"] = m.net->config_json();
+    run.report["precision"] = precision_name(run.precision);
+    run.add_row(std::move(row));
   };
-  ContinuousResult res = train_continuous(run.model, run.ts, run.load, co, hooks, done);
+  ContinuousResult res = train_continuous(run.model, run.ts, run.load, co, run.hooks, done);
   const bool interrupted = !res.windows.empty() && res.windows.back().interrupted;
-  bar->finish(fmt::format("({} steps, loss {:.5f})", global, res.loss_history.empty() ? 0.f : res.loss_history.back()));
+  run.bar->finish(
+      fmt::format("({} steps, loss {:.5f})", global, res.loss_history.empty() ? 0.f : res.loss_history.back()));
   Json probes = Json::array();
   for (const ProbePoint& p : res.probes) probes.push_back({p.step, p.timestep, p.psnr});
-  report["probe_voxels"] = res.probe_voxels;
-  report["probe_every"] = co.probe_every;
-  report["recovery_tolerance_db"] = co.recovery_tolerance_db;
-  report["probes"] = probes;
-  report["loss_history"] = res.loss_history;
-  report["interrupted"] = interrupted;
-  report["complete"] = !interrupted;
-  report["total_seconds"] = seconds_since(run.t_all);
-  write_report(report_path, report);
+  run.report["probe_voxels"] = res.probe_voxels;
+  run.report["probe_every"] = co.probe_every;
+  run.report["recovery_tolerance_db"] = co.recovery_tolerance_db;
+  run.report["probes"] = probes;
+  run.report["loss_history"] = res.loss_history;
+  run.finish(interrupted);
   if (interrupted)
     std::fprintf(stderr, "interrupted in timestep %d: its model is saved; later timesteps were not trained\n",
                  res.windows.back().timestep);
-
-  print_continuous(run, res, co, global, done_windows, windows);
+  print_continuous(run, res, co, global);
+  run.print_models_line();
 }
 
 }  // namespace

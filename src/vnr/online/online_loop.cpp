@@ -13,12 +13,12 @@ double seconds_between(std::chrono::steady_clock::time_point a, std::chrono::ste
 
 OnlineLoop::OnlineLoop(TrainingSession& session, Int3 dims, const TransferFunction& tf, const Camera& camera,
                        const RenderOptions& options, MacroCellMode mc, Device device)
-    : session_(session), trainer_(session.trainer()), device_(device), dims_(dims), box_{float(dims.x), float(dims.y), float(dims.z)}, tf_(tf), camera_(camera),
-      opt_(options), mc_mode_(mc) {
+    : session_(session), device_(device), dims_(dims), box_{float(dims.x), float(dims.y), float(dims.z)}, tf_(tf),
+      camera_(camera), opt_(options), mc_mode_(mc) {
   if (dims.x < 1 || dims.y < 1 || dims.z < 1) fail("online rendering: invalid volume dims");
   if (mc == MacroCellMode::Grid)
     fail("online rendering builds its macro-cells from the training samples: use online or off, not grid");
-  const Trainer& trainer = trainer_;
+  const Trainer& trainer = session.trainer();
   if (mc == MacroCellMode::Online) {
     if (!trainer.has_online_ranges())
       fail("online macro-cells need the trainer's online value ranges (Trainer::enable_online_ranges)");
@@ -46,14 +46,15 @@ float OnlineLoop::train(int64_t n) {
 }
 
 bool OnlineLoop::refresh() {
-  const uint64_t step = trainer_.steps_done();
+  Trainer& trainer = session_.trainer();
+  const uint64_t step = trainer.steps_done();
   if (model_dirty_ || step != rendered_step_ || !renderer_) {
     // New parameters (and, online, new samples): everything the renderer refers to is rebuilt.
     renderer_.reset();
-    trainer_.download();
-    field_ = std::make_unique<NetworkField>(trainer_.network(), dims_);
+    trainer.download();
+    field_ = std::make_unique<NetworkField>(trainer.network(), dims_);
     if (mc_mode_ == MacroCellMode::Online)
-      mc_ = std::make_unique<MacroCells>(trainer_.online_ranges(), box_);
+      mc_ = std::make_unique<MacroCells>(trainer.online_ranges(), box_);
     else
       mc_ = std::make_unique<MacroCells>(MacroCells::single(dims_, box_));
     mc_->update(tf_);
@@ -91,7 +92,7 @@ const Image& OnlineLoop::render_frame() {
   ++acc_count_;
   auto t2 = std::chrono::steady_clock::now();
   OnlineFrame f;
-  f.step = trainer_.steps_done();
+  f.step = session_.trainer().steps_done();
   f.accumulated = acc_count_;
   f.loss = last_loss_;
   f.train_seconds = pending_train_seconds_;

@@ -7,14 +7,15 @@
 // frame on the same GPU stream: sample a batch -> optimise -> widen the macro-cell value ranges with
 // the batch's samples -> recompute the macro-cells' max opacity -> render with the current weights.
 // Here the same loop runs sequentially (both halves use every core), on any training backend:
-//   train(n)        Trainer::run(n) (trainer_backend.h: the CPU or the GPU); each step's samples widen
-//                   the trainer's online value ranges (Trainer::enable_online_ranges) as they are drawn;
+//   train(n)        TrainingSession::run(n) on its Trainer backend (the CPU or the GPU); each step's
+//                   samples widen the trainer's online value ranges (Trainer::enable_online_ranges) as
+//                   they are drawn;
 //   render_frame()  if the model changed since the last frame (Trainer::steps_done() moved, or
 //                   model_changed() was called): bring the parameters into the Network
 //                   (Trainer::download, a no-op on the CPU), merge the online ranges
 //                   (Trainer::online_ranges), rebuild MacroCells from them and recompute their max
 //                   opacity for the transfer function, rebuild the NetworkField (its in-shader
-//                   PointEvaluator copies the weights, so it must see the new ones) and the CpuRenderer;
+//                   PointEvaluator copies the weights, so it must see the new ones) and the renderer;
 //                   then render one frame with the current parameters.
 //   run(T, k, cb)   train(k); render_frame(); cb(...) until T steps are done: k = 1 is the paper's
 //                   one-step-per-frame loop.
@@ -97,7 +98,6 @@ private:
   bool refresh();
 
   TrainingSession& session_;
-  Trainer& trainer_;  // session_.trainer()
   Device device_;
   Int3 dims_;
   Vec3f box_;

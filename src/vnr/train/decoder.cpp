@@ -1,17 +1,6 @@
 #include "vnr/train/decoder.h"
-#include <algorithm>
-#include <chrono>
-#include <cmath>
-#include <cstdio>
-#include <cstring>
 #include <vector>
-#include "vnr/core/error.h"
-#include "vnr/core/fileio.h"
-#include "vnr/core/metrics.h"
-#include "vnr/core/progress.h"
-#include "vnr/core/rng.h"
-#include "vnr/volume/raw_access.h"
-#include "vnr/volume/stream.h"
+#include "vnr/volume/volume.h"
 
 namespace vnr {
 

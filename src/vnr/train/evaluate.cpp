@@ -3,11 +3,8 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
-#include <cstdio>
-#include <cstring>
 #include <vector>
 #include "vnr/core/error.h"
-#include "vnr/core/fileio.h"
 #include "vnr/core/metrics.h"
 #include "vnr/core/progress.h"
 #include "vnr/core/rng.h"

@@ -25,12 +25,12 @@ struct Model {
   uint64_t param_bytes() const { return net->n_params() * 2; }  // fp16, as stored
 };
 
-// Writes .vnr, or instantvnr's BSON when the path ends in .bson or .json (instantvnr names its
-// BSON files params.json).
 // A fresh model of `config` for a volume of dims voxels of source_dtype with value range [lo, hi] in
 // original units, its parameters initialised from `seed` (tcnn's initialisation, Network::init_params).
 Model create_model(const ModelConfig& config, Int3 dims, DType source_dtype, double lo, double hi, uint32_t seed = 1337);
 
+// Writes .vnr, or instantvnr's BSON when the path ends in .bson or .json (instantvnr names its
+// BSON files params.json).
 void save_model(const std::string& path, const Model& m);
 Model load_model(const std::string& path);
 bool is_instantvnr_path(const std::string& path);

@@ -261,6 +261,7 @@ void describe_window(Model& model, const Volume& cur, const WindowResult& w, siz
 
 }  // namespace
 
+// One function: the windows share the session, the probe and the sampler their side work refers to.
 ContinuousResult train_continuous(Model& model, const std::vector<int>& timesteps, const FrameLoader& load,
                                   const ContinuousOptions& opts, const SeriesHooks& hooks,
                                   const std::function<void(const WindowResult&, const Model&)>& done) {

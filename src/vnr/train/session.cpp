@@ -33,7 +33,6 @@ void TrainingSession::check() const {
   if (opts_.checkpoint_every > 0 && opts_.output.empty()) fail("checkpoints need an output path");
 }
 
-
 TrainingSession::~TrainingSession() = default;
 
 void TrainingSession::pause() { paused_.store(true); }
@@ -132,10 +131,7 @@ void TrainingSession::run_steps(int64_t steps, double seconds, int64_t* done) {
                      ? opts_.divergence_message(steps_, loss_)
                      : fmt::format("training diverged at step {} (loss {}); try a smaller learning rate", steps_, loss_));
     for (const StepCallback& cb : step_callbacks_) cb(p);
-    if (every > 0 && steps_ % every == 0 && *done < steps) {
-      run_seconds_ = p.elapsed;
-      save_checkpoint();
-    }
+    if (every > 0 && steps_ % every == 0 && *done < steps) save_checkpoint();  // records run_seconds_ (= p.elapsed)
     if (seconds > 0 && p.elapsed >= seconds) break;
   }
   run_seconds_ = seconds_since(run_t0_) - excluded;
