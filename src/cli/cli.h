@@ -4,6 +4,7 @@
 #include "vnr/core/device.h"
 #include "vnr/core/json.h"
 #include "vnr/core/math.h"
+#include "vnr/core/units.h"
 #include "vnr/volume.h"
 
 namespace vnr {
@@ -39,7 +40,6 @@ void write_report(const std::string& path, const Json& report);  // atomic; "" =
 // Refuses to replace existing volume files (a decoded or generated volume must never silently
 // overwrite someone's data) unless force is set.
 void check_no_overwrite(const std::vector<std::string>& files, bool force);
-std::string human_bytes(double bytes);
 // A compression ratio for people: two decimals, or two significant digits below 0.01 (a model larger
 // than a tiny volume would otherwise read "0.00").
 std::string format_ratio(double ratio);

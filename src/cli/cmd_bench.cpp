@@ -8,6 +8,7 @@
 #include "vnr/core/parallel.h"
 #include "vnr/core/progress.h"
 #include "vnr/cuda/cuda.h"
+#include "vnr/core/units.h"
 
 namespace vnr::cli {
 namespace {

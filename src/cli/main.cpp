@@ -98,13 +98,6 @@ void check_no_overwrite(const std::vector<std::string>& files, bool force) {
     if (file_exists(f)) fail("'{}' already exists; choose another output or pass --force to replace it", f);
 }
 
-std::string human_bytes(double b) {
-  const char* u[] = {"B", "KiB", "MiB", "GiB", "TiB"};
-  int i = 0;
-  while (b >= 1024 && i < 4) b /= 1024, ++i;
-  return fmt::format("{:.2f} {}", b, u[i]);
-}
-
 std::string format_ratio(double r) { return r >= 0.01 || r == 0 ? fmt::format("{:.2f}", r) : fmt::format("{:.2g}", r); }
 
 }  // namespace vnr::cli

@@ -96,7 +96,7 @@ void evaluate_unheld(FileEvaluation& r, const Model& model, const FileEvalOption
   note(r, progress,
        fmt::format("evaluating in streamed slabs of {} slices: holding the volume and the decoded copy would take "
                    "{}, over the memory budget of {}",
-                   plan.slab_slices, byte_size_text(double(plan.full_bytes)), byte_size_text(double(plan.budget))));
+                   plan.slab_slices, human_bytes(double(plan.full_bytes)), human_bytes(double(plan.budget))));
   const Int3 dims = plan.desc.dims;
   auto eval_progress = [&](double f) {
     if (progress.update) progress.update("eval", f);

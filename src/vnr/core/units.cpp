@@ -52,4 +52,11 @@ uint64_t available_memory_bytes() {
   return physical_memory_bytes();
 }
 
+std::string human_bytes(double b) {
+  const char* u[] = {"B", "KiB", "MiB", "GiB", "TiB"};
+  int i = 0;
+  while (b >= 1024 && i < 4) b /= 1024, ++i;
+  return fmt::format("{:.2f} {}", b, u[i]);
+}
+
 }  // namespace vnr

@@ -7,6 +7,8 @@ namespace vnr {
 // "16MiB", "2GiB", "512k", "1.5G", "4096" (bytes). Binary units (K/Ki/KiB = 1024 ...), case-insensitive;
 // a trailing "B" is optional. One clear error line for anything else.
 uint64_t parse_byte_size(const std::string& text);
+// The other way, for people: "1.50 MiB" (two decimals, binary units up to TiB).
+std::string human_bytes(double bytes);
 
 // Physical memory and memory currently available to new allocations (/proc/meminfo MemAvailable,
 // falling back to total), in bytes.

@@ -3,6 +3,7 @@
 #include <cmath>
 #include "vnr/core/error.h"
 #include "vnr/train/training_data.h"
+#include "vnr/core/units.h"
 
 namespace vnr {
 namespace {
@@ -86,7 +87,7 @@ DeviceChoice choose_training_device(const std::string& asked_name, const Network
   const uint64_t need = cuda::GpuTrainer::bytes_needed(net, dims.count(), batch);
   if (why_not.empty() && cuda::free_memory_bytes() < need)
     why_not = fmt::format("the GPU has {} free, training needs about {} for this volume and batch",
-                          byte_size_text(double(cuda::free_memory_bytes())), byte_size_text(double(need)));
+                          human_bytes(double(cuda::free_memory_bytes())), human_bytes(double(need)));
   if (why_not.empty()) why_not = cuda::unsupported_reason(net);
   if (why_not.empty()) return {Device::Cuda, ""};
   if (asked_name == "cuda") fail("{}; use --device cpu", why_not);

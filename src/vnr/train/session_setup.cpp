@@ -56,7 +56,7 @@ std::unique_ptr<TrainingSession> open_training_session(const TrainingSetup& s, c
   Network& net = *model.net;
   if (s.target_ratio <= 0 && model.param_bytes() > data->source_bytes())
     say(fmt::format("note: the model ({}) is larger than the volume ({}); use --target-ratio R to compress",
-                    byte_size_text(double(model.param_bytes())), byte_size_text(double(data->source_bytes()))));
+                    human_bytes(double(model.param_bytes())), human_bytes(double(data->source_bytes()))));
 
   const DeviceChoice device = choose_training_device(s.device, net, data->dims, data->vol.has_value(), data->kind,
                                                      s.batch, s.cpu_only_reason);

@@ -5,6 +5,7 @@
 #include "vnr/core/error.h"
 #include "vnr/core/progress.h"
 #include "vnr/volume/stream.h"
+#include "vnr/core/units.h"
 
 namespace vnr {
 namespace {
@@ -46,20 +47,13 @@ void open_out_of_core(TrainingData& t, const TrainingDataOptions& o, const Messa
   const OutOfCoreSampler& s = *t.out_of_core;
   fill_bar.finish(fmt::format("({} blocks in {:.1f}s)", s.blocks(), s.fill_seconds()));
   say(message, fmt::format("out-of-core buffer: {} blocks of {} voxels, {} replaced per step; {} held of a {} budget",
-                           s.blocks(), dims_text(s.block_dims()), s.refresh(), byte_size_text(double(s.bytes_held())),
-                           byte_size_text(double(o.memory_budget))));
+                           s.blocks(), dims_text(s.block_dims()), s.refresh(), human_bytes(double(s.bytes_held())),
+                           human_bytes(double(o.memory_budget))));
   note_coverage(s, o.steps, message);
   t.sampler = t.out_of_core;
 }
 
 }  // namespace
-
-std::string byte_size_text(double b) {
-  const char* u[] = {"B", "KiB", "MiB", "GiB", "TiB"};
-  int i = 0;
-  while (b >= 1024 && i < 4) b /= 1024, ++i;
-  return fmt::format("{:.2f} {}", b, u[i]);
-}
 
 TrainingData open_training_data(const std::string& name, const VolumeDesc& desc, const LoadOptions& load,
                                 const TrainingDataOptions& o, const MessageFn& message) {
@@ -75,12 +69,12 @@ TrainingData open_training_data(const std::string& name, const VolumeDesc& desc,
     fail("--blocks, --refresh, --block-dims and --grid-lr-scale apply to --sampler outofcore (this run samples {})", t.kind);
   auto t0 = std::chrono::steady_clock::now();
   const std::string head = fmt::format("volume {}: {} {}, {}, range [", name, dims_text(t.dims), dtype_name(t.dtype),
-                                       byte_size_text(double(t.source_bytes())));
+                                       human_bytes(double(t.source_bytes())));
   if (t.kind == "incore") {
     if (in_core_bytes > o.memory_budget)
       fail("the volume needs {} in memory, more than the memory budget of {}; use --sampler outofcore (or mmap), or "
            "raise --memory-budget",
-           byte_size_text(double(in_core_bytes)), byte_size_text(double(o.memory_budget)));
+           human_bytes(double(in_core_bytes)), human_bytes(double(o.memory_budget)));
     t.vol = load_volume(desc, load);
     t.lo = t.vol->lo;
     t.hi = t.vol->hi;

@@ -16,9 +16,6 @@
 
 namespace vnr {
 
-// A size for people, as the CLI prints them: "1.50 GiB".
-std::string byte_size_text(double bytes);
-
 // One line for people (no trailing newline); null = say nothing.
 using MessageFn = std::function<void(const std::string& line)>;
 
