@@ -1,9 +1,12 @@
 #!/bin/sh
-# Installs every Debian 12 package that building, testing and running the vnr demo needs.
+# Installs every Debian 12 package that building, testing and running the vnr demo needs. The viewer
+# (`vnr view`) serves with Boost.Beast and encodes frames with libturbojpeg; its browser tests drive
+# Debian's Chromium through Selenium.
 set -eu
 PKGS="build-essential cmake ninja-build ccache pkg-config git \
   nlohmann-json3-dev libcli11-dev libfmt-dev libpng-dev zlib1g-dev libhwy-dev \
-  libgtest-dev libgmock-dev libbenchmark-dev"
+  libgtest-dev libgmock-dev libbenchmark-dev \
+  libboost-dev libturbojpeg0-dev chromium chromium-driver python3-selenium"
 missing=""
 for p in $PKGS; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing="$missing $p"
