@@ -128,6 +128,7 @@ struct ViewerImage {
 };
 struct ViewerFrame {
   uint64_t id = 0;        // grows by one per published frame
+  uint64_t state_version = 0;  // ViewerState::version of the settings it was rendered with
   bool refined = false;   // full viewport resolution (not a coarse interaction frame)
   int accumulated = 0;    // frames averaged into the network image
   double render_seconds = 0;
