@@ -94,7 +94,7 @@ VNR.CameraController = class {
   onDown(e, el) {
     if (!this.begin()) return;
     e.preventDefault();
-    el.setPointerCapture(e.pointerId);
+    try { el.setPointerCapture(e.pointerId); } catch { /* synthetic events (benchmarks) have no capture */ }
     el.classList.add("dragging");
     this.pointers.set(e.pointerId, { x: e.clientX, y: e.clientY });
     if (this.pointers.size === 1) this.mode = e.button === 2 || e.shiftKey ? "pan" : "orbit";
