@@ -1,0 +1,2 @@
+// Placeholder: the web helper's viewer.js replaces this.
+"use strict";
