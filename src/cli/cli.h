@@ -52,6 +52,7 @@ void add_synth(CLI::App& app);
 void add_convert(CLI::App& app);
 void add_bench(CLI::App& app);
 void add_render(CLI::App& app);
+void add_view(CLI::App& app);  // only with VNR_VIEW (cmd_view.cpp)
 void add_bench_render(CLI::App& bench);
 
 // Rendering options shared by `vnr render` and `vnr bench render`.

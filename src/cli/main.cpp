@@ -118,6 +118,9 @@ int main(int argc, char** argv) {
   add_convert(app);
   add_bench(app);
   add_render(app);
+#ifdef VNR_HAVE_VIEW
+  add_view(app);
+#endif
   try {
     app.parse(argc, argv);
   } catch (const CLI::CallForHelp& e) {

@@ -134,7 +134,8 @@ bool decode_png(PngSource* src, std::vector<unsigned char>* pixels, std::vector<
   return true;
 }
 
-void write_png(const std::string& path, const Image& img) {
+// The PNG bytes of img (8-bit RGB, round(255 * clamp(c, 0, 1)), sRGB chunk); `what` names it in errors.
+std::string png_bytes(const Image& img, const std::string& what) {
   std::vector<uint8_t> rgb(size_t(img.width) * size_t(img.height) * 3);
   for (size_t i = 0; i < img.pixels.size(); ++i) {
     const Vec4f& p = img.pixels[i];
@@ -144,9 +145,11 @@ void write_png(const std::string& path, const Image& img) {
   }
   std::string out;
   PngErr e{};
-  if (!encode_png(&out, rgb.data(), img.width, img.height, &e)) fail("cannot write '{}': libpng: {}", path, e.msg);
-  write_file_atomic(path, out);
+  if (!encode_png(&out, rgb.data(), img.width, img.height, &e)) fail("cannot write {}: libpng: {}", what, e.msg);
+  return out;
 }
+
+void write_png(const std::string& path, const Image& img) { write_file_atomic(path, png_bytes(img, "'" + path + "'")); }
 
 Image read_png(const std::string& path) {
   const std::string data = read_file(path);
@@ -253,6 +256,12 @@ Image read_pfm(const std::string& path) {
 }
 
 }  // namespace
+
+std::vector<uint8_t> encode_png(const Image& img) {
+  check_image(img, "a PNG image in memory");
+  const std::string bytes = png_bytes(img, "a PNG image in memory");
+  return std::vector<uint8_t>(bytes.begin(), bytes.end());
+}
 
 void write_image(const std::string& path, const Image& img) {
   check_image(img, path);
