@@ -2,6 +2,7 @@
 // Framebuffers and image files. Row 0 is the top row. Pixel values are the renderer's colours,
 // written to 8-bit PNG as display (sRGB-encoded) values without further transfer, the way
 // instantvnr and VTK show them; PFM keeps the exact floats.
+#include <cstdint>
 #include <string>
 #include <vector>
 #include "vnr/core/math.h"
@@ -20,6 +21,9 @@ struct Image {
 // By extension: .png (8-bit RGB, each channel round(255 * clamp(c, 0, 1)), sRGB chunk) or .pfm
 // (binary32 RGB, little-endian, exact). Written atomically. Any other extension is an error.
 void write_image(const std::string& path, const Image& img);
+// 8-bit RGBA, row 0 at the top: each colour channel exactly as PNG output writes it (round(255 *
+// clamp(c, 0, 1))), alpha 255 (the image is already composited over the background).
+std::vector<uint8_t> to_rgba8(const Image& img);
 // Reads .png (8-bit or 16-bit, gray/RGB/RGBA, palette) or .pfm; alpha = 1.
 Image read_image(const std::string& path);
 
