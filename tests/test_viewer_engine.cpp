@@ -268,3 +268,298 @@ TEST(ViewerEngine, SaveModelNameRulesAndFile) {
   const EvalResult ev = evaluate_model(m, open_volume(setup.input), false);
   EXPECT_GT(ev.psnr, engine.psnr_history().front()[1] + 3);
 }
+
+// Slices: truth = the volume's voxels of the plane, network = the model decoded at voxel centres as
+// `vnr decode` decodes it, difference = |network - truth| through the documented colour scale.
+TEST(ViewerEngine, SlicesEqualVoxelsAndDecodedNetwork) {
+  TmpDir dir("viewer");
+  ViewerSetup setup;
+  setup.input = trained_model_file(dir);
+  setup.ground_truth = dir / "gt.json";
+  setup.device = "cpu";
+  ViewerEngine engine(setup);
+  EXPECT_TRUE(engine.info().can_train);
+  EXPECT_EQ(engine.state().view.layout, ViewLayout::SideBySide);
+  engine.set_viewport(32, 32);
+  const Volume vol = open_volume(setup.ground_truth);
+  Model model = load_model(setup.input);
+  model.net->set_inference_precision(parse_precision("auto"));
+  const Volume decoded = ModelQuery(model, Device::Cpu).decode();
+  const TransferFunction hot = tf_preset("hot");
+  auto gray = [](float v) { return uint8_t(std::floor(255.0f * std::clamp(v, 0.0f, 1.0f) + 0.5f)); };
+  for (int axis = 0; axis < 3; ++axis) {
+    ViewSettings v = engine.state().view;
+    v.slice = true;
+    v.slice_axis = axis;
+    v.slice_position = 0.3f;
+    engine.set_view(v);
+    const uint64_t version = engine.state().version;
+    auto f = wait_for(engine, [&](const ViewerFrame& fr) { return fr.state_version >= version && image_of(fr, "slice_truth"); });
+    ASSERT_TRUE(f);
+    const ViewerImage* truth = image_of(*f, "slice_truth");
+    const ViewerImage* net = image_of(*f, "slice_network");
+    const ViewerImage* diff = image_of(*f, "slice_difference");
+    ASSERT_TRUE(truth && net && diff);
+    EXPECT_EQ(truth->width, 32);
+    EXPECT_EQ(truth->height, 32);
+    const int index = int(0.3f * 32);  // 9
+    for (int row = 0; row < 32; ++row)
+      for (int col = 0; col < 32; ++col) {
+        int64_t p[3];
+        const int u = axis == 0 ? 1 : 0, w = axis == 2 ? 1 : 2;
+        p[axis] = index, p[u] = col, p[w] = 31 - row;  // row 0 at the top: the plane's second axis points up
+        const size_t voxel = size_t(p[0] + 32 * (p[1] + 32 * p[2]));
+        const size_t px = 4 * size_t(row * 32 + col);
+        ASSERT_EQ(truth->rgba[px], gray(vol.data[voxel])) << axis << " " << row << " " << col;
+        ASSERT_EQ(net->rgba[px], gray(decoded.data[voxel])) << axis << " " << row << " " << col;
+        const Vec4f c = tf_lookup(view_of(hot), std::fabs(decoded.data[voxel] - vol.data[voxel]) / 0.1f);
+        ASSERT_EQ(diff->rgba[px], gray(c.x));
+        ASSERT_EQ(diff->rgba[px + 1], gray(c.y));
+      }
+  }
+}
+
+TEST(ViewerEngine, TimestepsSwitchTheTruthAndContinuousTrainingAdvances) {
+  TmpDir dir("viewer");
+  synth_series("marschner-lobb", kDims, 3, dir / "series.json");
+  ViewerSetup setup;
+  setup.input = dir / "series.json";
+  setup.config = small_config_file(dir);
+  setup.device = "cpu";
+  setup.batch = 4096;
+  ViewerEngine engine(setup);
+  EXPECT_EQ(engine.info().n_timesteps, 3);
+  engine.set_viewport(48, 48);
+  ViewSettings v = engine.state().view;
+  v.layout = ViewLayout::Truth;
+  engine.set_view(v);
+  engine.set_timestep(2);
+  EXPECT_EQ(engine.state().training.timestep, 2);
+  const uint64_t version = engine.state().version;
+  auto f = wait_for(engine, [&](const ViewerFrame& fr) { return fr.state_version >= version && fr.accumulated == 8; });
+  ASSERT_TRUE(f);
+  ASSERT_EQ(f->images.size(), 1u);
+  EXPECT_EQ(f->images[0].view, "truth");
+  VolumeOpenOptions o;
+  o.raw.timestep = 2;
+  RenderInput t2;
+  t2.volume = open_volume(setup.input, o);
+  EXPECT_EQ(f->images[0].rgba, reference_rgba(t2, false, engine.state(), 8));
+  o.raw.timestep = 0;
+  RenderInput t0;
+  t0.volume = open_volume(setup.input, o);
+  EXPECT_NE(f->images[0].rgba, reference_rgba(t0, false, engine.state(), 8));
+
+  EXPECT_HAS(error_of([&] { engine.set_timestep(3); }), "timestep 3");
+  engine.set_continuous(true, 20);
+  engine.start_training();
+  // 2 -> 0 -> 1 every 20 steps.
+  ASSERT_TRUE(wait_until([&] { return engine.state().training.timestep == 0; }));
+  const int64_t s0 = engine.state().training.step;
+  ASSERT_TRUE(wait_until([&] { return engine.state().training.timestep == 1; }));
+  const int64_t s1 = engine.state().training.step;
+  EXPECT_GE(s0, 20);
+  EXPECT_GE(s1, 40);
+  engine.pause_training();
+  const auto losses = engine.losses(0);
+  EXPECT_GE(losses.size(), 40u);
+}
+
+// An error on the engine thread (a timestep whose file went away) lands in the state and pauses
+// training; the thread keeps serving.
+TEST(ViewerEngine, EngineThreadErrorsGoToTheState) {
+  TmpDir dir("viewer");
+  synth_series("marschner-lobb", {16, 16, 16}, 2, dir / "list.json", 1, true);
+  ViewerSetup setup;
+  setup.input = dir / "list.json";
+  setup.config = small_config_file(dir);
+  setup.batch = 4096;
+  setup.train = true;
+  ViewerEngine engine(setup);
+  std::filesystem::remove(synth_series_output_files(dir / "list.json", 2, true)[1]);
+  EXPECT_EQ(engine.state().training.state, TrainingState::Running);
+  engine.set_viewport(32, 32);
+  engine.set_timestep(1);
+  ASSERT_TRUE(wait_until([&] { return engine.state().error_count > 0; }));
+  const ViewerState st = engine.state();
+  EXPECT_HAS(st.last_error, "t0001");
+  EXPECT_EQ(st.training.state, TrainingState::Paused);
+  engine.set_camera(orbit_camera(box_of(Int3{16, 16, 16}), 90, 0, 30), false);
+  EXPECT_TRUE(wait_for(engine, [](const ViewerFrame& f) { return f.refined; }, 10));
+}
+
+TEST(ViewerEngine, TfAndSceneJsonRoundTrip) {
+  TmpDir dir("viewer");
+  ViewerEngine engine(volume_setup(dir));
+  ViewerTf tf;
+  tf.colormap = "custom";
+  tf.custom_colors = {{0.1f, 0.2f, 0.9f}, {0.9f, 0.9f, 0.1f}, {1.0f, 0.3f, 0.2f}};
+  tf.opacity = {{0.0f, 0.0f}, {0.4f, 0.05f}, {0.7f, 0.6f}, {1.0f, 0.2f}};
+  tf.lo = 0.1f;
+  tf.hi = 0.9f;
+  engine.set_tf(tf);
+  const TransferFunction mine = to_transfer_function(tf);
+  write_file_atomic(dir / "tf.json", engine.tf_json());
+  const TransferFunction back = load_transfer_function(dir / "tf.json");
+  ASSERT_EQ(back.table.size(), mine.table.size());
+  EXPECT_EQ(back.lo, 0);  // the window baked in
+  for (size_t i = 0; i < back.table.size(); ++i) {
+    const Vec4f want = tf_lookup(view_of(mine), float(double(i) / double(back.table.size() - 1)));
+    ASSERT_NEAR(back.table[i].x, want.x, 1e-6) << i;
+    ASSERT_NEAR(back.table[i].z, want.z, 1e-6) << i;
+    ASSERT_NEAR(back.table[i].w, want.w, 1e-6) << i;
+  }
+  // The default window: the table itself.
+  tf.lo = 0;
+  tf.hi = 1;
+  engine.set_tf(tf);
+  const Camera cam = orbit_camera(box_of(kDims), 30, 25, 40);
+  engine.set_camera(cam, false);
+  write_file_atomic(dir / "scene.json", engine.scene_json());
+  const Scene scene = load_scene(dir / "scene.json");
+  ASSERT_TRUE(scene.camera && scene.tf);
+  EXPECT_NEAR(scene.camera->eye.x, cam.eye.x, 1e-4);
+  EXPECT_NEAR(scene.camera->eye.z, cam.eye.z, 1e-4);
+  EXPECT_NEAR(scene.camera->center.y, cam.center.y, 1e-5);
+  EXPECT_EQ(scene.camera->fovy, cam.fovy);
+  const TransferFunction table = to_transfer_function(tf);
+  ASSERT_EQ(scene.tf->table.size(), table.table.size());
+  for (size_t i = 0; i < table.table.size(); ++i) {
+    ASSERT_EQ(scene.tf->table[i].y, table.table[i].y) << i;
+    ASSERT_EQ(scene.tf->table[i].w, table.table[i].w) << i;
+  }
+
+  // load_tf_json: its own TF file back (custom colours, few opacity points) ...
+  engine.load_tf_json(read_file(dir / "scene.json"));
+  const ViewerTf loaded = engine.state().tf;
+  EXPECT_EQ(loaded.colormap, "custom");
+  EXPECT_LE(loaded.opacity.size(), 64u);
+  const TransferFunction again = to_transfer_function(loaded);
+  for (size_t i = 0; i < table.table.size(); ++i) {
+    ASSERT_NEAR(again.table[i].x, table.table[i].x, 2e-3) << i;
+    ASSERT_NEAR(again.table[i].w, table.table[i].w, 2e-3) << i;
+  }
+  // ... an instantvnr TF written by hand (a preset's colours: the colormap becomes that preset) ...
+  const Json hand = {{"transferFunction",
+                      {{"resolution", 1024},
+                       {"colorControls",
+                        {{{"position", 0.0}, {"color", {{"r", 0.0}, {"g", 0.0}, {"b", 0.0}}}},
+                         {{"position", 1.0}, {"color", {{"r", 1.0}, {"g", 1.0}, {"b", 1.0}}}}}},
+                       {"opacityControl",
+                        {{{"position", {{"x", 0.0}, {"y", 0.0}}}}, {{"position", {{"x", 0.5}, {"y", 0.3}}}},
+                         {{"position", {{"x", 1.0}, {"y", 0.9}}}}}}}}};
+  engine.load_tf_json(hand.dump());
+  const TransferFunction want = tf_from_json(hand, "hand");
+  const TransferFunction got = to_transfer_function(engine.state().tf);
+  for (int i = 0; i <= 100; ++i) {
+    const Vec4f a = tf_lookup(view_of(want), float(i) / 100), b = tf_lookup(view_of(got), float(i) / 100);
+    EXPECT_NEAR(a.x, b.x, 2e-3) << i;
+    EXPECT_NEAR(a.w, b.w, 2e-3) << i;
+  }
+  // ... and a whole vnr scene sets the camera too; bad text changes nothing.
+  const Json vnr_scene = {{"camera", {{"eye", {100, 20, 10}}, {"center", {16, 16, 16}}}}, {"transfer_function", "hot"}};
+  engine.load_tf_json(vnr_scene.dump());
+  EXPECT_EQ(engine.state().camera.eye.x, 100);
+  EXPECT_EQ(engine.state().tf.colormap, "hot");
+  const uint64_t version = engine.state().version;
+  EXPECT_HAS(error_of([&] { engine.load_tf_json("{\"colors\": 3"); }), "transfer function");
+  EXPECT_HAS(error_of([&] { engine.load_tf_json("{\"transfer_function\": \"/etc/passwd\"}"); }), "names a file");
+  EXPECT_EQ(engine.state().version, version);
+}
+
+// An instantvnr scene as the input brings its camera and TF; the truth view equals `vnr render SCENE`.
+TEST(ViewerEngine, SceneInputUsesItsCameraAndTf) {
+  TmpDir dir("viewer");
+  synth_volume("marschner-lobb", kDims, dir / "vol.json");
+  const Camera cam = orbit_camera(box_of(kDims), 60, 30, 35);
+  Json scene = scene_to_instantvnr_json(cam, tf_preset("cool-warm"));
+  scene["dataSource"] = {{{"fileName", "vol.raw"},
+                          {"dimensions", {{"x", 32}, {"y", 32}, {"z", 32}}},
+                          {"type", "FLOAT"},
+                          {"endian", "LITTLE_ENDIAN"},
+                          {"format", "REGULAR_GRID_RAW_BINARY"},
+                          {"offset", 0}}};
+  write_file_atomic(dir / "scene.json", scene.dump());
+  ViewerSetup setup;
+  setup.input = dir / "scene.json";
+  setup.config = small_config_file(dir);
+  ViewerEngine engine(setup);
+  const RenderInput input = open_render_input(setup.input, "", {}, Precision::FP32);
+  ASSERT_TRUE(input.scene.camera);
+  EXPECT_TRUE(same_camera_for_test(engine.state().camera, *input.scene.camera));
+  EXPECT_EQ(engine.state().tf.colormap, "cool-warm");  // the file's table has the preset's colours
+  auto f = wait_for(engine, [](const ViewerFrame& fr) { return fr.accumulated == 8 && image_of(fr, "truth"); });
+  ASSERT_TRUE(f);
+  RenderInput same;
+  same.volume = open_volume(setup.input);
+  same.scene = input.scene;
+  EXPECT_EQ(image_of(*f, "truth")->rgba, reference_rgba(same, false, engine.state(), 8));
+}
+
+TEST(ViewerEngine, BadSetterValuesThrowAndChangeNothing) {
+  TmpDir dir("viewer");
+  ViewerSetup setup;
+  setup.input = trained_model_file(dir);
+  ViewerEngine engine(setup);
+  const uint64_t version = engine.state().version;
+  EXPECT_HAS(error_of([&] { engine.set_viewport(8, 100); }), "width 8");
+  EXPECT_HAS(error_of([&] { engine.set_viewport(100, 5000); }), "height 5000");
+  ViewSettings v;
+  v.layout = ViewLayout::Truth;
+  EXPECT_HAS(error_of([&] { engine.set_view(v); }), "needs a volume");
+  v.layout = ViewLayout::Network;
+  v.slice_axis = 3;
+  EXPECT_HAS(error_of([&] { engine.set_view(v); }), "slice axis 3");
+  v.slice_axis = 0;
+  v.slice_position = 1.5f;
+  EXPECT_HAS(error_of([&] { engine.set_view(v); }), "slice position 1.5");
+  ViewerTf tf = engine.state().tf;
+  tf.colormap = "rainbowz";
+  EXPECT_HAS(error_of([&] { engine.set_tf(tf); }), "rainbowz");
+  tf = engine.state().tf;
+  tf.opacity = {{0.5f, 0.1f}, {0.2f, 0.3f}};
+  EXPECT_HAS(error_of([&] { engine.set_tf(tf); }), "sorted");
+  tf = engine.state().tf;
+  tf.lo = 0.7f;
+  tf.hi = 0.2f;
+  EXPECT_HAS(error_of([&] { engine.set_tf(tf); }), "[0.7, 0.2]");
+  ViewerRender r = engine.state().render;
+  r.step = -1;
+  EXPECT_HAS(error_of([&] { engine.set_render(r); }), "step -1");
+  r = engine.state().render;
+  r.macrocells = MacroCellMode::Grid;
+  EXPECT_HAS(error_of([&] { engine.set_render(r); }), "grid");
+  r = engine.state().render;
+  r.coarse_scale = 0;
+  EXPECT_HAS(error_of([&] { engine.set_render(r); }), "coarse_scale 0");
+  Camera c = engine.state().camera;
+  c.center = c.eye;
+  EXPECT_NE(error_of([&] { engine.set_camera(c, false); }), "");
+  c = engine.state().camera;
+  c.fovy = 0;
+  EXPECT_HAS(error_of([&] { engine.set_camera(c, false); }), "fovy 0");
+  EXPECT_HAS(error_of([&] { engine.start_training(); }), "ground truth");
+  EXPECT_HAS(error_of([&] { engine.set_training_budget(0); }), "budget 0");
+  EXPECT_HAS(error_of([&] { engine.set_timestep(1); }), "timestep 1");
+  EXPECT_HAS(error_of([&] { engine.histogram(0); }), "bins 0");
+  EXPECT_HAS(error_of([&] { engine.save_model("x"); }), "save directory");
+  EXPECT_EQ(engine.state().version, version);
+
+  ViewerSetup bad;
+  bad.input = dir / "missing.json";
+  EXPECT_HAS(error_of([&] { ViewerEngine e(bad); }), "missing.json");
+}
+
+TEST(ViewerEngine, HistogramCountsTheVolume) {
+  TmpDir dir("viewer");
+  ViewerEngine engine(volume_setup(dir));
+  const Volume vol = open_volume(dir / "vol.json");
+  std::vector<uint32_t> want(4, 0);
+  for (float v : vol.data) ++want[std::min(3, int(v * 4))];
+  EXPECT_EQ(engine.histogram(4), want);
+  const auto h = engine.histogram();
+  EXPECT_EQ(h.size(), 256u);
+  uint64_t total = 0;
+  for (uint32_t c : h) total += c;
+  EXPECT_EQ(total, kDims.count());
+}

@@ -113,7 +113,7 @@ void ViewerEngine::stop() {
     std::lock_guard<std::mutex> lock(m.mu);
     m.stopping = true;
   }
-  m.interrupt = true;
+  m.halting = true;
   if (TrainingSession* s = m.run.active.load()) s->request_stop();
   m.wake_cv.notify_all();
   if (m.thread.joinable()) m.thread.join();
@@ -169,9 +169,16 @@ void ViewerEngine::Impl::iterate(const ViewerSnapshot& snap) {
     frame->step = run.steps();
     const auto t0 = Clock::now();
     try {
-      rendered = render(snap, &frame->refined, &frame->accumulated);
+      if (!halting) rendered = render(snap, &frame->refined, &frame->accumulated);
       frame->render_seconds = std::chrono::duration<double>(Clock::now() - t0).count();
+      // A new layout (or any change) shows at once, even when its images were already complete.
+      if (!halting && !rendered && snap.epoch != published_epoch) {
+        frame->refined = !snap.interacting;
+        frame->accumulated = (snap.state.view.layout == ViewLayout::Truth ? truth_pass : net_pass).count;
+        rendered = true;
+      }
       if (rendered) {
+        published_epoch = snap.epoch;
         frame->images = frame_images(snap);
         if (frame->refined)
           main = std::make_shared<const Image>(snap.state.view.layout == ViewLayout::Truth ? truth_pass.acc
@@ -354,7 +361,6 @@ void ViewerEngine::start_training() {
     std::lock_guard<std::mutex> lock(m.mu);
     if (m.state.training.state == TrainingState::Running) return;
     m.state.training.state = TrainingState::Running;
-    m.interrupt = false;
     m.bump_locked(false);
   }
   m.wake_cv.notify_all();
@@ -366,7 +372,6 @@ void ViewerEngine::pause_training() {
   std::lock_guard<std::mutex> lock(m.mu);
   if (m.state.training.state != TrainingState::Running) return;
   m.state.training.state = TrainingState::Paused;
-  m.interrupt = true;
   m.bump_locked(false);
 }
 
@@ -388,7 +393,6 @@ void ViewerEngine::reset_training(std::optional<double> learning_rate) {
     t.n_losses = 0;
     m.losses.clear();
     m.psnr.clear();
-    m.interrupt = true;
     m.bump_locked(true);
   }
   m.wake_cv.notify_all();
@@ -409,7 +413,6 @@ void ViewerEngine::set_timestep(int t) {
     std::lock_guard<std::mutex> lock(m.mu);
     m.state.training.timestep = t;
     m.pending_timestep = t;
-    m.interrupt = true;
     m.bump_locked(true);
   }
   m.wake_cv.notify_all();

@@ -90,6 +90,7 @@ struct ViewerEngine::Impl {
   std::unique_ptr<Volume> volume;  // the current timestep (null: no volume)
   ViewerRun run;
   uint64_t model_version = 0, volume_version = 0;
+  uint64_t published_epoch = 0;  // of the last frame published
   TransferFunction tf;  // of tf_epoch below; backends point into it
   uint64_t built_tf_epoch = ~uint64_t(0);
   ViewContent net_content, truth_content;
@@ -121,7 +122,7 @@ struct ViewerEngine::Impl {
   std::shared_ptr<const Image> latest_main;  // the refined main image of `latest` (screenshot)
   uint64_t next_frame_id = 1;
   bool stopping = false, stopped = false;
-  std::atomic<bool> interrupt{false};  // ends a training chunk early (pause, reset, timestep, stop)
+  std::atomic<bool> halting{false};  // stop(): no more steps or frames
   std::thread thread;
 
   static constexpr int kFineBins = 65536;
@@ -139,6 +140,7 @@ struct ViewerEngine::Impl {
   void apply_reset(std::optional<double> learning_rate);
   void load_timestep(int t);
   double train_chunk(const ViewerSnapshot& snap);  // returns the training seconds it took
+  bool keep_training();  // still running, nothing pending (a chunk ends early otherwise)
   void take_probe();
   void publish_training();
   std::string save(const std::string& name);

@@ -152,7 +152,7 @@ double ViewerEngine::Impl::train_chunk(const ViewerSnapshot& snap) {
         load_timestep((snap.state.training.timestep + 1) % info.n_timesteps);
         break;
       }
-    } while (spent < want.budget_seconds && !interrupt);
+    } while (spent < want.budget_seconds && keep_training());
     if (run.steps() - run.probe_step >= kProbeEverySteps && run.seconds() - run.probe_seconds >= kProbeEverySeconds)
       take_probe();
   } catch (const std::exception& e) {
@@ -161,6 +161,12 @@ double ViewerEngine::Impl::train_chunk(const ViewerSnapshot& snap) {
   ++model_version;
   publish_training();
   return run.seconds() - t0;
+}
+
+bool ViewerEngine::Impl::keep_training() {
+  if (halting) return false;
+  std::lock_guard<std::mutex> lock(mu);
+  return state.training.state == TrainingState::Running && !pending_reset && !pending_timestep;
 }
 
 // The run's progress into the shared state (unless a reset is on its way: that state is already shown).
