@@ -30,6 +30,12 @@ VNR.setControl = (id, value) => {
 };
 
 VNR.format = (v, digits = 3) => (typeof v === "number" && isFinite(v) ? Number(v.toPrecision(digits)).toString() : "–");
+// Large counts with a unit prefix: 13500000 -> "13.5 M".
+VNR.formatCount = (v) => {
+  if (typeof v !== "number" || !isFinite(v)) return "–";
+  for (const [scale, prefix] of [[1e9, " G"], [1e6, " M"], [1e3, " k"]]) if (Math.abs(v) >= scale) return VNR.format(v / scale) + prefix;
+  return VNR.format(v);
+};
 
 VNR.Panels = class {
   constructor(send, tfEditor) {
@@ -194,9 +200,10 @@ VNR.Panels = class {
     this.updateColorbar(tf);
   }
 
-  // The colour bar: custom colours directly, a preset's from the server's TF file (/tf.json).
+  // The colour bar across the TF window: custom colours directly, a preset's from the server's TF
+  // file (/tf.json), whose colour controls span the whole normalised range.
   updateColorbar(tf) {
-    const key = JSON.stringify([tf.colormap, tf.custom_colors]);
+    const key = JSON.stringify([tf.colormap, tf.custom_colors, tf.range]);
     if (key === this.colorKey) return;
     this.colorKey = key;
     if (tf.colormap === "custom") {
@@ -207,7 +214,12 @@ VNR.Panels = class {
     const ticket = ++this.colorFetch;
     fetch(VNR.url("/tf.json"))
       .then((r) => (r.ok ? r.json() : null))
-      .then((j) => { if (j && ticket === this.colorFetch) this.tfEditor.setColorStops(VNR.colorStopsOf(j)); })
+      .then((j) => {
+        if (!j || ticket !== this.colorFetch) return;
+        const [lo, hi] = tf.range, span = Math.max(1e-9, hi - lo);
+        const stops = VNR.colorStopsOf(j).map(([p, ...c]) => [(p - lo) / span, ...c]);
+        this.tfEditor.setColorStops(stops.filter((s) => s[0] >= 0 && s[0] <= 1));
+      })
       .catch(() => {});
   }
 
@@ -233,7 +245,7 @@ VNR.Panels = class {
     VNR.$("train-loss").textContent = t.step > 0 ? VNR.format(t.loss, 4) : "–";
     VNR.$("train-psnr").textContent = t.psnr > 0 ? `${t.psnr.toFixed(2)} dB` : "–";
     VNR.$("train-steps-per-second").textContent = t.state === "running" ? VNR.format(stepsPerSecond, 3) : "0";
-    VNR.$("train-samples-per-second").textContent = VNR.format(t.samples_per_second, 3);
+    VNR.$("train-samples-per-second").textContent = VNR.formatCount(t.samples_per_second);
     VNR.$("train-learning-rate").textContent = VNR.format(t.learning_rate, 3);
     VNR.$("train-seconds").textContent = t.seconds.toFixed(1);
     VNR.$("train-start").disabled = t.state === "running" || t.state === "unavailable";
