@@ -136,7 +136,7 @@ def training(b, vnr, volume, config, seconds, work):
     b.js("vnrViewer.send({type: 'train', action: 'pause'});")
     report = os.path.join(work, "train.json")
     steps = b.js("return vnrViewer.state.training.step;") or 100
-    harness.run_vnr(vnr, "train", volume, "--config", config, "--steps", max(20, min(steps, 500)),
+    harness.run_vnr(vnr, "train", volume, "--config", config, "--steps", max(100, min(steps, 1000)),
                     "-o", os.path.join(work, "bench.vnr"), "--no-ssim", "--report", report, "-q")
     with open(report) as f:
         cli = json.load(f)["samples_per_second"]

@@ -173,6 +173,40 @@ class ModelView(ViewerTestCase):
         split = self.wait_state("Math.abs(s.view.split - 0.25) < 0.02 && s.view.split", "split 0.25")
         self.assertAlmostEqual(split, 0.25, delta=0.02)
 
+    def test_6_slices(self):
+        b = self.browser
+        self.browser.driver.find_element("id", "slice-toggle").click()
+        self.wait_state("s.view.slice", "slices on")
+        self.assertFalse(b.js("return document.getElementById('slices').hidden;"))
+        b.wait("['slice_truth', 'slice_network', 'slice_difference'].every(v => vnrViewer.lastHeader[v] &&"
+               " vnrViewer.lastHeader[v].version >= vnrViewer.state.version)", 30, "the three slice images")
+        # The slice strip takes height from the view area: the page sends the smaller viewport.
+        height = b.js("return document.getElementById('views').clientHeight;")
+        self.wait_state(f"s.viewport.height === {height}", "the viewport of the smaller area")
+        header = b.js("return vnrViewer.lastHeader.slice_truth;")
+        self.assertEqual((header["width"], header["height"]), (64, 64))  # the volume's xy plane (axis z)
+
+
+class SeriesView(ViewerTestCase):
+    """A time series: the time panel drives the target timestep."""
+
+    @classmethod
+    def server_args(cls):
+        series = os.path.join(cls.dir, "series.json")
+        run_vnr(VNR, "synth", "noise", "--dims", "32,32,32", "--timesteps", 3, "-o", series)
+        return [series, "--config", "small"]
+
+    def test_timestep_slider(self):
+        b = self.browser
+        self.assertFalse(b.js("return document.getElementById('time-panel').hidden;"))
+        self.assertEqual(b.js("return document.getElementById('timestep').max;"), "2")
+        b.js("const t = document.getElementById('timestep'); t.value = 2;"
+             " t.dispatchEvent(new Event('change'));")
+        version = self.wait_state("s.training.timestep === 2 && s.version", "timestep 2")
+        b.wait(f"vnrViewer.lastHeader.truth && vnrViewer.lastHeader.truth.version >= {version}", 30,
+               "a truth frame of timestep 2")
+        self.assertEqual(self.browser.js("return document.getElementById('timestep-value').textContent;"), "2")
+
 
 class TrainingView(ViewerTestCase):
     """A volume trained from the page; access rules, bad messages, two browsers, SIGTERM."""

@@ -25,6 +25,8 @@ VNR.trackEditing = (el) => {
 VNR.setControl = (id, value) => {
   const el = VNR.$(id);
   if (!el || el.dataset.editing) return;
+  // State numbers are float32 on the server: 0.2 arrives as 0.20000000298..., shown as 0.2.
+  if (typeof value === "number" && !Number.isInteger(value)) value = Number(value.toPrecision(6));
   if (el.type === "checkbox") el.checked = !!value;
   else if (String(el.value) !== String(value)) el.value = value;
 };
