@@ -23,6 +23,9 @@ struct Image {
 void write_image(const std::string& path, const Image& img);
 // The bytes of the .png file write_image writes for img (same 8-bit conversion and sRGB chunk).
 std::vector<uint8_t> encode_png(const Image& img);
+// 8-bit RGBA, row 0 at the top: each colour channel exactly as PNG output writes it (round(255 *
+// clamp(c, 0, 1))), alpha 255 (the image is already composited over the background).
+std::vector<uint8_t> to_rgba8(const Image& img);
 // Reads .png (8-bit or 16-bit, gray/RGB/RGBA, palette) or .pfm; alpha = 1.
 Image read_image(const std::string& path);
 

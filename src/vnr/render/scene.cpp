@@ -170,11 +170,25 @@ Scene load_vnr_scene(const Json& j, const std::string& path) {
 
 }  // namespace
 
-Scene load_scene(const std::string& path) {
-  const Json j = parse_json_file(path);
+Scene load_scene(const std::string& path) { return scene_from_json(parse_json_file(path), path); }
+
+Scene scene_from_json(const Json& j, const std::string& path) {
   if (!j.is_object()) fail("{}: a scene must be a JSON object, got {}", path, j.type_name());
   if (j.contains("dataSource") || j.contains("view") || j.contains("version")) return load_instantvnr_scene(j, path);
   return load_vnr_scene(j, path);
+}
+
+Json scene_to_instantvnr_json(const Camera& camera, const TransferFunction& tf) {
+  auto xyz = [](Vec3f v) { return Json{{"x", v.x}, {"y", v.y}, {"z", v.z}}; };
+  const Vec3f half{0.5f, 0.5f, 0.5f};
+  Json cam = {{"eye", xyz(camera.eye - half)},
+              {"center", xyz(camera.center - half)},
+              {"up", xyz(camera.up)},
+              {"fovy", camera.fovy},
+              {"projectionMode", "PERSPECTIVE"}};
+  Json volume = {{"transferFunction", tf_to_instantvnr_json(tf)["transferFunction"]},
+                 {"transferFunctionType", "TRANSFER_FUNCTION"}};
+  return Json{{"version", "VIDI3D"}, {"view", {{"camera", std::move(cam)}, {"volume", std::move(volume)}}}};
 }
 
 }  // namespace vnr

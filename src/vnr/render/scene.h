@@ -29,5 +29,11 @@ struct Scene {
 // {"camera": {"eye": [x,y,z], "center": [...], "up": [...], "fovy": deg}, "transfer_function":
 // <TF object or preset name>, "light": {"direction": [...], "color": [...]}, "background": [r,g,b]}.
 Scene load_scene(const std::string& path);
+// The same from parsed JSON; `where` names it in errors and anchors a vnr scene's relative TF file.
+Scene scene_from_json(const Json& j, const std::string& where);
+// An instantvnr scene of a view: view.camera (converted back to voxel-index units: world - 0.5) and
+// view.volume.transferFunction (tf_to_instantvnr_json); load_scene reads it back to the same camera
+// and table. No dataSource: it names no volume.
+Json scene_to_instantvnr_json(const Camera& camera, const TransferFunction& tf);
 
 }  // namespace vnr

@@ -25,14 +25,8 @@ constexpr int kDefaultResolution = 1024;
 
 // ---- control points ------------------------------------------------------------------------------
 
-struct ColorPoint {
-  double x;
-  Vec3f c;
-};
-struct AlphaPoint {
-  double x;
-  float a;
-};
+using ColorPoint = TfColorPoint;
+using AlphaPoint = TfAlphaPoint;
 
 inline Vec3f lerp_value(Vec3f a, Vec3f b, double t) {
   const float tf = float(t);
@@ -195,6 +189,19 @@ std::string base64_decode(const std::string& s, const std::string& where) {
   }
   if (digits % 4 == 1) fail("{}: invalid base64: truncated data ({} digits)", where, digits);
   if (pad > 2 || (pad && (digits + pad) % 4 != 0)) fail("{}: invalid base64 padding", where);
+  return out;
+}
+
+std::string base64_encode(const std::string& bytes) {
+  static const char* digits = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+  std::string out;
+  out.reserve((bytes.size() + 2) / 3 * 4);
+  for (size_t i = 0; i < bytes.size(); i += 3) {
+    const size_t n = std::min<size_t>(3, bytes.size() - i);
+    uint32_t v = 0;
+    for (size_t k = 0; k < 3; ++k) v = (v << 8) | (k < n ? uint8_t(bytes[i + k]) : 0u);
+    for (size_t k = 0; k < 4; ++k) out.push_back(k <= n ? digits[(v >> (18 - 6 * k)) & 63] : '=');
+  }
   return out;
 }
 
@@ -434,6 +441,43 @@ TransferFunction load_transfer_function(const std::string& file_or_preset) {
   TransferFunction tf = tf_from_json(parse_json_file(file_or_preset), file_or_preset);
   tf.name = file_or_preset;
   return tf;
+}
+
+TransferFunction tf_from_points(std::vector<TfColorPoint> colors, std::vector<TfAlphaPoint> alphas, int n, float lo,
+                                float hi, std::string name) {
+  if (n < 2 || n > kMaxResolution) fail("transfer function: resolution {} is outside [2, {}]", n, kMaxResolution);
+  if (!(lo < hi)) fail("transfer function: window lo {} must be below hi {}", lo, hi);
+  return build_nodal(std::move(colors), std::move(alphas), n, lo, hi, std::move(name));
+}
+
+std::vector<TfAlphaPoint> tf_preset_opacity(const std::string& name) {
+  for (const auto& p : presets())
+    if (iequals(name, p.name)) return p.alphas;
+  fail("unknown transfer-function preset \"{}\" (presets: {})", name, preset_list());
+}
+
+Json tf_to_instantvnr_json(const TransferFunction& tf) {
+  const int n = int(tf.table.size());
+  if (n < 2) fail("transfer function: needs at least 2 entries");
+  const TfView view = view_of(tf);
+  const bool whole_range = tf.lo == 0 && tf.hi == 1;
+  std::string alpha_bytes(size_t(n) * 4, '\0');
+  Json colors = Json::array();
+  for (int i = 0; i < n; ++i) {
+    const Vec4f e = whole_range ? tf.table[size_t(i)] : tf_lookup(view, float(double(i) / double(n - 1)));
+    const float a = std::clamp(e.w, 0.0f, 1.0f);
+    uint32_t u;
+    std::memcpy(&u, &a, 4);
+    if constexpr (std::endian::native == std::endian::big) u = __builtin_bswap32(u);
+    std::memcpy(alpha_bytes.data() + 4 * i, &u, 4);
+    // The reader evaluates colours at cell centres (i + 0.5) / n: a point exactly there gives entry i.
+    colors.push_back({{"position", (double(i) + 0.5) / double(n)},
+                      {"color", {{"r", std::clamp(e.x, 0.0f, 1.0f)}, {"g", std::clamp(e.y, 0.0f, 1.0f)}, {"b", std::clamp(e.z, 0.0f, 1.0f)}}}});
+  }
+  Json t = {{"resolution", n},
+            {"alphaArray", {{"encoding", "BASE64"}, {"data", base64_encode(alpha_bytes)}}},
+            {"colorControls", std::move(colors)}};
+  return Json{{"transferFunction", std::move(t)}};
 }
 
 }  // namespace vnr

@@ -1,0 +1,234 @@
+// ViewerEngine's training run: the session over the current timestep, budgeted chunks of steps, the
+// PSNR probe, resets, timestep switches (continuous training) and saving the model.
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include "vnr/api/viewer_impl.h"
+#include "vnr/core/error.h"
+#include "vnr/core/fileio.h"
+#include "vnr/train/make_trainer.h"
+
+namespace vnr {
+
+namespace {
+
+constexpr int kOnlineCellSize = 16;
+constexpr int64_t kProbeVoxels = int64_t(1) << 16;
+constexpr uint64_t kProbeSeed = 0x5eed;
+// A probe at most every this many training seconds and steps (both must have passed).
+constexpr double kProbeEverySeconds = 0.5;
+constexpr int64_t kProbeEverySteps = 50;
+// A training budget is run in slices of at most this long, so pause/reset/stop take effect soon.
+constexpr double kSliceSeconds = 0.05;
+// samples_per_second averages the steps of about the last this many training seconds.
+constexpr double kRateWindowSeconds = 1.0;
+
+}  // namespace
+
+// A trainer over the current volume: on the CPU through a SwitchableSampler (a new timestep keeps the
+// optimizer); on the GPU the trainer samples its own copy of the volume, so a new timestep gets a new
+// trainer (and a fresh Adam) there.
+void ViewerEngine::Impl::create_session() {
+  Network& net = *model->net;
+  TrainOptions to{setup.batch, setup.seed};
+  std::unique_ptr<Trainer> trainer;
+  if (train_device == Device::Cuda) {
+    trainer = make_trainer(Device::Cuda, net, std::make_shared<InCoreSampler>(*volume), volume.get(), to);
+  } else {
+    to.precision = resolve_training_precision("auto", net);
+    run.sampler = std::make_shared<SwitchableSampler>(view_of(*volume));
+    trainer = make_trainer(Device::Cpu, net, run.sampler, nullptr, to);
+  }
+  trainer->enable_online_ranges(volume->dims, kOnlineCellSize);
+  run.active = nullptr;
+  run.session = std::make_unique<TrainingSession>(*model, std::move(trainer), SessionOptions{});
+  run.active = run.session.get();
+  run.losses_published = 0;
+  if (!run.probe) run.probe.emplace(volume->dims, kProbeVoxels, kProbeSeed);
+}
+
+// Fresh parameters (a model input: its own), step 0, every history cleared.
+void ViewerEngine::Impl::apply_reset(std::optional<double> learning_rate) {
+  {
+    std::lock_guard<std::mutex> lock(mu);
+    pending_reset = false;
+    pending_learning_rate.reset();
+  }
+  // Whatever renders the old network goes first: it refers to it.
+  net_pass.backend.reset();
+  net_content = ViewContent{};
+  slices = SliceCache{};
+  run.active = nullptr;
+  run.session.reset();
+  if (learning_rate) config.adam.learning_rate = float(*learning_rate);
+  auto net = std::make_unique<Network>(config);
+  if (input.model) {
+    std::copy(initial_params.begin(), initial_params.end(), net->params.begin());
+    net->sync_half_table();
+  } else {
+    net->init_params(setup.seed);
+    model->macrocells.reset();
+  }
+  net->set_inference_precision(inference);
+  model->net = std::move(net);
+  run.step_base = 0;
+  run.seconds_base = 0;
+  run.probe_step = -1;
+  run.probe_seconds = 0;
+  run.new_psnr.clear();
+  run.continuous = false;
+  create_session();
+  ++model_version;
+  std::lock_guard<std::mutex> lock(mu);
+  state.training.learning_rate = config.adam.learning_rate;
+  ++state.version;
+}
+
+// Loads timestep t of the series and makes it the truth and the training target.
+void ViewerEngine::Impl::load_timestep(int t) {
+  if (!volume || info.n_timesteps < 2) return;
+  VolumeOpenOptions o = setup.volume_options;
+  o.raw.timestep = t;
+  auto next = std::make_unique<Volume>(open_volume(setup.input, o));
+  if (!(next->dims == volume->dims)) fail("timestep {} has other dims than timestep 0", t);
+  truth_pass.backend.reset();
+  truth_content = ViewContent{};
+  grid_ranges.reset();
+  grid_ranges_version = ~uint64_t(0);
+  slices = SliceCache{};
+  if (run.sampler) {
+    run.sampler->set_target(view_of(*next));
+  } else if (run.session) {
+    run.step_base += run.session->steps_done();
+    run.seconds_base += run.session->training_seconds();
+    run.active = nullptr;
+    run.session.reset();
+  }
+  volume = std::move(next);
+  if (!run.session && info.can_train) create_session();
+  model->lo = volume->lo;
+  model->hi = volume->hi;
+  ++volume_version;
+  if (run.continuous) run.switch_at = run.steps() + run.switch_every;
+  compute_histogram();
+  std::lock_guard<std::mutex> lock(mu);
+  state.training.timestep = t;
+  ++epoch;
+  ++state.version;
+}
+
+void ViewerEngine::Impl::take_probe() {
+  TrainingSession& s = *run.session;
+  double psnr = 0;
+  s.run_side_work([&] {
+    s.trainer().download();
+    psnr = run.probe->psnr(*model->net, *volume);
+  });
+  run.probe_step = run.steps();
+  run.probe_seconds = run.seconds();
+  run.new_psnr.push_back({double(run.probe_step), psnr});
+}
+
+// Trains for the snapshot's budget (at least one step), switching timesteps in continuous mode; an
+// error pauses training and lands in state.last_error. Returns the training seconds.
+double ViewerEngine::Impl::train_chunk(const ViewerSnapshot& snap) {
+  if (!run.session) return 0;
+  const ViewerTraining& want = snap.state.training;
+  if (want.continuous != run.continuous || (want.continuous && want.switch_every != run.switch_every)) {
+    run.continuous = want.continuous;
+    run.switch_every = want.switch_every;
+    run.switch_at = run.steps() + run.switch_every;
+  }
+  const double t0 = run.seconds();
+  try {
+    if (run.probe_step < 0) take_probe();
+    double spent = 0;
+    do {
+      int64_t limit = -1;
+      if (run.continuous) limit = std::max<int64_t>(1, run.switch_at - run.steps());
+      run.session->run(limit, std::min(want.budget_seconds - spent, kSliceSeconds));
+      spent = run.seconds() - t0;
+      if (run.continuous && run.steps() >= run.switch_at) {
+        load_timestep((snap.state.training.timestep + 1) % info.n_timesteps);
+        break;
+      }
+    } while (spent < want.budget_seconds && keep_training());
+    if (run.steps() - run.probe_step >= kProbeEverySteps && run.seconds() - run.probe_seconds >= kProbeEverySeconds)
+      take_probe();
+  } catch (const std::exception& e) {
+    record_error(e.what(), true);
+  }
+  ++model_version;
+  publish_training();
+  return run.seconds() - t0;
+}
+
+bool ViewerEngine::Impl::keep_training() {
+  if (halting) return false;
+  std::lock_guard<std::mutex> lock(mu);
+  return state.training.state == TrainingState::Running && !pending_reset && !pending_timestep;
+}
+
+// The run's progress into the shared state (unless a reset is on its way: that state is already shown).
+void ViewerEngine::Impl::publish_training() {
+  TrainingSession& s = *run.session;
+  const Trainer& trainer = s.trainer();
+  std::vector<float> fresh;
+  if (auto* cpu = dynamic_cast<const CpuTrainer*>(&trainer)) {
+    const auto& all = cpu->loss_history();
+    fresh.assign(all.begin() + std::ptrdiff_t(std::min(run.losses_published, all.size())), all.end());
+    run.losses_published = all.size();
+  } else {
+    const auto all = s.trainer().losses();
+    fresh.assign(all.begin() + std::ptrdiff_t(std::min(run.losses_published, all.size())), all.end());
+    run.losses_published = all.size();
+  }
+  // Samples per second over the last steps (about kRateWindowSeconds of them).
+  const auto& times = s.step_seconds();
+  double window = 0;
+  int64_t n = 0;
+  for (auto it = times.rbegin(); it != times.rend() && window < kRateWindowSeconds; ++it, ++n) window += *it;
+  std::lock_guard<std::mutex> lock(mu);
+  if (pending_reset) return;
+  losses.insert(losses.end(), fresh.begin(), fresh.end());
+  psnr.insert(psnr.end(), run.new_psnr.begin(), run.new_psnr.end());
+  run.new_psnr.clear();
+  ViewerTraining& t = state.training;
+  t.step = run.steps();
+  t.loss = s.last_loss();
+  t.samples_per_second = window > 0 ? double(n) * double(trainer.batch()) / window : 0;
+  t.seconds = run.seconds();
+  if (!psnr.empty()) t.psnr = psnr.back()[1];
+  t.learning_rate = trainer.current_learning_rate();
+  t.n_losses = losses.size();
+  ++state.version;
+}
+
+namespace {
+
+void check_model_name(const std::string& name) {
+  if (name.empty()) fail("the model name is empty");
+  if (name.size() > 200) fail("the model name '{}...' is longer than 200 characters", name.substr(0, 40));
+  if (name[0] == '.') fail("the model name '{}' starts with '.'", name);
+  for (char c : name) {
+    const bool ok = (c >= 'A' && c <= 'Z') || (c >= 'a' && c <= 'z') || (c >= '0' && c <= '9') || c == '.' ||
+                    c == '_' || c == '-';
+    if (!ok) fail("the model name '{}' may hold only letters, digits, '.', '_' and '-' (no paths)", name);
+  }
+}
+
+}  // namespace
+
+// Under work_mu: the engine thread is between steps and frames, so the parameters are whole.
+std::string ViewerEngine::Impl::save(const std::string& name) {
+  if (setup.save_dir.empty()) fail("saving is off: start the viewer with a save directory (--save-dir)");
+  check_model_name(name);
+  const std::string file = extension_of(name) == ".vnr" ? name : name + ".vnr";
+  const std::string path = join_path(setup.save_dir, file);
+  std::lock_guard<std::mutex> work(work_mu);
+  if (run.session) run.session->record();
+  vnr::save_model(path, *model);
+  return path;
+}
+
+}  // namespace vnr

@@ -1,0 +1,278 @@
+// ViewerEngine's images: the network and truth views (progressive accumulation, coarse frames while
+// interacting), the slice images and the value histogram.
+#include <algorithm>
+#include <cmath>
+#include "vnr/api/viewer_impl.h"
+#include "vnr/core/error.h"
+#include "vnr/render_cuda/gpu_renderer.h"
+#include "vnr/train/decoder.h"
+
+namespace vnr {
+
+namespace {
+
+constexpr int kCellSize = 16;
+// The difference slice maps |network - truth| (normalised units) over [0, kDifferenceScale] through
+// the "hot" preset's colours (black, red, yellow, white), clamped above.
+constexpr float kDifferenceScale = 0.1f;
+
+bool same_vec(Vec3f a, Vec3f b) { return a.x == b.x && a.y == b.y && a.z == b.z; }
+
+}  // namespace
+
+bool same_camera(const Camera& a, const Camera& b) {
+  return same_vec(a.eye, b.eye) && same_vec(a.center, b.center) && same_vec(a.up, b.up) && a.fovy == b.fovy;
+}
+
+// The RenderOptions `vnr render` would use with these settings (the scene's background and light colour).
+RenderOptions viewer_render_options(const ViewerRender& r, const Scene& scene, int width, int height) {
+  RenderOptions o;
+  o.mode = r.mode;
+  o.strategy = r.strategy;
+  o.width = width;
+  o.height = height;
+  o.step = r.step;
+  o.density_scale = r.density;
+  o.shade = r.shade;
+  o.background = scene.background.value_or(Vec3f{0, 0, 0});
+  o.light = scene.light.value_or(DirectionalLight{});
+  o.light.direction = r.light_direction;
+  return o;
+}
+
+int viewer_max_frames(const ViewerRender& r) {
+  if (r.max_frames > 0) return r.max_frames;
+  switch (r.mode) {
+    case RenderMode::Shadow: return 16;
+    case RenderMode::PathTrace: return 256;
+    case RenderMode::RayMarch:
+    default: return 8;
+  }
+}
+
+namespace {
+
+// Renders the next frame of `pass` (restarting it when its content, settings or camera changed);
+// false when it already holds `target` frames.
+bool render_pass(ViewPass& pass, const ViewContent& content, const TransferFunction& tf, const ViewerSnapshot& snap,
+                 const RenderOptions& opt, bool coarse, int target, Device device, Vec3f box) {
+  const Camera& cam = snap.state.camera;
+  if (!pass.backend || pass.content_version != content.version || pass.tf_epoch != snap.tf_epoch ||
+      pass.options_epoch != snap.options_epoch || pass.coarse != coarse) {
+    pass.backend.reset();
+    pass.backend = make_renderer(device, *content.field, box, *content.mc, tf, cam, opt, cuda::MlpPath::Auto);
+    pass.content_version = content.version;
+    pass.tf_epoch = snap.tf_epoch;
+    pass.options_epoch = snap.options_epoch;
+    pass.coarse = coarse;
+    pass.camera = cam;
+    pass.count = 0;
+  } else if (!same_camera(pass.camera, cam)) {
+    pass.backend->set_camera(cam);
+    pass.camera = cam;
+    pass.count = 0;
+  }
+  if (pass.count >= target) return false;
+  pass.backend->render_frame(uint32_t(pass.count), pass.frame);
+  if (pass.count == 0)
+    pass.acc = pass.frame;
+  else
+    accumulate_frame(pass.acc, pass.frame, pass.count);
+  ++pass.count;
+  pass.rgba = to_rgba8(pass.acc);
+  return true;
+}
+
+ViewerImage gray_image(const char* view, int w, int h, const std::vector<float>& values) {
+  ViewerImage img{view, w, h, std::vector<uint8_t>(values.size() * 4)};
+  for (size_t i = 0; i < values.size(); ++i) {
+    const float v = std::clamp(values[i], 0.0f, 1.0f);
+    const uint8_t g = uint8_t(std::floor(255.0f * v + 0.5f));
+    img.rgba[4 * i] = img.rgba[4 * i + 1] = img.rgba[4 * i + 2] = g;
+    img.rgba[4 * i + 3] = 255;
+  }
+  return img;
+}
+
+ViewerImage difference_image(int w, int h, const std::vector<float>& net, const std::vector<float>& truth) {
+  static const TransferFunction hot = tf_preset("hot");
+  const TfView colours = view_of(hot);
+  ViewerImage img{"slice_difference", w, h, std::vector<uint8_t>(net.size() * 4)};
+  for (size_t i = 0; i < net.size(); ++i) {
+    const Vec4f c = tf_lookup(colours, std::fabs(net[i] - truth[i]) / kDifferenceScale);
+    const float rgb[3] = {c.x, c.y, c.z};
+    for (int k = 0; k < 3; ++k) img.rgba[4 * i + k] = uint8_t(std::floor(255.0f * std::clamp(rgb[k], 0.0f, 1.0f) + 0.5f));
+    img.rgba[4 * i + 3] = 255;
+  }
+  return img;
+}
+
+}  // namespace
+
+// The voxels of the slice plane, row 0 at the top: axis 2 (z) shows x to the right and y up, axis 1
+// (y) x right and z up, axis 0 (x) y right and z up.
+static std::vector<int64_t> slice_voxels(Int3 d, int axis, int index, int* width, int* height) {
+  const int64_t n[3] = {d.x, d.y, d.z};
+  const int u = axis == 0 ? 1 : 0, v = axis == 2 ? 1 : 2;
+  *width = int(n[u]);
+  *height = int(n[v]);
+  std::vector<int64_t> out(size_t(n[u] * n[v]));
+  for (int64_t row = 0; row < n[v]; ++row)
+    for (int64_t col = 0; col < n[u]; ++col) {
+      int64_t p[3];
+      p[axis] = index;
+      p[u] = col;
+      p[v] = n[v] - 1 - row;
+      out[size_t(row * n[u] + col)] = p[0] + d.x * (p[1] + d.y * p[2]);
+    }
+  return out;
+}
+
+// The grid macro-cells' value ranges of the current volume (computed once per timestep).
+const ValueRangeGrid& ViewerEngine::Impl::volume_ranges() {
+  if (grid_ranges_version != volume_version) {
+    grid_ranges = render_device == Device::Cuda ? gpu_value_ranges_from_grid(view_of(*volume), kCellSize)
+                                                : value_ranges_from_grid(view_of(*volume), kCellSize);
+    grid_ranges_version = volume_version;
+  }
+  return *grid_ranges;
+}
+
+// The network's field and macro-cells for the current parameters and macro-cell mode.
+void ViewerEngine::Impl::update_network_content(MacroCellMode mode) {
+  ViewContent& c = net_content;
+  if (c.field && c.version == model_version && c.mode == mode) return;
+  net_pass.backend.reset();  // it refers to the old field and cells
+  if (run.session) run.session->trainer().download();
+  c.field = std::make_unique<NetworkField>(*model->net, model->dims);
+  const bool trained = run.session && run.session->steps_done() > 0;
+  if (mode == MacroCellMode::Online && trained)
+    c.mc = std::make_unique<MacroCells>(run.session->trainer().online_ranges(), box);
+  else if (mode == MacroCellMode::Online && model->macrocells)
+    c.mc = std::make_unique<MacroCells>(*model->macrocells, box);
+  else if (mode == MacroCellMode::Grid && volume)
+    c.mc = std::make_unique<MacroCells>(volume_ranges(), box);
+  else  // off, or online before the first step (no samples yet: the untrained network shows as it is)
+    c.mc = std::make_unique<MacroCells>(MacroCells::single(model->dims, box));
+  c.version = model_version;
+  c.mode = mode;
+  c.tf_epoch = ~uint64_t(0);
+}
+
+// The truth volume's field and grid macro-cells for the current timestep.
+void ViewerEngine::Impl::update_truth_content() {
+  ViewContent& c = truth_content;
+  if (c.field && c.version == volume_version) return;
+  truth_pass.backend.reset();
+  c.field = std::make_unique<GridField>(view_of(*volume));
+  c.mc = std::make_unique<MacroCells>(volume_ranges(), box);
+  c.version = volume_version;
+  c.mode = MacroCellMode::Grid;
+  c.tf_epoch = ~uint64_t(0);
+}
+
+// Renders one frame of each view the layout needs that is not complete, and the slices when on.
+bool ViewerEngine::Impl::render(const ViewerSnapshot& snap, bool* refined, int* accumulated) {
+  const ViewerState& st = snap.state;
+  if (built_tf_epoch != snap.tf_epoch) {
+    // Backends point into tf: every one is rebuilt for the new epoch before it renders again.
+    tf = to_transfer_function(st.tf);
+    built_tf_epoch = snap.tf_epoch;
+  }
+  const bool coarse = snap.interacting;
+  const int scale = coarse ? st.render.coarse_scale : 1;
+  const RenderOptions opt =
+      viewer_render_options(st.render, input.scene, std::max(1, st.width / scale), std::max(1, st.height / scale));
+  const int target = coarse ? 1 : viewer_max_frames(st.render);
+  const bool want_net = st.view.layout != ViewLayout::Truth;
+  const bool want_truth = volume && st.view.layout != ViewLayout::Network;
+  auto draw = [&](ViewContent& c, ViewPass& pass) {
+    if (c.tf_epoch != snap.tf_epoch) {
+      pass.backend.reset();
+      c.mc->update(tf);
+      c.tf_epoch = snap.tf_epoch;
+    }
+    return render_pass(pass, c, tf, snap, opt, coarse, target, render_device, box);
+  };
+  bool any = false;
+  if (want_net) {
+    update_network_content(st.render.macrocells);
+    any |= draw(net_content, net_pass);
+  }
+  if (want_truth) {
+    update_truth_content();
+    any |= draw(truth_content, truth_pass);
+  }
+  *refined = !coarse;
+  *accumulated = (want_net ? net_pass : truth_pass).count;
+  if (st.view.slice) any |= render_slices(st.view);
+  return any;
+}
+
+// The slice images (truth, network, difference) of the plane the view selects, when it changed.
+bool ViewerEngine::Impl::render_slices(const ViewSettings& view) {
+  const Int3 d = model->dims;
+  const int64_t n = view.slice_axis == 0 ? d.x : (view.slice_axis == 1 ? d.y : d.z);
+  const int index = int(std::clamp<int64_t>(int64_t(view.slice_position * float(n)), 0, n - 1));
+  SliceCache& sc = slices;
+  if (sc.axis == view.slice_axis && sc.index == index && sc.model_version == model_version &&
+      sc.volume_version == volume_version)
+    return false;
+  int w = 0, h = 0;
+  const std::vector<int64_t> voxels = slice_voxels(d, view.slice_axis, index, &w, &h);
+  std::vector<float> net(voxels.size()), truth;
+  if (run.session) run.session->trainer().download();
+  Decoder(*model->net, render_device).voxels(d, voxels.data(), int64_t(voxels.size()), net.data());
+  sc.images.clear();
+  if (volume) {
+    truth.resize(voxels.size());
+    for (size_t i = 0; i < voxels.size(); ++i) truth[i] = volume->data[size_t(voxels[i])];
+    sc.images.push_back(gray_image("slice_truth", w, h, truth));
+  }
+  sc.images.push_back(gray_image("slice_network", w, h, net));
+  if (volume) sc.images.push_back(difference_image(w, h, net, truth));
+  sc.axis = view.slice_axis;
+  sc.index = index;
+  sc.model_version = model_version;
+  sc.volume_version = volume_version;
+  return true;
+}
+
+// The images of a frame in the layout's order: network, truth, then the slices.
+std::vector<ViewerImage> ViewerEngine::Impl::frame_images(const ViewerSnapshot& snap) const {
+  const ViewerState& st = snap.state;
+  std::vector<ViewerImage> out;
+  auto add = [&](const char* name, const ViewPass& p) {
+    if (p.count > 0) out.push_back(ViewerImage{name, p.acc.width, p.acc.height, p.rgba});
+  };
+  if (st.view.layout != ViewLayout::Truth) add("network", net_pass);
+  if (volume && st.view.layout != ViewLayout::Network) add("truth", truth_pass);
+  if (st.view.slice)
+    for (const ViewerImage& img : slices.images) out.push_back(img);
+  return out;
+}
+
+// Counts of the normalised values in kFineBins bins: the truth volume's, else the network decoded on
+// a grid of at most 64 voxels per axis.
+void ViewerEngine::Impl::compute_histogram() {
+  std::vector<uint64_t> counts(size_t(kFineBins), 0);
+  auto count = [&](const float* v, size_t n) {
+    for (size_t i = 0; i < n; ++i) {
+      const float u = std::clamp(v[i], 0.0f, 1.0f);
+      ++counts[std::min<size_t>(size_t(u * float(kFineBins)), size_t(kFineBins - 1))];
+    }
+  };
+  if (volume) {
+    count(volume->data.data(), volume->data.size());
+  } else {
+    const Int3 d{std::min<int64_t>(model->dims.x, 64), std::min<int64_t>(model->dims.y, 64),
+                 std::min<int64_t>(model->dims.z, 64)};
+    std::vector<float> values(d.count());
+    Decoder(*model->net, render_device).slices(d, 0, d.z, values.data());
+    count(values.data(), values.size());
+  }
+  std::lock_guard<std::mutex> lock(mu);
+  fine_histogram = std::move(counts);
+}
+
+}  // namespace vnr
