@@ -190,6 +190,8 @@ TEST_F(ViewServerTest, CameraChangeShowsInStateAndInALaterFrame) {
     return is_type(m, "state") && json_of(m)["state"]["camera"]["eye"] == Json({eye.x, eye.y, eye.z});
   });
   ASSERT_TRUE(st) << "no state with the new camera";
+  // The server sends the state a frame was rendered with before the frame: frames skipped above are
+  // older than this state.
   const uint64_t version = json_of(*st)["state"]["version"];
   EXPECT_EQ(engine_->state().camera.eye.x, eye.x);
   EXPECT_EQ(engine_->state().camera.center.x, before.center.x);  // a partial update
@@ -262,8 +264,19 @@ TEST_F(ViewServerTest, TwoClientsSeeFramesAndEachOthersChanges) {
   ASSERT_TRUE(a->read_until([](const WsMessage& m) {
     return is_type(m, "state") && json_of(m)["state"]["view"]["split"] == 0.25;
   }));
-  EXPECT_TRUE(a->read_until([](const WsMessage& m) { return m.binary; }));
-  EXPECT_TRUE(b->read_until([](const WsMessage& m) { return m.binary; }));
+  // A change that needs a new image: both get the frame.
+  Camera cam = engine_->state().camera;
+  a->send(Json{{"type", "camera"}, {"eye", {cam.eye.x + 1, cam.eye.y, cam.eye.z}}}.dump());
+  uint64_t version = 0;
+  ASSERT_TRUE(b->read_until([&](const WsMessage& m) {
+    if (!is_type(m, "state") || json_of(m)["state"]["camera"]["eye"][0] != cam.eye.x + 1) return false;
+    version = json_of(m)["state"]["version"];
+    return true;
+  }));
+  for (WsClient* c : {a.get(), b.get()})
+    EXPECT_TRUE(c->read_until([&](const WsMessage& m) {
+      return m.binary && view::split_frame_message(m.data).header["version"].get<uint64_t>() >= version;
+    }));
 }
 
 TEST_F(ViewServerTest, AClientThatNeverReadsDoesNotStallTheOthers) {
