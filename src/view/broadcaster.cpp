@@ -85,19 +85,11 @@ void run_broadcaster(ServerCore& core, const std::atomic<bool>& stop) {
       newest = std::move(f);
     }
     auto sessions = core.live_sessions();
-    if (newest && newest->id != encoded_id && !sessions.empty()) {
-      const auto t0 = Clock::now();
-      std::shared_ptr<const EncodedFrame> enc = encode_frame(*newest, jpeg, core);
-      encoded_id = newest->id;
-      {
-        std::lock_guard lk(core.sessions_mu);
-        core.latest_frame = enc;
-      }
-      for (const auto& s : sessions) s->send_frame(enc);
-      core.broadcast_ns += ns_since(t0);
-    }
     const auto now = Clock::now();
-    if (now >= next_state) {
+    const bool frame_due = newest && newest->id != encoded_id && !sessions.empty();
+    // The state a frame was rendered with goes out before the frame (a client sees its change in the
+    // state, then the frame showing it), and otherwise at most every 50 ms.
+    if (now >= next_state || (frame_due && newest->state_version > last_version)) {
       next_state = now + std::chrono::milliseconds(50);
       const ViewerState st = engine.state();
       if (st.version != last_version) {
@@ -110,6 +102,17 @@ void run_broadcaster(ServerCore& core, const std::atomic<bool>& stop) {
         const bool kept = losses.update(engine, st.training);
         send_losses(core, losses, kept, sessions);
       }
+    }
+    if (frame_due) {
+      const auto t0 = Clock::now();
+      std::shared_ptr<const EncodedFrame> enc = encode_frame(*newest, jpeg, core);
+      encoded_id = newest->id;
+      {
+        std::lock_guard lk(core.sessions_mu);
+        core.latest_frame = enc;
+      }
+      for (const auto& s : sessions) s->send_frame(enc);
+      core.broadcast_ns += ns_since(t0);
     }
   }
 }

@@ -95,6 +95,7 @@ ViewServer::ViewServer(ServerOptions options) : impl_(std::make_unique<Impl>()) 
   m.options = std::move(options);
   if (m.options.port < 0 || m.options.port > 65535) fail("--port must be in 0..65535, got {}", m.options.port);
   m.core.token = m.options.token.empty() ? make_token() : m.options.token;
+  m.core.send_buffer_bytes = m.options.send_buffer_bytes;
   beast::error_code ec;
   const net::ip::address address = net::ip::make_address(m.options.host, ec);
   if (ec) fail("--host '{}' is not an IP address", m.options.host);

@@ -16,6 +16,9 @@ struct ServerOptions {
   std::string host = "127.0.0.1";
   int port = 8765;      // 0: any free port
   std::string token;    // "" = a fresh make_token()
+  // Kernel send buffer of each WebSocket: small enough that a slow client's writes stall soon (and its
+  // frames are dropped) instead of megabytes of stale frames piling up in the socket.
+  int send_buffer_bytes = 256 * 1024;
 };
 
 struct ServerStats {

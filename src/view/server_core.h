@@ -60,6 +60,7 @@ struct ServerCore {
   net::io_context ioc{1};
   ViewerEngine* engine = nullptr;
   std::string token;
+  int send_buffer_bytes = 0;
   Worker worker;
   std::vector<uint32_t> histogram;  // for hello: computed once at start
 

@@ -11,6 +11,9 @@ void WsSession::start(http::request<http::empty_body> req) {
   ws_.set_option(websocket::stream_base::timeout::suggested(beast::role_type::server));
   ws_.read_message_max(kMessageLimit);
   ws_.auto_fragment(false);
+  beast::error_code ec;
+  if (core_.send_buffer_bytes > 0)
+    beast::get_lowest_layer(ws_).socket().set_option(net::socket_base::send_buffer_size(core_.send_buffer_bytes), ec);
   ws_.async_accept(req, [self = shared_from_this()](beast::error_code ec) {
     if (ec) return;
     self->open_ = true;

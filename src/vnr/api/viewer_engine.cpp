@@ -79,6 +79,7 @@ void ViewerEngine::Impl::open(const ViewerSetup& s) {
   info.n_params = int64_t(model->net->n_params());
   info.colormaps = tf_preset_names();
   info.save_dir = s.save_dir;
+  online_available = info.can_train || model->macrocells.has_value();
   if (info.can_train) {
     train_device = choose_training_device(s.device, *model->net, dims, true, "incore", s.batch).device;
     if (train_device == Device::Cuda && render_device == Device::Cuda) info.device = device_description(Device::Cuda);
@@ -296,7 +297,7 @@ void ViewerEngine::set_viewport(int width, int height) {
 
 void ViewerEngine::set_view(const ViewSettings& view) {
   Impl& m = *impl_;
-  if (view.layout != ViewLayout::Network && !m.volume)
+  if (view.layout != ViewLayout::Network && !m.info.has_volume)
     fail("this layout needs a volume (the input is a model without a ground truth): use the network layout");
   if (!(view.split >= 0 && view.split <= 1)) fail("split {} is outside [0, 1]", view.split);
   if (view.slice_axis < 0 || view.slice_axis > 2) fail("slice axis {} is not 0, 1 or 2", view.slice_axis);
@@ -330,9 +331,9 @@ void ViewerEngine::set_render(const ViewerRender& r) {
   if (r.coarse_scale < 1 || r.coarse_scale > 16) fail("coarse_scale {} is outside 1..16", r.coarse_scale);
   check_finite(r.light_direction, "light direction");
   if (!(length(r.light_direction) > 0)) fail("light direction (0, 0, 0) has no direction");
-  if (r.macrocells == MacroCellMode::Grid && !m.volume)
+  if (r.macrocells == MacroCellMode::Grid && !m.info.has_volume)
     fail("macrocells grid needs the ground-truth volume (use online or off)");
-  if (r.macrocells == MacroCellMode::Online && !m.info.can_train && !m.model->macrocells)
+  if (r.macrocells == MacroCellMode::Online && !m.online_available)
     fail("macrocells online needs a model trained by vnr or training (use grid or off)");
   ViewerRender checked = r;
   checked.light_direction = normalize(r.light_direction);

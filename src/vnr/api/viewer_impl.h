@@ -84,6 +84,7 @@ struct ViewerEngine::Impl {
   Precision inference = Precision::FP32;
   Vec3f box;
   ViewerState initial;             // defaults (reset_camera)
+  bool online_available = false;   // online macro-cells: recorded in the model, or from training
 
   // ---- engine thread (work_mu)
   std::mutex work_mu;
@@ -148,6 +149,10 @@ struct ViewerEngine::Impl {
   // viewer_views.cpp
   // Renders what the snapshot needs; returns false when every image was already complete.
   bool render(const ViewerSnapshot& snap, bool* refined, int* accumulated);
+  bool render_slices(const ViewSettings& view);
+  void update_network_content(MacroCellMode mode);
+  void update_truth_content();
+  const ValueRangeGrid& volume_ranges();
   std::vector<ViewerImage> frame_images(const ViewerSnapshot& snap) const;
   void compute_histogram();
 };

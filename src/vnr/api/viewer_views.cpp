@@ -128,6 +128,49 @@ static std::vector<int64_t> slice_voxels(Int3 d, int axis, int index, int* width
   return out;
 }
 
+// The grid macro-cells' value ranges of the current volume (computed once per timestep).
+const ValueRangeGrid& ViewerEngine::Impl::volume_ranges() {
+  if (grid_ranges_version != volume_version) {
+    grid_ranges = render_device == Device::Cuda ? gpu_value_ranges_from_grid(view_of(*volume), kCellSize)
+                                                : value_ranges_from_grid(view_of(*volume), kCellSize);
+    grid_ranges_version = volume_version;
+  }
+  return *grid_ranges;
+}
+
+// The network's field and macro-cells for the current parameters and macro-cell mode.
+void ViewerEngine::Impl::update_network_content(MacroCellMode mode) {
+  ViewContent& c = net_content;
+  if (c.field && c.version == model_version && c.mode == mode) return;
+  net_pass.backend.reset();  // it refers to the old field and cells
+  if (run.session) run.session->trainer().download();
+  c.field = std::make_unique<NetworkField>(*model->net, model->dims);
+  const bool trained = run.session && run.session->steps_done() > 0;
+  if (mode == MacroCellMode::Online && trained)
+    c.mc = std::make_unique<MacroCells>(run.session->trainer().online_ranges(), box);
+  else if (mode == MacroCellMode::Online && model->macrocells)
+    c.mc = std::make_unique<MacroCells>(*model->macrocells, box);
+  else if (mode == MacroCellMode::Grid && volume)
+    c.mc = std::make_unique<MacroCells>(volume_ranges(), box);
+  else  // off, or online before the first step (no samples yet: the untrained network shows as it is)
+    c.mc = std::make_unique<MacroCells>(MacroCells::single(model->dims, box));
+  c.version = model_version;
+  c.mode = mode;
+  c.tf_epoch = ~uint64_t(0);
+}
+
+// The truth volume's field and grid macro-cells for the current timestep.
+void ViewerEngine::Impl::update_truth_content() {
+  ViewContent& c = truth_content;
+  if (c.field && c.version == volume_version) return;
+  truth_pass.backend.reset();
+  c.field = std::make_unique<GridField>(view_of(*volume));
+  c.mc = std::make_unique<MacroCells>(volume_ranges(), box);
+  c.version = volume_version;
+  c.mode = MacroCellMode::Grid;
+  c.tf_epoch = ~uint64_t(0);
+}
+
 // Renders one frame of each view the layout needs that is not complete, and the slices when on.
 bool ViewerEngine::Impl::render(const ViewerSnapshot& snap, bool* refined, int* accumulated) {
   const ViewerState& st = snap.state;
@@ -143,94 +186,56 @@ bool ViewerEngine::Impl::render(const ViewerSnapshot& snap, bool* refined, int* 
   const int target = coarse ? 1 : viewer_max_frames(st.render);
   const bool want_net = st.view.layout != ViewLayout::Truth;
   const bool want_truth = volume && st.view.layout != ViewLayout::Network;
+  auto draw = [&](ViewContent& c, ViewPass& pass) {
+    if (c.tf_epoch != snap.tf_epoch) {
+      pass.backend.reset();
+      c.mc->update(tf);
+      c.tf_epoch = snap.tf_epoch;
+    }
+    return render_pass(pass, c, tf, snap, opt, coarse, target, render_device, box);
+  };
   bool any = false;
   if (want_net) {
-    ViewContent& c = net_content;
-    if (c.version != model_version || c.mode != st.render.macrocells || !c.field) {
-      net_pass.backend.reset();
-      if (run.session) run.session->trainer().download();
-      c.field = std::make_unique<NetworkField>(*model->net, model->dims);
-      const bool trained = run.session && run.session->steps_done() > 0;
-      if (st.render.macrocells == MacroCellMode::Online && trained)
-        c.mc = std::make_unique<MacroCells>(run.session->trainer().online_ranges(), box);
-      else if (st.render.macrocells == MacroCellMode::Online && model->macrocells)
-        c.mc = std::make_unique<MacroCells>(*model->macrocells, box);
-      else if (st.render.macrocells == MacroCellMode::Grid && volume) {
-        if (grid_ranges_version != volume_version) {
-          grid_ranges = render_device == Device::Cuda ? gpu_value_ranges_from_grid(view_of(*volume), kCellSize)
-                                                      : value_ranges_from_grid(view_of(*volume), kCellSize);
-          grid_ranges_version = volume_version;
-        }
-        c.mc = std::make_unique<MacroCells>(*grid_ranges, box);
-      } else {
-        // Off, or online before the first step (no samples yet: the untrained network shows as it is).
-        c.mc = std::make_unique<MacroCells>(MacroCells::single(model->dims, box));
-      }
-      c.version = model_version;
-      c.mode = st.render.macrocells;
-      c.tf_epoch = ~uint64_t(0);
-    }
-    if (c.tf_epoch != snap.tf_epoch) {
-      net_pass.backend.reset();
-      c.mc->update(tf);
-      c.tf_epoch = snap.tf_epoch;
-    }
-    any |= render_pass(net_pass, c, tf, snap, opt, coarse, target, render_device, box);
+    update_network_content(st.render.macrocells);
+    any |= draw(net_content, net_pass);
   }
   if (want_truth) {
-    ViewContent& c = truth_content;
-    if (c.version != volume_version || !c.field) {
-      truth_pass.backend.reset();
-      c.field = std::make_unique<GridField>(view_of(*volume));
-      if (grid_ranges_version != volume_version) {
-        grid_ranges = render_device == Device::Cuda ? gpu_value_ranges_from_grid(view_of(*volume), kCellSize)
-                                                    : value_ranges_from_grid(view_of(*volume), kCellSize);
-        grid_ranges_version = volume_version;
-      }
-      c.mc = std::make_unique<MacroCells>(*grid_ranges, box);
-      c.version = volume_version;
-      c.mode = MacroCellMode::Grid;
-      c.tf_epoch = ~uint64_t(0);
-    }
-    if (c.tf_epoch != snap.tf_epoch) {
-      truth_pass.backend.reset();
-      c.mc->update(tf);
-      c.tf_epoch = snap.tf_epoch;
-    }
-    any |= render_pass(truth_pass, c, tf, snap, opt, coarse, target, render_device, box);
+    update_truth_content();
+    any |= draw(truth_content, truth_pass);
   }
-  const ViewPass& main = want_net ? net_pass : truth_pass;
   *refined = !coarse;
-  *accumulated = main.count;
-
-  if (st.view.slice) {
-    const Int3 d = model->dims;
-    const int n = st.view.slice_axis == 0 ? d.x : (st.view.slice_axis == 1 ? d.y : d.z);
-    const int index = std::clamp(int(st.view.slice_position * float(n)), 0, n - 1);
-    SliceCache& sc = slices;
-    if (sc.axis != st.view.slice_axis || sc.index != index || sc.model_version != model_version ||
-        sc.volume_version != volume_version) {
-      int w = 0, h = 0;
-      const std::vector<int64_t> voxels = slice_voxels(d, st.view.slice_axis, index, &w, &h);
-      std::vector<float> net(voxels.size()), truth;
-      if (run.session) run.session->trainer().download();
-      Decoder(*model->net, render_device).voxels(d, voxels.data(), int64_t(voxels.size()), net.data());
-      sc.images.clear();
-      if (volume) {
-        truth.resize(voxels.size());
-        for (size_t i = 0; i < voxels.size(); ++i) truth[i] = volume->data[size_t(voxels[i])];
-        sc.images.push_back(gray_image("slice_truth", w, h, truth));
-      }
-      sc.images.push_back(gray_image("slice_network", w, h, net));
-      if (volume) sc.images.push_back(difference_image(w, h, net, truth));
-      sc.axis = st.view.slice_axis;
-      sc.index = index;
-      sc.model_version = model_version;
-      sc.volume_version = volume_version;
-      any = true;
-    }
-  }
+  *accumulated = (want_net ? net_pass : truth_pass).count;
+  if (st.view.slice) any |= render_slices(st.view);
   return any;
+}
+
+// The slice images (truth, network, difference) of the plane the view selects, when it changed.
+bool ViewerEngine::Impl::render_slices(const ViewSettings& view) {
+  const Int3 d = model->dims;
+  const int64_t n = view.slice_axis == 0 ? d.x : (view.slice_axis == 1 ? d.y : d.z);
+  const int index = int(std::clamp<int64_t>(int64_t(view.slice_position * float(n)), 0, n - 1));
+  SliceCache& sc = slices;
+  if (sc.axis == view.slice_axis && sc.index == index && sc.model_version == model_version &&
+      sc.volume_version == volume_version)
+    return false;
+  int w = 0, h = 0;
+  const std::vector<int64_t> voxels = slice_voxels(d, view.slice_axis, index, &w, &h);
+  std::vector<float> net(voxels.size()), truth;
+  if (run.session) run.session->trainer().download();
+  Decoder(*model->net, render_device).voxels(d, voxels.data(), int64_t(voxels.size()), net.data());
+  sc.images.clear();
+  if (volume) {
+    truth.resize(voxels.size());
+    for (size_t i = 0; i < voxels.size(); ++i) truth[i] = volume->data[size_t(voxels[i])];
+    sc.images.push_back(gray_image("slice_truth", w, h, truth));
+  }
+  sc.images.push_back(gray_image("slice_network", w, h, net));
+  if (volume) sc.images.push_back(difference_image(w, h, net, truth));
+  sc.axis = view.slice_axis;
+  sc.index = index;
+  sc.model_version = model_version;
+  sc.volume_version = volume_version;
+  return true;
 }
 
 // The images of a frame in the layout's order: network, truth, then the slices.
