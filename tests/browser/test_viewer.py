@@ -75,6 +75,11 @@ class ViewerTestCase(unittest.TestCase):
     def wait_state(self, condition, what, timeout=30):
         return self.browser.wait(f"(() => {{ const s = vnrViewer.state; return {condition}; }})()", timeout, what)
 
+    def settled_screenshot(self, label):
+        """/screenshot.png once the current settings are fully rendered."""
+        self.browser.wait_settled()
+        return self.server.fetch("/screenshot.png", os.path.join(self.dir, f"{label}-before.png"))
+
     def assert_matches_render(self, label, input_path, previous_shot=None):
         """Waits for the settled frame, then compares /screenshot.png and the canvas with `vnr render`
         of /scene.json; previous_shot: an earlier screenshot the render must differ from."""
@@ -113,10 +118,11 @@ class ModelView(ViewerTestCase):
 
     def test_1_first_frame_matches_render(self):
         self.assertTrue(self.browser.js("return vnrViewer.frames.network > 0;"))
-        self.__class__.shot = self.assert_matches_render("first", MODEL)
+        self.assert_matches_render("first", MODEL)
 
     def test_2_drag_changes_camera(self):
         from selenium.webdriver.common.action_chains import ActionChains
+        shot = self.settled_screenshot("drag")
         before = self.state()
         canvas = self.browser.driver.find_element("id", "canvas-main")
         ActionChains(self.browser.driver).move_to_element(canvas).click_and_hold() \
@@ -124,15 +130,17 @@ class ModelView(ViewerTestCase):
         self.wait_state(f"s.version > {before['version']} && s.camera.eye[0] !== {before['camera']['eye'][0]}",
                         "the camera to change")
         # the drag sent coarse frames (interacting), then a refined one
-        self.__class__.shot = self.assert_matches_render("drag", MODEL, previous_shot=self.shot)
+        self.assert_matches_render("drag", MODEL, previous_shot=shot)
 
     def test_3_shadow_mode(self):
+        shot = self.settled_screenshot("shadow")
         self.select("render-mode", "shadow")
         self.wait_state("s.render.mode === 'shadow'", "shadow mode")
-        self.__class__.shot = self.assert_matches_render("shadow", MODEL, previous_shot=self.shot)
+        self.assert_matches_render("shadow", MODEL, previous_shot=shot)
 
     def test_4_tf_point_drag(self):
         from selenium.webdriver.common.action_chains import ActionChains
+        shot = self.settled_screenshot("tf")
         before = self.state()["tf"]["opacity"]
         # The last control point (x = 1) is dragged down to a quarter of the canvas height.
         b = self.browser
@@ -150,7 +158,7 @@ class ModelView(ViewerTestCase):
                                 "the TF's last point to move down")
         self.assertEqual(len(after), len(before))
         self.assertAlmostEqual(after[-1][0], 1.0)
-        self.assert_matches_render("tf", MODEL, previous_shot=self.shot)
+        self.assert_matches_render("tf", MODEL, previous_shot=shot)
 
     def test_5_layouts_size_the_viewport(self):
         b = self.browser

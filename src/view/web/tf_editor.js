@@ -33,13 +33,18 @@ VNR.TfEditor = class {
 
   points() { return this.local || (this.tf ? this.tf.opacity : []); }
 
+  // The edited points stay on screen until the state shows them (or for a second: a refused edit).
   setState(tf) {
     this.tf = tf;
-    if (this.local && this.dragIndex < 0 && performance.now() > this.localUntil) this.local = null;
+    if (this.local && this.dragIndex < 0 &&
+        (VNR.TfEditor.samePoints(tf.opacity, this.local) || performance.now() > this.localUntil)) {
+      this.local = null;
+    }
     this.draw();
   }
-  // The state moved past our last edit: show the server's points again.
-  stateCaughtUp() { if (this.dragIndex < 0) this.local = null; this.draw(); }
+  static samePoints(a, b) {
+    return a.length === b.length && a.every((p, i) => Math.abs(p[0] - b[i][0]) < 1e-4 && Math.abs(p[1] - b[i][1]) < 1e-4);
+  }
   setHistogram(counts) { this.histogram = counts || []; this.draw(); }
   setColorStops(stops) { this.colorStops = stops; this.drawColorbar(); }
   setMaxOpacity(v) { if (v > 0) { this.maxOpacity = v; this.draw(); } }
@@ -133,6 +138,8 @@ VNR.TfEditor = class {
   commit() {
     if (!this.local) return;
     this.localUntil = performance.now() + 1000;
+    clearTimeout(this.revertTimer);
+    this.revertTimer = setTimeout(() => { if (this.tf) this.setState(this.tf); }, 1100);
     this.send({ opacity: this.local.map((p) => [p[0], p[1]]) });
     this.draw();
   }

@@ -114,12 +114,10 @@ VNR.Viewer = class {
   }
 
   applyState(s) {
-    const previous = this.state;
     this.state = s;
     if (this.tracing) this.trace.push({ t: performance.now(), kind: "state", version: s.version, camera: s.camera });
     if (this.errorCount !== null && s.error_count > this.errorCount && s.last_error) this.showError(s.last_error);
     this.errorCount = s.error_count;
-    if (previous && s.version > this.versionAtSend) this.tfEditor.stateCaughtUp();
     this.views.setState(s);
     this.panels.setState(s);
   }
