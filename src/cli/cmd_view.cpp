@@ -51,6 +51,11 @@ void serve(const ViewArgs& a) {
   setup.batch = a.batch;
   setup.seed = a.seed;
   ViewerEngine engine(setup);
+  // Whatever happens below, the server's threads end before the engine they use is destroyed.
+  struct StopServerFirst {
+    view::ViewServer& server;
+    ~StopServerFirst() { server.stop(); }
+  } stop_server_first{server};
   server.start(engine);
   std::printf("vnr view: %s\n", server.url().c_str());
   std::fflush(stdout);

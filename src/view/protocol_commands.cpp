@@ -64,7 +64,7 @@ public:
     }
     fail("{}.{} = \"{}\" is not one of {}", type_, name, *s, list);
   }
-  // An array of `n` finite numbers (n = 0: any length is not allowed here; see number_rows).
+  // An array of exactly `n` finite numbers.
   std::vector<float> numbers(const Json& j, size_t n, const std::string& what) const {
     if (!j.is_array() || j.size() != n) fail("{} must be an array of {} numbers, got {}", what, n, short_dump(j));
     std::vector<float> v;
