@@ -539,7 +539,7 @@ TEST(ViewerEngine, BadSetterValuesThrowAndChangeNothing) {
   c.fovy = 0;
   EXPECT_HAS(error_of([&] { engine.set_camera(c, false); }), "fovy 0");
   EXPECT_HAS(error_of([&] { engine.start_training(); }), "ground truth");
-  EXPECT_HAS(error_of([&] { engine.set_training_budget(0); }), "budget 0");
+  EXPECT_HAS(error_of([&] { engine.set_training_budget(0.0005); }), "budget 0.0005");
   EXPECT_HAS(error_of([&] { engine.set_timestep(1); }), "timestep 1");
   EXPECT_HAS(error_of([&] { engine.histogram(0); }), "bins 0");
   EXPECT_HAS(error_of([&] { engine.save_model("x"); }), "save directory");

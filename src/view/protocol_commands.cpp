@@ -200,7 +200,7 @@ Run render_command(const Fields& f) {
 Run train_command(const Fields& f) {
   auto action = f.choice("action", {"start", "pause", "reset"});
   auto lr = f.number("learning_rate", 1e-12, 1e3);
-  auto budget = f.number("budget", 0.001, 10);
+  auto budget = f.number("budget", 0, 10);
   if (lr && action != 2) fail("train.learning_rate goes with action \"reset\" only");
   if (!action && !budget) fail("train needs \"action\" (start, pause, reset) or \"budget\"");
   return [=](ViewerEngine& e) {

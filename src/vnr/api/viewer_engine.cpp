@@ -172,6 +172,7 @@ void ViewerEngine::Impl::iterate(const ViewerSnapshot& snap) {
     try {
       if (!halting) rendered = render(snap, &frame->refined, &frame->accumulated);
       frame->render_seconds = std::chrono::duration<double>(Clock::now() - t0).count();
+      if (rendered) last_render_seconds = frame->render_seconds;
       // A new layout (or any change) shows at once, even when its images were already complete.
       if (!halting && !rendered && snap.epoch != published_epoch) {
         frame->refined = !snap.interacting;
@@ -400,8 +401,8 @@ void ViewerEngine::reset_training(std::optional<double> learning_rate) {
 }
 
 void ViewerEngine::set_training_budget(double seconds_per_frame) {
-  if (!(std::isfinite(seconds_per_frame) && seconds_per_frame >= 0.001 && seconds_per_frame <= 10))
-    fail("training budget {} s is outside 0.001..10 s per frame", seconds_per_frame);
+  if (!(std::isfinite(seconds_per_frame) && (seconds_per_frame == 0 || (seconds_per_frame >= 0.001 && seconds_per_frame <= 10))))
+    fail("training budget {} s is outside 0.001..10 s per frame (0 = auto)", seconds_per_frame);
   std::lock_guard<std::mutex> lock(impl_->mu);
   impl_->state.training.budget_seconds = seconds_per_frame;
   impl_->bump_locked(false);

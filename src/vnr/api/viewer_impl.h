@@ -103,6 +103,7 @@ struct ViewerEngine::Impl {
     uint64_t model_version = ~uint64_t(0), volume_version = ~uint64_t(0);
     std::vector<ViewerImage> images;
   } slices;
+  double last_render_seconds = 0;  // of the last frame rendered: what the automatic training budget follows
 
   // ---- shared (mu)
   mutable std::mutex mu;

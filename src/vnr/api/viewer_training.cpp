@@ -20,6 +20,8 @@ constexpr double kProbeEverySeconds = 0.5;
 constexpr int64_t kProbeEverySteps = 50;
 // A training budget is run in slices of at most this long, so pause/reset/stop take effect soon.
 constexpr double kSliceSeconds = 0.05;
+// The automatic budget (budget_seconds = 0): training gets 1.5x the time the last frame took to render.
+constexpr double kAutoBudgetFactor = 1.5, kAutoBudgetMin = 0.05;
 // samples_per_second averages the steps of about the last this many training seconds.
 constexpr double kRateWindowSeconds = 1.0;
 
@@ -140,19 +142,20 @@ double ViewerEngine::Impl::train_chunk(const ViewerSnapshot& snap) {
     run.switch_at = run.steps() + run.switch_every;
   }
   const double t0 = run.seconds();
+  const double budget = want.budget_seconds > 0 ? want.budget_seconds : std::max(kAutoBudgetMin, kAutoBudgetFactor * last_render_seconds);
   try {
     if (run.probe_step < 0) take_probe();
     double spent = 0;
     do {
       int64_t limit = -1;
       if (run.continuous) limit = std::max<int64_t>(1, run.switch_at - run.steps());
-      run.session->run(limit, std::min(want.budget_seconds - spent, kSliceSeconds));
+      run.session->run(limit, std::min(budget - spent, kSliceSeconds));
       spent = run.seconds() - t0;
       if (run.continuous && run.steps() >= run.switch_at) {
         load_timestep((snap.state.training.timestep + 1) % info.n_timesteps);
         break;
       }
-    } while (spent < want.budget_seconds && keep_training());
+    } while (spent < budget && keep_training());
     if (run.steps() - run.probe_step >= kProbeEverySteps && run.seconds() - run.probe_seconds >= kProbeEverySeconds)
       take_probe();
   } catch (const std::exception& e) {
