@@ -84,7 +84,11 @@ TrainingData open_training_data(const std::string& name, const VolumeDesc& desc,
   }
   if (t.kind != "outofcore" && t.kind != "mmap") fail("unknown --sampler '{}' (allowed: incore, outofcore, mmap)", t.kind);
   // Before any pass over the data: these samplers read at random offsets.
-  require_random_access(desc, "--sampler " + t.kind);
+  if (t.kind == "mmap")
+    require_raw_bytes(desc, "--sampler mmap",
+                      desc.encoding == "hdf5" || desc.encoding == "netcdf" ? "use --sampler outofcore" : "");
+  else
+    require_random_access(desc, "--sampler " + t.kind);
   // The value range: the descriptor's, or one streaming pass (the volume is never loaded).
   const bool known_range = desc.range_lo && desc.range_hi;
   Progress scan_bar("value range", 1.0, !o.show_progress || known_range);

@@ -11,11 +11,21 @@
 #include <type_traits>
 #include <vector>
 #include "vnr/core/error.h"
+#include "vnr/volume/dataset.h"
 #include "vnr/volume/formats.h"
 
 namespace vnr {
 
 void require_random_access(const VolumeDesc& desc, const std::string& what, const std::string& alternative) {
+  if (!detail::is_dataset_encoding(desc.encoding)) require_raw_bytes(desc, what, alternative);
+}
+
+void require_raw_bytes(const VolumeDesc& desc, const std::string& what, const std::string& alternative) {
+  if (detail::is_dataset_encoding(desc.encoding))
+    fail("'{}:{}' is an {} dataset, and {} needs the voxels as plain bytes in a file (raw, or NRRD with "
+         "'encoding: raw'){}{}",
+         desc.path, desc.dataset, desc.encoding == "hdf5" ? "HDF5" : "NetCDF", what,
+         alternative.empty() ? "" : "; ", alternative);
   if (desc.encoding != "raw")
     fail("'{}' is {}-encoded, and {} reads voxels at random offsets, which needs uncompressed data (raw, or NRRD "
          "with 'encoding: raw'){}{}",
@@ -81,7 +91,7 @@ struct DataFile {
 
 DataFile open_data(const VolumeDesc& desc, double lo, double hi, const std::string& what,
                    const std::string& alternative) {
-  require_random_access(desc, what, alternative);
+  require_raw_bytes(desc, what, alternative);
   check_dims(desc);
   check_range(desc, lo, hi);
   DataFile f;
@@ -124,6 +134,10 @@ float normalised_sample(const unsigned char* p, bool swap, bool strict, const Pi
 RawVolumeFile::RawVolumeFile(const VolumeDesc& desc, double lo, double hi, NonFinitePolicy policy,
                              const std::string& what, const std::string& alternative)
     : desc_(desc), policy_(policy) {
+  if (is_dataset_encoding(desc.encoding)) {
+    open_dataset(lo, hi, what, alternative);
+    return;
+  }
   DataFile f = open_data(desc, lo, hi, what, alternative);
   fd_ = f.fd;
   file_bytes_ = f.id.size;
@@ -141,8 +155,47 @@ RawVolumeFile::~RawVolumeFile() {
   if (fd_ >= 0) ::close(fd_);
 }
 
+// An HDF5/NetCDF source: the same checks and pivot as a raw file's, the container file's identity
+// for check_unchanged, and reads through the library.
+void RawVolumeFile::open_dataset(double lo, double hi, const std::string& what, const std::string& alternative) {
+  require_random_access(desc_, what, alternative);
+  check_dims(desc_);
+  check_range(desc_, lo, hi);
+  esize_ = dtype_size(desc_.dtype);
+  swap_ = false;
+  frame_bytes_ = desc_.dims.count() * esize_;
+  struct stat st;
+  if (::stat(desc_.path.c_str(), &st) != 0) fail("cannot stat '{}': {}", desc_.path, std::strerror(errno));
+  file_bytes_ = uint64_t(st.st_size);
+  dev_ = st.st_dev;
+  ino_ = st.st_ino;
+  dataset_ = open_dataset_reader(desc_);
+  double pivot = 0;
+  if (!pivot_from_desc(desc_, &pivot)) {  // the first finite sample in file order, as load_volume
+    const uint64_t n = desc_.dims.count(), per = std::min<uint64_t>(n, uint64_t(1) << 16);
+    std::vector<unsigned char> buf(size_t(per * esize_));
+    bool found = false;
+    for (uint64_t i0 = 0; i0 < n && !found; i0 += per) {
+      const uint64_t m = std::min(per, n - i0);
+      read_voxel_run(*dataset_, desc_.dims, i0, m, esize_, buf.data());
+      with_sample_type(desc_.dtype, [&](auto tag) {
+        found = find_pivot<typename decltype(tag)::type>(buf.data(), int64_t(m), false, &pivot);
+      });
+    }
+  }
+  norm_.set(pivot, lo, hi, policy_);
+}
+
 void RawVolumeFile::read_bytes(unsigned char* dst, size_t bytes, uint64_t file_offset) const {
-  pread_exact(fd_, dst, bytes, file_offset, desc_.path);
+  if (dataset_) {
+    read_voxel_run(*dataset_, desc_.dims, (file_offset - desc_.offset) / esize_, bytes / esize_, esize_, dst);
+  } else {
+    pread_exact(fd_, dst, bytes, file_offset, desc_.path);
+  }
+  count_read(bytes, file_offset);
+}
+
+void RawVolumeFile::count_read(size_t bytes, uint64_t file_offset) const {
   bytes_read_.fetch_add(bytes, std::memory_order_relaxed);
   uint64_t end = file_offset + bytes, cur = max_read_end_.load(std::memory_order_relaxed);
   while (end > cur && !max_read_end_.compare_exchange_weak(cur, end, std::memory_order_relaxed)) {
@@ -165,7 +218,40 @@ size_t RawVolumeFile::scratch_bytes(Int3 box) const {
   return size_t((rows_per_read(box.y) - 1) * int64_t(desc_.dims.x) + in_row) * esize_;
 }
 
+// A dataset's box: the part inside the volume as one hyperslab, then clamp-to-edge outside it.
+void RawVolumeFile::read_dataset_box(Int3 origin, Int3 size, float* out) const {
+  const Int3 d = desc_.dims;
+  Int3 lo, in;
+  for (int a = 0; a < 3; ++a) {
+    lo[a] = std::clamp<int64_t>(origin[a], 0, d[a] - 1);
+    in[a] = std::clamp<int64_t>(origin[a] + size[a], lo[a] + 1, d[a]) - lo[a];  // >= 1: a box outside reads the edge
+  }
+  std::vector<unsigned char> buf(size_t(in.count() * esize_));
+  dataset_->read_box(lo, in, buf.data());
+  count_read(buf.size(), desc_.offset + uint64_t((lo.z * d.y + lo.y) * d.x + lo.x) * esize_);
+  const bool strict = policy_ == NonFinitePolicy::Error;
+  const PivotNormaliser norm = norm_;
+  auto inside = [](int64_t v, int64_t lo_, int64_t n) { return std::clamp<int64_t>(v, lo_, lo_ + n - 1) - lo_; };
+  with_sample_type(desc_.dtype, [&](auto tag) {
+    using T = typename decltype(tag)::type;
+    for (int64_t k = 0; k < size.z; ++k) {
+      const int64_t bz = inside(origin.z + k, lo.z, in.z);
+      for (int64_t j = 0; j < size.y; ++j) {
+        const int64_t by = inside(origin.y + j, lo.y, in.y);
+        float* row = out + (k * size.y + j) * size.x;
+        for (int64_t i = 0; i < size.x; ++i) {
+          const int64_t bx = inside(origin.x + i, lo.x, in.x);
+          const int64_t voxel = ((lo.z + bz) * d.y + lo.y + by) * d.x + lo.x + bx;
+          row[i] = normalised_sample<T>(buf.data() + ((bz * in.y + by) * in.x + bx) * int64_t(esize_), false, strict,
+                                        norm, desc_, voxel);
+        }
+      }
+    }
+  });
+}
+
 void RawVolumeFile::read_box(Int3 origin, Int3 size, float* out, unsigned char* scratch) const {
+  if (dataset_) return read_dataset_box(origin, size, out);
   const Int3 d = desc_.dims;
   auto clamp = [](int64_t v, int64_t n) { return v < 0 ? 0 : (v >= n ? n - 1 : v); };
   // The part of each row inside the volume; columns outside copy the edge voxel.

@@ -6,6 +6,7 @@
 // sample of the timestep, read at construction) and the same arithmetic (sample_io.h).
 #include <atomic>
 #include <cstdint>
+#include <memory>
 #include <string>
 #include <sys/types.h>
 #include "vnr/volume/sample_io.h"
@@ -13,13 +14,18 @@
 
 namespace vnr {
 
-// Fails unless desc can be read at random offsets (raw encoding); `what` names the reader in the
-// message, `alternative` (optional) says what to do instead. The readers below check this first.
+// Fails unless desc can be read at random offsets (raw encoding, or an HDF5/NetCDF dataset, read as
+// hyperslabs); `what` names the reader in the message, `alternative` (optional) says what to do
+// instead. RawVolumeFile checks this first.
 void require_random_access(const VolumeDesc& desc, const std::string& what, const std::string& alternative = "");
+// Fails unless desc's voxels are plain bytes in a file (raw encoding), as a memory map needs.
+void require_raw_bytes(const VolumeDesc& desc, const std::string& what, const std::string& alternative = "");
 
-// pread access to the voxels of one timestep of a raw-encoded volume. Thread-safe: any number of
-// threads may read at once. Reads never leave [offset, offset + frame), and a file that shrinks
-// gives a clear error instead of garbage.
+// pread access to the voxels of one timestep of a raw-encoded volume (or hyperslab reads of an
+// HDF5/NetCDF dataset: "file offsets" are then offsets into the timestep's samples, and a box is
+// one hyperslab). Thread-safe: any number of threads may read at once (dataset reads take turns).
+// Reads never leave [offset, offset + frame), and a file that shrinks gives a clear error instead
+// of garbage.
 class RawVolumeFile {
 public:
   // Normalises with range [lo, hi]. Compressed data is refused with one line naming `what` (what
@@ -61,7 +67,11 @@ public:
 
 private:
   void read_bytes(unsigned char* dst, size_t bytes, uint64_t file_offset) const;
+  void open_dataset(double lo, double hi, const std::string& what, const std::string& alternative);
+  void read_dataset_box(Int3 origin, Int3 size, float* out) const;
+  void count_read(size_t bytes, uint64_t file_offset) const;
   VolumeDesc desc_;
+  std::unique_ptr<detail::DatasetReader> dataset_;  // HDF5/NetCDF sources
   detail::PivotNormaliser norm_;
   NonFinitePolicy policy_;
   int fd_ = -1;

@@ -11,6 +11,7 @@
 #include <cstdio>
 #include <cstring>
 #include <limits>
+#include <memory>
 #include <string>
 #include <type_traits>
 #include <vector>
@@ -21,6 +22,8 @@
 struct gzFile_s;  // zlib's gzFile
 
 namespace vnr::detail {
+
+class DatasetReader;  // dataset.h: HDF5 datasets and NetCDF variables
 
 template <typename T>
 struct TypeTag {
@@ -171,8 +174,9 @@ ValueRange resolve_range(const VolumeDesc& desc, const Tally& t);
 // means the file shrank since it was described.
 void pread_exact(int fd, unsigned char* dst, size_t bytes, uint64_t at, const std::string& path);
 
-// The samples of one timestep in file order, from a raw file or a gzip stream, with load_volume's
-// messages for short or corrupt data.
+// The samples of one timestep in file order, from a raw file, a gzip stream or an HDF5/NetCDF
+// dataset (read as hyperslabs of whole z-slices, chunk-aligned), with load_volume's messages for
+// short or corrupt data.
 class SampleStream {
 public:
   explicit SampleStream(const VolumeDesc& desc);
@@ -192,6 +196,7 @@ private:
   uint64_t gz_base() const;
   uint64_t gz_expected() const;
   [[noreturn]] void gz_size_error();
+  void dataset_read(unsigned char* dst, uint64_t bytes);
 
   const VolumeDesc& desc_;
   uint64_t frame_ = 0;
@@ -199,6 +204,9 @@ private:
   uint64_t pos_ = 0;
   gzFile_s* gz_ = nullptr;
   uint64_t gz_total_ = 0;
+  std::unique_ptr<DatasetReader> dataset_;
+  std::vector<unsigned char> slab_;      // dataset: whole z-slices [slab_begin_, slab_end_) in bytes
+  uint64_t slab_begin_ = 0, slab_end_ = 0;
 };
 
 }  // namespace vnr::detail

@@ -12,6 +12,7 @@
 #include <cstring>
 #include <new>
 #include "vnr/core/error.h"
+#include "vnr/volume/dataset.h"
 #include "vnr/volume/formats.h"
 #include "vnr/volume/sample_io.h"
 
@@ -63,6 +64,10 @@ void pread_exact(int fd, unsigned char* dst, size_t bytes, uint64_t at, const st
 // ---------------------------------------------------------------------------------------------
 SampleStream::SampleStream(const VolumeDesc& desc) : desc_(desc) {
   frame_ = desc.dims.count() * dtype_size(desc.dtype);
+  if (is_dataset_encoding(desc.encoding)) {
+    dataset_ = open_dataset_reader(desc);
+    return;
+  }
   if (desc.encoding == "gzip") {
     int fd = ::open(desc.path.c_str(), O_RDONLY | O_CLOEXEC);
     if (fd < 0) fail("cannot open '{}': {}", desc.path, std::strerror(errno));
@@ -101,6 +106,7 @@ SampleStream::SampleStream(const VolumeDesc& desc) : desc_(desc) {
 SampleStream::~SampleStream() { close(); }
 
 void SampleStream::read(unsigned char* dst, uint64_t bytes) {
+  if (dataset_) return dataset_read(dst, bytes);
   if (gz_) {
     if (gz_read(dst, bytes) != bytes) gz_size_error();
     return;
@@ -110,6 +116,29 @@ void SampleStream::read(unsigned char* dst, uint64_t bytes) {
   if (n != bytes) {
     if (std::ferror(f_)) fail("cannot read '{}': {}", desc_.path, std::strerror(errno));
     fail("'{}': unexpected end of file at byte {} (did the file change since it was described?)", desc_.path, pos_);
+  }
+}
+
+// Serves the bytes from a slab of whole z-slices, read as one hyperslab: a multiple of the chunks'
+// z-extent (each chunk decompressed once) of about 16 MiB, at least one chunk layer.
+void SampleStream::dataset_read(unsigned char* dst, uint64_t bytes) {
+  const uint64_t slice = uint64_t(desc_.dims.x) * uint64_t(desc_.dims.y) * dtype_size(desc_.dtype);
+  const uint64_t chunk_z = uint64_t(dataset_->chunk_slices());
+  const uint64_t slab_slices = chunk_z * std::max<uint64_t>(1, (uint64_t(16) << 20) / (slice * chunk_z));
+  while (bytes > 0) {
+    if (pos_ >= slab_begin_ && pos_ < slab_end_) {
+      const uint64_t m = std::min(bytes, slab_end_ - pos_);
+      std::memcpy(dst, slab_.data() + (pos_ - slab_begin_), size_t(m));
+      dst += m, pos_ += m, bytes -= m;
+      continue;
+    }
+    const uint64_t z0 = pos_ / slice;
+    if (z0 >= uint64_t(desc_.dims.z)) fail("'{}:{}': read past the last slice", desc_.path, desc_.dataset);
+    const uint64_t k = std::min(slab_slices - z0 % slab_slices, uint64_t(desc_.dims.z) - z0);
+    slab_.resize(size_t(k * slice));
+    dataset_->read_box(Int3{0, 0, int64_t(z0)}, Int3{desc_.dims.x, desc_.dims.y, int64_t(k)}, slab_.data());
+    slab_begin_ = z0 * slice;
+    slab_end_ = slab_begin_ + k * slice;
   }
 }
 

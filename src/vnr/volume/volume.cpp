@@ -7,6 +7,7 @@
 #include "vnr/core/error.h"
 #include "vnr/core/fileio.h"
 #include "vnr/core/json.h"
+#include "vnr/volume/dataset.h"
 #include "vnr/volume/formats.h"
 #include "vnr/volume/volume.h"
 
@@ -91,6 +92,8 @@ Source describe_file(const std::string& path, const RawOptions& opts, bool* plai
   *plain_raw = false;
   if (ext == ".json") return describe_json(path);
   if (ext == ".nrrd" || ext == ".nhdr" || has_nrrd_magic(path)) return detail::describe_nrrd(path);
+  const std::string dataset_encoding = detail::dataset_encoding_of_extension(ext);
+  if (!dataset_encoding.empty()) detail::fail_no_dataset_path(path, dataset_encoding);
   *plain_raw = true;
   if (!opts.dims || !opts.dtype)
     fail("--dims X,Y,Z and --dtype T are required for raw file '{}' (or describe it with a .json sidecar or .nhdr)",
@@ -137,12 +140,24 @@ void check_data_file_size(const Source& s, VolumeDesc& d, uint64_t frame, uint64
   if (s.files.empty()) d.offset += uint64_t(d.timestep) * frame;
 }
 
+// An HDF5 dataset or NetCDF variable is described by its dataspace and type: of RawOptions only the
+// timestep and the range apply.
+Source describe_dataset_source(const detail::DatasetPath& p, const RawOptions& opts) {
+  const char* layout_option =
+      opts.dims ? "--dims" : opts.dtype ? "--dtype" : opts.endian ? "--endian" : opts.offset ? "--offset" : nullptr;
+  if (layout_option)
+    fail("{} does not apply to '{}:{}': its dims and type come from the {}", layout_option, p.file, p.name,
+         p.encoding == "hdf5" ? "dataset" : "variable");
+  return detail::describe_dataset(p);
+}
+
 }  // namespace
 
 VolumeDesc describe_volume(const std::string& path, const RawOptions& opts) {
-  file_size(path);  // missing, unreadable or a directory: says so with the path
+  const std::optional<detail::DatasetPath> dataset = detail::split_dataset_path(path);
+  if (!dataset) file_size(path);  // missing, unreadable or a directory: says so with the path
   bool plain_raw = false;
-  Source s = describe_file(path, opts, &plain_raw);
+  Source s = dataset ? describe_dataset_source(*dataset, opts) : describe_file(path, opts, &plain_raw);
   VolumeDesc& d = s.desc;
   const std::string what = s.origin.empty() ? "'" + path + "'" : "'" + s.origin + "'";
   apply_overrides(opts, s);
@@ -172,6 +187,7 @@ VolumeDesc describe_volume(const std::string& path, const RawOptions& opts) {
          d.n_timesteps == 1 ? "" : "s", d.n_timesteps - 1);
   d.timestep = t;
   if (!s.files.empty()) d.path = s.files[size_t(t)];
+  if (dataset) return d;  // the library reads the timestep's hyperslab: no byte offsets to check
 
   if (d.encoding == "gzip") {
     if (s.files.empty()) d.offset += uint64_t(t) * frame;

@@ -21,10 +21,11 @@ struct VolumeDesc {
   DType dtype = DType::UInt8;
   bool big_endian = false;
   uint64_t offset = 0;       // bytes to skip before the first voxel (after timestep selection)
-  std::string encoding = "raw";  // "raw" or "gzip" (NRRD)
+  std::string encoding = "raw";  // "raw", "gzip" (NRRD), "hdf5" or "netcdf" (then `path` is the container file)
+  std::string dataset;       // hdf5: the dataset's path in the file ("/group/data"); netcdf: the variable
   uint64_t gzip_start = 0;   // gzip: where the compressed stream starts in `path`; `offset` then
                              // counts decompressed bytes
-  int n_timesteps = 1;       // a 4th sidecar dim
+  int n_timesteps = 1;       // a 4th sidecar dim, or a 4-D dataset's first axis
   int timestep = 0;          // which one `offset` points at
   std::optional<double> range_lo, range_hi;  // explicit value range in original units (B.1)
   Vec3f spacing{1, 1, 1};
@@ -43,7 +44,10 @@ struct RawOptions {
 
 // Understands: vnr/shared JSON sidecars ({"file","dims","dtype","byte_order",...}), instantvnr scene
 // JSON ({"dataSource":[...], "view":{"volume":{"scalarMappingRange..."}}}), NRRD (.nrrd/.nhdr, raw
-// or gzip), and plain raw files (with RawOptions). Validates everything it can without reading
+// or gzip), HDF5 datasets "FILE.h5:/group/dataset" (.h5/.hdf5/.he5) and NetCDF variables
+// "FILE.nc:variable" (.nc/.nc4) -- C-order (nz, ny, nx), x = the last axis; 4-D (nt, nz, ny, nx) is
+// a time series; RawOptions may set only timestep and range for them -- and plain raw files (with
+// RawOptions). Validates everything it can without reading
 // the data: file size vs dims x dtype (message states expected and actual bytes), zero or
 // overflowing dims, unknown dtype, unreadable file.
 VolumeDesc describe_volume(const std::string& path, const RawOptions& opts = {});
