@@ -107,14 +107,16 @@ Hid open_file(const std::string& path) {
   return f;
 }
 
-// Whether the object at `name` is a dataset a volume can come from (3-D or 4-D, integer or float).
+// Whether the object at `name` is a dataset a volume can come from (3-D or 4-D, of a type vnr reads).
 bool is_volume_dataset(hid_t loc, const char* name) {
   Hid obj(H5Oopen(loc, name, H5P_DEFAULT), H5Oclose);
   if (!obj.ok() || H5Iget_type(obj.get()) != H5I_DATASET) return false;
   Hid space(H5Dget_space(obj.get()), H5Sclose), type(H5Dget_type(obj.get()), H5Tclose);
   const int rank = H5Sget_simple_extent_ndims(space.get());
   const H5T_class_t c = H5Tget_class(type.get());
-  return (rank == 3 || rank == 4) && (c == H5T_INTEGER || c == H5T_FLOAT);
+  const size_t size = H5Tget_size(type.get());
+  const bool readable = (c == H5T_INTEGER && size <= 4) || (c == H5T_FLOAT && (size == 4 || size == 8));
+  return (rank == 3 || rank == 4) && readable;
 }
 
 // "3-D or 4-D numeric datasets here: /a, /g/b" (at most 20 named), or that there are none.
@@ -167,9 +169,9 @@ std::vector<hsize_t> extents_of(hid_t dset) {
 void describe_open_dataset(hid_t dset, const std::string& where, VolumeDesc* d) {
   const std::vector<hsize_t> e = extents_of(dset);
   std::vector<uint64_t> e64(e.begin(), e.end());
-  dims_from_extents(e64.data(), int(e64.size()), where, d);
   Hid type(H5Dget_type(dset), H5Tclose);
-  d->dtype = dtype_of(type.get(), where);
+  d->dtype = dtype_of(type.get(), where);  // first: "holds strings" says more than a rank
+  dims_from_extents(e64.data(), int(e64.size()), where, d);
 }
 
 class Hdf5Reader final : public DatasetReader {

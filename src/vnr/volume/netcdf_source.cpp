@@ -118,8 +118,8 @@ Variable open_variable(const NcFile& f, const std::string& path, const std::stri
 
 void describe_variable(const Variable& v, const std::string& where, VolumeDesc* d) {
   std::vector<uint64_t> e(v.extents.begin(), v.extents.end());
+  d->dtype = dtype_of(v.type, where);  // first: "holds text" says more than a rank
   dims_from_extents(e.data(), v.rank, where, d);
-  d->dtype = dtype_of(v.type, where);
 }
 
 class NetcdfReader final : public DatasetReader {
