@@ -232,7 +232,7 @@ TEST_F(DatasetVolumes, Hdf5ErrorsAreOneClearLine) {
   expect_error([&] { describe_volume(at("vols.h5:/uint8/contiguous"), dims); }, {"--dims does not apply"});
   // A filter libhdf5 lacks (h5py's own LZF): described, then one error at the first read.
   const VolumeDesc lzf = describe_volume(at("vols.h5:/lzf"));
-  expect_error([&] { load_volume(lzf); }, {"cannot read", "/lzf"});
+  expect_error([&] { load_volume(lzf); }, {"cannot read", "/lzf", "filter 'lzf' is not registered"});
 }
 
 TEST_F(DatasetVolumes, NetcdfErrorsAreOneClearLine) {
@@ -278,6 +278,10 @@ TEST_F(DatasetVolumes, CliTrainsAndEvaluatesOnHdf5LikeOnRaw) {
   Result info = run("info " + at("h5.vnr"));
   ASSERT_EQ(info.code, 0) << info.err;
   EXPECT_HAS(info.out, "35x19x21 uint16");
+  Result described = run("info " + at("vols.h5:/series"));
+  ASSERT_EQ(described.code, 0) << described.err;
+  EXPECT_HAS(described.out, "HDF5 dataset /series, 35x19x21 float32 (x = the last axis), 3 timesteps");
+  expect_error("info " + at("vols.h5"), "give FILE.h5:/DATASET");
   expect_error("train " + at("vols.h5:/uint16/gzip4") + " -o " + at("m.vnr") + " --steps 2 --sampler mmap",
                "use --sampler outofcore");
   expect_error("train " + at("vols.h5") + " -o " + at("m.vnr") + " --steps 2", "give FILE.h5:/DATASET");

@@ -206,17 +206,42 @@ void print_system_info(bool json) {
 }
 }  // namespace
 
+// `vnr info FILE.h5:/DATASET` (or FILE.nc:VARIABLE, or the file alone: then the error lists its
+// volumes): what the volume layer reads from the dataset.
+bool is_dataset_argument(const std::string& path) {
+  if (file_exists(path)) {
+    const std::string ext = extension_of(path);
+    return ext == ".h5" || ext == ".hdf5" || ext == ".he5" || ext == ".nc" || ext == ".nc4";
+  }
+  return path.find(':') != std::string::npos;
+}
+
+void print_dataset_info(const std::string& path, bool json) {
+  const VolumeDesc d = describe_volume_file(path);
+  if (json) {
+    const Json j = {{"file", d.path},       {"encoding", d.encoding},       {"dataset", d.dataset},
+                    {"dims", {d.dims.x, d.dims.y, d.dims.z}}, {"dtype", dtype_name(d.dtype)},
+                    {"n_timesteps", d.n_timesteps}};
+    std::printf("%s\n", j.dump(2).c_str());
+    return;
+  }
+  std::printf("%s: %s %s, %lldx%lldx%lld %s (x = the last axis), %d timestep%s\n", path.c_str(),
+              d.encoding == "hdf5" ? "HDF5 dataset" : "NetCDF variable", d.dataset.c_str(), (long long)d.dims.x,
+              (long long)d.dims.y, (long long)d.dims.z, dtype_name(d.dtype), d.n_timesteps, d.n_timesteps == 1 ? "" : "s");
+}
+
 void add_info(CLI::App& app) {
   struct Args {
     std::string model;
     bool json = false;
   };
   auto a = std::make_shared<Args>();
-  CLI::App* c = app.add_subcommand("info", "describe a model file, or (without one) this vnr's backends and devices");
-  c->add_option("model", a->model, "model file");
+  CLI::App* c = app.add_subcommand("info", "describe a model file, an HDF5/NetCDF volume (FILE.h5:/DATASET, FILE.nc:VARIABLE), or (without one) this vnr's backends and devices");
+  c->add_option("model", a->model, "model file, or FILE.h5:/DATASET / FILE.nc:VARIABLE");
   c->add_flag("--json", a->json, "print JSON");
   c->callback([a]() {
     if (a->model.empty()) return print_system_info(a->json);
+    if (is_dataset_argument(a->model)) return print_dataset_info(a->model, a->json);
     Model m = load_model(a->model);
     const Network& n = *m.net;
     const uint64_t bytes = file_size(a->model);

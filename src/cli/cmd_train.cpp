@@ -137,7 +137,7 @@ void run_train(const TrainArgs& a) {
 void add_train(CLI::App& app) {
   auto a = std::make_shared<TrainArgs>();
   CLI::App* c = app.add_subcommand("train", "train a neural representation of a volume");
-  c->add_option("volume", a->volume, "volume: JSON sidecar, instantvnr scene, .nrrd/.nhdr, or raw (with --dims --dtype)")
+  c->add_option("volume", a->volume, "volume: JSON sidecar, instantvnr scene, .nrrd/.nhdr, FILE.h5:/DATASET, FILE.nc:VARIABLE, or raw (with --dims --dtype)")
       ->required();
   c->add_option("-o,--output", a->output, "model file (.vnr; .json/.bson writes instantvnr's BSON)")->required();
   c->add_option("--config", a->config, "preset (paper, small) or tiny-cuda-nn JSON config file")->capture_default_str();

@@ -39,17 +39,20 @@ private:
 // setting is per thread, so every entry point sets it.
 void quiet() { H5Eset_auto2(H5E_DEFAULT, nullptr, nullptr); }
 
-// The innermost description on the current error stack (e.g. "required filter 'lzf' is not
-// registered"), for read errors.
+// The telling line of the current error stack: the first that names a filter (a missing one reads
+// "required filter 'lzf' is not registered"; below it are only the plugin search's failures), else
+// the innermost.
 std::string hdf5_error_text() {
-  std::string text;
+  std::vector<std::string> lines;
   H5Ewalk2(H5E_DEFAULT, H5E_WALK_DOWNWARD,
            [](unsigned, const H5E_error2_t* e, void* out) -> herr_t {
-             if (e->desc && *e->desc) *static_cast<std::string*>(out) = e->desc;
+             if (e->desc && *e->desc) static_cast<std::vector<std::string>*>(out)->push_back(e->desc);
              return 0;
            },
-           &text);
-  return text.empty() ? "unknown HDF5 error" : text;
+           &lines);
+  for (const std::string& l : lines)
+    if (l.find("filter") != std::string::npos) return l;
+  return lines.empty() ? "unknown HDF5 error" : lines.back();
 }
 
 const char* class_text(H5T_class_t c) {
