@@ -278,6 +278,17 @@ TEST_F(DatasetVolumes, CliTrainsAndEvaluatesOnHdf5LikeOnRaw) {
   Result info = run("info " + at("h5.vnr"));
   ASSERT_EQ(info.code, 0) << info.err;
   EXPECT_HAS(info.out, "35x19x21 uint16");
+  // Rendering the ground truth, and a model with the dataset as --volume (macro-cells from it).
+  for (const std::string& src : {std::string("vols.h5:/uint16/gzip4"), std::string("uint16.json")}) {
+    const std::string tag = src == "uint16.json" ? "raw" : "h5";
+    Result r1 = run("render " + at(src) + " -o " + at(tag + "_gt.png") + " --size 48x40 --threads 2");
+    ASSERT_EQ(r1.code, 0) << r1.err;
+    Result r2 = run("render " + at("h5.vnr") + " --volume " + at(src) + " --macrocells grid -o " + at(tag + "_nn.png") +
+                    " --size 48x40 --threads 2");
+    ASSERT_EQ(r2.code, 0) << r2.err;
+  }
+  EXPECT_EQ(read_file(at("h5_gt.png")), read_file(at("raw_gt.png")));
+  EXPECT_EQ(read_file(at("h5_nn.png")), read_file(at("raw_nn.png")));
   Result described = run("info " + at("vols.h5:/series"));
   ASSERT_EQ(described.code, 0) << described.err;
   EXPECT_HAS(described.out, "HDF5 dataset /series, 35x19x21 float32 (x = the last axis), 3 timesteps");

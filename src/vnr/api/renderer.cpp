@@ -16,6 +16,7 @@ namespace vnr {
 
 bool is_model_path(const std::string& path) {
   std::ifstream f(path, std::ios::binary);
+  if (!f && path.find(':') != std::string::npos) return false;  // FILE.h5:/DATASET, FILE.nc:VAR: open_volume's
   if (!f) fail("cannot open '{}'", path);
   char head[8] = {};
   f.read(head, 8);

@@ -29,7 +29,7 @@ ValueRange scan_value_range(const VolumeDesc& desc, const LoadOptions& opts = {}
 // slabs equal load_volume's data bit for bit, float data included: load_volume rounds v - pivot
 // to float (pivot = an explicit range end of desc, else the first finite sample) before mapping
 // it in double, and this does the same with the same pivot. Memory: one slab of floats plus a
-// read buffer of at most 8 MiB. A file shorter than desc says is an error; so are NaN/Inf under
+// read buffer of at most 8 MiB (HDF5/NetCDF: plus the ~16 MiB of whole slices SampleStream reads). A file shorter than desc says is an error; so are NaN/Inf under
 // NonFinitePolicy::Error (reported once the pass is complete, with load_volume's message; fn is
 // not called again from the first slab that holds one).
 void for_each_slab(const VolumeDesc& desc, double lo, double hi, const LoadOptions& opts, int64_t max_slab_voxels,
