@@ -18,6 +18,7 @@ resolution the origin is 0 and the spacing 1.
 
 import os
 
+import numpy
 from paraview.util.vtkAlgorithm import VTKPythonAlgorithmBase, smdomain, smhint, smproperty, smproxy
 from vtkmodules.util import numpy_support
 from vtkmodules.vtkCommonCore import vtkOutputWindow
@@ -114,7 +115,7 @@ class VnrModelReader(VTKPythonAlgorithmBase):
 
     def _geometry(self):
         model = self._load_model()
-        return model, output_geometry(model_dims_xyz(model), self._dims)
+        return model, output_geometry(model.dims, self._dims)  # model.dims: x, y, z
 
     # A failure is reported once, as one line, and leaves an empty image: returning 0 instead would add
     # the executive's own multi-line error (and RequestData would repeat the first).
@@ -155,15 +156,8 @@ class VnrModelReader(VTKPythonAlgorithmBase):
         return 1
 
 
-def model_dims_xyz(model):
-    """The model's grid size x, y, z (the dims of the volume it was trained on)."""
-    return [int(n) for n in model.dims]
-
-
 def decode(model, dims, device):
     """The model decoded at dims (x, y, z) as a C-contiguous float32 (nz, ny, nx) array in original units."""
-    import numpy
-
     values = model.decode(shape=(dims[2], dims[1], dims[0]), dtype="float32", device=device)
     values = numpy.ascontiguousarray(values, dtype=numpy.float32)
     if values.shape != (dims[2], dims[1], dims[0]):
