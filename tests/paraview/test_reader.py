@@ -112,7 +112,7 @@ def check_bad_file(plugin, work):
     finally:
         vtkOutputWindow.SetInstance(previous)
     text = messages.GetOutput()
-    assert text.count("vnr reader: ") == 1 and "is not a vnr model file" in text, text
+    assert text.count("vnr reader: ") == 1 and "bad.vnr" in text and "vnr model file" in text, text
     assert "Traceback" not in text and "returned failure" not in text, text
     assert algorithm.GetOutputDataObject(0).GetNumberOfPoints() == 0
     print("bad file: %s" % text.strip().splitlines()[0])
