@@ -26,14 +26,17 @@ endif()
 
 if(VNR_BUILD_TESTS AND VNR_PYTHON)
   if(VNR_PARAVIEW AND VNR_PVPYTHON_EXECUTABLE)
-    add_test(NAME paraview_reader COMMAND ${VNR_PVPYTHON_EXECUTABLE} ${CMAKE_CURRENT_SOURCE_DIR}/tests/paraview/test_reader.py)
-    set_tests_properties(paraview_reader PROPERTIES
-      ENVIRONMENT "VNR_CLI=$<TARGET_FILE:vnr_cli>;PYTHONPATH=${CMAKE_BINARY_DIR}/python;VNR_PVPYTHON=${VNR_PVPYTHON_EXECUTABLE};VNR_PARAVIEW_PLUGIN=${CMAKE_CURRENT_SOURCE_DIR}/src/paraview/vnr_reader.py"
-      LABELS cpu TIMEOUT 300)
+    add_test(NAME paraview_reader
+             COMMAND ${VNR_PVPYTHON_EXECUTABLE} ${CMAKE_CURRENT_SOURCE_DIR}/tests/paraview/test_reader.py)
+    set(vnr_paraview_env VNR_CLI=$<TARGET_FILE:vnr_cli> PYTHONPATH=${CMAKE_BINARY_DIR}/python
+        VNR_PVPYTHON=${VNR_PVPYTHON_EXECUTABLE}
+        VNR_PARAVIEW_PLUGIN=${CMAKE_CURRENT_SOURCE_DIR}/src/paraview/vnr_reader.py)
+    set_tests_properties(paraview_reader PROPERTIES ENVIRONMENT "${vnr_paraview_env}" LABELS cpu TIMEOUT 300)
   elseif(NOT VNR_PVPYTHON_EXECUTABLE)
     # Shown as "Skipped" by ctest, so a machine without ParaView does not silently lose the test.
     message(STATUS "pvpython not found: the ParaView reader test (paraview_reader) will be skipped")
-    add_test(NAME paraview_reader COMMAND sh -c "echo 'SKIPPED: pvpython not found (install paraview python3-paraview)'; exit 77")
+    add_test(NAME paraview_reader
+             COMMAND sh -c "echo 'SKIPPED: pvpython not found (install paraview python3-paraview)'; exit 77")
     set_tests_properties(paraview_reader PROPERTIES SKIP_RETURN_CODE 77 LABELS cpu)
   endif()
 endif()

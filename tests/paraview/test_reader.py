@@ -47,7 +47,8 @@ def cli_decode(model, out_dir, dims=None):
     """`vnr decode` on the CPU -> (nz, ny, nx) float32 array, read from the raw file and its sidecar."""
     name = "decoded_%s" % ("own" if dims is None else "x".join(map(str, dims)))
     raw = os.path.join(out_dir, name + ".raw")
-    run_cli("decode", model, "-o", raw, "--device", "cpu", "-q", *([] if dims is None else ["--dims", ",".join(map(str, dims))]))
+    size = [] if dims is None else ["--dims", ",".join(map(str, dims))]
+    run_cli("decode", model, "-o", raw, "--device", "cpu", "-q", *size)
     with open(os.path.join(out_dir, name + ".json")) as f:
         meta = json.load(f)
     assert meta["dtype"] == "float32" and meta["byte_order"] == "little", meta
