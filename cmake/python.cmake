@@ -21,6 +21,9 @@ if(VNR_PYTHON)
                         "pybind11-dev) or configure with -DVNR_PYTHON=OFF")
   endif()
   set(CMAKE_POSITION_INDEPENDENT_CODE ON)
+  # PIC lets GCC assume any global function may be interposed at load time, which stops it inlining
+  # them; nothing interposes vnr's functions, so keep the inlining of a non-PIC build.
+  add_compile_options($<$<COMPILE_LANGUAGE:CXX>:-fno-semantic-interposition>)
   # Where `cmake --install` puts the package, relative to the prefix: Debian's python3 looks in
   # <prefix>/lib/python3.X/dist-packages for /usr/local (and lib/python3/dist-packages for /usr).
   if(Python3_SITEARCH MATCHES "dist-packages")

@@ -6,7 +6,6 @@
 #include "bindings.h"
 #include "vnr/core/error.h"
 #include "vnr/core/fileio.h"
-#include "vnr/volume/sample_io.h"
 
 namespace vnr::py {
 
@@ -39,6 +38,19 @@ void store_values(const float* in, int64_t n, T* out) {
   }
 }
 
+void store_as(DType t, const float* in, int64_t n, void* out) {
+  switch (t) {
+    case DType::Int8: return store_values(in, n, static_cast<int8_t*>(out));
+    case DType::UInt8: return store_values(in, n, static_cast<uint8_t*>(out));
+    case DType::Int16: return store_values(in, n, static_cast<int16_t*>(out));
+    case DType::UInt16: return store_values(in, n, static_cast<uint16_t*>(out));
+    case DType::Int32: return store_values(in, n, static_cast<int32_t*>(out));
+    case DType::UInt32: return store_values(in, n, static_cast<uint32_t*>(out));
+    case DType::Float32: return store_values(in, n, static_cast<float*>(out));
+    case DType::Float64: return store_values(in, n, static_cast<double*>(out));
+  }
+}
+
 pyb::array decode(ModelHolder& h, std::optional<pyb::tuple> shape, const std::string& dtype_name,
                   const std::string& device) {
   const Int3 dims = shape ? dims_of_shape(*shape) : h.model.dims;
@@ -58,10 +70,7 @@ pyb::array decode(ModelHolder& h, std::optional<pyb::tuple> shape, const std::st
   for (int64_t z0 = 0; z0 < dims.z; z0 += slab) {
     const int64_t z1 = std::min(dims.z, z0 + slab), n = plane * (z1 - z0);
     q.slab(dims, z0, z1, buf.data(), ValueUnits::Original);
-    detail::with_sample_type(out_t, [&](auto tag) {
-      using T = typename decltype(tag)::type;
-      store_values(buf.data(), n, static_cast<T*>(dst) + z0 * plane);
-    });
+    store_as(out_t, buf.data(), n, static_cast<char*>(dst) + z0 * plane * int64_t(dtype_size(out_t)));
   }
   return out;
 }

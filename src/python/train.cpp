@@ -131,7 +131,8 @@ ModelPtr train(const TrainArgs& a) {
 const char* kTrainDoc = R"(Trains a neural representation of a volume and returns the vnr.Model.
 
 volume: a 3-D numpy array (as vnr.Volume.from_numpy takes it), a vnr.Volume (shared, not copied) or a
-path of any volume the CLI reads. The session is `vnr train`'s: the same config, seed, batch and
+path of any volume the CLI reads. Given an array, vnr's normalised float32 copy lives only while train
+runs (a vnr.Volume keeps its own until it is released). The session is `vnr train`'s: the same config, seed, batch and
 thread count give the same model as `vnr train ... --seed S --threads T`; its parameters are rounded
 to fp16 as the model file stores them (so decode() equals `vnr decode` of that file).
 config: a preset ("paper", "small"), a tiny-cuda-nn config dict, or a JSON file path.
