@@ -28,6 +28,12 @@ VolumeDesc describe_volume_file(const std::string& path, const VolumeOpenOptions
 // data's finite min/max (either end may be given); NaN/Inf follow policy (default: an error).
 Volume volume_from_array(const float* values, Int3 dims, std::optional<double> range_lo = {},
                          std::optional<double> range_hi = {}, NonFinitePolicy policy = NonFinitePolicy::Error);
+// The same for `dims.count()` samples of `dtype` at `samples` (x fastest; byte-swapped first when
+// big_endian differs from the machine's): converted and normalised exactly as open_volume reads a raw
+// file of that dtype, which the volume records as its source dtype.
+Volume volume_from_samples(const void* samples, DType dtype, Int3 dims, bool big_endian = false,
+                           std::optional<double> range_lo = {}, std::optional<double> range_hi = {},
+                           NonFinitePolicy policy = NonFinitePolicy::Error);
 
 // The volume's value at normalised coordinates (x, y, z) in [0, 1)^3: cell-centred trilinear
 // (docs/semantics.md B.2), in normalised units. Batched callers should take view_of(v) once.

@@ -139,6 +139,7 @@ struct TrainingSetup {
   RawOptions raw;
   LoadOptions load;
   std::string config = "paper";  // preset or tiny-cuda-nn JSON file
+  std::optional<Json> config_json;  // a tiny-cuda-nn config given as JSON (the Python module): wins over config
   double target_ratio = 0;       // > 0: size the grid for this compression ratio
   int64_t batch = 65536;
   uint32_t seed = 1337;
@@ -164,5 +165,10 @@ std::unique_ptr<TrainingSession> make_training_session(Model& model, const Volum
 // Loads the config, opens the training data, sizes the model, creates it and the backend on the chosen
 // device. `message` gets every line for people (volume summary, notes, the device).
 std::unique_ptr<TrainingSession> open_training_session(const TrainingSetup& setup, const MessageFn& message = {});
+// The same over a volume already in memory (the Python module's arrays), sampled in core and shared, not
+// copied: the model, device and backend come out exactly as for a file holding the same values.
+// setup.volume names it in messages; setup.raw, setup.load and setup.data's sampler options are unused.
+std::unique_ptr<TrainingSession> open_training_session(const TrainingSetup& setup, std::shared_ptr<const Volume> volume,
+                                                       const MessageFn& message = {});
 
 }  // namespace vnr

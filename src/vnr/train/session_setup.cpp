@@ -29,18 +29,14 @@ std::unique_ptr<TrainingSession> make_training_session(Model& model, const Volum
   return std::make_unique<TrainingSession>(model, std::move(trainer), std::move(session));
 }
 
-std::unique_ptr<TrainingSession> open_training_session(const TrainingSetup& s, const MessageFn& message) {
+namespace {
+
+// open_training_session once the training data is open: model size, model, device, backend.
+std::unique_ptr<TrainingSession> session_on_data(const TrainingSetup& s, ModelConfig config,
+                                                 std::shared_ptr<TrainingData> data, const MessageFn& message) {
   auto say = [&](const std::string& line) {
     if (message) message(line);
   };
-  check_training_setup(s);
-  ModelConfig config = load_config(s.config);
-  const VolumeDesc desc = describe_volume(s.volume, s.raw);
-  TrainingDataOptions dopt = s.data;
-  if (dopt.memory_budget == 0) dopt.memory_budget = available_memory_bytes() / 2;
-  dopt.seed = s.seed;
-  dopt.steps = s.steps;
-  auto data = std::make_shared<TrainingData>(open_training_data(s.volume, desc, s.load, dopt, message));
   if (data->hi == data->lo)
     say(fmt::format("note: the volume is constant ({:g}); it is represented as normalised 0", data->lo));
   std::string note;
@@ -49,7 +45,7 @@ std::unique_ptr<TrainingSession> open_training_session(const TrainingSetup& s, c
     say(note);
   }
   if (data->out_of_core) {
-    config = scale_grid_learning_rate(config, dopt.grid_lr_scale, *data->out_of_core, &note);
+    config = scale_grid_learning_rate(config, s.data.grid_lr_scale, *data->out_of_core, &note);
     if (!note.empty()) say(note);
   }
   Model model = create_model(config, data->dims, data->dtype, data->lo, data->hi, s.seed);
@@ -58,7 +54,7 @@ std::unique_ptr<TrainingSession> open_training_session(const TrainingSetup& s, c
     say(fmt::format("note: the model ({}) is larger than the volume ({}); use --target-ratio R to compress",
                     human_bytes(double(model.param_bytes())), human_bytes(double(data->source_bytes()))));
 
-  const DeviceChoice device = choose_training_device(s.device, net, data->dims, data->vol.has_value(), data->kind,
+  const DeviceChoice device = choose_training_device(s.device, net, data->dims, data->vol != nullptr, data->kind,
                                                      s.batch, s.cpu_only_reason);
   if (!device.note.empty()) say("note: " + device.note);
   TrainOptions to{s.batch, s.seed};
@@ -77,6 +73,43 @@ std::unique_ptr<TrainingSession> open_training_session(const TrainingSetup& s, c
   SessionOptions so = s.session;
   so.sampler_name = data->kind;
   return std::make_unique<TrainingSession>(std::move(model), std::move(data), std::move(trainer), so);
+}
+
+}  // namespace
+
+std::unique_ptr<TrainingSession> open_training_session(const TrainingSetup& s, const MessageFn& message) {
+  check_training_setup(s);
+  ModelConfig config = s.config_json ? ModelConfig::from_json(*s.config_json) : load_config(s.config);
+  const VolumeDesc desc = describe_volume(s.volume, s.raw);
+  TrainingDataOptions dopt = s.data;
+  if (dopt.memory_budget == 0) dopt.memory_budget = available_memory_bytes() / 2;
+  dopt.seed = s.seed;
+  dopt.steps = s.steps;
+  auto data = std::make_shared<TrainingData>(open_training_data(s.volume, desc, s.load, dopt, message));
+  return session_on_data(s, std::move(config), std::move(data), message);
+}
+
+std::unique_ptr<TrainingSession> open_training_session(const TrainingSetup& s, std::shared_ptr<const Volume> volume,
+                                                       const MessageFn& message) {
+  check_training_setup(s);
+  if (!volume) fail("open_training_session: no volume given");
+  if (!s.data.sampler.empty() && s.data.sampler != "incore")
+    fail("a volume in memory is sampled in core; --sampler {} needs a volume file", s.data.sampler);
+  ModelConfig config = s.config_json ? ModelConfig::from_json(*s.config_json) : load_config(s.config);
+  auto data = std::make_shared<TrainingData>();
+  data->kind = "incore";
+  data->dims = data->desc.dims = volume->dims;
+  data->dtype = data->desc.dtype = volume->source_dtype;
+  data->desc.path = s.volume;
+  data->lo = volume->lo;
+  data->hi = volume->hi;
+  data->memory_budget = s.data.memory_budget ? s.data.memory_budget : available_memory_bytes() / 2;
+  data->sampler = std::make_shared<InCoreSampler>(*volume);
+  data->vol = std::move(volume);
+  if (message)
+    message(fmt::format("volume {}: {} {}, {}, range [{:g}, {:g}], in memory", s.volume, fmt::format("{}x{}x{}", data->dims.x, data->dims.y, data->dims.z),
+                        dtype_name(data->dtype), human_bytes(double(data->source_bytes())), data->lo, data->hi));
+  return session_on_data(s, std::move(config), std::move(data), message);
 }
 
 }  // namespace vnr

@@ -75,7 +75,7 @@ TrainingData open_training_data(const std::string& name, const VolumeDesc& desc,
       fail("the volume needs {} in memory, more than the memory budget of {}; use --sampler outofcore (or mmap), or "
            "raise --memory-budget",
            human_bytes(double(in_core_bytes)), human_bytes(double(o.memory_budget)));
-    t.vol = load_volume(desc, load);
+    t.vol = std::make_shared<const Volume>(load_volume(desc, load));
     t.lo = t.vol->lo;
     t.hi = t.vol->hi;
     t.sampler = std::make_shared<InCoreSampler>(*t.vol);

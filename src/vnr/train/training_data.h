@@ -34,7 +34,9 @@ struct TrainingDataOptions {
 struct TrainingData {
   std::string kind;  // incore | outofcore | mmap
   std::shared_ptr<Sampler> sampler;
-  std::optional<Volume> vol;                       // incore only
+  // incore only; shared, so that a caller holding the volume in memory (the Python module) trains on it
+  // without a copy
+  std::shared_ptr<const Volume> vol;
   std::shared_ptr<OutOfCoreSampler> out_of_core;   // outofcore only
   std::shared_ptr<const RawVolumeFile> raw_file;   // outofcore only
   VolumeDesc desc;

@@ -1,0 +1,168 @@
+// vnr.train: the CLI's training session (open_training_session) over a numpy array, a vnr.Volume or a
+// volume file, run with the GIL released; the step callback takes the GIL to report progress, check
+// for Ctrl-C and let the caller stop.
+#include <cstdio>
+#include "bindings.h"
+#include "vnr/core/error.h"
+#include "vnr/core/parallel.h"
+
+namespace vnr::py {
+
+namespace {
+
+struct TrainArgs {
+  pyb::object volume, config, callback;
+  std::optional<int64_t> steps;
+  std::optional<double> seconds, target_ratio;
+  uint32_t seed = 0;
+  std::string device, sampler, precision;
+  int64_t batch = 65536;
+  int macrocell_size = 16;
+  std::optional<int> threads;
+  bool verbose = false;
+};
+
+// What happened in the step callback that the session must not see as its own error.
+struct CallbackState {
+  pyb::object callback;
+  std::optional<pyb::error_already_set> error;  // the callback raised: re-raised after the run
+  bool interrupted = false;                      // Ctrl-C (KeyboardInterrupt), a clean stop
+};
+
+void on_step(TrainingSession& session, CallbackState& st, const TrainingProgress& p) {
+  pyb::gil_scoped_acquire gil;
+  if (PyErr_CheckSignals() != 0) {
+    pyb::error_already_set e;
+    if (e.matches(PyExc_KeyboardInterrupt)) st.interrupted = true;
+    else st.error = std::move(e);
+    session.request_stop();
+    return;
+  }
+  if (st.callback.is_none()) return;
+  try {
+    pyb::object r = st.callback(p.step, p.loss, p.samples_per_second);
+    if (!r.is_none() && !r.cast<bool>()) session.request_stop();
+  } catch (pyb::error_already_set& e) {
+    if (e.matches(PyExc_KeyboardInterrupt)) st.interrupted = true;
+    else st.error = std::move(e);
+    session.request_stop();
+  }
+}
+
+TrainingSetup setup_of(const TrainArgs& a) {
+  TrainingSetup s;
+  s.seed = a.seed;
+  s.device = a.device;
+  s.precision = a.precision;
+  s.batch = a.batch;
+  s.macrocell_size = a.macrocell_size;
+  s.steps = a.steps.value_or(-1);
+  s.target_ratio = a.target_ratio.value_or(0);
+  s.data.sampler = a.sampler;
+  if (a.seconds && *a.seconds <= 0) fail("seconds must be positive, got {}", *a.seconds);
+  if (pyb::isinstance<pyb::dict>(a.config)) {
+    s.config_json = Json::parse(pyb::str(pyb::module_::import("json").attr("dumps")(a.config)).cast<std::string>());
+  } else if (pyb::isinstance<pyb::str>(a.config)) {
+    s.config = a.config.cast<std::string>();
+  } else {
+    s.config = pyb::str(pyb::module_::import("os").attr("fspath")(a.config)).cast<std::string>();
+  }
+  if (!s.config_json && !is_preset(s.config)) require_file(s.config, "config");
+  return s;
+}
+
+std::unique_ptr<TrainingSession> open_session(const TrainArgs& a, TrainingSetup& s, const MessageFn& say) {
+  if (pyb::isinstance<pyb::str>(a.volume) || pyb::hasattr(a.volume, "__fspath__")) {
+    s.volume = pyb::str(pyb::module_::import("os").attr("fspath")(a.volume)).cast<std::string>();
+    require_file(s.volume, "volume");
+    pyb::gil_scoped_release release;
+    return open_training_session(s, say);
+  }
+  std::shared_ptr<const Volume> vol;
+  if (pyb::isinstance<Volume>(a.volume)) {
+    vol = a.volume.cast<std::shared_ptr<Volume>>();  // shared, not copied
+  } else {
+    pyb::array arr = pyb::array::ensure(a.volume);
+    if (!arr) fail("volume must be a numpy array, a vnr.Volume or a path");
+    vol = std::make_shared<const Volume>(volume_from_numpy(arr, std::nullopt, std::nullopt));
+  }
+  s.volume = "array";
+  pyb::gil_scoped_release release;
+  return open_training_session(s, std::move(vol), say);
+}
+
+ModelPtr train(const TrainArgs& a) {
+  TrainingSetup setup = setup_of(a);
+  if (a.threads) set_num_threads(*a.threads);
+  std::vector<std::string> lines;
+  std::mutex lines_mutex;
+  MessageFn say = [&](const std::string& line) {
+    std::lock_guard lock(lines_mutex);
+    lines.push_back(line);
+  };
+  std::unique_ptr<TrainingSession> session = open_session(a, setup, say);
+  if (a.verbose)
+    for (const std::string& l : lines) pyb::print(l, pyb::arg("file") = pyb::module_::import("sys").attr("stderr"));
+  CallbackState st;
+  st.callback = a.callback;
+  TrainingSession& s = *session;
+  s.add_step_callback([&](const TrainingProgress& p) { on_step(s, st, p); });
+  const int64_t steps = a.steps ? *a.steps : (a.seconds ? INT64_MAX : 1000);
+  {
+    pyb::gil_scoped_release release;
+    s.run(steps, a.seconds.value_or(0));
+    s.record();
+  }
+  if (st.error) throw std::move(*st.error);
+  if (st.interrupted)
+    PyErr_WarnFormat(PyExc_RuntimeWarning, 1, "vnr.train interrupted after %lld steps: returning the model so far",
+                     (long long)s.steps_done());
+  auto h = std::make_shared<ModelHolder>();
+  h->model = std::move(s.model());
+  // The parameters as a model file stores them (fp16): decode() then equals `vnr decode` of the CLI's
+  // model, and save/load is lossless.
+  Network& net = *h->model.net;
+  net.set_params_half(net.params_half());
+  h->model.net->set_inference_precision(parse_precision("auto"));
+  session.reset();
+  return h;
+}
+
+const char* kTrainDoc = R"(Trains a neural representation of a volume and returns the vnr.Model.
+
+volume: a 3-D numpy array (as vnr.Volume.from_numpy takes it), a vnr.Volume (shared, not copied) or a
+path of any volume the CLI reads. Given an array, vnr's normalised float32 copy lives only while train
+runs (a vnr.Volume keeps its own until it is released). The session is `vnr train`'s: the same config, seed, batch and
+thread count give the same model as `vnr train ... --seed S --threads T`; its parameters are rounded
+to fp16 as the model file stores them (so decode() equals `vnr decode` of that file).
+config: a preset ("paper", "small"), a tiny-cuda-nn config dict, or a JSON file path.
+steps / seconds: stop after this many steps or seconds of training (default: 1000 steps).
+seed: 0 by default (note: the CLI's --seed defaults to 1337).
+device: "auto" (a visible GPU, else the CPU), "cpu" or "cuda".
+sampler: "incore" for arrays and volumes in memory; a path may also use "outofcore" or "mmap".
+target_ratio: size the hash table so the model is about 1/R of the volume's bytes.
+callback(step, loss, samples_per_second): called after each step (GPU: each step group); returning
+False stops training. Ctrl-C stops training cleanly and returns the model trained so far (with a
+RuntimeWarning). threads: CPU threads (vnr.set_num_threads); verbose: print the CLI's notes to stderr.)";
+
+}  // namespace
+
+void bind_train(pyb::module_& m) {
+  m.def(
+      "train",
+      [](pyb::object volume, pyb::object config, std::optional<int64_t> steps, std::optional<double> seconds,
+         uint32_t seed, const std::string& device, const std::string& sampler, std::optional<double> target_ratio,
+         pyb::object callback, int64_t batch, const std::string& precision, int macrocell_size,
+         std::optional<int> threads, bool verbose) {
+        TrainArgs a{volume, config, callback, steps, seconds, target_ratio, seed, device, sampler, precision,
+                    batch, macrocell_size, threads, verbose};
+        return train(a);
+      },
+      pyb::arg("volume"), pyb::arg("config") = "paper", pyb::arg("steps") = pyb::none(),
+      pyb::arg("seconds") = pyb::none(), pyb::arg("seed") = 0, pyb::arg("device") = "auto",
+      pyb::arg("sampler") = "incore", pyb::arg("target_ratio") = pyb::none(), pyb::arg("callback") = pyb::none(),
+      pyb::kw_only(), pyb::arg("batch") = 65536, pyb::arg("precision") = "auto", pyb::arg("macrocell_size") = 16,
+      pyb::arg("threads") = pyb::none(), pyb::arg("verbose") = false, kTrainDoc);
+}
+
+}  // namespace vnr::py
