@@ -38,6 +38,10 @@ def test_train_decode_equals_cli(trained, cli):
     source = model.decode(dtype="source", device="cpu")
     assert source.dtype == np.uint8
     np.testing.assert_array_equal(source, read_raw_json(str(d / "cli_src.json")))
+    # Another resolution: shape is numpy's (nz, ny, nx), the CLI's --dims is X,Y,Z.
+    cli("decode", trained["cli_model"], "-o", d / "cli_small.raw", "--dims", "7,6,5", "--threads", THREADS,
+        "--device", "cpu", "-q")
+    np.testing.assert_array_equal(model.decode(shape=(5, 6, 7), device="cpu"), read_raw_json(str(d / "cli_small.json")))
     assert model.training["steps"] == STEPS
     assert model.value_range == (float(trained["array"].min()), float(trained["array"].max()))
     # A vnr.Volume (shared, not copied) trains to the same model as the array it came from.
@@ -56,7 +60,7 @@ def test_save_load_round_trip(trained, tmp_path):
     assert loaded.source_dtype == np.uint8
     assert loaded.compression_ratio == pytest.approx(trained["array"].nbytes / os.path.getsize(path))
     # Another resolution: (nz, ny, nx) as numpy orders it.
-    assert loaded.decode(shape=(5, 6, 7), device="cpu").shape == (5, 6, 7)
+    assert loaded.decode(shape=[5, 6, 7], device="cpu").shape == (5, 6, 7)
 
 
 def test_sample_at_voxel_centres_equals_decode(trained):
