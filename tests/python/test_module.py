@@ -8,7 +8,10 @@ import textwrap
 
 import pytest
 
-from conftest import np, vnr, read_pfm, read_raw_json, smooth_volume, write_raw
+np = pytest.importorskip("numpy", reason="numpy (Debian python3-numpy) is needed for the vnr module's tests")
+vnr = pytest.importorskip("vnr", reason="the vnr module is not built (VNR_PYTHON=ON) or not on PYTHONPATH")
+
+from conftest import read_pfm, read_raw_json, smooth_volume, write_raw  # noqa: E402
 
 SEED, THREADS, STEPS = 3, 2, 80
 TRAIN = dict(config="small", steps=STEPS, seed=SEED, device="cpu", threads=THREADS)
@@ -220,3 +223,13 @@ def test_ctrl_c_returns_model(tmp_path):
     steps = int(out.split()[1])
     assert 1 <= steps and "(16, 16, 16)" in out
     assert "interrupted" in err
+
+
+def test_512_cubed_uint8_trains_and_decodes_within_memory_bound():
+    """No hidden copy: peak RSS of train + decode stays under input + max(normalised, decoded) + model +
+    256 MiB (bench/python_memory.py, the small config here for speed; docs/benchmarks.md: paper)."""
+    script = os.path.join(os.path.dirname(__file__), "..", "..", "bench", "python_memory.py")
+    r = subprocess.run([sys.executable, script, "--size", "512", "--steps", "2", "--config", "small"],
+                       capture_output=True, text=True, env=dict(os.environ))
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "within the bound" in r.stdout
