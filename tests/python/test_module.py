@@ -233,3 +233,53 @@ def test_512_cubed_uint8_trains_and_decodes_within_memory_bound():
                        capture_output=True, text=True, env=dict(os.environ))
     assert r.returncode == 0, r.stdout + r.stderr
     assert "within the bound" in r.stdout
+
+
+def test_path_trains_like_the_array(trained):
+    """vnr.train on a file path (the CLI's loader) and on the array of its values give one model."""
+    from_path = vnr.train(trained["side"], **TRAIN)
+    np.testing.assert_array_equal(from_path.decode(device="cpu"), trained["model"].decode(device="cpu"))
+
+
+def test_stubs_match_the_compiled_signatures():
+    """_vnr.pyi names every compiled function and method with the parameters pybind11 reports."""
+    import ast
+    import re
+    stub_path = os.path.join(os.path.dirname(vnr.__file__), "_vnr.pyi")
+    with open(stub_path) as f:
+        tree = ast.parse(f.read())
+
+    def params(fn):
+        a = fn.args
+        return [p.arg for p in a.posonlyargs + a.args + a.kwonlyargs if p.arg != "self"]
+
+    def compiled_params(obj):  # from pybind11's signature line, split at top-level commas
+        first = obj.__doc__.splitlines()[0]
+        inner, names, depth, part = first[first.index("(") + 1:first.rindex(")")], [], 0, ""
+        for ch in inner + ",":
+            depth += ch in "[(" and 1 or (ch in "])" and -1 or 0)
+            if ch == "," and depth == 0:
+                name = re.match(r"\s*(\w+)", part)
+                if name and name.group(1) != "self":
+                    names.append(name.group(1))
+                part = ""
+            else:
+                part += ch
+        return names
+
+    checked = 0
+    for node in tree.body:
+        if isinstance(node, ast.FunctionDef):
+            assert params(node) == compiled_params(getattr(vnr._vnr, node.name)), node.name
+            checked += 1
+        elif isinstance(node, ast.ClassDef):
+            cls = getattr(vnr._vnr, node.name)
+            for item in node.body:
+                if isinstance(item, ast.FunctionDef) and not any(
+                        isinstance(d, ast.Name) and d.id == "property" for d in item.decorator_list):
+                    assert params(item) == compiled_params(getattr(cls, item.name)), f"{node.name}.{item.name}"
+                    checked += 1
+                elif isinstance(item, ast.FunctionDef):
+                    assert isinstance(getattr(cls, item.name), property), f"{node.name}.{item.name}"
+                    checked += 1
+    assert checked >= 25
