@@ -55,8 +55,10 @@ def main():
         model = vnr.train(volume, config=a.config, steps=1, device=a.device, threads=a.threads)
         points = np.random.default_rng(0).random((int(a.points), 3), dtype=np.float32)
         module_rate(model, points[:65536], a.device)  # warm-up
-        cli = [cli_rate(a.cli, volume, a.config, a.threads, a.seconds, a.device) for _ in range(a.repeats)]
-        mod = [module_rate(model, points, a.device) for _ in range(a.repeats)]
+        cli, mod = [], []
+        for _ in range(a.repeats):  # alternating, so that a busy machine slows both alike
+            cli.append(cli_rate(a.cli, volume, a.config, a.threads, a.seconds, a.device))
+            mod.append(module_rate(model, points, a.device))
     c, m = statistics.median(cli), statistics.median(mod)
     print(f"config {a.config}, {a.threads} threads, device {a.device}, {len(points):.0e} points")
     print(f"vnr bench infer : {c / 1e6:8.2f} M samples/s  (runs: {', '.join(f'{r / 1e6:.2f}' for r in cli)})")

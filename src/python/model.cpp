@@ -1,11 +1,13 @@
 // vnr.Model: a trained network and the volume it represents; decodes and point queries return numpy
 // arrays in original units, computed with the GIL released on all cores (or the GPU).
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <limits>
 #include "bindings.h"
 #include "vnr/core/error.h"
 #include "vnr/core/fileio.h"
+#include "vnr/core/parallel.h"
 
 namespace vnr::py {
 
@@ -51,9 +53,9 @@ void store_as(DType t, const float* in, int64_t n, void* out) {
   }
 }
 
-pyb::array decode(ModelHolder& h, std::optional<pyb::tuple> shape, const std::string& dtype_name,
+pyb::array decode(ModelHolder& h, const pyb::object& shape, const std::string& dtype_name,
                   const std::string& device) {
-  const Int3 dims = shape ? dims_of_shape(*shape) : h.model.dims;
+  const Int3 dims = shape.is_none() ? h.model.dims : dims_of_shape(pyb::tuple(shape));
   const DType out_t = dtype_name == "source" ? h.model.source_dtype : parse_dtype(dtype_name);
   const Device dev = parse_device(device);
   pyb::array out(numpy_dtype(out_t), shape_of(dims));
@@ -83,10 +85,21 @@ void gather_points(const pyb::array& a, int64_t b, int64_t e, float* xyz) {
     for (int k = 0; k < 3; ++k) xyz[3 * (i - b) + k] = float(r(i, k));
 }
 
+// In parallel (the check is a pass over the caller's points): the first point outside [0, 1]^3, or NaN.
 void check_points(const float* xyz, int64_t n, int64_t first) {
-  for (int64_t i = 0; i < 3 * n; ++i)
-    if (!(xyz[i] >= 0.f && xyz[i] <= 1.f))  // also catches NaN
-      fail("points must be finite and in [0, 1]^3; point {} has {} = {}", first + i / 3, "xyz"[i % 3], xyz[i]);
+  std::atomic<int64_t> bad{INT64_MAX};
+  parallel_for_range(3 * n, int64_t(1) << 18, [&](int64_t b, int64_t e) {
+    for (int64_t i = b; i < e; ++i)
+      if (!(xyz[i] >= 0.f && xyz[i] <= 1.f)) {  // also catches NaN
+        int64_t seen = bad.load();
+        while (i < seen && !bad.compare_exchange_weak(seen, i)) {
+        }
+        return;
+      }
+  });
+  const int64_t i = bad.load();
+  if (i != INT64_MAX)
+    fail("points must be finite and in [0, 1]^3; point {} has {} = {}", first + i / 3, "xyz"[i % 3], xyz[i]);
 }
 
 pyb::array_t<float> sample(ModelHolder& h, const pyb::array& points, const std::string& device) {

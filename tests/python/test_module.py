@@ -8,7 +8,10 @@ import textwrap
 
 import pytest
 
-from conftest import np, vnr, read_pfm, read_raw_json, smooth_volume, write_raw
+np = pytest.importorskip("numpy", reason="numpy (Debian python3-numpy) is needed for the vnr module's tests")
+vnr = pytest.importorskip("vnr", reason="the vnr module is not built (VNR_PYTHON=ON) or not on PYTHONPATH")
+
+from conftest import read_pfm, read_raw_json, smooth_volume, write_raw  # noqa: E402
 
 SEED, THREADS, STEPS = 3, 2, 80
 TRAIN = dict(config="small", steps=STEPS, seed=SEED, device="cpu", threads=THREADS)
@@ -38,6 +41,10 @@ def test_train_decode_equals_cli(trained, cli):
     source = model.decode(dtype="source", device="cpu")
     assert source.dtype == np.uint8
     np.testing.assert_array_equal(source, read_raw_json(str(d / "cli_src.json")))
+    # Another resolution: shape is numpy's (nz, ny, nx), the CLI's --dims is X,Y,Z.
+    cli("decode", trained["cli_model"], "-o", d / "cli_small.raw", "--dims", "7,6,5", "--threads", THREADS,
+        "--device", "cpu", "-q")
+    np.testing.assert_array_equal(model.decode(shape=(5, 6, 7), device="cpu"), read_raw_json(str(d / "cli_small.json")))
     assert model.training["steps"] == STEPS
     assert model.value_range == (float(trained["array"].min()), float(trained["array"].max()))
     # A vnr.Volume (shared, not copied) trains to the same model as the array it came from.
@@ -56,7 +63,7 @@ def test_save_load_round_trip(trained, tmp_path):
     assert loaded.source_dtype == np.uint8
     assert loaded.compression_ratio == pytest.approx(trained["array"].nbytes / os.path.getsize(path))
     # Another resolution: (nz, ny, nx) as numpy orders it.
-    assert loaded.decode(shape=(5, 6, 7), device="cpu").shape == (5, 6, 7)
+    assert loaded.decode(shape=[5, 6, 7], device="cpu").shape == (5, 6, 7)
 
 
 def test_sample_at_voxel_centres_equals_decode(trained):
@@ -216,3 +223,63 @@ def test_ctrl_c_returns_model(tmp_path):
     steps = int(out.split()[1])
     assert 1 <= steps and "(16, 16, 16)" in out
     assert "interrupted" in err
+
+
+def test_512_cubed_uint8_trains_and_decodes_within_memory_bound():
+    """No hidden copy: peak RSS of train + decode stays under input + max(normalised, decoded) + model +
+    256 MiB (bench/python_memory.py, the small config here for speed; docs/benchmarks.md: paper)."""
+    script = os.path.join(os.path.dirname(__file__), "..", "..", "bench", "python_memory.py")
+    r = subprocess.run([sys.executable, script, "--size", "512", "--steps", "2", "--config", "small"],
+                       capture_output=True, text=True, env=dict(os.environ))
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "within the bound" in r.stdout
+
+
+def test_path_trains_like_the_array(trained):
+    """vnr.train on a file path (the CLI's loader) and on the array of its values give one model."""
+    from_path = vnr.train(trained["side"], **TRAIN)
+    np.testing.assert_array_equal(from_path.decode(device="cpu"), trained["model"].decode(device="cpu"))
+
+
+def test_stubs_match_the_compiled_signatures():
+    """_vnr.pyi names every compiled function and method with the parameters pybind11 reports."""
+    import ast
+    import re
+    stub_path = os.path.join(os.path.dirname(vnr.__file__), "_vnr.pyi")
+    with open(stub_path) as f:
+        tree = ast.parse(f.read())
+
+    def params(fn):
+        a = fn.args
+        return [p.arg for p in a.posonlyargs + a.args + a.kwonlyargs if p.arg != "self"]
+
+    def compiled_params(obj):  # from pybind11's signature line, split at top-level commas
+        first = obj.__doc__.splitlines()[0]
+        inner, names, depth, part = first[first.index("(") + 1:first.rindex(")")], [], 0, ""
+        for ch in inner + ",":
+            depth += ch in "[(" and 1 or (ch in "])" and -1 or 0)
+            if ch == "," and depth == 0:
+                name = re.match(r"\s*(\w+)", part)
+                if name and name.group(1) != "self":
+                    names.append(name.group(1))
+                part = ""
+            else:
+                part += ch
+        return names
+
+    checked = 0
+    for node in tree.body:
+        if isinstance(node, ast.FunctionDef):
+            assert params(node) == compiled_params(getattr(vnr._vnr, node.name)), node.name
+            checked += 1
+        elif isinstance(node, ast.ClassDef):
+            cls = getattr(vnr._vnr, node.name)
+            for item in node.body:
+                if isinstance(item, ast.FunctionDef) and not any(
+                        isinstance(d, ast.Name) and d.id == "property" for d in item.decorator_list):
+                    assert params(item) == compiled_params(getattr(cls, item.name)), f"{node.name}.{item.name}"
+                    checked += 1
+                elif isinstance(item, ast.FunctionDef):
+                    assert isinstance(getattr(cls, item.name), property), f"{node.name}.{item.name}"
+                    checked += 1
+    assert checked >= 25

@@ -72,7 +72,7 @@ class Model:
     def save(self, path: str) -> None:
         """Writes the model atomically (.vnr; .bson/.json: instantvnr's BSON)."""
 
-    def decode(self, shape: Optional[Tuple[int, int, int]] = None,
+    def decode(self, shape: Optional[Sequence[int]] = None,
                dtype: Union[Literal["float32", "source"], str] = "float32",
                device: DeviceName = "auto") -> npt.NDArray[Any]:
         """The volume decoded at voxel centres in original units, shape (nz, ny, nx)."""

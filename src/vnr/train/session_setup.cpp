@@ -107,8 +107,9 @@ std::unique_ptr<TrainingSession> open_training_session(const TrainingSetup& s, s
   data->sampler = std::make_shared<InCoreSampler>(*volume);
   data->vol = std::move(volume);
   if (message)
-    message(fmt::format("volume {}: {} {}, {}, range [{:g}, {:g}], in memory", s.volume, fmt::format("{}x{}x{}", data->dims.x, data->dims.y, data->dims.z),
-                        dtype_name(data->dtype), human_bytes(double(data->source_bytes())), data->lo, data->hi));
+    message(fmt::format("volume {}: {}x{}x{} {}, {}, range [{:g}, {:g}], in memory", s.volume, data->dims.x,
+                        data->dims.y, data->dims.z, dtype_name(data->dtype), human_bytes(double(data->source_bytes())),
+                        data->lo, data->hi));
   return session_on_data(s, std::move(config), std::move(data), message);
 }
 
