@@ -44,6 +44,12 @@ void check_no_overwrite(const std::vector<std::string>& files, bool force);
 // than a tiny volume would otherwise read "0.00").
 std::string format_ratio(double ratio);
 
+// SIGINT/SIGTERM outside a graceful stop: one error line, the temporaries of unfinished saves removed,
+// then the default action (so the exit status still says which signal). Installed by main();
+// training guards hand signals back to it after their first one.
+extern "C" void exit_on_signal(int sig);
+void install_exit_on_signal();
+
 void add_train(CLI::App& app);
 void add_eval(CLI::App& app);
 void add_decode(CLI::App& app);

@@ -17,22 +17,25 @@ namespace vnr::cli {
 
 namespace {
 
-// Ctrl-C during training asks the session to stop after the current step; it still evaluates and saves
-// the model (minutes of training are not thrown away). A second Ctrl-C exits at once.
+// Ctrl-C or SIGTERM during training asks the session to stop after the current step; it still
+// evaluates and saves the model (minutes of training are not thrown away). A second signal exits at
+// once, leaving the previous model file intact.
 std::atomic<TrainingSession*> g_session{nullptr};
-extern "C" void on_sigint(int) {
+extern "C" void on_stop_signal(int) {
   if (TrainingSession* s = g_session.load()) s->request_stop();
-  std::signal(SIGINT, SIG_DFL);
+  std::signal(SIGINT, exit_on_signal);
+  std::signal(SIGTERM, exit_on_signal);
 }
 
-struct SigintGuard {
-  void (*previous)(int);
-  explicit SigintGuard(TrainingSession& s) {
+struct StopSignalGuard {
+  explicit StopSignalGuard(TrainingSession& s) {
     g_session.store(&s);
-    previous = std::signal(SIGINT, on_sigint);
+    std::signal(SIGINT, on_stop_signal);
+    std::signal(SIGTERM, on_stop_signal);
   }
-  ~SigintGuard() {
-    std::signal(SIGINT, previous == SIG_ERR ? SIG_DFL : previous);
+  ~StopSignalGuard() {
+    std::signal(SIGINT, exit_on_signal);
+    std::signal(SIGTERM, exit_on_signal);
     g_session.store(nullptr);
   }
 };
@@ -114,7 +117,7 @@ void run_train(const TrainArgs& a) {
     bar.update(by_time ? p.elapsed : double(p.step), extra);
   });
   {
-    SigintGuard guard(*session);
+    StopSignalGuard guard(*session);
     try {
       session->run(steps, a.seconds);
     } catch (const std::exception&) {

@@ -26,21 +26,25 @@ namespace {
 
 namespace fs = std::filesystem;
 
-// Ctrl-C stops after the current step; that timestep (window) is still evaluated and saved, and the
-// series ends there. A second Ctrl-C exits at once.
+// Ctrl-C or SIGTERM stops after the current step; that timestep (window) is still evaluated and
+// saved, and the series ends there. A second signal exits at once.
 volatile std::sig_atomic_t g_series_interrupted = 0;
-extern "C" void on_sigint_series(int) {
+extern "C" void on_stop_signal_series(int) {
   g_series_interrupted = 1;
-  std::signal(SIGINT, SIG_DFL);
+  std::signal(SIGINT, exit_on_signal);
+  std::signal(SIGTERM, exit_on_signal);
 }
 
 struct SigintGuard {
-  void (*previous)(int);
   SigintGuard() {
     g_series_interrupted = 0;
-    previous = std::signal(SIGINT, on_sigint_series);
+    std::signal(SIGINT, on_stop_signal_series);
+    std::signal(SIGTERM, on_stop_signal_series);
   }
-  ~SigintGuard() { std::signal(SIGINT, previous == SIG_ERR ? SIG_DFL : previous); }
+  ~SigintGuard() {
+    std::signal(SIGINT, exit_on_signal);
+    std::signal(SIGTERM, exit_on_signal);
+  }
 };
 
 void check_series_args(const TrainArgs& a) {

@@ -1,5 +1,7 @@
 // vnr: command-line front end of libvnr. Each subcommand lives in its own file; errors from the
 // library arrive as vnr::Error and are printed as one line with a non-zero exit status.
+#include <unistd.h>
+#include <csignal>
 #include <cstdio>
 #include <cstdlib>
 #include "cli.h"
@@ -98,6 +100,21 @@ void check_no_overwrite(const std::vector<std::string>& files, bool force) {
     if (file_exists(f)) fail("'{}' already exists; choose another output or pass --force to replace it", f);
 }
 
+extern "C" void exit_on_signal(int sig) {
+  static const char kTerm[] = "vnr: error: terminated (SIGTERM); unfinished output discarded\n";
+  static const char kInt[] = "vnr: error: interrupted (SIGINT); unfinished output discarded\n";
+  vnr::remove_pending_temporaries();
+  if (sig == SIGTERM) (void)!::write(2, kTerm, sizeof kTerm - 1);
+  else (void)!::write(2, kInt, sizeof kInt - 1);
+  std::signal(sig, SIG_DFL);
+  std::raise(sig);
+}
+
+void install_exit_on_signal() {
+  for (int sig : {SIGINT, SIGTERM})
+    if (std::signal(sig, exit_on_signal) == SIG_IGN) std::signal(sig, SIG_IGN);  // keep nohup's choice
+}
+
 std::string format_ratio(double r) { return r >= 0.01 || r == 0 ? fmt::format("{:.2f}", r) : fmt::format("{:.2g}", r); }
 
 }  // namespace vnr::cli
@@ -110,6 +127,7 @@ int main(int argc, char** argv) {
     return std::string("vnr ") + VNR_VERSION + " (backends: cpu [" + vnr::kernels::simd_target_name() + "]; " +
            vnr::cuda::backend_summary() + ")";
   });
+  install_exit_on_signal();
   add_train(app);
   add_eval(app);
   add_decode(app);

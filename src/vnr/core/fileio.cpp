@@ -2,6 +2,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 #include <zlib.h>
+#include <atomic>
 #include <cerrno>
 #include <cstring>
 #include "vnr/core/error.h"
@@ -69,10 +70,50 @@ std::string strip_extension(const std::string& path) {
   return dot == std::string::npos ? path : path.substr(0, dot);
 }
 
+namespace {
+
+// Fixed storage, so a signal handler can read it without allocating or locking. A slot's path is
+// written before its flag is set and read only while the flag is set.
+constexpr int kPendingSlots = 16;
+constexpr size_t kPendingPathBytes = 4096;
+char g_pending_paths[kPendingSlots][kPendingPathBytes];
+std::atomic<bool> g_pending_used[kPendingSlots];
+
+int register_pending(const std::string& tmp) {
+  if (tmp.size() >= kPendingPathBytes) return -1;
+  for (int i = 0; i < kPendingSlots; ++i) {
+    bool expected = false;
+    if (g_pending_used[i].compare_exchange_strong(expected, true)) {
+      std::memcpy(g_pending_paths[i], tmp.c_str(), tmp.size() + 1);
+      return i;
+    }
+  }
+  return -1;  // more concurrent saves than slots: that temporary is simply not cleaned on a signal
+}
+
+void unregister_pending(int slot) {
+  if (slot >= 0) {
+    g_pending_paths[slot][0] = '\0';
+    g_pending_used[slot].store(false);
+  }
+}
+
+}  // namespace
+
+void remove_pending_temporaries() {
+  for (int i = 0; i < kPendingSlots; ++i)
+    if (g_pending_used[i].load() && g_pending_paths[i][0]) ::unlink(g_pending_paths[i]);
+}
+
 AtomicFile::AtomicFile(const std::string& path) : path_(path) {
   tmp_ = path + ".tmp-" + std::to_string(::getpid());
+  slot_ = register_pending(tmp_);
   f_ = std::fopen(tmp_.c_str(), "wb");
-  if (!f_) fail("cannot write '{}': {}", path, std::strerror(errno));
+  if (!f_) {
+    int e = errno;
+    unregister_pending(slot_);
+    fail("cannot write '{}': {}", path, std::strerror(e));
+  }
 }
 
 AtomicFile::~AtomicFile() {
@@ -80,6 +121,7 @@ AtomicFile::~AtomicFile() {
     std::fclose(f_);
     std::remove(tmp_.c_str());
   }
+  unregister_pending(slot_);
 }
 
 void AtomicFile::write(const void* data, size_t bytes) {
@@ -90,8 +132,13 @@ void AtomicFile::write(const void* data, size_t bytes) {
 void AtomicFile::commit() {
   if (std::fflush(f_) != 0 || ::fsync(fileno(f_)) != 0)
     fail("cannot write '{}': {}", path_, std::strerror(errno));
-  std::fclose(f_);
+  const bool closed = std::fclose(f_) == 0;
   f_ = nullptr;
+  if (!closed) {
+    int e = errno;
+    std::remove(tmp_.c_str());
+    fail("cannot write '{}': {}", path_, std::strerror(e));
+  }
   if (std::rename(tmp_.c_str(), path_.c_str()) != 0) {
     int e = errno;
     std::remove(tmp_.c_str());

@@ -32,7 +32,12 @@ public:
 private:
   std::string path_, tmp_;
   std::FILE* f_ = nullptr;
+  int slot_ = -1;  // where tmp_ is registered for remove_pending_temporaries()
 };
+
+// Unlinks the temporaries of every AtomicFile not yet committed. Async-signal-safe: a SIGTERM/SIGINT
+// handler calls it before the process dies, so a kill during a save leaves no partial file behind.
+void remove_pending_temporaries();
 
 void write_file_atomic(const std::string& path, std::string_view data);
 

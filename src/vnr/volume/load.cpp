@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <new>
 #include "vnr/core/error.h"
+#include "vnr/core/units.h"
 #include "vnr/volume/sample_io.h"
 #include "vnr/volume/volume.h"
 
@@ -11,12 +12,29 @@ namespace vnr {
 
 using namespace detail;
 
+namespace {
+
+// A header may claim any size: refuse what cannot fit before allocating, naming the sizes, rather
+// than letting the allocation fail late or the machine swap.
+void check_in_core_fits(const VolumeDesc& desc, uint64_t n) {
+  const double bytes = double(n) * sizeof(float);
+  const uint64_t available = available_memory_bytes();
+  if (bytes <= double(available)) return;
+  fail("'{}': dims {}x{}x{} = {:.3g} voxels x {} bytes = {} exceeds the memory available ({}); use the out-of-core "
+       "sampler (--sampler outofcore)",
+       desc.path, desc.dims.x, desc.dims.y, desc.dims.z, double(n), sizeof(float), human_bytes(bytes),
+       human_bytes(double(available)));
+}
+
+}  // namespace
+
 Volume load_volume(const VolumeDesc& desc, const LoadOptions& opts) {
   check_dims(desc);
   const Int3 d = desc.dims;
   const uint64_t n = d.count();
   const size_t esize = dtype_size(desc.dtype);
 
+  check_in_core_fits(desc, n);
   Volume vol;
   vol.dims = d;
   vol.source_dtype = desc.dtype;
