@@ -104,7 +104,9 @@ void parse_grid(const std::string& lo, const Json& j, EncodingConfig& e) {
   if (e.n_levels < 1 || e.n_levels > 32) fail("encoding: n_levels must be in 1..32, got {}", e.n_levels);
   e.log2_hashmap_size = json_get<uint32_t>(j, "log2_hashmap_size", 19u, w);
   if (e.log2_hashmap_size < 1 || e.log2_hashmap_size > 30)
-    fail("encoding: log2_hashmap_size must be in 1..30, got {}", e.log2_hashmap_size);
+    fail("encoding: log2_hashmap_size must be in 1..30, got {} (a table of 2^{} entries per level exceeds the "
+         "limit of 2^30)",
+         e.log2_hashmap_size, e.log2_hashmap_size);
   e.base_resolution = json_get<uint32_t>(j, "base_resolution", 16u, w);
   if (e.base_resolution < 1) fail("encoding: base_resolution must be at least 1");
   e.per_level_scale = json_get<float>(j, "per_level_scale", 2.0f, w);
