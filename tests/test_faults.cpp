@@ -70,6 +70,12 @@ std::vector<std::string> temporaries_in(const std::string& dir) {
 
 void sleep_ms(int ms) { std::this_thread::sleep_for(std::chrono::milliseconds(ms)); }
 
+// Training has begun once its first checkpoint replaced the previous model (up to 60 s on a busy machine).
+void wait_for_first_checkpoint(const std::string& model, const std::string& previous) {
+  for (int i = 0; i < 600 && bytes_of(model) == previous; ++i) sleep_ms(100);
+  ASSERT_NE(bytes_of(model), previous) << "no checkpoint within 60 s";
+}
+
 class Faults : public ::testing::Test {
 protected:
   void SetUp() override {
@@ -82,9 +88,8 @@ protected:
               0);
     previous_model = read_file(dir + "/m.vnr");
   }
-  std::string long_train(const std::string& extra = "") const {
-    return "train " + dir + "/ml.json -o " + dir + "/m.vnr --config small --seconds 60 --batch 4096 -q --no-ssim " +
-           extra;
+  std::string long_train() const {
+    return "train " + dir + "/ml.json -o " + dir + "/m.vnr --config small --seconds 60 --batch 4096 -q --no-ssim";
   }
   std::string dir, previous_model;
 };
@@ -122,8 +127,9 @@ TEST_F(Faults, FullDiskDuringDecodeKeepsThePreviousOutput) {
 }
 
 // One signal mid-training stops after the current step and saves a complete model (exit 0).
-void expect_graceful_stop(const std::string& dir, const Child& c, int sig) {
-  sleep_ms(2500);  // past loading (a 32^3 volume loads in milliseconds)
+void expect_graceful_stop(const std::string& dir, const Child& c, const std::string& previous_model, int sig) {
+  wait_for_first_checkpoint(dir + "/m.vnr", previous_model);
+  sleep_ms(200);
   ASSERT_EQ(::kill(c.pid, sig), 0);
   const int st = wait_status(c);
   ASSERT_TRUE(WIFEXITED(st)) << "signalled: " << WTERMSIG(st);
@@ -137,14 +143,14 @@ void expect_graceful_stop(const std::string& dir, const Child& c, int sig) {
 }
 
 TEST_F(Faults, SigtermMidTrainingSavesTheModel) {
-  Child c = spawn(long_train(), dir);
-  expect_graceful_stop(dir, c, SIGTERM);
+  Child c = spawn(long_train() + " --checkpoint-every 50", dir);
+  expect_graceful_stop(dir, c, previous_model, SIGTERM);
   EXPECT_NE(read_file(dir + "/m.vnr"), previous_model);
 }
 
 TEST_F(Faults, SigintMidTrainingSavesTheModel) {
-  Child c = spawn(long_train(), dir);
-  expect_graceful_stop(dir, c, SIGINT);
+  Child c = spawn(long_train() + " --checkpoint-every 50", dir);
+  expect_graceful_stop(dir, c, previous_model, SIGINT);
   EXPECT_NE(read_file(dir + "/m.vnr"), previous_model);
 }
 
@@ -196,8 +202,7 @@ TEST_F(Faults, VolumeTruncatedUnderOutOfCoreTrainingKeepsTheLastModel) {
   Child c = spawn("train " + dir + "/big.json -o " + dir + "/m.vnr --config small --seconds 60 --batch 4096 -q "
                   "--no-ssim --sampler outofcore --memory-budget 256KiB --checkpoint-every 20",
                   dir);
-  sleep_ms(2500);  // several checkpoints written
-  const std::string checkpoint = read_file(dir + "/m.vnr");
+  wait_for_first_checkpoint(dir + "/m.vnr", previous_model);
   fs::resize_file(raw, fs::file_size(raw) / 2);
   const int st = wait_status(c);
   const std::string err = read_file(c.err_path);

@@ -9,7 +9,9 @@
 #include <fstream>
 #include "test_support.h"
 #include "vnr/core/error.h"
+#include "vnr/core/units.h"
 #include "vnr/nn/config.h"
+#include "vnr/nn/network.h"
 #include "vnr/volume/volume.h"
 
 namespace vnr::test {
@@ -85,6 +87,27 @@ TEST(Limits, ConfigWithA2To40EntryTableIsRefused) {
   j["encoding"]["log2_hashmap_size"] = 40;
   const std::string msg = error_of([&] { ModelConfig::from_json(j); });
   EXPECT_NE(msg.find("a table of 2^40 entries per level exceeds the limit of 2^30"), std::string::npos) << msg;
+}
+
+// A dense grid of 2^31 entries x 8 features (17e9 parameters, 96 GiB) is refused before the parameter
+// vectors are allocated, naming the count.
+TEST(Limits, AbsurdParameterCountIsRefusedBeforeAllocating) {
+  Json j = preset_config("small");
+  j["encoding"] = {{"otype", "DenseGrid"}, {"n_levels", 1}, {"n_features_per_level", 8}, {"base_resolution", 1300}};
+  const ModelConfig cfg = ModelConfig::from_json(j);
+  if (available_memory_bytes() > (uint64_t(96) << 30)) GTEST_SKIP() << "this machine could hold 96 GiB";
+  const std::string msg = error_of([&] { Network net(cfg, 1); });
+  EXPECT_NE(msg.find("(17179869184 in the grid table)"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("exceeding the memory available"), std::string::npos) << msg;
+}
+
+// An instantvnr-style sidecar claiming 10^12 voxels over a 64-byte file.
+TEST(Limits, SidecarClaimingTeraVoxelsIsRefusedByTheFileSize) {
+  const std::string dir = temp_dir("vnr_limits");
+  write_text(dir + "/small2.raw", std::string(64, '\0'));
+  write_text(dir + "/tera.json", R"({"file": "small2.raw", "dims": [10000, 10000, 10000], "dtype": "uint8"})");
+  const std::string msg = error_of([&] { describe_volume(dir + "/tera.json"); });
+  EXPECT_NE(msg.find("has 64 bytes, expected 1000000000000"), std::string::npos) << msg;
 }
 
 // A .vnr file with bytes appended (or cut) disagrees with the parameter count in its header.

@@ -4,13 +4,30 @@
 #include "vnr/core/error.h"
 #include "vnr/core/half.h"
 #include "vnr/core/rng.h"
+#include "vnr/core/units.h"
 
 namespace vnr {
+
+namespace {
+
+// A config or model file may describe any number of parameters: refuse what cannot fit before
+// allocating (fp32 master copy + fp16 table), naming the sizes.
+void check_params_fit(uint64_t n_params, uint64_t grid_params) {
+  const double bytes = double(n_params) * sizeof(float) + double(grid_params) * sizeof(uint16_t);
+  const uint64_t available = available_memory_bytes();
+  if (bytes <= double(available)) return;
+  fail("the model has {} parameters ({} in the grid table) = {} exceeding the memory available ({}); reduce "
+       "n_levels, log2_hashmap_size or the grid resolution",
+       n_params, grid_params, human_bytes(bytes), human_bytes(double(available)));
+}
+
+}  // namespace
 
 Network::Network(const ModelConfig& config, uint32_t n_output_dims)
     : cfg_(config), cfg_json_(cfg_.to_json()), enc_(make_encoding(cfg_.encoding)) {  // cfg_json_: every key explicit
   if (enc_->grid()) grid_ = *enc_->grid();
   mlp_ = make_mlp_layout(cfg_, n_output_dims);
+  check_params_fit(n_params(), grid_params());
   params.assign(n_params(), 0.0f);
   grid_half_.assign(grid_params(), 0);
 }
