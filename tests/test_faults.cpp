@@ -13,6 +13,7 @@
 #include <sstream>
 #include <thread>
 #include "test_support.h"
+#include "vnr/core/fileio.h"
 
 namespace vnr::test {
 namespace {
@@ -214,6 +215,26 @@ TEST_F(Faults, VolumeTruncatedUnderOutOfCoreTrainingKeepsTheLastModel) {
   EXPECT_EQ(info.code, 0) << info.err;
   EXPECT_NE(info.out.find("changed size during training"), std::string::npos) << info.out;  // the model says why
   EXPECT_TRUE(temporaries_in(dir).empty());
+}
+
+// What the CLI's signal handler relies on: an unfinished AtomicFile's temporary is removed, a committed
+// file is left alone.
+TEST(PendingTemporaries, RemovesOnlyUnfinishedTemporaries) {
+  const std::string dir = temp_dir("vnr_faults") + "/pending";
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  {
+    AtomicFile done(dir + "/done.bin");
+    done.write("kept");
+    done.commit();
+    AtomicFile unfinished(dir + "/unfinished.bin");
+    unfinished.write("partial");
+    ASSERT_EQ(temporaries_in(dir).size(), 1u);
+    remove_pending_temporaries();
+    EXPECT_TRUE(temporaries_in(dir).empty());
+  }
+  EXPECT_EQ(read_file(dir + "/done.bin"), "kept");
+  EXPECT_FALSE(fs::exists(dir + "/unfinished.bin"));
 }
 
 }  // namespace

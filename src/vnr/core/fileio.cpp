@@ -72,19 +72,21 @@ std::string strip_extension(const std::string& path) {
 
 namespace {
 
-// Fixed storage, so a signal handler can read it without allocating or locking. A slot's path is
-// written before its flag is set and read only while the flag is set.
+// Fixed storage, so a signal handler can read it without allocating or locking. A slot is claimed
+// (kWriting), filled, then published (kReady); the handler reads only published slots.
 constexpr int kPendingSlots = 16;
 constexpr size_t kPendingPathBytes = 4096;
+enum PendingState : int { kFree = 0, kWriting = 1, kReady = 2 };
 char g_pending_paths[kPendingSlots][kPendingPathBytes];
-std::atomic<bool> g_pending_used[kPendingSlots];
+std::atomic<int> g_pending_state[kPendingSlots];
 
 int register_pending(const std::string& tmp) {
   if (tmp.size() >= kPendingPathBytes) return -1;
   for (int i = 0; i < kPendingSlots; ++i) {
-    bool expected = false;
-    if (g_pending_used[i].compare_exchange_strong(expected, true)) {
+    int expected = kFree;
+    if (g_pending_state[i].compare_exchange_strong(expected, kWriting)) {
       std::memcpy(g_pending_paths[i], tmp.c_str(), tmp.size() + 1);
+      g_pending_state[i].store(kReady);
       return i;
     }
   }
@@ -92,17 +94,14 @@ int register_pending(const std::string& tmp) {
 }
 
 void unregister_pending(int slot) {
-  if (slot >= 0) {
-    g_pending_paths[slot][0] = '\0';
-    g_pending_used[slot].store(false);
-  }
+  if (slot >= 0) g_pending_state[slot].store(kFree);
 }
 
 }  // namespace
 
 void remove_pending_temporaries() {
   for (int i = 0; i < kPendingSlots; ++i)
-    if (g_pending_used[i].load() && g_pending_paths[i][0]) ::unlink(g_pending_paths[i]);
+    if (g_pending_state[i].load() == kReady) ::unlink(g_pending_paths[i]);
 }
 
 AtomicFile::AtomicFile(const std::string& path) : path_(path) {
