@@ -26,8 +26,8 @@ struct Child {
 };
 
 // Starts `vnr args...` with stderr to a file; fsize_limit > 0 caps the bytes it may write per file
-// (SIGXFSZ ignored, so the write fails with EFBIG as on a full disk).
-Child spawn(const std::string& args, const std::string& dir, rlim_t fsize_limit = 0) {
+// (SIGXFSZ ignored unless xfsz_default, so the write fails with EFBIG as on a full disk).
+Child spawn(const std::string& args, const std::string& dir, rlim_t fsize_limit = 0, bool xfsz_default = false) {
   Child c;
   c.err_path = dir + "/child_stderr.txt";
   std::vector<std::string> words;
@@ -40,7 +40,7 @@ Child spawn(const std::string& args, const std::string& dir, rlim_t fsize_limit 
     ::dup2(fd, 2);
     ::dup2(null_fd, 1);
     if (fsize_limit) {
-      std::signal(SIGXFSZ, SIG_IGN);
+      std::signal(SIGXFSZ, xfsz_default ? SIG_DFL : SIG_IGN);
       rlimit r{fsize_limit, fsize_limit};
       ::setrlimit(RLIMIT_FSIZE, &r);
     }
@@ -95,10 +95,11 @@ protected:
   std::string dir, previous_model;
 };
 
-TEST_F(Faults, FullDiskDuringModelSaveKeepsThePreviousModel) {
+// xfsz_default: as under a shell's `ulimit -f`, where SIGXFSZ would kill the process mid-write.
+void expect_full_disk_keeps_the_model(const std::string& dir, const std::string& previous_model, bool xfsz_default) {
   Child c = spawn("train " + dir + "/ml.json -o " + dir + "/m.vnr --config small --steps 10 --batch 4096 --seed 7 -q "
                   "--no-ssim",
-                  dir, 4096);
+                  dir, 4096, xfsz_default);
   const int st = wait_status(c);
   ASSERT_TRUE(WIFEXITED(st));
   EXPECT_NE(WEXITSTATUS(st), 0);
@@ -108,6 +109,12 @@ TEST_F(Faults, FullDiskDuringModelSaveKeepsThePreviousModel) {
   EXPECT_NE(err.find("File too large"), std::string::npos) << err;
   EXPECT_EQ(read_file(dir + "/m.vnr"), previous_model);
   EXPECT_TRUE(temporaries_in(dir).empty());
+}
+
+TEST_F(Faults, FullDiskDuringModelSaveKeepsThePreviousModel) { expect_full_disk_keeps_the_model(dir, previous_model, false); }
+
+TEST_F(Faults, FileSizeLimitWithDefaultSigxfszKeepsThePreviousModel) {
+  expect_full_disk_keeps_the_model(dir, previous_model, true);
 }
 
 TEST_F(Faults, FullDiskDuringDecodeKeepsThePreviousOutput) {

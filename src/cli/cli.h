@@ -46,7 +46,7 @@ std::string format_ratio(double ratio);
 
 // SIGINT/SIGTERM outside a graceful stop: one error line, the temporaries of unfinished saves removed,
 // then the default action (so the exit status still says which signal). Installed by main();
-// training guards hand signals back to it after their first one.
+// training guards hand signals back to it after their first one. SIGXFSZ is ignored (EFBIG errors).
 extern "C" void exit_on_signal(int sig);
 void install_exit_on_signal();
 

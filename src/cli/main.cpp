@@ -113,6 +113,9 @@ extern "C" void exit_on_signal(int sig) {
 void install_exit_on_signal() {
   for (int sig : {SIGINT, SIGTERM})
     if (std::signal(sig, exit_on_signal) == SIG_IGN) std::signal(sig, SIG_IGN);  // keep nohup's choice
+  // Past a file-size limit (ulimit -f) a write then fails with EFBIG and is reported like a full disk,
+  // instead of the process dying mid-write with its temporaries left behind.
+  std::signal(SIGXFSZ, SIG_IGN);
 }
 
 std::string format_ratio(double r) { return r >= 0.01 || r == 0 ? fmt::format("{:.2f}", r) : fmt::format("{:.2g}", r); }
