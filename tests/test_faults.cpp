@@ -162,6 +162,26 @@ TEST_F(Faults, SigintMidTrainingSavesTheModel) {
   EXPECT_NE(read_file(dir + "/m.vnr"), previous_model);
 }
 
+// A time series stops the same way on SIGTERM: the timestep in training is saved, the series ends there.
+TEST_F(Faults, SigtermDuringASeriesSavesTheCurrentTimestep) {
+  ASSERT_EQ(run("synth marschner-lobb --dims 24,24,24 --timesteps 3 -o " + dir + "/ts.json").code, 0);
+  Child c = spawn("train " + dir + "/ts.json --timesteps all -o " + dir + "/series --config small --seconds 30 "
+                  "--batch 4096 -q --no-ssim",
+                  dir);
+  for (int i = 0; i < 600 && !fs::exists(dir + "/series"); ++i) sleep_ms(100);
+  sleep_ms(1500);  // past loading the first timestep
+  ASSERT_EQ(::kill(c.pid, SIGTERM), 0);
+  const int st = wait_status(c);
+  const std::string err = read_file(c.err_path);
+  ASSERT_TRUE(WIFEXITED(st)) << err;
+  EXPECT_EQ(WEXITSTATUS(st), 0);
+  EXPECT_EQ(count_lines(err), 1) << err;
+  EXPECT_NE(err.find("interrupted: stopped after timestep 0"), std::string::npos) << err;
+  EXPECT_EQ(run("info " + dir + "/series/t0000.vnr").code, 0);
+  EXPECT_FALSE(fs::exists(dir + "/series/t0001.vnr"));
+  EXPECT_TRUE(temporaries_in(dir + "/series").empty());
+}
+
 // Whatever a signal interrupts, the model file is the previous one or a complete new one, and no
 // temporary is left; a run killed by the signal says so in one error line (after the note of the first
 // signal, when it came mid-training).
