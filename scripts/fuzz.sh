@@ -2,7 +2,8 @@
 # Builds the libFuzzer targets (fuzz/, clang + ASan/UBSan, in build-fuzz/) and runs each for SECONDS
 # (default 60) on a copy of its seed corpus, printing executions, coverage (edges) and crashes per target.
 # Findings land in build-fuzz/findings/<target>/ (crash-*, timeout-*, leak-*); keep each as a regression
-# input under tests/data/fuzz/<target>/ once fixed.
+# input under tests/data/fuzz/<target>/ once fixed. VNR_FUZZ_TARGETS="a b" picks targets; VNR_FUZZ_NO_BUILD=1
+# runs what is built.
 set -euo pipefail
 SECONDS_PER_TARGET=${1:-60}
 ROOT=$(cd "$(dirname "$0")/.." && pwd)
@@ -19,7 +20,7 @@ if [[ ! -f "$BUILD/CMakeCache.txt" ]]; then
     -DVNR_CUDA=OFF -DVNR_PYTHON=OFF -DVNR_PARAVIEW=OFF -DVNR_VIEW=OFF -DVNR_BUILD_TESTS=OFF \
     -DVNR_BUILD_BENCH=OFF "${launcher[@]}" >/dev/null
 fi
-cmake --build "$BUILD" -j"${VNR_FUZZ_JOBS:-2}" --target "${TARGETS[@]}"
+[[ -n "${VNR_FUZZ_NO_BUILD:-}" ]] || cmake --build "$BUILD" -j"${VNR_FUZZ_JOBS:-2}" --target "${TARGETS[@]}"
 
 printf '%-22s %12s %8s %8s\n' target executions edges crashes
 for t in "${TARGETS[@]}"; do
