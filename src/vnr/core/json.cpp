@@ -9,8 +9,9 @@ namespace vnr {
 Json parse_json_text(const std::string& text, const std::string& what) {
   try {
     return Json::parse(text, nullptr, /*allow_exceptions=*/true, /*ignore_comments=*/true);
-  } catch (const Json::parse_error& e) {
-    // nlohmann's message carries the byte position; keep it on one line.
+  } catch (const Json::exception& e) {
+    // parse_error, or out_of_range for a number beyond double (1e999). nlohmann's message carries the
+    // byte position; keep it on one line.
     std::string msg = e.what();
     std::replace(msg.begin(), msg.end(), '\n', ' ');
     fail("{}: invalid JSON ({})", what, msg);

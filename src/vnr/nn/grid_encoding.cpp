@@ -15,6 +15,10 @@ GridLayout make_grid_layout(const EncodingConfig& cfg) {
   for (uint32_t l = 0; l < cfg.n_levels; ++l) {
     GridLevel& L = g.levels[l];
     L.scale = exp2f(float(l) * log2s) * float(cfg.base_resolution) - 1.0f;
+    // Beyond 2^30 cells per axis the uint32 resolution and the hashing of corners overflow.
+    if (!(L.scale < 1073741824.0f))
+      fail("encoding: level {} has a resolution of {} cells per axis (base_resolution {}, per_level_scale {}); at "
+           "most 2^30 allowed", l, L.scale, cfg.base_resolution, cfg.per_level_scale);
     L.res = uint32_t(ceilf(L.scale)) + 1;
     double dense_f = double(L.res) * L.res * L.res;
     uint64_t dense = dense_f > 2147483647.0 ? 2147483647ull : uint64_t(L.res) * L.res * L.res;

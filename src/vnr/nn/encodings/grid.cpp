@@ -1,5 +1,6 @@
 // HashGrid / DenseGrid / TiledGrid (docs/semantics.md A.2): the multi-resolution grid. Per-sample code
 // is grid_encoding.h's VNR_HD functions; chunks go through the per-SIMD-target kernels of cpu_kernels.
+#include <cmath>
 #include "vnr/core/error.h"
 #include "vnr/core/fileio.h"
 #include "vnr/nn/cpu_kernels.h"
@@ -110,7 +111,8 @@ void parse_grid(const std::string& lo, const Json& j, EncodingConfig& e) {
   e.base_resolution = json_get<uint32_t>(j, "base_resolution", 16u, w);
   if (e.base_resolution < 1) fail("encoding: base_resolution must be at least 1");
   e.per_level_scale = json_get<float>(j, "per_level_scale", 2.0f, w);
-  if (!(e.per_level_scale >= 1.0f)) fail("encoding: per_level_scale must be >= 1");
+  if (!(e.per_level_scale >= 1.0f) || !std::isfinite(e.per_level_scale))
+    fail("encoding: per_level_scale must be a finite number >= 1");
   std::string interp = to_lower(json_get<std::string>(j, "interpolation", "Linear", w));
   if (interp == "linear") e.interpolation = Interpolation::Linear;
   else if (interp == "nearest") e.interpolation = Interpolation::Nearest;
