@@ -61,6 +61,30 @@ void dims_from_extents(const uint64_t* extents, int rank, const std::string& wha
   d->n_timesteps = rank == 4 ? int(extents[0]) : 1;
 }
 
+std::string volume_names_text(const std::vector<std::string>& names, const std::string& kind) {
+  if (names.empty()) return "it holds no 3-D or 4-D numeric " + kind;
+  std::string text = "3-D or 4-D numeric " + kind + "s here: ";
+  for (size_t i = 0; i < names.size() && i < 20; ++i) text += (i ? ", " : "") + names[i];
+  if (names.size() > 20) text += fmt::format(", ... ({} in all)", names.size());
+  return text;
+}
+
+void check_dataset_unchanged(const VolumeDesc& desc, const VolumeDesc& now, const std::string& where) {
+  if (now.dims != desc.dims || now.dtype != desc.dtype || now.n_timesteps != desc.n_timesteps)
+    fail("{} changed since it was described (now {} {})", where, dims_string(now.dims, now.n_timesteps),
+         dtype_name(now.dtype));
+}
+
+ChunkCacheSize layer_chunk_cache(const VolumeDesc& desc, const uint64_t* chunk, int rank) {
+  const uint64_t cy = std::max<uint64_t>(chunk[rank - 2], 1), cx = std::max<uint64_t>(chunk[rank - 1], 1);
+  const uint64_t per_layer = ((uint64_t(desc.dims.x) + cx - 1) / cx) * ((uint64_t(desc.dims.y) + cy - 1) / cy);
+  ChunkCacheSize c;
+  c.chunk_bytes = dtype_size(desc.dtype);
+  for (int a = 0; a < rank; ++a) c.chunk_bytes *= std::max<uint64_t>(chunk[a], 1);
+  c.bytes = std::clamp<uint64_t>(per_layer * c.chunk_bytes + c.chunk_bytes, 1 << 20, uint64_t(256) << 20);
+  return c;
+}
+
 void read_voxel_run(DatasetReader& r, Int3 dims, uint64_t first, uint64_t n, size_t esize, unsigned char* dst) {
   const uint64_t nx = uint64_t(dims.x), slice = nx * uint64_t(dims.y);
   while (n > 0) {

@@ -10,6 +10,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <vector>
 #include "vnr/volume/formats.h"
 #include "vnr/volume/volume.h"
 
@@ -62,6 +63,21 @@ Source describe_netcdf(const DatasetPath& p);
 
 // Voxels [first, first + n) in file order (x fastest) into dst, with at most five box reads.
 void read_voxel_run(DatasetReader& r, Int3 dims, uint64_t first, uint64_t n, size_t esize, unsigned char* dst);
+
+// "3-D or 4-D numeric {kind}s here: a, b" (at most 20 named), or that there are none: the list the
+// errors for a missing or unusable dataset/variable end with.
+std::string volume_names_text(const std::vector<std::string>& names, const std::string& kind);
+
+// Fails unless the dataset, opened again, still has desc's dims, dtype and timestep count (`now`).
+void check_dataset_unchanged(const VolumeDesc& desc, const VolumeDesc& now, const std::string& where);
+
+// A chunk cache that holds one z-layer of chunks plus one (at least libhdf5's default 1 MiB, at most
+// 256 MiB), so that a slab or box read decompresses each chunk it touches once. chunk: the chunk's
+// C-order extents ((nt,) nz, ny, nx), rank 3 or 4.
+struct ChunkCacheSize {
+  uint64_t bytes = 0, chunk_bytes = 0;
+};
+ChunkCacheSize layer_chunk_cache(const VolumeDesc& desc, const uint64_t* chunk, int rank);
 
 // The dims and timestep count of a C-order extent list of rank 3 or 4 ((nt,) nz, ny, nx); `what`
 // names the dataset in the rank error.

@@ -132,11 +132,7 @@ std::string volume_datasets_text(hid_t file) {
              return 0;
            },
            &names);
-  if (names.empty()) return "it holds no 3-D or 4-D numeric dataset";
-  std::string text = "3-D or 4-D numeric datasets here: ";
-  for (size_t i = 0; i < names.size() && i < 20; ++i) text += (i ? ", " : "") + names[i];
-  if (names.size() > 20) text += fmt::format(", ... ({} in all)", names.size());
-  return text;
+  return volume_names_text(names, "dataset");
 }
 
 // The dataset at `name`, with one message for each way it can be missing: a missing group on the
@@ -184,9 +180,7 @@ public:
     Hid probe = open_dataset(file_.get(), desc.path, desc.dataset, H5P_DEFAULT);
     VolumeDesc now;
     describe_open_dataset(probe.get(), where, &now);
-    if (now.dims != desc.dims || now.dtype != desc.dtype || now.n_timesteps != desc.n_timesteps)
-      fail("{} changed since it was described (now {} {})", where, dims_string(now.dims, now.n_timesteps),
-           dtype_name(now.dtype));
+    check_dataset_unchanged(desc, now, where);
     rank_ = desc.n_timesteps > 1 || extents_of(probe.get()).size() == 4 ? 4 : 3;
     Hid dapl(H5Pcreate(H5P_DATASET_ACCESS), H5Pclose);
     set_chunk_cache(probe.get(), dapl.get());
@@ -213,22 +207,17 @@ public:
   int64_t chunk_slices() const override { return chunk_slices_; }
 
 private:
-  // A chunk cache that holds one z-layer of chunks (at least libhdf5's default 1 MiB, at most 256
-  // MiB): a slab or box read then decompresses each chunk it touches once.
+  // A chunk cache that holds one z-layer of chunks (dataset.h's layer_chunk_cache).
   void set_chunk_cache(hid_t dset, hid_t dapl) {
     Hid dcpl(H5Dget_create_plist(dset), H5Pclose);
     if (H5Pget_layout(dcpl.get()) != H5D_CHUNKED) return;
     hsize_t c[4] = {1, 1, 1, 1};
     H5Pget_chunk(dcpl.get(), rank_, c);
-    const int k = rank_ - 3;
-    chunk_slices_ = int64_t(c[k]);
-    const uint64_t per_layer = uint64_t((desc_.dims.x + int64_t(c[k + 2]) - 1) / int64_t(c[k + 2])) *
-                               uint64_t((desc_.dims.y + int64_t(c[k + 1]) - 1) / int64_t(c[k + 1]));
-    uint64_t chunk_bytes = dtype_size(desc_.dtype);
-    for (int a = 0; a < rank_; ++a) chunk_bytes *= c[a];
-    const uint64_t bytes = std::clamp<uint64_t>(per_layer * chunk_bytes + chunk_bytes, 1 << 20, uint64_t(256) << 20);
-    const uint64_t slots = std::clamp<uint64_t>(100 * (bytes / chunk_bytes + 1) + 1, 521, 1 << 20);
-    H5Pset_chunk_cache(dapl, size_t(slots), size_t(bytes), 1.0);
+    chunk_slices_ = int64_t(c[rank_ - 3]);
+    const uint64_t c64[4] = {c[0], c[1], c[2], c[3]};
+    const ChunkCacheSize cache = layer_chunk_cache(desc_, c64, rank_);
+    const uint64_t slots = std::clamp<uint64_t>(100 * (cache.bytes / cache.chunk_bytes + 1) + 1, 521, 1 << 20);
+    H5Pset_chunk_cache(dapl, size_t(slots), size_t(cache.bytes), 1.0);
   }
 
   VolumeDesc desc_;

@@ -88,11 +88,7 @@ std::string volume_variables_text(int ncid) {
                          t == NC_UINT || t == NC_FLOAT || t == NC_DOUBLE;
     if (numeric && (rank == 3 || rank == 4)) names.push_back(name);
   }
-  if (names.empty()) return "it holds no 3-D or 4-D numeric variable";
-  std::string text = "3-D or 4-D numeric variables here: ";
-  for (size_t i = 0; i < names.size() && i < 20; ++i) text += (i ? ", " : "") + names[i];
-  if (names.size() > 20) text += fmt::format(", ... ({} in all)", names.size());
-  return text;
+  return volume_names_text(names, "variable");
 }
 
 struct Variable {
@@ -132,9 +128,7 @@ public:
       VolumeDesc now;
       const std::string where = "'" + desc.path + ":" + desc.dataset + "'";
       describe_variable(v_, where, &now);
-      if (now.dims != desc.dims || now.dtype != desc.dtype || now.n_timesteps != desc.n_timesteps)
-        fail("{} changed since it was described (now {} {})", where, dims_string(now.dims, now.n_timesteps),
-             dtype_name(now.dtype));
+      check_dataset_unchanged(desc, now, where);
       set_chunk_cache();
     } catch (...) {
       file_.reset();
@@ -167,15 +161,12 @@ private:
     int storage = NC_CONTIGUOUS;
     size_t c[NC_MAX_VAR_DIMS] = {};
     if (nc_inq_var_chunking(v_.group, v_.var, &storage, c) != NC_NOERR || storage != NC_CHUNKED) return;
-    const int k = v_.rank - 3;
-    chunk_slices_ = int64_t(std::max<size_t>(c[k], 1));
-    uint64_t chunk_bytes = dtype_size(desc_.dtype);
-    for (int a = 0; a < v_.rank; ++a) chunk_bytes *= std::max<size_t>(c[a], 1);
-    const uint64_t per_layer = uint64_t((desc_.dims.x + int64_t(c[k + 2]) - 1) / int64_t(c[k + 2])) *
-                               uint64_t((desc_.dims.y + int64_t(c[k + 1]) - 1) / int64_t(c[k + 1]));
-    const uint64_t bytes = std::clamp<uint64_t>(per_layer * chunk_bytes + chunk_bytes, 1 << 20, uint64_t(256) << 20);
-    nc_set_var_chunk_cache(v_.group, v_.var, size_t(bytes), size_t(std::max<uint64_t>(521, 4 * (bytes / chunk_bytes + 1))),
-                           1.0f);
+    chunk_slices_ = int64_t(std::max<size_t>(c[v_.rank - 3], 1));
+    uint64_t c64[4] = {};  // rank 3 or 4 (describe_variable checked)
+    std::copy(c, c + v_.rank, c64);
+    const ChunkCacheSize cache = layer_chunk_cache(desc_, c64, v_.rank);
+    nc_set_var_chunk_cache(v_.group, v_.var, size_t(cache.bytes),
+                           size_t(std::max<uint64_t>(521, 4 * (cache.bytes / cache.chunk_bytes + 1))), 1.0f);
   }
 
   VolumeDesc desc_;
