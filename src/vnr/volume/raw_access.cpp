@@ -135,7 +135,7 @@ RawVolumeFile::RawVolumeFile(const VolumeDesc& desc, double lo, double hi, NonFi
                              const std::string& what, const std::string& alternative)
     : desc_(desc), policy_(policy) {
   if (is_dataset_encoding(desc.encoding)) {
-    open_dataset(lo, hi, what, alternative);
+    open_dataset(lo, hi);  // a dataset is read as hyperslabs: any reader may have it
     return;
   }
   DataFile f = open_data(desc, lo, hi, what, alternative);
@@ -157,8 +157,7 @@ RawVolumeFile::~RawVolumeFile() {
 
 // An HDF5/NetCDF source: the same checks and pivot as a raw file's, the container file's identity
 // for check_unchanged, and reads through the library.
-void RawVolumeFile::open_dataset(double lo, double hi, const std::string& what, const std::string& alternative) {
-  require_random_access(desc_, what, alternative);
+void RawVolumeFile::open_dataset(double lo, double hi) {
   check_dims(desc_);
   check_range(desc_, lo, hi);
   esize_ = dtype_size(desc_.dtype);

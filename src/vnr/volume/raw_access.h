@@ -67,7 +67,7 @@ public:
 
 private:
   void read_bytes(unsigned char* dst, size_t bytes, uint64_t file_offset) const;
-  void open_dataset(double lo, double hi, const std::string& what, const std::string& alternative);
+  void open_dataset(double lo, double hi);
   void read_dataset_box(Int3 origin, Int3 size, float* out) const;
   void count_read(size_t bytes, uint64_t file_offset) const;
   VolumeDesc desc_;
