@@ -181,7 +181,7 @@ public:
     VolumeDesc now;
     describe_open_dataset(probe.get(), where, &now);
     check_dataset_unchanged(desc, now, where);
-    rank_ = desc.n_timesteps > 1 || extents_of(probe.get()).size() == 4 ? 4 : 3;
+    rank_ = int(extents_of(probe.get()).size());  // 3 or 4: describe_open_dataset checked
     Hid dapl(H5Pcreate(H5P_DATASET_ACCESS), H5Pclose);
     set_chunk_cache(probe.get(), dapl.get());
     dset_ = open_dataset(file_.get(), desc.path, desc.dataset, dapl.get());
