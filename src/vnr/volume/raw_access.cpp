@@ -63,8 +63,9 @@ void check_same_file(const std::string& path, uint64_t size, dev_t dev, ino_t in
 }
 
 // load_volume's pivot for desc's timestep: an explicit range end, else the first finite sample in
-// file order.
-double pivot_of(int fd, const VolumeDesc& desc) {
+// file order; read(dst, first, n) reads voxels [first, first + n) of the timestep.
+template <typename Read>
+double pivot_of(const VolumeDesc& desc, bool swap, Read&& read) {
   double pivot = 0;
   if (pivot_from_desc(desc, &pivot)) return pivot;
   const int64_t n = int64_t(desc.dims.count()), esize = int64_t(dtype_size(desc.dtype));
@@ -73,12 +74,19 @@ double pivot_of(int fd, const VolumeDesc& desc) {
   bool found = false;
   for (int64_t i0 = 0; i0 < n && !found; i0 += per) {
     const int64_t m = std::min(per, n - i0);
-    pread_exact(fd, buf.data(), size_t(m * esize), desc.offset + uint64_t(i0 * esize), desc.path);
+    read(buf.data(), i0, m);
     with_sample_type(desc.dtype, [&](auto tag) {
-      found = find_pivot<typename decltype(tag)::type>(buf.data(), m, needs_swap(desc), &pivot);
+      found = find_pivot<typename decltype(tag)::type>(buf.data(), m, swap, &pivot);
     });
   }
   return pivot;  // none found: every sample is NaN/Inf, and those do not use the pivot
+}
+
+double pivot_of(int fd, const VolumeDesc& desc) {
+  const int64_t esize = int64_t(dtype_size(desc.dtype));
+  return pivot_of(desc, needs_swap(desc), [&](unsigned char* dst, int64_t i0, int64_t m) {
+    pread_exact(fd, dst, size_t(m * esize), desc.offset + uint64_t(i0 * esize), desc.path);
+  });
 }
 
 // The data file of desc, open for reading, after the checks both access paths share: raw
@@ -169,19 +177,9 @@ void RawVolumeFile::open_dataset(double lo, double hi) {
   dev_ = st.st_dev;
   ino_ = st.st_ino;
   dataset_ = open_dataset_reader(desc_);
-  double pivot = 0;
-  if (!pivot_from_desc(desc_, &pivot)) {  // the first finite sample in file order, as load_volume
-    const uint64_t n = desc_.dims.count(), per = std::min<uint64_t>(n, uint64_t(1) << 16);
-    std::vector<unsigned char> buf(size_t(per * esize_));
-    bool found = false;
-    for (uint64_t i0 = 0; i0 < n && !found; i0 += per) {
-      const uint64_t m = std::min(per, n - i0);
-      read_voxel_run(*dataset_, desc_.dims, i0, m, esize_, buf.data());
-      with_sample_type(desc_.dtype, [&](auto tag) {
-        found = find_pivot<typename decltype(tag)::type>(buf.data(), int64_t(m), false, &pivot);
-      });
-    }
-  }
+  const double pivot = pivot_of(desc_, false, [&](unsigned char* dst, int64_t i0, int64_t m) {
+    read_voxel_run(*dataset_, desc_.dims, uint64_t(i0), uint64_t(m), esize_, dst);
+  });
   norm_.set(pivot, lo, hi, policy_);
 }
 
