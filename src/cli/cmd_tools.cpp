@@ -14,6 +14,7 @@
 #include "vnr/cuda/cuda.h"
 #include "vnr/nn/mlp_kernels.h"
 #include "vnr/model.h"
+#include "vnr/volume/dataset.h"
 #include "vnr/volume/stream.h"
 #include "vnr/volume/writer.h"
 
@@ -204,15 +205,11 @@ void print_system_info(bool json) {
   std::printf("%s\n", cuda::backend_summary().c_str());
   std::printf("default --device: %s\n", devs.empty() ? "cpu" : "cuda");
 }
-}  // namespace
 
 // `vnr info FILE.h5:/DATASET` (or FILE.nc:VARIABLE, or the file alone: then the error lists its
 // volumes): what the volume layer reads from the dataset.
 bool is_dataset_argument(const std::string& path) {
-  if (file_exists(path)) {
-    const std::string ext = extension_of(path);
-    return ext == ".h5" || ext == ".hdf5" || ext == ".he5" || ext == ".nc" || ext == ".nc4";
-  }
+  if (file_exists(path)) return !detail::dataset_encoding_of_extension(extension_of(path)).empty();
   return path.find(':') != std::string::npos;
 }
 
@@ -229,6 +226,7 @@ void print_dataset_info(const std::string& path, bool json) {
               d.encoding == "hdf5" ? "HDF5 dataset" : "NetCDF variable", d.dataset.c_str(), (long long)d.dims.x,
               (long long)d.dims.y, (long long)d.dims.z, dtype_name(d.dtype), d.n_timesteps, d.n_timesteps == 1 ? "" : "s");
 }
+}  // namespace
 
 void add_info(CLI::App& app) {
   struct Args {
