@@ -97,7 +97,6 @@ struct SeriesRun {
   FrameLoader load;
   SeriesHooks hooks;
   Json report;
-  Json rows = Json::array();  // report["rows"]: one per saved model
   std::string report_path;
   uint64_t frame_bytes = 0;
   Precision precision = Precision::FP32;
@@ -137,8 +136,7 @@ struct SeriesRun {
   }
   // Appends a row and rewrites the report, marked incomplete until finish().
   void add_row(Json row) {
-    rows.push_back(std::move(row));
-    report["rows"] = rows;
+    report["rows"].push_back(std::move(row));  // one per saved model
     report["complete"] = false;
     write_report(report_path, report);
   }
@@ -149,7 +147,8 @@ struct SeriesRun {
     write_report(report_path, report);
   }
   void print_models_line() const {
-    std::printf("%zu model%s in %s, report %s\n", rows.size(), rows.size() == 1 ? "" : "s", a.output.c_str(),
+    const size_t n = report.contains("rows") ? report["rows"].size() : 0;
+    std::printf("%zu model%s in %s, report %s\n", n, n == 1 ? "" : "s", a.output.c_str(),
                 report_path.c_str());
   }
 };
@@ -206,7 +205,7 @@ void print_continuous(const SeriesRun& run, const ContinuousResult& res, const C
   std::printf("timestep  steps  seconds  PSNR (dB)  model\n");
   for (size_t i = 0; i < res.windows.size(); ++i)
     std::printf("t%04d     %5lld  %7.2f  %9.2f  %s\n", res.windows[i].timestep, (long long)res.windows[i].steps,
-                res.windows[i].seconds, res.windows[i].eval.psnr, run.rows[i]["model"].get<std::string>().c_str());
+                res.windows[i].seconds, res.windows[i].eval.psnr, run.report["rows"][i]["model"].get<std::string>().c_str());
   if (res.windows.size() > 1) {
     std::printf("switch          PSNR before  PSNR after  recovered after\n");
     for (const WindowResult& w : res.windows) {
