@@ -49,6 +49,20 @@ std::string format_ratio(double ratio);
 // training guards hand signals back to it after their first one. SIGXFSZ is ignored (EFBIG errors).
 extern "C" void exit_on_signal(int sig);
 void install_exit_on_signal();
+// SIGINT and SIGTERM both go to `handler`: every command treats the two alike (async-signal-safe).
+void handle_stop_signals(void (*handler)(int));
+// Routes SIGINT and SIGTERM to `handler` while it lives, then puts back what was there before.
+class StopSignalScope {
+public:
+  explicit StopSignalScope(void (*handler)(int));
+  ~StopSignalScope();
+  StopSignalScope(const StopSignalScope&) = delete;
+  StopSignalScope& operator=(const StopSignalScope&) = delete;
+
+private:
+  void (*previous_int_)(int);
+  void (*previous_term_)(int);
+};
 
 void add_train(CLI::App& app);
 void add_eval(CLI::App& app);

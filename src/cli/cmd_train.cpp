@@ -23,21 +23,19 @@ namespace {
 std::atomic<TrainingSession*> g_session{nullptr};
 extern "C" void on_stop_signal(int) {
   if (TrainingSession* s = g_session.load()) s->request_stop();
-  std::signal(SIGINT, exit_on_signal);
-  std::signal(SIGTERM, exit_on_signal);
+  handle_stop_signals(exit_on_signal);
 }
 
 struct StopSignalGuard {
   explicit StopSignalGuard(TrainingSession& s) {
-    g_session.store(&s);
-    std::signal(SIGINT, on_stop_signal);
-    std::signal(SIGTERM, on_stop_signal);
+    g_session.store(&s);  // before the handler can run
+    signals.emplace(on_stop_signal);
   }
   ~StopSignalGuard() {
-    std::signal(SIGINT, exit_on_signal);
-    std::signal(SIGTERM, exit_on_signal);
+    signals.reset();
     g_session.store(nullptr);
   }
+  std::optional<StopSignalScope> signals;
 };
 
 TrainingSetup setup_of(const TrainArgs& a, bool preview) {

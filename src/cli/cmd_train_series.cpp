@@ -9,6 +9,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <memory>
+#include <optional>
 #include <system_error>
 #include "cli.h"
 #include "train_cli.h"
@@ -31,20 +32,15 @@ namespace fs = std::filesystem;
 volatile std::sig_atomic_t g_series_interrupted = 0;
 extern "C" void on_stop_signal_series(int) {
   g_series_interrupted = 1;
-  std::signal(SIGINT, exit_on_signal);
-  std::signal(SIGTERM, exit_on_signal);
+  handle_stop_signals(exit_on_signal);
 }
 
-struct SigintGuard {
-  SigintGuard() {
+struct StopSignalGuard {
+  StopSignalGuard() {
     g_series_interrupted = 0;
-    std::signal(SIGINT, on_stop_signal_series);
-    std::signal(SIGTERM, on_stop_signal_series);
+    signals.emplace(on_stop_signal_series);
   }
-  ~SigintGuard() {
-    std::signal(SIGINT, exit_on_signal);
-    std::signal(SIGTERM, exit_on_signal);
-  }
+  std::optional<StopSignalScope> signals;
 };
 
 void check_series_args(const TrainArgs& a) {
@@ -334,7 +330,7 @@ void run_train_series(const TrainArgs& a) {
   run.t_all = std::chrono::steady_clock::now();
   run.precision = resolve_training_precision(a.precision, *run.model.net);
   try {
-    SigintGuard guard;
+    StopSignalGuard guard;
     if (!a.continuous)
       train_per_timestep(run);
     else

@@ -118,6 +118,19 @@ void install_exit_on_signal() {
   std::signal(SIGXFSZ, SIG_IGN);
 }
 
+void handle_stop_signals(void (*handler)(int)) {
+  std::signal(SIGINT, handler);
+  std::signal(SIGTERM, handler);
+}
+
+StopSignalScope::StopSignalScope(void (*handler)(int))
+    : previous_int_(std::signal(SIGINT, handler)), previous_term_(std::signal(SIGTERM, handler)) {}
+
+StopSignalScope::~StopSignalScope() {
+  std::signal(SIGINT, previous_int_ == SIG_ERR ? exit_on_signal : previous_int_);
+  std::signal(SIGTERM, previous_term_ == SIG_ERR ? exit_on_signal : previous_term_);
+}
+
 std::string format_ratio(double r) { return r >= 0.01 || r == 0 ? fmt::format("{:.2f}", r) : fmt::format("{:.2g}", r); }
 
 }  // namespace vnr::cli
