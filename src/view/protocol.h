@@ -49,8 +49,7 @@ struct ClientCommand {
 // vnr::Error naming what is wrong for malformed JSON, a missing or unknown type, a wrong field type or
 // an invalid value. Unknown fields are ignored.
 ClientCommand parse_client_message(std::string_view text);
-// parse + run, never throwing: the reply text ("" = none; an "error" message on failure).
+// Runs a parsed command, never throwing: the reply text ("" = none; an "error" message on failure).
 std::string run_command(const ClientCommand& command, ViewerEngine& engine);
-std::string handle_client_message(std::string_view text, ViewerEngine& engine);
 
 }  // namespace vnr::view

@@ -271,21 +271,9 @@ std::string run_command(const ClientCommand& command, ViewerEngine& engine) {
   try {
     const Json reply = command.run(engine);
     return reply.is_null() ? std::string() : reply.dump(-1, ' ', false, Json::error_handler_t::replace);
-  } catch (const Error& e) {
-    return error_message(command.type + ": " + e.what());
-  } catch (const std::exception& e) {
+  } catch (const std::exception& e) {  // vnr::Error and whatever else the engine throws
     return error_message(command.type + ": " + e.what());
   }
-}
-
-std::string handle_client_message(std::string_view text, ViewerEngine& engine) {
-  ClientCommand c;
-  try {
-    c = parse_client_message(text);
-  } catch (const Error& e) {
-    return error_message(e.what());
-  }
-  return run_command(c, engine);
 }
 
 }  // namespace vnr::view
