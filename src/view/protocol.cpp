@@ -10,16 +10,6 @@ namespace {
 
 Json vec3(Vec3f v) { return Json::array({v.x, v.y, v.z}); }
 
-const char* layout_name(ViewLayout l) {
-  switch (l) {
-    case ViewLayout::Network: return "network";
-    case ViewLayout::Truth: return "truth";
-    case ViewLayout::SideBySide: return "side_by_side";
-    case ViewLayout::Split: return "split";
-  }
-  return "network";
-}
-
 const char* training_state_name(TrainingState s) {
   switch (s) {
     case TrainingState::Unavailable: return "unavailable";
@@ -66,6 +56,16 @@ Json training_json(const ViewerTraining& t) {
 
 }  // namespace
 
+const char* view_layout_name(ViewLayout l) {
+  switch (l) {
+    case ViewLayout::Network: return "network";
+    case ViewLayout::Truth: return "truth";
+    case ViewLayout::SideBySide: return "side_by_side";
+    case ViewLayout::Split: return "split";
+  }
+  return "network";
+}
+
 Json info_json(const ViewerInfo& i) {
   return {{"description", i.description},
           {"dims", {i.dims.x, i.dims.y, i.dims.z}},
@@ -89,7 +89,7 @@ Json state_json(const ViewerState& s) {
           {"camera", {{"eye", vec3(s.camera.eye)}, {"center", vec3(s.camera.center)}, {"up", vec3(s.camera.up)},
                       {"fovy", s.camera.fovy}}},
           {"viewport", {{"width", s.width}, {"height", s.height}}},
-          {"view", {{"layout", layout_name(v.layout)}, {"split", v.split}, {"slice", v.slice},
+          {"view", {{"layout", view_layout_name(v.layout)}, {"split", v.split}, {"slice", v.slice},
                     {"slice_axis", v.slice_axis}, {"slice_position", v.slice_position}}},
           {"tf", tf_json(s.tf)},
           {"render", render_json(s.render)},

@@ -11,6 +11,10 @@
 
 namespace vnr::view {
 
+// The names of the messages' enums: "network", "truth", "side_by_side", "split" (the render enums go
+// by render_mode_name, render_strategy_name and macrocell_mode_name).
+const char* view_layout_name(ViewLayout layout);
+
 // ---- server -> client -------------------------------------------------------------------------------
 
 Json info_json(const ViewerInfo& info);

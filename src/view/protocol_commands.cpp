@@ -1,5 +1,6 @@
 // Client -> server messages: each checked field by field (a clear error names the field), then turned
 // into engine calls that start from the engine's current settings (messages are partial updates).
+#include <array>
 #include <cmath>
 #include <optional>
 #include "view/protocol.h"
@@ -52,15 +53,15 @@ public:
     if (!s) fail("{} needs the field \"{}\"", type_, name);
     return *s;
   }
-  // One of `names` (the index).
-  std::optional<int> choice(const char* name, std::initializer_list<const char*> names) const {
+  // One of `values`, by the name name_of gives it.
+  template <class T, size_t N>
+  std::optional<T> choice(const char* name, const std::array<T, N>& values, const char* (*name_of)(T)) const {
     std::optional<std::string> s = string(name);
     if (!s) return std::nullopt;
-    int i = 0;
     std::string list;
-    for (const char* n : names) {
-      if (*s == n) return i;
-      list += (i++ ? ", " : "") + std::string(n);
+    for (const T& v : values) {
+      if (*s == name_of(v)) return v;
+      list += (list.empty() ? "" : ", ") + std::string(name_of(v));
     }
     fail("{}.{} = \"{}\" is not one of {}", type_, name, *s, list);
   }
@@ -131,13 +132,14 @@ Run viewport_command(const Fields& f) {
 }
 
 Run view_command(const Fields& f) {
-  auto layout = f.choice("layout", {"network", "truth", "side_by_side", "split"});
+  auto layout = f.choice("layout", std::array{ViewLayout::Network, ViewLayout::Truth, ViewLayout::SideBySide,
+                                               ViewLayout::Split}, view_layout_name);
   auto split = f.number("split", 0, 1), position = f.number("slice_position", 0, 1);
   auto slice = f.boolean("slice");
   auto axis = f.integer("slice_axis", 0, 2);
   return [=](ViewerEngine& e) {
     ViewSettings v = e.state().view;
-    if (layout) v.layout = ViewLayout(*layout);
+    if (layout) v.layout = *layout;
     if (split) v.split = float(*split);
     if (slice) v.slice = *slice;
     if (axis) v.slice_axis = int(*axis);
@@ -173,19 +175,21 @@ Run tf_command(const Fields& f) {
 }
 
 Run render_command(const Fields& f) {
-  auto mode = f.choice("mode", {"raymarch", "shadow", "pathtrace"});
-  auto strategy = f.choice("strategy", {"streaming", "inshader"});
-  auto macrocells = f.choice("macrocells", {"online", "grid", "off"});
+  auto mode = f.choice("mode", std::array{RenderMode::RayMarch, RenderMode::Shadow, RenderMode::PathTrace},
+                       render_mode_name);
+  auto strategy = f.choice("strategy", std::array{RenderStrategy::Streaming, RenderStrategy::InShader},
+                           render_strategy_name);
+  auto macrocells = f.choice("macrocells", std::array{MacroCellMode::Online, MacroCellMode::Grid, MacroCellMode::Off},
+                             macrocell_mode_name);
   auto step = f.number("step", 1e-3, 1e3), density = f.number("density", 0, 1e6);
   auto shade = f.boolean("shade");
   auto light = f.vec3("light");
   auto max_frames = f.integer("max_frames", 0, 1 << 20), coarse = f.integer("coarse_scale", 1, 64);
   return [=](ViewerEngine& e) {
     ViewerRender r = e.state().render;
-    if (mode) r.mode = std::array{RenderMode::RayMarch, RenderMode::Shadow, RenderMode::PathTrace}[size_t(*mode)];
-    if (strategy) r.strategy = *strategy == 0 ? RenderStrategy::Streaming : RenderStrategy::InShader;
-    if (macrocells)
-      r.macrocells = std::array{MacroCellMode::Online, MacroCellMode::Grid, MacroCellMode::Off}[size_t(*macrocells)];
+    if (mode) r.mode = *mode;
+    if (strategy) r.strategy = *strategy;
+    if (macrocells) r.macrocells = *macrocells;
     if (step) r.step = float(*step);
     if (shade) r.shade = *shade;
     if (light) r.light_direction = *light;
@@ -197,17 +201,21 @@ Run render_command(const Fields& f) {
   };
 }
 
+enum class TrainAction { Start, Pause, Reset };
+const char* train_action_name(TrainAction a) { return std::array{"start", "pause", "reset"}[size_t(a)]; }
+
 Run train_command(const Fields& f) {
-  auto action = f.choice("action", {"start", "pause", "reset"});
+  auto action = f.choice("action", std::array{TrainAction::Start, TrainAction::Pause, TrainAction::Reset},
+                         train_action_name);
   auto lr = f.number("learning_rate", 1e-12, 1e3);
   auto budget = f.number("budget", 0, 10);
-  if (lr && action != 2) fail("train.learning_rate goes with action \"reset\" only");
+  if (lr && action != TrainAction::Reset) fail("train.learning_rate goes with action \"reset\" only");
   if (!action && !budget) fail("train needs \"action\" (start, pause, reset) or \"budget\"");
   return [=](ViewerEngine& e) {
     if (budget) e.set_training_budget(*budget);
-    if (action == 0) e.start_training();
-    if (action == 1) e.pause_training();
-    if (action == 2) e.reset_training(lr);
+    if (action == TrainAction::Start) e.start_training();
+    if (action == TrainAction::Pause) e.pause_training();
+    if (action == TrainAction::Reset) e.reset_training(lr);
     return Json();
   };
 }
