@@ -1,6 +1,5 @@
 // Server -> client messages: ViewerInfo / ViewerState / frames as the JSON docs/VIEWER.md names.
 #include "view/protocol.h"
-#include <cstring>
 #include "vnr/core/dtype.h"
 #include "vnr/core/error.h"
 
@@ -98,29 +97,27 @@ Json state_json(const ViewerState& s) {
           {"last_error", s.last_error}};
 }
 
-// Strings from the engine (file names, error messages) need not be UTF-8: replace what is not rather
-// than failing the whole message.
-static std::string dump(const Json& j) { return j.dump(-1, ' ', false, Json::error_handler_t::replace); }
+std::string json_text(const Json& j) { return j.dump(-1, ' ', false, Json::error_handler_t::replace); }
 
 std::string hello_message(const ViewerInfo& info, const std::vector<uint32_t>& histogram, const ViewerState& state) {
-  return dump({{"type", "hello"}, {"info", info_json(info)}, {"histogram", histogram}, {"state", state_json(state)}});
+  return json_text({{"type", "hello"}, {"info", info_json(info)}, {"histogram", histogram}, {"state", state_json(state)}});
 }
 
-std::string state_message(const ViewerState& state) { return dump({{"type", "state"}, {"state", state_json(state)}}); }
+std::string state_message(const ViewerState& state) { return json_text({{"type", "state"}, {"state", state_json(state)}}); }
 
 std::string losses_message(size_t from, const float* values, size_t n, const std::vector<std::array<double, 2>>& psnr) {
   Json v = Json::array(), p = Json::array();
   for (size_t i = 0; i < n; ++i) v.push_back(values[i]);
   for (const auto& e : psnr) p.push_back({e[0], e[1]});
-  return dump({{"type", "losses"}, {"from", from}, {"values", v}, {"psnr", p}});
+  return json_text({{"type", "losses"}, {"from", from}, {"values", v}, {"psnr", p}});
 }
 
 std::string error_message(std::string_view message) {
-  return dump({{"type", "error"}, {"message", std::string(message)}});
+  return json_text({{"type", "error"}, {"message", std::string(message)}});
 }
 
 std::string frame_message_head(const ViewerFrame& f, const ViewerImage& im) {
-  const std::string header = dump({{"frame", f.id},
+  const std::string header = json_text({{"frame", f.id},
                                    {"view", im.view},
                                    {"version", f.state_version},
                                    {"width", im.width},

@@ -19,6 +19,9 @@ const char* view_layout_name(ViewLayout layout);
 
 Json info_json(const ViewerInfo& info);
 Json state_json(const ViewerState& state);
+// The compact JSON text of a message. Strings from the engine (file names, error messages) need not be
+// UTF-8: what is not is replaced rather than failing the whole message.
+std::string json_text(const Json& j);
 std::string hello_message(const ViewerInfo& info, const std::vector<uint32_t>& histogram, const ViewerState& state);
 std::string state_message(const ViewerState& state);
 // Losses values[0, n) of steps [from, from + n), and the whole PSNR history.

@@ -93,7 +93,7 @@ public:
     return out;
   }
   static std::string short_dump(const Json& j) {
-    std::string s = j.dump(-1, ' ', false, Json::error_handler_t::replace);
+    std::string s = json_text(j);
     return s.size() > 80 ? s.substr(0, 77) + "..." : s;
   }
 
@@ -278,7 +278,7 @@ ClientCommand parse_client_message(std::string_view text) {
 std::string run_command(const ClientCommand& command, ViewerEngine& engine) {
   try {
     const Json reply = command.run(engine);
-    return reply.is_null() ? std::string() : reply.dump(-1, ' ', false, Json::error_handler_t::replace);
+    return reply.is_null() ? std::string() : json_text(reply);
   } catch (const std::exception& e) {  // vnr::Error and whatever else the engine throws
     return error_message(command.type + ": " + e.what());
   }
