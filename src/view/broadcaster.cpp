@@ -19,7 +19,6 @@ uint64_t ns_since(Clock::time_point t0) {
 
 std::shared_ptr<const EncodedFrame> encode_frame(const ViewerFrame& f, JpegEncoder& jpeg, ServerCore& core) {
   auto out = std::make_shared<EncodedFrame>();
-  out->id = f.id;
   for (const ViewerImage& im : f.images) {
     if (im.width <= 0 || im.height <= 0 || im.rgba.size() != size_t(im.width) * size_t(im.height) * 4) continue;
     std::string msg = frame_message_head(f, im);

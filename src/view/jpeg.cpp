@@ -11,13 +11,13 @@ JpegEncoder::JpegEncoder() : handle_(tjInitCompress()) {
 
 JpegEncoder::~JpegEncoder() { tjDestroy(handle_); }
 
-void JpegEncoder::encode(const uint8_t* rgba, int width, int height, std::string* out, int quality) {
+void JpegEncoder::encode(const uint8_t* rgba, int width, int height, std::string* out) {
   if (width <= 0 || height <= 0) fail("cannot encode an empty {}x{} image as JPEG", width, height);
   unsigned char* buf = nullptr;  // allocated by libturbojpeg
   unsigned long size = 0;
   // 4:2:0 chroma and the fast DCT: a frame is shown once and replaced; speed matters more than the
   // last fraction of a dB.
-  const int rc = tjCompress2(handle_, rgba, width, 0, height, TJPF_RGBA, &buf, &size, TJSAMP_420, quality,
+  const int rc = tjCompress2(handle_, rgba, width, 0, height, TJPF_RGBA, &buf, &size, TJSAMP_420, kJpegQuality,
                              TJFLAG_FASTDCT);
   if (rc != 0) {
     const std::string msg = tjGetErrorStr2(handle_);

@@ -18,7 +18,7 @@ public:
   JpegEncoder(const JpegEncoder&) = delete;
   JpegEncoder& operator=(const JpegEncoder&) = delete;
   // Appends the JPEG of width x height RGBA8 pixels (row 0 at the top; alpha dropped) to out.
-  void encode(const uint8_t* rgba, int width, int height, std::string* out, int quality = kJpegQuality);
+  void encode(const uint8_t* rgba, int width, int height, std::string* out);
 
 private:
   void* handle_;

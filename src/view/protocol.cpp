@@ -1,6 +1,5 @@
 // Server -> client messages: ViewerInfo / ViewerState / frames as the JSON docs/VIEWER.md names.
 #include "view/protocol.h"
-#include <cstring>
 #include "vnr/core/dtype.h"
 #include "vnr/core/error.h"
 
@@ -9,16 +8,6 @@ namespace vnr::view {
 namespace {
 
 Json vec3(Vec3f v) { return Json::array({v.x, v.y, v.z}); }
-
-const char* layout_name(ViewLayout l) {
-  switch (l) {
-    case ViewLayout::Network: return "network";
-    case ViewLayout::Truth: return "truth";
-    case ViewLayout::SideBySide: return "side_by_side";
-    case ViewLayout::Split: return "split";
-  }
-  return "network";
-}
 
 const char* training_state_name(TrainingState s) {
   switch (s) {
@@ -66,6 +55,16 @@ Json training_json(const ViewerTraining& t) {
 
 }  // namespace
 
+const char* view_layout_name(ViewLayout l) {
+  switch (l) {
+    case ViewLayout::Network: return "network";
+    case ViewLayout::Truth: return "truth";
+    case ViewLayout::SideBySide: return "side_by_side";
+    case ViewLayout::Split: return "split";
+  }
+  return "network";
+}
+
 Json info_json(const ViewerInfo& i) {
   return {{"description", i.description},
           {"dims", {i.dims.x, i.dims.y, i.dims.z}},
@@ -89,7 +88,7 @@ Json state_json(const ViewerState& s) {
           {"camera", {{"eye", vec3(s.camera.eye)}, {"center", vec3(s.camera.center)}, {"up", vec3(s.camera.up)},
                       {"fovy", s.camera.fovy}}},
           {"viewport", {{"width", s.width}, {"height", s.height}}},
-          {"view", {{"layout", layout_name(v.layout)}, {"split", v.split}, {"slice", v.slice},
+          {"view", {{"layout", view_layout_name(v.layout)}, {"split", v.split}, {"slice", v.slice},
                     {"slice_axis", v.slice_axis}, {"slice_position", v.slice_position}}},
           {"tf", tf_json(s.tf)},
           {"render", render_json(s.render)},
@@ -98,29 +97,27 @@ Json state_json(const ViewerState& s) {
           {"last_error", s.last_error}};
 }
 
-// Strings from the engine (file names, error messages) need not be UTF-8: replace what is not rather
-// than failing the whole message.
-static std::string dump(const Json& j) { return j.dump(-1, ' ', false, Json::error_handler_t::replace); }
+std::string json_text(const Json& j) { return j.dump(-1, ' ', false, Json::error_handler_t::replace); }
 
 std::string hello_message(const ViewerInfo& info, const std::vector<uint32_t>& histogram, const ViewerState& state) {
-  return dump({{"type", "hello"}, {"info", info_json(info)}, {"histogram", histogram}, {"state", state_json(state)}});
+  return json_text({{"type", "hello"}, {"info", info_json(info)}, {"histogram", histogram}, {"state", state_json(state)}});
 }
 
-std::string state_message(const ViewerState& state) { return dump({{"type", "state"}, {"state", state_json(state)}}); }
+std::string state_message(const ViewerState& state) { return json_text({{"type", "state"}, {"state", state_json(state)}}); }
 
 std::string losses_message(size_t from, const float* values, size_t n, const std::vector<std::array<double, 2>>& psnr) {
   Json v = Json::array(), p = Json::array();
   for (size_t i = 0; i < n; ++i) v.push_back(values[i]);
   for (const auto& e : psnr) p.push_back({e[0], e[1]});
-  return dump({{"type", "losses"}, {"from", from}, {"values", v}, {"psnr", p}});
+  return json_text({{"type", "losses"}, {"from", from}, {"values", v}, {"psnr", p}});
 }
 
 std::string error_message(std::string_view message) {
-  return dump({{"type", "error"}, {"message", std::string(message)}});
+  return json_text({{"type", "error"}, {"message", std::string(message)}});
 }
 
 std::string frame_message_head(const ViewerFrame& f, const ViewerImage& im) {
-  const std::string header = dump({{"frame", f.id},
+  const std::string header = json_text({{"frame", f.id},
                                    {"view", im.view},
                                    {"version", f.state_version},
                                    {"width", im.width},

@@ -11,10 +11,17 @@
 
 namespace vnr::view {
 
+// The names of the messages' enums: "network", "truth", "side_by_side", "split" (the render enums go
+// by render_mode_name, render_strategy_name and macrocell_mode_name).
+const char* view_layout_name(ViewLayout layout);
+
 // ---- server -> client -------------------------------------------------------------------------------
 
 Json info_json(const ViewerInfo& info);
 Json state_json(const ViewerState& state);
+// The compact JSON text of a message. Strings from the engine (file names, error messages) need not be
+// UTF-8: what is not is replaced rather than failing the whole message.
+std::string json_text(const Json& j);
 std::string hello_message(const ViewerInfo& info, const std::vector<uint32_t>& histogram, const ViewerState& state);
 std::string state_message(const ViewerState& state);
 // Losses values[0, n) of steps [from, from + n), and the whole PSNR history.
@@ -49,8 +56,7 @@ struct ClientCommand {
 // vnr::Error naming what is wrong for malformed JSON, a missing or unknown type, a wrong field type or
 // an invalid value. Unknown fields are ignored.
 ClientCommand parse_client_message(std::string_view text);
-// parse + run, never throwing: the reply text ("" = none; an "error" message on failure).
+// Runs a parsed command, never throwing: the reply text ("" = none; an "error" message on failure).
 std::string run_command(const ClientCommand& command, ViewerEngine& engine);
-std::string handle_client_message(std::string_view text, ViewerEngine& engine);
 
 }  // namespace vnr::view

@@ -1,5 +1,6 @@
 // Client -> server messages: each checked field by field (a clear error names the field), then turned
 // into engine calls that start from the engine's current settings (messages are partial updates).
+#include <array>
 #include <cmath>
 #include <optional>
 #include "view/protocol.h"
@@ -52,15 +53,15 @@ public:
     if (!s) fail("{} needs the field \"{}\"", type_, name);
     return *s;
   }
-  // One of `names` (the index).
-  std::optional<int> choice(const char* name, std::initializer_list<const char*> names) const {
+  // One of `values`, by the name name_of gives it.
+  template <class T, size_t N>
+  std::optional<T> choice(const char* name, const std::array<T, N>& values, const char* (*name_of)(T)) const {
     std::optional<std::string> s = string(name);
     if (!s) return std::nullopt;
-    int i = 0;
     std::string list;
-    for (const char* n : names) {
-      if (*s == n) return i;
-      list += (i++ ? ", " : "") + std::string(n);
+    for (const T& v : values) {
+      if (*s == name_of(v)) return v;
+      list += (list.empty() ? "" : ", ") + std::string(name_of(v));
     }
     fail("{}.{} = \"{}\" is not one of {}", type_, name, *s, list);
   }
@@ -92,7 +93,7 @@ public:
     return out;
   }
   static std::string short_dump(const Json& j) {
-    std::string s = j.dump(-1, ' ', false, Json::error_handler_t::replace);
+    std::string s = json_text(j);
     return s.size() > 80 ? s.substr(0, 77) + "..." : s;
   }
 
@@ -131,13 +132,14 @@ Run viewport_command(const Fields& f) {
 }
 
 Run view_command(const Fields& f) {
-  auto layout = f.choice("layout", {"network", "truth", "side_by_side", "split"});
+  auto layout = f.choice("layout", std::array{ViewLayout::Network, ViewLayout::Truth, ViewLayout::SideBySide,
+                                               ViewLayout::Split}, view_layout_name);
   auto split = f.number("split", 0, 1), position = f.number("slice_position", 0, 1);
   auto slice = f.boolean("slice");
   auto axis = f.integer("slice_axis", 0, 2);
   return [=](ViewerEngine& e) {
     ViewSettings v = e.state().view;
-    if (layout) v.layout = ViewLayout(*layout);
+    if (layout) v.layout = *layout;
     if (split) v.split = float(*split);
     if (slice) v.slice = *slice;
     if (axis) v.slice_axis = int(*axis);
@@ -173,19 +175,21 @@ Run tf_command(const Fields& f) {
 }
 
 Run render_command(const Fields& f) {
-  auto mode = f.choice("mode", {"raymarch", "shadow", "pathtrace"});
-  auto strategy = f.choice("strategy", {"streaming", "inshader"});
-  auto macrocells = f.choice("macrocells", {"online", "grid", "off"});
+  auto mode = f.choice("mode", std::array{RenderMode::RayMarch, RenderMode::Shadow, RenderMode::PathTrace},
+                       render_mode_name);
+  auto strategy = f.choice("strategy", std::array{RenderStrategy::Streaming, RenderStrategy::InShader},
+                           render_strategy_name);
+  auto macrocells = f.choice("macrocells", std::array{MacroCellMode::Online, MacroCellMode::Grid, MacroCellMode::Off},
+                             macrocell_mode_name);
   auto step = f.number("step", 1e-3, 1e3), density = f.number("density", 0, 1e6);
   auto shade = f.boolean("shade");
   auto light = f.vec3("light");
   auto max_frames = f.integer("max_frames", 0, 1 << 20), coarse = f.integer("coarse_scale", 1, 64);
   return [=](ViewerEngine& e) {
     ViewerRender r = e.state().render;
-    if (mode) r.mode = std::array{RenderMode::RayMarch, RenderMode::Shadow, RenderMode::PathTrace}[size_t(*mode)];
-    if (strategy) r.strategy = *strategy == 0 ? RenderStrategy::Streaming : RenderStrategy::InShader;
-    if (macrocells)
-      r.macrocells = std::array{MacroCellMode::Online, MacroCellMode::Grid, MacroCellMode::Off}[size_t(*macrocells)];
+    if (mode) r.mode = *mode;
+    if (strategy) r.strategy = *strategy;
+    if (macrocells) r.macrocells = *macrocells;
     if (step) r.step = float(*step);
     if (shade) r.shade = *shade;
     if (light) r.light_direction = *light;
@@ -197,17 +201,21 @@ Run render_command(const Fields& f) {
   };
 }
 
+enum class TrainAction { Start, Pause, Reset };
+const char* train_action_name(TrainAction a) { return std::array{"start", "pause", "reset"}[size_t(a)]; }
+
 Run train_command(const Fields& f) {
-  auto action = f.choice("action", {"start", "pause", "reset"});
+  auto action = f.choice("action", std::array{TrainAction::Start, TrainAction::Pause, TrainAction::Reset},
+                         train_action_name);
   auto lr = f.number("learning_rate", 1e-12, 1e3);
   auto budget = f.number("budget", 0, 10);
-  if (lr && action != 2) fail("train.learning_rate goes with action \"reset\" only");
+  if (lr && action != TrainAction::Reset) fail("train.learning_rate goes with action \"reset\" only");
   if (!action && !budget) fail("train needs \"action\" (start, pause, reset) or \"budget\"");
   return [=](ViewerEngine& e) {
     if (budget) e.set_training_budget(*budget);
-    if (action == 0) e.start_training();
-    if (action == 1) e.pause_training();
-    if (action == 2) e.reset_training(lr);
+    if (action == TrainAction::Start) e.start_training();
+    if (action == TrainAction::Pause) e.pause_training();
+    if (action == TrainAction::Reset) e.reset_training(lr);
     return Json();
   };
 }
@@ -270,22 +278,10 @@ ClientCommand parse_client_message(std::string_view text) {
 std::string run_command(const ClientCommand& command, ViewerEngine& engine) {
   try {
     const Json reply = command.run(engine);
-    return reply.is_null() ? std::string() : reply.dump(-1, ' ', false, Json::error_handler_t::replace);
-  } catch (const Error& e) {
-    return error_message(command.type + ": " + e.what());
-  } catch (const std::exception& e) {
+    return reply.is_null() ? std::string() : json_text(reply);
+  } catch (const std::exception& e) {  // vnr::Error and whatever else the engine throws
     return error_message(command.type + ": " + e.what());
   }
-}
-
-std::string handle_client_message(std::string_view text, ViewerEngine& engine) {
-  ClientCommand c;
-  try {
-    c = parse_client_message(text);
-  } catch (const Error& e) {
-    return error_message(e.what());
-  }
-  return run_command(c, engine);
 }
 
 }  // namespace vnr::view

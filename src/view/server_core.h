@@ -50,7 +50,6 @@ private:
 
 // A frame's images as ready-to-send binary messages, shared by every session.
 struct EncodedFrame {
-  uint64_t id = 0;
   std::vector<std::string> messages;
 };
 
