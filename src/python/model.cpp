@@ -8,6 +8,7 @@
 #include "vnr/core/error.h"
 #include "vnr/core/fileio.h"
 #include "vnr/core/parallel.h"
+#include "vnr/volume/sample_io.h"
 
 namespace vnr::py {
 
@@ -41,16 +42,10 @@ void store_values(const float* in, int64_t n, T* out) {
 }
 
 void store_as(DType t, const float* in, int64_t n, void* out) {
-  switch (t) {
-    case DType::Int8: return store_values(in, n, static_cast<int8_t*>(out));
-    case DType::UInt8: return store_values(in, n, static_cast<uint8_t*>(out));
-    case DType::Int16: return store_values(in, n, static_cast<int16_t*>(out));
-    case DType::UInt16: return store_values(in, n, static_cast<uint16_t*>(out));
-    case DType::Int32: return store_values(in, n, static_cast<int32_t*>(out));
-    case DType::UInt32: return store_values(in, n, static_cast<uint32_t*>(out));
-    case DType::Float32: return store_values(in, n, static_cast<float*>(out));
-    case DType::Float64: return store_values(in, n, static_cast<double*>(out));
-  }
+  detail::with_sample_type(t, [&](auto tag) {
+    using T = typename decltype(tag)::type;
+    store_values(in, n, static_cast<T*>(out));
+  });
 }
 
 pyb::array decode(ModelHolder& h, const pyb::object& shape, const std::string& dtype_name,

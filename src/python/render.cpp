@@ -56,7 +56,9 @@ Camera camera_of(const RenderArgs& a, Vec3f box) {
   return orbit_camera(box, az, el, a.fovy);
 }
 
-pyb::array_t<float> render(const Model* model, const Volume* volume, const RenderArgs& a) {
+// `model_mutex` (the model's holder's, or null) is locked only once the GIL is released: a query holding
+// it may take the GIL (Model.sample of a strided array).
+pyb::array_t<float> render(const Model* model, const Volume* volume, const RenderArgs& a, std::mutex* model_mutex) {
   const auto [w, h] = a.size;
   if (w < 1 || h < 1 || w > 32768 || h > 32768) fail("size expects (width, height), positive, at most 32768, got ({}, {})", w, h);
   if (a.spp < 1) fail("spp must be at least 1, got {}", a.spp);
@@ -73,11 +75,13 @@ pyb::array_t<float> render(const Model* model, const Volume* volume, const Rende
   if (a.light) o.light.direction = vec(*a.light);
   if (a.background) o.background = vec(*a.background);
   const TransferFunction tf = transfer_function_of(a.tf);
-  const MacroCellMode mc = a.macrocells ? parse_macrocell_mode(*a.macrocells) : default_macrocell_mode(model, volume);
-  const Device device = choose_render_device(a.device, model);
   pyb::array_t<float> out({pyb::ssize_t(h), pyb::ssize_t(w), pyb::ssize_t(4)});
   float* dst = out.mutable_data();
   pyb::gil_scoped_release release;
+  std::unique_lock<std::mutex> lock;
+  if (model_mutex) lock = std::unique_lock(*model_mutex);
+  const MacroCellMode mc = a.macrocells ? parse_macrocell_mode(*a.macrocells) : default_macrocell_mode(model, volume);
+  const Device device = choose_render_device(a.device, model);
   std::unique_ptr<Renderer> r = model ? std::make_unique<Renderer>(*model, device) : std::make_unique<Renderer>(*volume, device);
   r->set_scene(Scene{});
   r->set_transfer_function(tf);
@@ -105,10 +109,9 @@ void bind_render(pyb::module_& m) {
                      shade, background, light};
         if (pyb::isinstance<ModelHolder>(target)) {
           ModelPtr h = target.cast<ModelPtr>();
-          std::lock_guard lock(h->mutex);
-          return render(&h->model, nullptr, a);
+          return render(&h->model, nullptr, a, &h->mutex);
         }
-        if (pyb::isinstance<Volume>(target)) return render(nullptr, target.cast<std::shared_ptr<Volume>>().get(), a);
+        if (pyb::isinstance<Volume>(target)) return render(nullptr, target.cast<std::shared_ptr<Volume>>().get(), a, nullptr);
         fail("render expects a vnr.Model or a vnr.Volume");
       },
       pyb::arg("target"), pyb::arg("eye"), pyb::arg("center"), pyb::arg("up"), pyb::arg("fovy"), pyb::arg("orbit"),

@@ -1,7 +1,6 @@
 // vnr.train: the CLI's training session (open_training_session) over a numpy array, a vnr.Volume or a
 // volume file, run with the GIL released; the step callback takes the GIL to report progress, check
 // for Ctrl-C and let the caller stop.
-#include <cstdio>
 #include "bindings.h"
 #include "vnr/core/error.h"
 #include "vnr/core/parallel.h"

@@ -1,6 +1,5 @@
 // vnr.Volume: numpy arrays and volume files as vnr volumes (normalised float32, x fastest), and the
 // conversions every binding file shares.
-#include <cstdio>
 #include "bindings.h"
 #include "vnr/core/error.h"
 #include "vnr/core/fileio.h"

@@ -31,6 +31,11 @@ std::unique_ptr<TrainingSession> make_training_session(Model& model, const Volum
 
 namespace {
 
+// The setup's config: its JSON when given, else the preset or file named.
+ModelConfig config_of(const TrainingSetup& s) {
+  return s.config_json ? ModelConfig::from_json(*s.config_json) : load_config(s.config);
+}
+
 // open_training_session once the training data is open: model size, model, device, backend.
 std::unique_ptr<TrainingSession> session_on_data(const TrainingSetup& s, ModelConfig config,
                                                  std::shared_ptr<TrainingData> data, const MessageFn& message) {
@@ -79,7 +84,7 @@ std::unique_ptr<TrainingSession> session_on_data(const TrainingSetup& s, ModelCo
 
 std::unique_ptr<TrainingSession> open_training_session(const TrainingSetup& s, const MessageFn& message) {
   check_training_setup(s);
-  ModelConfig config = s.config_json ? ModelConfig::from_json(*s.config_json) : load_config(s.config);
+  ModelConfig config = config_of(s);
   const VolumeDesc desc = describe_volume(s.volume, s.raw);
   TrainingDataOptions dopt = s.data;
   if (dopt.memory_budget == 0) dopt.memory_budget = available_memory_bytes() / 2;
@@ -95,21 +100,9 @@ std::unique_ptr<TrainingSession> open_training_session(const TrainingSetup& s, s
   if (!volume) fail("open_training_session: no volume given");
   if (!s.data.sampler.empty() && s.data.sampler != "incore")
     fail("a volume in memory is sampled in core; --sampler {} needs a volume file", s.data.sampler);
-  ModelConfig config = s.config_json ? ModelConfig::from_json(*s.config_json) : load_config(s.config);
-  auto data = std::make_shared<TrainingData>();
-  data->kind = "incore";
-  data->dims = data->desc.dims = volume->dims;
-  data->dtype = data->desc.dtype = volume->source_dtype;
-  data->desc.path = s.volume;
-  data->lo = volume->lo;
-  data->hi = volume->hi;
-  data->memory_budget = s.data.memory_budget ? s.data.memory_budget : available_memory_bytes() / 2;
-  data->sampler = std::make_shared<InCoreSampler>(*volume);
-  data->vol = std::move(volume);
-  if (message)
-    message(fmt::format("volume {}: {}x{}x{} {}, {}, range [{:g}, {:g}], in memory", s.volume, data->dims.x,
-                        data->dims.y, data->dims.z, dtype_name(data->dtype), human_bytes(double(data->source_bytes())),
-                        data->lo, data->hi));
+  ModelConfig config = config_of(s);
+  const uint64_t budget = s.data.memory_budget ? s.data.memory_budget : available_memory_bytes() / 2;
+  auto data = std::make_shared<TrainingData>(in_memory_training_data(s.volume, std::move(volume), budget, message));
   return session_on_data(s, std::move(config), std::move(data), message);
 }
 

@@ -16,6 +16,21 @@ void say(const MessageFn& message, const std::string& line) {
 
 std::string dims_text(Int3 d) { return fmt::format("{}x{}x{}", d.x, d.y, d.z); }
 
+// The start of the volume's line for people, up to the value range's "[".
+std::string volume_line_head(const std::string& name, const TrainingData& t) {
+  return fmt::format("volume {}: {} {}, {}, range [", name, dims_text(t.dims), dtype_name(t.dtype),
+                     human_bytes(double(t.source_bytes())));
+}
+
+// Samples the in-memory volume `vol` in core.
+void sample_in_core(TrainingData& t, std::shared_ptr<const Volume> vol) {
+  t.kind = "incore";
+  t.vol = std::move(vol);
+  t.lo = t.vol->lo;
+  t.hi = t.vol->hi;
+  t.sampler = std::make_shared<InCoreSampler>(*t.vol);
+}
+
 // Regions never loaded are never learned: the note when a run cannot be expected to see (almost) the
 // whole volume, with the --refresh (or steps) that would.
 void note_coverage(const OutOfCoreSampler& s, int64_t steps, const MessageFn& message) {
@@ -68,17 +83,13 @@ TrainingData open_training_data(const std::string& name, const VolumeDesc& desc,
   if (t.kind != "outofcore" && (o.blocks > 0 || o.refresh > 0 || o.block_dims || o.grid_lr_scale != "1"))
     fail("--blocks, --refresh, --block-dims and --grid-lr-scale apply to --sampler outofcore (this run samples {})", t.kind);
   auto t0 = std::chrono::steady_clock::now();
-  const std::string head = fmt::format("volume {}: {} {}, {}, range [", name, dims_text(t.dims), dtype_name(t.dtype),
-                                       human_bytes(double(t.source_bytes())));
+  const std::string head = volume_line_head(name, t);
   if (t.kind == "incore") {
     if (in_core_bytes > o.memory_budget)
       fail("the volume needs {} in memory, more than the memory budget of {}; use --sampler outofcore (or mmap), or "
            "raise --memory-budget",
            human_bytes(double(in_core_bytes)), human_bytes(double(o.memory_budget)));
-    t.vol = std::make_shared<const Volume>(load_volume(desc, load));
-    t.lo = t.vol->lo;
-    t.hi = t.vol->hi;
-    t.sampler = std::make_shared<InCoreSampler>(*t.vol);
+    sample_in_core(t, std::make_shared<const Volume>(load_volume(desc, load)));
     say(message, head + fmt::format("{:g}, {:g}], loaded in {:.1f}s", t.lo, t.hi, seconds_since(t0)));
     return t;
   }
@@ -105,6 +116,18 @@ TrainingData open_training_data(const std::string& name, const VolumeDesc& desc,
     return t;
   }
   open_out_of_core(t, o, message);
+  return t;
+}
+
+TrainingData in_memory_training_data(const std::string& name, std::shared_ptr<const Volume> volume,
+                                     uint64_t memory_budget, const MessageFn& message) {
+  TrainingData t;
+  t.memory_budget = memory_budget;
+  t.dims = t.desc.dims = volume->dims;
+  t.dtype = t.desc.dtype = volume->source_dtype;
+  t.desc.path = name;
+  sample_in_core(t, std::move(volume));
+  say(message, volume_line_head(name, t) + fmt::format("{:g}, {:g}], in memory", t.lo, t.hi));
   return t;
 }
 

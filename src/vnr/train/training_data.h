@@ -53,6 +53,10 @@ struct TrainingData {
 // buffer filled). Fails with one line for options that do not fit the data.
 TrainingData open_training_data(const std::string& name, const VolumeDesc& desc, const LoadOptions& load,
                                 const TrainingDataOptions& opts, const MessageFn& message = {});
+// The same for a volume already in memory (named `name` in messages), sampled in core and shared, not
+// copied.
+TrainingData in_memory_training_data(const std::string& name, std::shared_ptr<const Volume> volume,
+                                     uint64_t memory_budget, const MessageFn& message = {});
 
 // The out-of-core grid learning rate: a buffer concentrates each step's samples on the resident
 // fraction f of the volume, so every hash-grid entry it touches gets many consistent gradients and Adam
