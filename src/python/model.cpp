@@ -2,13 +2,12 @@
 // arrays in original units, computed with the GIL released on all cores (or the GPU).
 #include <algorithm>
 #include <atomic>
-#include <cmath>
-#include <limits>
 #include "bindings.h"
 #include "vnr/core/error.h"
 #include "vnr/core/fileio.h"
 #include "vnr/core/parallel.h"
 #include "vnr/volume/sample_io.h"
+#include "vnr/volume/writer.h"
 
 namespace vnr::py {
 
@@ -27,18 +26,10 @@ constexpr int64_t kSlabVoxels = int64_t(1) << 24;
 // Points converted to interleaved float32 per batch when the input is not already that.
 constexpr int64_t kPointBatch = int64_t(1) << 20;
 
-// `vnr decode`'s conversion of a value in original units to an output dtype (VolumeWriter): integers
-// rounded to nearest and clamped to the type, NaN -> 0.
+// `vnr decode`'s conversion of values in original units to an output dtype.
 template <typename T>
 void store_values(const float* in, int64_t n, T* out) {
-  for (int64_t i = 0; i < n; ++i) {
-    if constexpr (std::is_integral_v<T>) {
-      double r = std::isnan(in[i]) ? 0.0 : std::nearbyint(double(in[i]));
-      out[i] = T(std::clamp(r, double(std::numeric_limits<T>::lowest()), double(std::numeric_limits<T>::max())));
-    } else {
-      out[i] = T(in[i]);
-    }
-  }
+  for (int64_t i = 0; i < n; ++i) out[i] = to_stored_value<T>(in[i]);
 }
 
 void store_as(DType t, const float* in, int64_t n, void* out) {

@@ -22,30 +22,30 @@ public:
   std::optional<double> number(const char* name, double lo, double hi) const {
     const Json* j = get(name);
     if (!j) return std::nullopt;
-    if (!j->is_number()) fail("{}.{} must be a number, got {}", type_, name, j->dump());
+    if (!j->is_number()) fail("{}.{} must be a number, got {}", type_, name, short_dump(*j));
     const double v = j->get<double>();
-    if (!std::isfinite(v) || v < lo || v > hi) fail("{}.{} = {} is outside [{}, {}]", type_, name, j->dump(), lo, hi);
+    if (!std::isfinite(v) || v < lo || v > hi) fail("{}.{} = {} is outside [{}, {}]", type_, name, short_dump(*j), lo, hi);
     return v;
   }
   std::optional<int64_t> integer(const char* name, int64_t lo, int64_t hi) const {
     const Json* j = get(name);
     if (!j) return std::nullopt;
     if (!j->is_number() || (j->is_number_float() && std::floor(j->get<double>()) != j->get<double>()))
-      fail("{}.{} must be an integer, got {}", type_, name, j->dump());
+      fail("{}.{} must be an integer, got {}", type_, name, short_dump(*j));
     const double v = j->get<double>();
-    if (!(v >= double(lo) && v <= double(hi))) fail("{}.{} = {} is outside [{}, {}]", type_, name, j->dump(), lo, hi);
+    if (!(v >= double(lo) && v <= double(hi))) fail("{}.{} = {} is outside [{}, {}]", type_, name, short_dump(*j), lo, hi);
     return int64_t(v);
   }
   std::optional<bool> boolean(const char* name) const {
     const Json* j = get(name);
     if (!j) return std::nullopt;
-    if (!j->is_boolean()) fail("{}.{} must be true or false, got {}", type_, name, j->dump());
+    if (!j->is_boolean()) fail("{}.{} must be true or false, got {}", type_, name, short_dump(*j));
     return j->get<bool>();
   }
   std::optional<std::string> string(const char* name) const {
     const Json* j = get(name);
     if (!j) return std::nullopt;
-    if (!j->is_string()) fail("{}.{} must be a string, got {}", type_, name, j->dump());
+    if (!j->is_string()) fail("{}.{} must be a string, got {}", type_, name, short_dump(*j));
     return j->get<std::string>();
   }
   std::string required_string(const char* name) const {

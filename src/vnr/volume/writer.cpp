@@ -27,18 +27,12 @@ void put(unsigned char* dst, T v) {
   if constexpr (std::endian::native == std::endian::big) std::reverse(dst, dst + sizeof(T));
 }
 
-// Integers: round to nearest, clamp to the type (NaN -> 0). Returns the stored value.
+// Writes to_stored_value(v); returns the stored value.
 template <typename T>
 double store(unsigned char* dst, float v) {
-  if constexpr (std::is_integral_v<T>) {
-    double r = std::isnan(v) ? 0.0 : std::nearbyint(double(v));
-    r = std::clamp(r, double(std::numeric_limits<T>::min()), double(std::numeric_limits<T>::max()));
-    put<T>(dst, T(r));
-    return r;
-  } else {
-    put<T>(dst, T(v));
-    return double(T(v));
-  }
+  const T stored = to_stored_value<T>(v);
+  put<T>(dst, stored);
+  return double(stored);
 }
 
 // Shortest text that reads back as the same double (fmt), which is also valid JSON for finite values.

@@ -1,6 +1,10 @@
 #pragma once
+#include <algorithm>
+#include <cmath>
+#include <limits>
 #include <memory>
 #include <optional>
+#include <type_traits>
 #include <string>
 #include <vector>
 #include "vnr/core/fileio.h"
@@ -8,6 +12,18 @@
 #include "vnr/volume/volume.h"
 
 namespace vnr {
+
+// A value in original units as an output dtype stores it (VolumeWriter, `vnr decode`, the Python
+// module's decode): integers rounded to nearest and clamped to the type, NaN -> 0.
+template <typename T>
+T to_stored_value(float v) {
+  if constexpr (std::is_integral_v<T>) {
+    const double r = std::isnan(v) ? 0.0 : std::nearbyint(double(v));
+    return T(std::clamp(r, double(std::numeric_limits<T>::lowest()), double(std::numeric_limits<T>::max())));
+  } else {
+    return T(v);
+  }
+}
 
 // Streams a volume to disk one z-slab at a time, so outputs larger than memory never need a full
 // copy. The format follows the extension of `path`:
