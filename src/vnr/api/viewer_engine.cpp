@@ -78,7 +78,6 @@ void ViewerEngine::Impl::open(const ViewerSetup& s) {
   online_available = info.can_train || model->macrocells.has_value();
   if (info.can_train) {
     train_device = choose_training_device(s.device, *model->net, dims, true, "incore", s.batch).device;
-    if (train_device == Device::Cuda && render_device == Device::Cuda) info.device = device_description(Device::Cuda);
     create_session();
   }
 
