@@ -381,6 +381,13 @@ std::string preset_list() {
   return s;
 }
 
+// The preset called `name` (any case); fails naming the presets.
+const Preset& find_preset(const std::string& name) {
+  for (const auto& p : presets())
+    if (iequals(name, p.name)) return p;
+  fail("unknown transfer-function preset \"{}\" (presets: {})", name, preset_list());
+}
+
 }  // namespace
 
 std::vector<std::string> tf_preset_names() {
@@ -396,9 +403,8 @@ bool is_tf_preset(const std::string& name) {
 }
 
 TransferFunction tf_preset(const std::string& name) {
-  for (const auto& p : presets())
-    if (iequals(name, p.name)) return build_nodal(p.colors, p.alphas, kDefaultResolution, 0, 1, p.name);
-  fail("unknown transfer-function preset \"{}\" (presets: {})", name, preset_list());
+  const Preset& p = find_preset(name);
+  return build_nodal(p.colors, p.alphas, kDefaultResolution, 0, 1, p.name);
 }
 
 TransferFunction tf_from_json(const Json& j, const std::string& where) {
@@ -450,11 +456,7 @@ TransferFunction tf_from_points(std::vector<TfColorPoint> colors, std::vector<Tf
   return build_nodal(std::move(colors), std::move(alphas), n, lo, hi, std::move(name));
 }
 
-std::vector<TfAlphaPoint> tf_preset_opacity(const std::string& name) {
-  for (const auto& p : presets())
-    if (iequals(name, p.name)) return p.alphas;
-  fail("unknown transfer-function preset \"{}\" (presets: {})", name, preset_list());
-}
+std::vector<TfAlphaPoint> tf_preset_opacity(const std::string& name) { return find_preset(name).alphas; }
 
 Json tf_to_instantvnr_json(const TransferFunction& tf) {
   const int n = int(tf.table.size());
