@@ -191,7 +191,7 @@ void ViewerEngine::load_tf_json(const std::string& text) {
   if (text.size() > (size_t(1) << 24)) fail("the transfer function text is larger than 16 MiB");
   const Json j = parse_json_text(text, "the transfer function");
   if (!j.is_object()) fail("the transfer function must be a JSON object, got {}", j.type_name());
-  const bool instantvnr_scene = j.contains("dataSource") || j.contains("view") || j.contains("version");
+  const bool instantvnr_scene = is_instantvnr_scene(j);
   const bool vnr_scene = !instantvnr_scene && (j.contains("camera") || j.contains("transfer_function"));
   if (vnr_scene) {
     if (auto t = j.find("transfer_function"); t != j.end() && t->is_string() && !is_tf_preset(t->get<std::string>()))
