@@ -70,12 +70,12 @@ std::string matching_preset(const std::vector<Vec4f>& table) {
 // The table's colours as few evenly spaced colours as reproduce them within kSimplifyTolerance (or all).
 std::vector<Vec3f> even_colors(const std::vector<Vec4f>& table) {
   const size_t n = table.size();
+  TransferFunction probe;
+  probe.table = table;
+  const TfView v = view_of(probe);
   for (size_t k : {2, 3, 5, 9, 17, 33, 65, 129, 257}) {
     if (k >= n) break;
     std::vector<Vec3f> c(k);
-    TransferFunction probe;
-    probe.table = table;
-    const TfView v = view_of(probe);
     for (size_t j = 0; j < k; ++j) {
       const Vec4f e = tf_lookup(v, float(double(j) / double(k - 1)));
       c[j] = Vec3f{e.x, e.y, e.z};
