@@ -102,15 +102,6 @@ bool same_camera_for_test(const Camera& a, const Camera& b) {
   return eq(a.eye, b.eye) && eq(a.center, b.center) && eq(a.up, b.up) && a.fovy == b.fovy;
 }
 
-std::string error_of(const std::function<void()>& fn) {
-  try {
-    fn();
-  } catch (const Error& e) {
-    return e.what();
-  }
-  return "";
-}
-
 }  // namespace
 
 TEST(ViewerEngine, DefaultTfReproducesThePresetTable) {

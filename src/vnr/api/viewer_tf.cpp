@@ -70,12 +70,12 @@ std::string matching_preset(const std::vector<Vec4f>& table) {
 // The table's colours as few evenly spaced colours as reproduce them within kSimplifyTolerance (or all).
 std::vector<Vec3f> even_colors(const std::vector<Vec4f>& table) {
   const size_t n = table.size();
+  TransferFunction probe;
+  probe.table = table;
+  const TfView v = view_of(probe);
   for (size_t k : {2, 3, 5, 9, 17, 33, 65, 129, 257}) {
     if (k >= n) break;
     std::vector<Vec3f> c(k);
-    TransferFunction probe;
-    probe.table = table;
-    const TfView v = view_of(probe);
     for (size_t j = 0; j < k; ++j) {
       const Vec4f e = tf_lookup(v, float(double(j) / double(k - 1)));
       c[j] = Vec3f{e.x, e.y, e.z};
@@ -191,7 +191,7 @@ void ViewerEngine::load_tf_json(const std::string& text) {
   if (text.size() > (size_t(1) << 24)) fail("the transfer function text is larger than 16 MiB");
   const Json j = parse_json_text(text, "the transfer function");
   if (!j.is_object()) fail("the transfer function must be a JSON object, got {}", j.type_name());
-  const bool instantvnr_scene = j.contains("dataSource") || j.contains("view") || j.contains("version");
+  const bool instantvnr_scene = is_instantvnr_scene(j);
   const bool vnr_scene = !instantvnr_scene && (j.contains("camera") || j.contains("transfer_function"));
   if (vnr_scene) {
     if (auto t = j.find("transfer_function"); t != j.end() && t->is_string() && !is_tf_preset(t->get<std::string>()))

@@ -176,16 +176,12 @@ bool ViewerEngine::Impl::keep_training() {
 void ViewerEngine::Impl::publish_training() {
   TrainingSession& s = *run.session;
   const Trainer& trainer = s.trainer();
-  std::vector<float> fresh;
-  if (auto* cpu = dynamic_cast<const CpuTrainer*>(&trainer)) {
-    const auto& all = cpu->loss_history();
-    fresh.assign(all.begin() + std::ptrdiff_t(std::min(run.losses_published, all.size())), all.end());
-    run.losses_published = all.size();
-  } else {
-    const auto all = s.trainer().losses();
-    fresh.assign(all.begin() + std::ptrdiff_t(std::min(run.losses_published, all.size())), all.end());
-    run.losses_published = all.size();
-  }
+  // The CPU trainer's history by reference (no copy of every loss per chunk); other trainers' as a copy.
+  std::vector<float> copy;
+  const auto* cpu = dynamic_cast<const CpuTrainer*>(&trainer);
+  const std::vector<float>& all = cpu ? cpu->loss_history() : (copy = trainer.losses());
+  const std::vector<float> fresh(all.begin() + std::ptrdiff_t(std::min(run.losses_published, all.size())), all.end());
+  run.losses_published = all.size();
   // Samples per second over the last steps (about kRateWindowSeconds of them).
   const auto& times = s.step_seconds();
   double window = 0;

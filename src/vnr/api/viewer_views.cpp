@@ -86,9 +86,7 @@ bool render_pass(ViewPass& pass, const ViewContent& content, const TransferFunct
 ViewerImage gray_image(const char* view, int w, int h, const std::vector<float>& values) {
   ViewerImage img{view, w, h, std::vector<uint8_t>(values.size() * 4)};
   for (size_t i = 0; i < values.size(); ++i) {
-    const float v = std::clamp(values[i], 0.0f, 1.0f);
-    const uint8_t g = uint8_t(std::floor(255.0f * v + 0.5f));
-    img.rgba[4 * i] = img.rgba[4 * i + 1] = img.rgba[4 * i + 2] = g;
+    img.rgba[4 * i] = img.rgba[4 * i + 1] = img.rgba[4 * i + 2] = channel_to_u8(values[i]);
     img.rgba[4 * i + 3] = 255;
   }
   return img;
@@ -100,8 +98,9 @@ ViewerImage difference_image(int w, int h, const std::vector<float>& net, const 
   ViewerImage img{"slice_difference", w, h, std::vector<uint8_t>(net.size() * 4)};
   for (size_t i = 0; i < net.size(); ++i) {
     const Vec4f c = tf_lookup(colours, std::fabs(net[i] - truth[i]) / kDifferenceScale);
-    const float rgb[3] = {c.x, c.y, c.z};
-    for (int k = 0; k < 3; ++k) img.rgba[4 * i + k] = uint8_t(std::floor(255.0f * std::clamp(rgb[k], 0.0f, 1.0f) + 0.5f));
+    img.rgba[4 * i + 0] = channel_to_u8(c.x);
+    img.rgba[4 * i + 1] = channel_to_u8(c.y);
+    img.rgba[4 * i + 2] = channel_to_u8(c.z);
     img.rgba[4 * i + 3] = 255;
   }
   return img;

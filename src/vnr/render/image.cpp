@@ -134,16 +134,14 @@ bool decode_png(PngSource* src, std::vector<unsigned char>* pixels, std::vector<
   return true;
 }
 
-inline uint8_t to_u8(float c) { return uint8_t(std::floor(255.0f * clamp01(c) + 0.5f)); }
-
 // The PNG bytes of img (8-bit RGB, round(255 * clamp(c, 0, 1)), sRGB chunk); `what` names it in errors.
 std::string png_bytes(const Image& img, const std::string& what) {
   std::vector<uint8_t> rgb(size_t(img.width) * size_t(img.height) * 3);
   for (size_t i = 0; i < img.pixels.size(); ++i) {
     const Vec4f& p = img.pixels[i];
-    rgb[3 * i + 0] = to_u8(p.x);
-    rgb[3 * i + 1] = to_u8(p.y);
-    rgb[3 * i + 2] = to_u8(p.z);
+    rgb[3 * i + 0] = channel_to_u8(p.x);
+    rgb[3 * i + 1] = channel_to_u8(p.y);
+    rgb[3 * i + 2] = channel_to_u8(p.z);
   }
   std::string out;
   PngErr e{};
@@ -310,9 +308,9 @@ std::vector<uint8_t> to_rgba8(const Image& img) {
   std::vector<uint8_t> out(img.pixels.size() * 4);
   for (size_t i = 0; i < img.pixels.size(); ++i) {
     const Vec4f& p = img.pixels[i];
-    out[4 * i + 0] = to_u8(p.x);
-    out[4 * i + 1] = to_u8(p.y);
-    out[4 * i + 2] = to_u8(p.z);
+    out[4 * i + 0] = channel_to_u8(p.x);
+    out[4 * i + 1] = channel_to_u8(p.y);
+    out[4 * i + 2] = channel_to_u8(p.z);
     out[4 * i + 3] = 255;
   }
   return out;

@@ -2,6 +2,7 @@
 // Framebuffers and image files. Row 0 is the top row. Pixel values are the renderer's colours,
 // written to 8-bit PNG as display (sRGB-encoded) values without further transfer, the way
 // instantvnr and VTK show them; PFM keeps the exact floats.
+#include <cmath>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -23,6 +24,8 @@ struct Image {
 void write_image(const std::string& path, const Image& img);
 // The bytes of the .png file write_image writes for img (same 8-bit conversion and sRGB chunk).
 std::vector<uint8_t> encode_png(const Image& img);
+// One colour channel in 8 bits as PNG output writes it: round(255 * clamp(c, 0, 1)); NaN gives 0.
+inline uint8_t channel_to_u8(float c) { return uint8_t(std::floor(255.0f * (c > 0 ? (c < 1 ? c : 1.0f) : 0.0f) + 0.5f)); }
 // 8-bit RGBA, row 0 at the top: each colour channel exactly as PNG output writes it (round(255 *
 // clamp(c, 0, 1))), alpha 255 (the image is already composited over the background).
 std::vector<uint8_t> to_rgba8(const Image& img);

@@ -172,9 +172,11 @@ Scene load_vnr_scene(const Json& j, const std::string& path) {
 
 Scene load_scene(const std::string& path) { return scene_from_json(parse_json_file(path), path); }
 
+bool is_instantvnr_scene(const Json& j) { return j.contains("dataSource") || j.contains("view") || j.contains("version"); }
+
 Scene scene_from_json(const Json& j, const std::string& path) {
   if (!j.is_object()) fail("{}: a scene must be a JSON object, got {}", path, j.type_name());
-  if (j.contains("dataSource") || j.contains("view") || j.contains("version")) return load_instantvnr_scene(j, path);
+  if (is_instantvnr_scene(j)) return load_instantvnr_scene(j, path);
   return load_vnr_scene(j, path);
 }
 

@@ -29,6 +29,8 @@ struct Scene {
 // {"camera": {"eye": [x,y,z], "center": [...], "up": [...], "fovy": deg}, "transfer_function":
 // <TF object or preset name>, "light": {"direction": [...], "color": [...]}, "background": [r,g,b]}.
 Scene load_scene(const std::string& path);
+// Whether parsed scene JSON is instantvnr's (it has "dataSource", "view" or "version"), else vnr's.
+bool is_instantvnr_scene(const Json& j);
 // The same from parsed JSON; `where` names it in errors and anchors a vnr scene's relative TF file.
 Scene scene_from_json(const Json& j, const std::string& where);
 // An instantvnr scene of a view: view.camera (converted back to voxel-index units: world - 0.5) and

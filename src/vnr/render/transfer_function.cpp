@@ -205,6 +205,13 @@ std::string base64_encode(const std::string& bytes) {
   return out;
 }
 
+void store_f32_le(char* p, float f) {
+  uint32_t u;
+  std::memcpy(&u, &f, 4);
+  if constexpr (std::endian::native == std::endian::big) u = __builtin_bswap32(u);
+  std::memcpy(p, &u, 4);
+}
+
 float load_f32_le(const char* p) {
   uint32_t u;
   std::memcpy(&u, p, 4);
@@ -381,6 +388,13 @@ std::string preset_list() {
   return s;
 }
 
+// The preset called `name` (any case); fails naming the presets.
+const Preset& find_preset(const std::string& name) {
+  for (const auto& p : presets())
+    if (iequals(name, p.name)) return p;
+  fail("unknown transfer-function preset \"{}\" (presets: {})", name, preset_list());
+}
+
 }  // namespace
 
 std::vector<std::string> tf_preset_names() {
@@ -396,9 +410,8 @@ bool is_tf_preset(const std::string& name) {
 }
 
 TransferFunction tf_preset(const std::string& name) {
-  for (const auto& p : presets())
-    if (iequals(name, p.name)) return build_nodal(p.colors, p.alphas, kDefaultResolution, 0, 1, p.name);
-  fail("unknown transfer-function preset \"{}\" (presets: {})", name, preset_list());
+  const Preset& p = find_preset(name);
+  return build_nodal(p.colors, p.alphas, kDefaultResolution, 0, 1, p.name);
 }
 
 TransferFunction tf_from_json(const Json& j, const std::string& where) {
@@ -450,11 +463,7 @@ TransferFunction tf_from_points(std::vector<TfColorPoint> colors, std::vector<Tf
   return build_nodal(std::move(colors), std::move(alphas), n, lo, hi, std::move(name));
 }
 
-std::vector<TfAlphaPoint> tf_preset_opacity(const std::string& name) {
-  for (const auto& p : presets())
-    if (iequals(name, p.name)) return p.alphas;
-  fail("unknown transfer-function preset \"{}\" (presets: {})", name, preset_list());
-}
+std::vector<TfAlphaPoint> tf_preset_opacity(const std::string& name) { return find_preset(name).alphas; }
 
 Json tf_to_instantvnr_json(const TransferFunction& tf) {
   const int n = int(tf.table.size());
@@ -465,11 +474,7 @@ Json tf_to_instantvnr_json(const TransferFunction& tf) {
   Json colors = Json::array();
   for (int i = 0; i < n; ++i) {
     const Vec4f e = whole_range ? tf.table[size_t(i)] : tf_lookup(view, float(double(i) / double(n - 1)));
-    const float a = std::clamp(e.w, 0.0f, 1.0f);
-    uint32_t u;
-    std::memcpy(&u, &a, 4);
-    if constexpr (std::endian::native == std::endian::big) u = __builtin_bswap32(u);
-    std::memcpy(alpha_bytes.data() + 4 * i, &u, 4);
+    store_f32_le(alpha_bytes.data() + 4 * i, std::clamp(e.w, 0.0f, 1.0f));
     // The reader evaluates colours at cell centres (i + 0.5) / n: a point exactly there gives entry i.
     colors.push_back({{"position", (double(i) + 0.5) / double(n)},
                       {"color", {{"r", std::clamp(e.x, 0.0f, 1.0f)}, {"g", std::clamp(e.y, 0.0f, 1.0f)}, {"b", std::clamp(e.z, 0.0f, 1.0f)}}}});
