@@ -19,6 +19,10 @@ struct ModelFile {
   Int3 macrocell_dims;            // {0,0,0} when absent
   std::vector<float> macrocell_ranges;  // 2 * macrocell_dims.count() floats: min0, max0, min1, ...
   Json training;                  // optional training summary (steps, seconds, psnr...); may be null
+  // Optional error-bound residuals (docs/MODEL_FORMAT.md): an opaque block owned by the train layer,
+  // described by residuals_meta; both empty when absent. A file with them is format version 2.
+  Json residuals_meta;
+  std::vector<uint8_t> residuals_bytes;
 };
 
 // Native .vnr format (docs/MODEL_FORMAT.md): magic "VNRMODEL", format version, a JSON header (config,
