@@ -27,7 +27,7 @@ Volume volume_from_samples(const void* samples, DType dtype, Int3 dims, bool big
   desc.range_lo = range_lo;
   desc.range_hi = range_hi;
   check_dims(desc);
-  if (!samples) fail("volume_from_array: no values given for {}x{}x{} voxels", dims.x, dims.y, dims.z);
+  if (!samples) fail("volume_from_samples: no values given for {}x{}x{} voxels", dims.x, dims.y, dims.z);
   const int64_t n = int64_t(dims.count());
   Volume vol;
   vol.dims = dims;
