@@ -47,6 +47,11 @@ void print_evaluation(const FileEvaluation& ev, Json& report) {
                  {"value_range", {ev.value_range.lo, ev.value_range.hi}},
                  {"value_range_source", ev.value_range_source}});
   if (ev.psnr_ci95) report["mse_stderr"] = ev.mse_stderr;
+  if (ev.error_bound_original) {
+    std::printf("error bound %.4g (data units): %s\n", *ev.error_bound_original,
+                ev.bound_holds ? (ev.psnr_ci95 ? "holds at every sampled voxel" : "holds at every voxel") : "VIOLATED");
+    report["error_bound"] = {{"max_error", *ev.error_bound_original}, {"holds", ev.bound_holds}};
+  }
 }
 
 // Progress bars on stderr, one per stage as it starts, and the notes as they arise.

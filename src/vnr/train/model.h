@@ -10,6 +10,7 @@
 #include "vnr/core/value_range_grid.h"
 #include "vnr/nn/model_file.h"
 #include "vnr/nn/network.h"
+#include "vnr/train/residuals.h"
 
 namespace vnr {
 
@@ -22,6 +23,8 @@ struct Model {
   double lo = 0, hi = 1;
   Json training;  // summary written by `vnr train`
   std::optional<ValueRangeGrid> macrocells;  // value ranges built online while training (or imported)
+  // Error-bound residuals at dims (train/residuals.h): decodes at dims apply them on the CPU reference.
+  std::optional<Residuals> residuals;
   uint64_t param_bytes() const { return net->n_params() * 2; }  // fp16, as stored
 };
 

@@ -160,6 +160,29 @@ void TrainingSession::save_checkpoint() {
   save_model(opts_.output, *model_);
 }
 
+// The error-bound residuals of the trained network (SessionOptions::error_bound), kept in the model
+// (coded once here, so the save reuses the bytes); their summary for the report, or null.
+Json TrainingSession::attach_residuals() {
+  if (!opts_.error_bound.active()) return Json();
+  const TrainingData& data = *data_;
+  if (!data.vol) fail("an error bound needs the volume in memory (in-core sampler)");
+  const double b = normalised_error_bound(opts_.error_bound, data.lo, data.hi, model_->source_dtype);
+  Residuals res = compute_residuals(*model_->net, data.vol->data.data(), data.vol->dims, b);
+  res.encoded = std::make_shared<const EncodedResiduals>(encode_residuals(res));
+  const int64_t nz = res.nonzero();
+  const uint64_t bytes = res.encoded->bytes.size();
+  Json j = {{"max_error", b * (data.hi - data.lo)},
+            {"max_error_normalised", b},
+            {"step_normalised", res.step},
+            {"residual_nonzero", nz},
+            {"residual_nonzero_fraction", double(nz) / double(data.dims.count())},
+            {"residual_bytes", bytes},
+            {"residual_bits_per_voxel", 8.0 * double(bytes) / double(data.dims.count())},
+            {"predictor", res.encoded->meta["predictor"]}};
+  model_->residuals = std::move(res);
+  return j;
+}
+
 TrainingResult TrainingSession::finish(bool with_ssim, int64_t eval_samples) {
   if (!data_) fail("finish() needs a session opened on training data (open_training_session)");
   if (opts_.output.empty()) fail("finish() needs an output path");
@@ -174,8 +197,10 @@ TrainingResult TrainingSession::finish(bool with_ssim, int64_t eval_samples) {
   // Exact over the volume in memory; a volume that is not in memory gets a PSNR estimate from random
   // voxels (a full pass can take longer than the training did).
   Json evaluation;
+  const Json bound = attach_residuals();
+  const Residuals* residuals = model_->residuals ? &*model_->residuals : nullptr;
   if (data.vol) {
-    EvalResult ev = evaluate(net, *data.vol, with_ssim, dev);
+    EvalResult ev = evaluate(net, *data.vol, with_ssim, dev, residuals);
     r.psnr = ev.psnr;
     r.max_abs_error = ev.max_abs_error;
     r.max_abs_error_original = ev.max_abs_error_original;
@@ -203,6 +228,11 @@ TrainingResult TrainingSession::finish(bool with_ssim, int64_t eval_samples) {
   r.compression_ratio = double(data.source_bytes()) / double(r.model_bytes);
   r.samples_per_second = double(r.steps) * double(trainer_->batch()) / r.seconds;
   r.report = report_json(r, evaluation);
+  if (!bound.is_null()) {
+    r.report["error_bound"] = bound;
+    r.report["error_bound"]["holds"] = r.max_abs_error_original <= bound["max_error"].get<double>();
+    r.report["error_bound"]["network_bytes"] = r.model_bytes - bound["residual_bytes"].get<uint64_t>();
+  }
   return r;
 }
 

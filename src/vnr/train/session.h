@@ -45,6 +45,8 @@ struct SessionOptions {
   // The error message of a non-finite loss; default: "training diverged at step S (loss L); try a
   // smaller learning rate".
   std::function<std::string(int64_t step, float loss)> divergence_message;
+  // A guaranteed max error (--max-error/--max-rel-error): finish() adds residuals (train/residuals.h).
+  ErrorBoundRequest error_bound;
 };
 
 // What finish() measured, and the record of `vnr train --report`.
@@ -115,6 +117,7 @@ private:
   void run_steps(int64_t steps, double seconds, int64_t* done);
   void wait_while_paused();
   Json report_json(const TrainingResult& r, const Json& evaluation) const;
+  Json attach_residuals();
 
   std::unique_ptr<Model> owned_model_;
   Model* model_;

@@ -44,6 +44,12 @@ std::unique_ptr<TrainingSession> session_on_data(const TrainingSetup& s, ModelCo
   };
   if (data->hi == data->lo)
     say(fmt::format("note: the volume is constant ({:g}); it is represented as normalised 0", data->lo));
+  if (s.session.error_bound.active()) {  // checked before training, not after it
+    normalised_error_bound(s.session.error_bound, data->lo, data->hi, data->dtype);
+    if (!data->vol) fail("an error bound (--max-error/--max-rel-error) needs the volume in memory (in-core sampler)");
+    if (is_instantvnr_path(s.session.output))
+      fail("'{}': instantvnr's format cannot hold error-bound residuals; save the model as .vnr", s.session.output);
+  }
   std::string note;
   if (s.target_ratio > 0) {
     config = size_config_for_ratio(config, data->source_bytes(), s.target_ratio, &note);
