@@ -31,6 +31,7 @@ void save_model(const std::string& path, const Model& m) {
   f.hi = m.hi;
   f.params = m.net->params_half();
   f.training = m.training;
+  f.param_segments = m.param_segments;  // compressed storage (format 2) when set
   if (m.macrocells) {
     f.macrocell_dims = m.macrocells->cells;
     f.macrocell_ranges = m.macrocells->to_pairs();
@@ -63,6 +64,7 @@ Model load_model(const std::string& path) {
     m.residuals = decode_residuals(f.residuals_meta, f.residuals_bytes, f.dims, "'" + path + "'");
     m.residuals->encoded = std::make_shared<const EncodedResiduals>(EncodedResiduals{f.residuals_meta, f.residuals_bytes});
   }
+  m.param_segments = f.param_segments;
   if (!(f.macrocell_dims == Int3{}) && f.dims.count() > 0) {
     try {
       m.macrocells = ValueRangeGrid::from_pairs(f.dims, f.macrocell_dims, f.macrocell_ranges);

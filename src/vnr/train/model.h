@@ -4,6 +4,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <vector>
 #include "vnr/core/dtype.h"
 #include "vnr/core/json.h"
 #include "vnr/core/math.h"
@@ -25,6 +26,9 @@ struct Model {
   std::optional<ValueRangeGrid> macrocells;  // value ranges built online while training (or imported)
   // Error-bound residuals at dims (train/residuals.h): decodes at dims apply them on the CPU reference.
   std::optional<Residuals> residuals;
+  // Quantization steps of compact storage (nn/param_codec.h); empty = plain fp16. The network's
+  // parameters are then already the dequantized values (quantize_params), so the file holds them exactly.
+  std::vector<ParamSegment> param_segments;
   uint64_t param_bytes() const { return net->n_params() * 2; }  // fp16, as stored
 };
 
