@@ -168,9 +168,10 @@ RdReport run_rate_distortion(const std::string& volume_path, const Volume& volum
   std::vector<std::optional<RdPoint>> best(o.rel_bounds.size());
   try {
     for (double ratio : o.ratios) {
-      Model m;
+      Model trained;
       const std::string path = dir + fmt::format("/r{}.vnr", ratio);
-      add(train_point(shared, volume_path, ratio, o, path, &m));
+      add(train_point(shared, volume_path, ratio, o, path, &trained));
+      const Model m = load_model(path);  // the network as stored, as a decoder sees it
       for (size_t k = 0; k < o.rel_bounds.size(); ++k) {
         RdPoint p = bound_point(volume, m, file_size(path), o.rel_bounds[k], ratio);
         if (!best[k] || p.bytes < best[k]->bytes) best[k] = std::move(p);

@@ -167,6 +167,9 @@ Json TrainingSession::attach_residuals() {
   const TrainingData& data = *data_;
   if (!data.vol) fail("an error bound needs the volume in memory (in-core sampler)");
   const double b = normalised_error_bound(opts_.error_bound, data.lo, data.hi, model_->source_dtype);
+  // Residuals are taken against the network as the file stores it (fp16 parameters), not the fp32
+  // master copy, so that a loaded model decodes to the same predictions.
+  model_->net->set_params_half(model_->net->params_half());
   Residuals res = compute_residuals(*model_->net, data.vol->data.data(), data.vol->dims, b);
   res.encoded = std::make_shared<const EncodedResiduals>(encode_residuals(res));
   const int64_t nz = res.nonzero();
