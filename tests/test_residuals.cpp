@@ -5,6 +5,7 @@
 #include "test_support.h"
 #include "vnr/core/parallel.h"
 #include "vnr/model.h"
+#include "vnr/train/residual_context_coder.h"
 #include "vnr/train/residuals.h"
 
 using namespace vnr;
@@ -143,8 +144,13 @@ TEST(Residuals, DamagedBlocksAreOneClearError) {
   EXPECT_HAS(error_of(e.meta, {}), "corrupted");
   EXPECT_HAS(error_of(e.meta, e.bytes, Int3{kDims.x, kDims.y, kDims.z + 1}), "dims");
   Json meta = e.meta;
-  meta["escapes"] = meta["escapes"].get<uint64_t>() + 1;
-  EXPECT_HAS(error_of(meta, e.bytes), "inconsistent");
+  if (meta.contains("escapes")) {
+    meta["escapes"] = meta["escapes"].get<uint64_t>() + 1;
+    EXPECT_HAS(error_of(meta, e.bytes), "inconsistent");
+  } else {
+    meta["crc32"] = meta["crc32"].get<uint64_t>() ^ 1;
+    EXPECT_HAS(error_of(meta, e.bytes), "CRC");
+  }
   meta = e.meta;
   meta["codec"] = "lz4";
   EXPECT_HAS(error_of(meta, e.bytes), "unknown residual coding");
@@ -169,4 +175,22 @@ TEST(Residuals, LorenzoIsChosenWhenItCodesSmaller) {
   const EncodedResiduals e = encode_residuals(r);
   EXPECT_EQ(e.meta["predictor"], "lorenzo");
   EXPECT_EQ(decode_residuals(e.meta, e.bytes, kDims, "ramp").q, r.q);  // escapes (|q| >= 128) included
+}
+
+TEST(Residuals, ContextCoderRoundTripsEveryMagnitudeAndDetectsTruncation) {
+  std::mt19937 rng(5);
+  std::vector<int32_t> q(kDims.count());
+  for (size_t i = 0; i < q.size(); ++i) {
+    const uint32_t r = rng() % 100;
+    q[i] = r < 70 ? 0 : r < 90 ? int32_t(rng() % 5) - 2 : r < 99 ? int32_t(rng() % 2001) - 1000 : (r % 2 ? 1 : -1) * int32_t(rng() % (1 << 27));
+  }
+  const std::vector<uint8_t> bytes = context_encode(q.data(), kDims);
+  std::vector<int32_t> back(q.size());
+  context_decode(bytes.data(), bytes.size(), kDims, back.data(), "t");
+  EXPECT_EQ(back, q);
+  EXPECT_THROW(context_decode(bytes.data(), bytes.size() / 2, kDims, back.data(), "t"), Error);
+  // Sparse small values (what a good network leaves) cost well under a byte each.
+  std::vector<int32_t> sparse(kDims.count(), 0);
+  for (size_t i = 0; i < sparse.size(); i += 17) sparse[i] = i % 2 ? 1 : -1;
+  EXPECT_LT(context_encode(sparse.data(), kDims).size(), sparse.size() / 8);
 }

@@ -139,7 +139,9 @@ RdPoint bound_point(const Volume& vol, const Model& m, uint64_t model_file_bytes
              {"residual_bytes", enc.bytes.size()},
              {"residual_nonzero_fraction", double(res.nonzero()) / double(vol.dims.count())},
              {"residual_bits_per_voxel", 8.0 * double(enc.bytes.size()) / double(vol.dims.count())},
+             {"codec", enc.meta["codec"]},
              {"predictor", enc.meta["predictor"]},
+             {"candidate_bytes", enc.meta["candidate_bytes"]},
              {"bound_holds", p.max_abs_error <= b * (vol.hi - vol.lo)}};
   return p;
 }

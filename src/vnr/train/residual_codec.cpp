@@ -6,7 +6,9 @@
 #include <memory>
 #include "vnr/core/error.h"
 #include "vnr/core/parallel.h"
+#include "vnr/train/residual_context_coder.h"
 #include "vnr/train/residuals.h"
+#include <zlib.h>
 
 namespace vnr {
 
@@ -52,6 +54,18 @@ std::vector<uint8_t> byte_layout(const Residuals& r, bool predict, uint64_t* esc
   return out;
 }
 
+// CRC-32 of the values' bytes: the arithmetic-coded stream has no checksum of its own.
+uint64_t values_crc(const std::vector<int32_t>& q) {
+  uLong crc = crc32(0L, Z_NULL, 0);
+  const auto* p = reinterpret_cast<const Bytef*>(q.data());
+  for (size_t done = 0, total = q.size() * sizeof(int32_t); done < total;) {
+    const size_t n = std::min<size_t>(total - done, 1u << 30);
+    crc = crc32(crc, p + done, uInt(n));
+    done += n;
+  }
+  return uint64_t(crc);
+}
+
 std::vector<uint8_t> zstd_compress(const std::vector<uint8_t>& raw) {
   std::vector<uint8_t> out(ZSTD_compressBound(raw.size()));
   // The frame carries a checksum of its content: a damaged block fails to decode instead of decoding wrong.
@@ -69,10 +83,12 @@ std::vector<uint8_t> zstd_compress(const std::vector<uint8_t>& raw) {
 EncodedResiduals encode_residuals(const Residuals& r) {
   if (r.q.size() != r.dims.count()) fail("residual field of {} values for {} voxels", r.q.size(), r.dims.count());
   EncodedResiduals best;
+  Json sizes = Json::object();  // every candidate's size, kept in the description for the record
   for (bool predict : {false, true}) {
     uint64_t escapes = 0;
     const std::vector<uint8_t> raw = byte_layout(r, predict, &escapes);
     std::vector<uint8_t> packed = zstd_compress(raw);
+    sizes[predict ? "zstd-lorenzo" : "zstd"] = packed.size();
     if (!best.bytes.empty() && packed.size() >= best.bytes.size()) continue;
     best.bytes = std::move(packed);
     best.meta = {{"codec", "zstd"},
@@ -85,6 +101,20 @@ EncodedResiduals encode_residuals(const Residuals& r) {
                  {"escapes", escapes},
                  {"raw_bytes", raw.size()}};
   }
+  std::vector<uint8_t> ac = context_encode(r.q.data(), r.dims);
+  sizes["context"] = ac.size();
+  if (ac.size() < best.bytes.size()) {
+    best.meta = {{"codec", "context"},
+                 {"layout", "binary-ac"},
+                 {"predictor", "none"},
+                 {"dims", {r.dims.x, r.dims.y, r.dims.z}},
+                 {"bound", r.bound},
+                 {"step", r.step},
+                 {"nonzero", r.nonzero()},
+                 {"crc32", values_crc(r.q)}};
+    best.bytes = std::move(ac);
+  }
+  best.meta["candidate_bytes"] = sizes;
   return best;
 }
 
@@ -105,7 +135,8 @@ T meta_get(const Json& meta, const char* key, const std::string& what) {
 Residuals decode_residuals(const Json& meta, const std::vector<uint8_t>& bytes, Int3 dims, const std::string& what) {
   const auto codec = meta_get<std::string>(meta, "codec", what), layout = meta_get<std::string>(meta, "layout", what);
   const auto predictor = meta_get<std::string>(meta, "predictor", what);
-  if (codec != "zstd" || layout != "zigzag-bytes" || (predictor != "none" && predictor != "lorenzo"))
+  const bool context = codec == "context" && layout == "binary-ac" && predictor == "none";
+  if (!context && (codec != "zstd" || layout != "zigzag-bytes" || (predictor != "none" && predictor != "lorenzo")))
     fail("{}: unknown residual coding {}/{}/{} (written by a newer vnr?)", what, codec, layout, predictor);
   const auto md = meta_get<std::vector<int64_t>>(meta, "dims", what);
   if (md.size() != 3 || !(Int3{md[0], md[1], md[2]} == dims))
@@ -117,6 +148,13 @@ Residuals decode_residuals(const Json& meta, const std::vector<uint8_t>& bytes, 
   if (!(r.bound > 0) || !(r.step > 0) || !(r.step <= 2 * r.bound) || !std::isfinite(r.bound))
     fail("{}: invalid residual bound {} / step {}", what, r.bound, r.step);
   const int64_t n = dims.count();
+  if (context) {
+    const auto crc = meta_get<uint64_t>(meta, "crc32", what);
+    r.q.resize(size_t(n));
+    context_decode(bytes.data(), bytes.size(), dims, r.q.data(), what);
+    if (values_crc(r.q) != crc) fail("{}: the residual block is corrupted (CRC mismatch)", what);
+    return r;
+  }
   const auto escapes = meta_get<uint64_t>(meta, "escapes", what), raw_bytes = meta_get<uint64_t>(meta, "raw_bytes", what);
   if (escapes > uint64_t(n) || raw_bytes != uint64_t(n) + 4 * escapes)
     fail("{}: the residual block's sizes are inconsistent", what);

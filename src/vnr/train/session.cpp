@@ -181,7 +181,9 @@ Json TrainingSession::attach_residuals() {
             {"residual_nonzero_fraction", double(nz) / double(data.dims.count())},
             {"residual_bytes", bytes},
             {"residual_bits_per_voxel", 8.0 * double(bytes) / double(data.dims.count())},
-            {"predictor", res.encoded->meta["predictor"]}};
+            {"codec", res.encoded->meta["codec"]},
+            {"predictor", res.encoded->meta["predictor"]},
+            {"candidate_bytes", res.encoded->meta["candidate_bytes"]}};
   model_->residuals = std::move(res);
   return j;
 }
