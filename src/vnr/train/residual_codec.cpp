@@ -66,6 +66,20 @@ uint64_t values_crc(const std::vector<int32_t>& q) {
   return uint64_t(crc);
 }
 
+// q minus its Lorenzo prediction at every voxel (|q| < 2^27 keeps the differences inside int32).
+std::vector<int32_t> lorenzo_differences(const Residuals& r) {
+  const Int3 d = r.dims;
+  std::vector<int32_t> out(r.q.size());
+  parallel_for(d.z, [&](int64_t k) {
+    for (int64_t j = 0; j < d.y; ++j)
+      for (int64_t i = 0; i < d.x; ++i) {
+        const int64_t v = i + d.x * (j + d.y * k);
+        out[size_t(v)] = int32_t(int64_t(r.q[size_t(v)]) - lorenzo(r.q.data(), d, i, j, k));
+      }
+  });
+  return out;
+}
+
 std::vector<uint8_t> zstd_compress(const std::vector<uint8_t>& raw) {
   std::vector<uint8_t> out(ZSTD_compressBound(raw.size()));
   // The frame carries a checksum of its content: a damaged block fails to decode instead of decoding wrong.
@@ -101,12 +115,13 @@ EncodedResiduals encode_residuals(const Residuals& r) {
                  {"escapes", escapes},
                  {"raw_bytes", raw.size()}};
   }
-  std::vector<uint8_t> ac = context_encode(r.q.data(), r.dims);
-  sizes["context"] = ac.size();
-  if (ac.size() < best.bytes.size()) {
+  for (bool predict : {false, true}) {
+    std::vector<uint8_t> ac = context_encode(predict ? lorenzo_differences(r).data() : r.q.data(), r.dims);
+    sizes[predict ? "context-lorenzo" : "context"] = ac.size();
+    if (ac.size() >= best.bytes.size()) continue;
     best.meta = {{"codec", "context"},
                  {"layout", "binary-ac"},
-                 {"predictor", "none"},
+                 {"predictor", predict ? "lorenzo" : "none"},
                  {"dims", {r.dims.x, r.dims.y, r.dims.z}},
                  {"bound", r.bound},
                  {"step", r.step},
@@ -135,7 +150,7 @@ T meta_get(const Json& meta, const char* key, const std::string& what) {
 Residuals decode_residuals(const Json& meta, const std::vector<uint8_t>& bytes, Int3 dims, const std::string& what) {
   const auto codec = meta_get<std::string>(meta, "codec", what), layout = meta_get<std::string>(meta, "layout", what);
   const auto predictor = meta_get<std::string>(meta, "predictor", what);
-  const bool context = codec == "context" && layout == "binary-ac" && predictor == "none";
+  const bool context = codec == "context" && layout == "binary-ac" && (predictor == "none" || predictor == "lorenzo");
   if (!context && (codec != "zstd" || layout != "zigzag-bytes" || (predictor != "none" && predictor != "lorenzo")))
     fail("{}: unknown residual coding {}/{}/{} (written by a newer vnr?)", what, codec, layout, predictor);
   const auto md = meta_get<std::vector<int64_t>>(meta, "dims", what);
@@ -152,6 +167,16 @@ Residuals decode_residuals(const Json& meta, const std::vector<uint8_t>& bytes, 
     const auto crc = meta_get<uint64_t>(meta, "crc32", what);
     r.q.resize(size_t(n));
     context_decode(bytes.data(), bytes.size(), dims, r.q.data(), what);
+    if (predictor == "lorenzo") {  // differences back to values, in coding order
+      int64_t v = 0;
+      for (int64_t k = 0; k < dims.z; ++k)
+        for (int64_t j = 0; j < dims.y; ++j)
+          for (int64_t i = 0; i < dims.x; ++i, ++v) {
+            const int64_t q = int64_t(r.q[size_t(v)]) + lorenzo(r.q.data(), dims, i, j, k);
+            if (q < INT32_MIN || q > INT32_MAX) fail("{}: the residual block is corrupted (value out of range)", what);
+            r.q[size_t(v)] = int32_t(q);
+          }
+    }
     if (values_crc(r.q) != crc) fail("{}: the residual block is corrupted (CRC mismatch)", what);
     return r;
   }
