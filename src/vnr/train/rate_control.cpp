@@ -48,6 +48,7 @@ ModelFile file_of(const Model& model, const std::vector<float>& master, const st
     off += s.count;
   }
   f.param_segments = segs;
+  f.compact_macrocells = true;  // as save_model writes a compact model
   return f;
 }
 
