@@ -98,7 +98,7 @@ TEST(RateControl, TargetPsnrKeepsTheQualityAtTheSmallestSize) {
   EXPECT_GE(summary["heldback_psnr"].get<double>(), 32.0);
   EXPECT_LT(summary["heldback_psnr"].get<double>(), 33.0);  // the coarsest steps that still reach it
   const TrainingResult r = session->finish(false, 0);
-  EXPECT_NEAR(r.psnr, summary["heldback_psnr"].get<double>(), 1.5);
+  EXPECT_NEAR(r.psnr, summary["heldback_psnr"].get<double>(), 0.5);  // random voxels estimate the full PSNR
   EXPECT_LT(double(r.model_bytes), 0.5 * double(session->network().n_params() * 2));
 }
 

@@ -47,6 +47,7 @@ TrainingSetup setup_of(const TrainArgs& a, bool preview) {
   s.target_ratio = a.target_ratio;
   s.target_psnr = a.target_psnr;
   s.bits_per_param = a.bits_per_param;
+  s.qat_fraction = a.qat_fraction;
   s.batch = a.batch;
   s.seed = a.seed;
   s.device = a.device;
@@ -157,6 +158,9 @@ void add_train(CLI::App& app) {
                  "--target-ratio the file is at most that size");
   c->add_option("--bits-per-param", a->bits_per_param,
                  "--target-ratio: size the hash grid for this many bits per parameter after coding")
+      ->capture_default_str();
+  c->add_option("--qat-fraction", a->qat_fraction,
+                 "compact models: the last part of the steps trained on quantized parameters (CPU trainer)")
       ->capture_default_str();
   c->add_option("--steps", a->steps, "training steps (default 1000, or unlimited with --seconds)");
   c->add_option("--seconds", a->seconds, "stop after this many seconds of training");

@@ -89,6 +89,24 @@ ProbeSet draw_probe(const Sampler& sampler, int64_t n, uint64_t seed) {
   return p;
 }
 
+ProbeSet draw_voxel_probe(const Volume& vol, int64_t n, uint64_t seed) {
+  ProbeSet p;
+  const uint64_t count = uint64_t(vol.dims.count());
+  n = std::min<int64_t>(n, int64_t(count));
+  p.x.resize(size_t(n));
+  p.y.resize(size_t(n));
+  p.z.resize(size_t(n));
+  p.target.resize(size_t(n));
+  Pcg32 rng(seed);
+  for (int64_t i = 0; i < n; ++i) {
+    const uint64_t r = (uint64_t(rng.next_uint()) << 32) | rng.next_uint();
+    const int64_t v = int64_t(r % count);
+    voxel_centre(vol.dims, v, &p.x[i], &p.y[i], &p.z[i]);
+    p.target[i] = vol.data[size_t(v)];
+  }
+  return p;
+}
+
 double ProbeSet::mse(const Network& net) const {
   const int64_t n = int64_t(target.size());
   std::vector<float> out(static_cast<size_t>(n));
@@ -203,7 +221,10 @@ Json train_compact(TrainingSession& session, int64_t steps, double seconds, cons
   const int64_t steps1 = by_time ? -1 : int64_t(std::llround(double(steps) * (1 - f)));
   session.run(steps1, by_time ? seconds * (1 - f) : 0);
 
-  const ProbeSet probe = draw_probe(*session.data()->sampler, o.probe_samples, session.trainer().seed() ^ 0x9e3779b9u);
+  const TrainingData& data = *session.data();
+  const uint64_t probe_seed = session.trainer().seed() ^ 0x9e3779b9u;
+  const ProbeSet probe = data.vol ? draw_voxel_probe(*data.vol, o.probe_samples, probe_seed)
+                                  : draw_probe(*data.sampler, o.probe_samples, probe_seed);
   // finish() adds the evaluation to the header's training record: leave room for it.
   const uint64_t aim = o.target_bytes - std::min<uint64_t>(o.target_bytes / 50, 256);
   auto choose = [&](const std::vector<float>& master, const QuantPlan& plan, uint64_t* bytes) {

@@ -31,6 +31,9 @@ struct ProbeSet {
   double mse(const Network& net) const;
 };
 ProbeSet draw_probe(const Sampler& sampler, int64_t n, uint64_t seed);
+// Random voxels of a volume in memory at their centres, with their exact values: what the final
+// evaluation measures (sampler targets are interpolated between voxels and read ~1 dB optimistic).
+ProbeSet draw_voxel_probe(const Volume& vol, int64_t n, uint64_t seed);
 double psnr_of_mse(double mse);
 
 // Per-segment steps step_i = g * shape_i. With a_i the growth of the probe MSE per squared step of
