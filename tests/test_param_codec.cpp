@@ -288,3 +288,50 @@ TEST(ParamCodec, DamagedFilesAreClearErrors) {
     }
   }
 }
+
+// Compact macro-cells: 8 bits per bound, widened outwards (a decoded range contains the stored one),
+// empty cells stay empty; ranges outside [0, 1] keep float32.
+TEST(CompactMacrocells, WidenOutwardsAndKeepEmptyCells) {
+  TmpDir tmp;
+  const std::string path = tmp.str() + "/m.vnr";
+  ModelFile m = make_model(8);
+  m.macrocell_dims = {3, 2, 2};
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<float> u(0, 1);
+  m.macrocell_ranges.clear();
+  for (int c = 0; c < 12; ++c) {
+    const float a = u(rng), b = u(rng);
+    m.macrocell_ranges.push_back(std::min(a, b));
+    m.macrocell_ranges.push_back(std::max(a, b));
+  }
+  m.macrocell_ranges[2] = m.macrocell_ranges[3] = 0.5f;  // a single value
+  m.macrocell_ranges[4] = 1.0f, m.macrocell_ranges[5] = -1.0f;  // empty
+  m.macrocell_ranges[6] = 0.0f, m.macrocell_ranges[7] = 1.0f;
+  m.compact_macrocells = true;
+  write_vnr(path, m);
+  EXPECT_EQ(version_of(read_file(path)), 2u);
+  ModelFile r = read_vnr(path);
+  EXPECT_TRUE(r.compact_macrocells);
+  ASSERT_EQ(r.macrocell_ranges.size(), m.macrocell_ranges.size());
+  for (size_t c = 0; c < 12; ++c) {
+    const float lo = m.macrocell_ranges[2 * c], hi = m.macrocell_ranges[2 * c + 1];
+    const float dlo = r.macrocell_ranges[2 * c], dhi = r.macrocell_ranges[2 * c + 1];
+    if (lo > hi) {
+      EXPECT_GT(dlo, dhi) << c;
+      continue;
+    }
+    EXPECT_LE(dlo, lo) << c;
+    EXPECT_GE(dhi, hi) << c;
+    EXPECT_LE(lo - dlo, 1.0f / 255 + 1e-7f) << c;
+    EXPECT_LE(dhi - hi, 1.0f / 255 + 1e-7f) << c;
+  }
+  EXPECT_EQ(r.macrocell_ranges[6], 0.0f);
+  EXPECT_EQ(r.macrocell_ranges[7], 1.0f);
+  write_vnr(tmp.str() + "/b.vnr", r);  // stable once stored
+  EXPECT_EQ(read_file(tmp.str() + "/b.vnr"), read_file(path));
+  // Outside [0, 1]: float32 as before, exact.
+  m.macrocell_ranges[1] = 1.5f;
+  write_vnr(path, m);
+  EXPECT_EQ(version_of(read_file(path)), 1u);
+  EXPECT_EQ(read_vnr(path).macrocell_ranges, m.macrocell_ranges);
+}

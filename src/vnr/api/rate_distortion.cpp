@@ -13,6 +13,7 @@
 #include "vnr/core/progress.h"
 #include "vnr/model.h"
 #include "vnr/trainer.h"
+#include "vnr/train/rate_control.h"
 #include "vnr/train/session.h"
 
 namespace vnr {
@@ -104,7 +105,11 @@ RdPoint train_point(const std::shared_ptr<const Volume>& vol, const std::string&
   s.steps = o.steps;
   s.session.output = path;
   std::unique_ptr<TrainingSession> session = open_training_session(s, vol);
-  session->run(o.steps > 0 ? o.steps : INT64_MAX, o.steps > 0 ? 0 : o.seconds);
+  // --target-ratio's path: compact (quantized, entropy-coded) models of the exact size.
+  if (session->options().compact.enabled())
+    train_compact(*session, o.steps > 0 ? o.steps : -1, o.steps > 0 ? 0 : o.seconds, session->options().compact);
+  else
+    session->run(o.steps > 0 ? o.steps : INT64_MAX, o.steps > 0 ? 0 : o.seconds);
   const TrainingResult r = session->finish(false, 0);
   RdPoint p;
   p.codec = "vnr";

@@ -21,6 +21,7 @@ constexpr char kEndMagic[8] = {'V', 'N', 'R', 'E', 'N', 'D', '\0', '\0'};
 constexpr uint32_t kFormatVersion = 2;     // the newest this vnr reads
 constexpr uint32_t kPlainFormatVersion = 1;  // written when a model needs nothing of version 2
 constexpr const char* kParamsCodec = "quant-zstd";
+constexpr const char* kMacrocellCodec = "u8-zstd";
 constexpr uint64_t kPreambleBytes = 24;  // magic, version, flags, header length
 constexpr uint64_t kTrailerBytes = 12;   // CRC-32 + end magic
 constexpr uint64_t kAlign = 64;          // every data block starts on a 64-byte boundary
@@ -225,6 +226,8 @@ struct V2Blocks {
   Json segments;
   bool residuals = false;
   uint64_t residual_bytes = 0;
+  bool compact_macrocells = false;
+  uint64_t macrocell_bytes = 0;  // of the compressed macro-cell block
 };
 
 uint64_t header_count(const Json& obj, const char* key, const std::string& path, const char* where) {
@@ -244,6 +247,13 @@ V2Blocks parse_v2_keys(const std::string& path, const Json& h, uint32_t version)
     v.compressed = true;
     v.params_bytes = header_count(*pe, "bytes", path, "params_encoding.bytes");
     v.segments = pe->contains("segments") ? (*pe)["segments"] : Json();
+  }
+  if (auto me = h.find("macrocell_encoding"); me != h.end() && !me->is_null()) {
+    if (!me->is_object() || !me->contains("codec") || (*me)["codec"] != kMacrocellCodec)
+      fail("'{}' has an unsupported macrocell_encoding {} (this vnr reads codec \"{}\")", path,
+           one_line(me->dump()), kMacrocellCodec);
+    v.compact_macrocells = true;
+    v.macrocell_bytes = header_count(*me, "bytes", path, "macrocell_encoding.bytes");
   }
   if (auto r = h.find("residuals"); r != h.end() && !r->is_null()) {
     if (!r->is_object()) fail("'{}' has an invalid header: 'residuals' must be an object", path);
@@ -281,7 +291,9 @@ ModelFile parse_vnr(const std::string& path, const std::string& buf) {
     u128 mc_off = 0, res_off = 0;
     if (mc_count) {
       mc_off = align(end);
-      end = mc_off + u128(mc_count) * 8;
+      end = mc_off + (v2.compact_macrocells ? u128(v2.macrocell_bytes) : u128(mc_count) * 8);
+    } else if (v2.compact_macrocells) {
+      fail("'{}' has an invalid header: 'macrocell_encoding' without 'macrocell_dims'", path);
     }
     if (v2.residuals) {
       res_off = align(end);
@@ -305,8 +317,13 @@ ModelFile parse_vnr(const std::string& path, const std::string& buf) {
       m.params.resize(size_t(n_params));
       if (n_params) std::memcpy(m.params.data(), buf.data() + size_t(params_off), size_t(2 * n_params));
     }
-    m.macrocell_ranges.resize(size_t(2 * mc_count));
-    if (mc_count) std::memcpy(m.macrocell_ranges.data(), buf.data() + size_t(mc_off), size_t(8 * mc_count));
+    if (v2.compact_macrocells) {
+      m.macrocell_ranges = decode_macrocells_u8(path, buf.data() + size_t(mc_off), v2.macrocell_bytes, mc_count);
+      m.compact_macrocells = true;
+    } else {
+      m.macrocell_ranges.resize(size_t(2 * mc_count));
+      if (mc_count) std::memcpy(m.macrocell_ranges.data(), buf.data() + size_t(mc_off), size_t(8 * mc_count));
+    }
     if (v2.residuals) {
       m.residuals_meta = h["residuals"];
       m.residuals_bytes.assign(buf.begin() + ptrdiff_t(res_off), buf.begin() + ptrdiff_t(res_off + v2.residual_bytes));
@@ -458,6 +475,8 @@ static std::string encode_vnr(const std::string& path, const ModelFile& m) {
     fail("cannot write '{}': residual bytes given without their description", path);
   const bool compressed = !m.param_segments.empty();
   const bool residuals = !m.residuals_meta.is_null();
+  const bool compact_mc = m.compact_macrocells && has_macrocells(m) && macrocells_fit_u8(m.macrocell_ranges);
+  const std::string mc_block = compact_mc ? encode_macrocells_u8(m.macrocell_ranges) : std::string();
   Json h = Json::object();
   h["config"] = m.config;
   h["dims"] = int3_array(m.dims);
@@ -475,6 +494,7 @@ static std::string encode_vnr(const std::string& path, const ModelFile& m) {
     params_block.assign(reinterpret_cast<const char*>(m.params.data()), m.params.size() * 2);
   }
   if (has_macrocells(m)) h["macrocell_dims"] = int3_array(m.macrocell_dims);
+  if (compact_mc) h["macrocell_encoding"] = {{"codec", kMacrocellCodec}, {"bytes", uint64_t(mc_block.size())}};
   if (residuals) {
     h["residuals"] = m.residuals_meta;
     h["residuals_bytes"] = uint64_t(m.residuals_bytes.size());
@@ -488,7 +508,7 @@ static std::string encode_vnr(const std::string& path, const ModelFile& m) {
 
   // A model that needs nothing of version 2 stays version 1, byte for byte as older vnr wrote it.
   std::string out(kMagic, sizeof kMagic);
-  append_le<uint32_t>(out, compressed || residuals ? kFormatVersion : kPlainFormatVersion);
+  append_le<uint32_t>(out, compressed || residuals || compact_mc ? kFormatVersion : kPlainFormatVersion);
   append_le<uint32_t>(out, 0);  // reserved flags
   append_le<uint64_t>(out, header.size());
   auto pad = [&out] { out.resize(size_t(next_multiple(out.size(), kAlign)), '\0'); };
@@ -497,7 +517,8 @@ static std::string encode_vnr(const std::string& path, const ModelFile& m) {
   out += params_block;
   if (has_macrocells(m)) {
     pad();
-    out.append(reinterpret_cast<const char*>(m.macrocell_ranges.data()), m.macrocell_ranges.size() * 4);
+    if (compact_mc) out += mc_block;
+    else out.append(reinterpret_cast<const char*>(m.macrocell_ranges.data()), m.macrocell_ranges.size() * 4);
   }
   if (residuals) {
     pad();

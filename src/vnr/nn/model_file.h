@@ -28,6 +28,9 @@ struct ModelFile {
   // with these per-segment steps and zstd-coded (format version 2); read_vnr fills them back and
   // dequantizes into `params`. Call quantize_params first so that `params` equal what a read returns.
   std::vector<ParamSegment> param_segments;
+  // Store the macro-cell ranges in 8 bits, widened outwards (param_codec.h; format version 2). Set by
+  // read_vnr when the file stores them so. Ranges outside [0, 1] are then stored as float32 anyway.
+  bool compact_macrocells = false;
 };
 
 // Native .vnr format (docs/MODEL_FORMAT.md): magic "VNRMODEL", format version, a JSON header (config,

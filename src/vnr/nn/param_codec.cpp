@@ -175,4 +175,52 @@ std::vector<uint16_t> decode_params(const std::string& path, const char* block, 
   return params;
 }
 
+bool macrocells_fit_u8(const std::vector<float>& r) {
+  for (size_t i = 0; i + 1 < r.size(); i += 2) {
+    if (!std::isfinite(r[i]) || !std::isfinite(r[i + 1])) return false;
+    if (r[i] <= r[i + 1] && (r[i] < 0 || r[i + 1] > 1)) return false;
+  }
+  return true;
+}
+
+std::string encode_macrocells_u8(const std::vector<float>& r) {
+  const size_t cells = r.size() / 2;
+  std::vector<uint8_t> planes(2 * cells);
+  for (size_t c = 0; c < cells; ++c) {
+    const float lo = r[2 * c], hi = r[2 * c + 1];
+    if (lo > hi) {  // empty: decodes to (1, 0), still empty
+      planes[c] = 255;
+      planes[cells + c] = 0;
+      continue;
+    }
+    // The largest code whose decoded float is <= lo, the smallest whose decoded float is >= hi: exact,
+    // so that decoded ranges encode to themselves again.
+    int a = int(std::clamp(std::floor(double(lo) * 255.0), 0.0, 255.0));
+    if (a < 255 && float(a + 1) / 255.0f <= lo) ++a;
+    int b = int(std::clamp(std::ceil(double(hi) * 255.0), 0.0, 255.0));
+    if (b > 0 && float(b - 1) / 255.0f >= hi) --b;
+    planes[c] = uint8_t(a);
+    planes[cells + c] = uint8_t(b);
+  }
+  std::string frame(ZSTD_compressBound(planes.size()), '\0');
+  const size_t n = ZSTD_compress(frame.data(), frame.size(), planes.data(), planes.size(), 19);
+  if (ZSTD_isError(n)) fail("zstd compression failed: {}", ZSTD_getErrorName(n));
+  frame.resize(n);
+  return frame;
+}
+
+std::vector<float> decode_macrocells_u8(const std::string& path, const char* block, uint64_t bytes, uint64_t cells) {
+  std::vector<uint8_t> planes(static_cast<size_t>(2 * cells));
+  if (ZSTD_getFrameContentSize(block, bytes) != planes.size())
+    fail("'{}' is corrupted (compressed macro-cells have the wrong size)", path);
+  const size_t got = ZSTD_decompress(planes.data(), planes.size(), block, bytes);
+  if (ZSTD_isError(got) || got != planes.size()) fail("'{}' is corrupted (compressed macro-cells)", path);
+  std::vector<float> r(static_cast<size_t>(2 * cells));
+  for (uint64_t c = 0; c < cells; ++c) {
+    r[2 * c] = float(planes[c]) / 255.0f;
+    r[2 * c + 1] = float(planes[cells + c]) / 255.0f;
+  }
+  return r;
+}
+
 }  // namespace vnr

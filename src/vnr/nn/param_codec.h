@@ -40,4 +40,12 @@ std::string encode_params(const std::vector<uint16_t>& params, const std::vector
 std::vector<uint16_t> decode_params(const std::string& path, const char* block, uint64_t block_bytes,
                                     const Json& meta, uint64_t n_params, std::vector<ParamSegment>& segments);
 
+// Macro-cell ranges in 8 bits (format 2, compact models): each min rounded down and each max rounded
+// up to a multiple of 1/255, so a decoded range always contains the stored one and empty-space
+// skipping stays conservative; empty cells (min > max) stay empty. zstd-coded, min and max planes.
+// Only for ranges inside [0, 1] (and empty ones): macrocells_fit_u8 says whether they are.
+bool macrocells_fit_u8(const std::vector<float>& ranges);
+std::string encode_macrocells_u8(const std::vector<float>& ranges);
+std::vector<float> decode_macrocells_u8(const std::string& path, const char* block, uint64_t bytes, uint64_t cells);
+
 }  // namespace vnr

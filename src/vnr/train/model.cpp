@@ -32,6 +32,7 @@ void save_model(const std::string& path, const Model& m) {
   f.params = m.net->params_half();
   f.training = m.training;
   f.param_segments = m.param_segments;  // compressed storage (format 2) when set
+  f.compact_macrocells = !m.param_segments.empty();
   if (m.macrocells) {
     f.macrocell_dims = m.macrocells->cells;
     f.macrocell_ranges = m.macrocells->to_pairs();

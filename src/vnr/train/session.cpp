@@ -91,6 +91,7 @@ int64_t TrainingSession::run(int64_t steps, double seconds) {
 // The loop: step (GPU: a group) -> side work -> divergence check -> callbacks -> checkpoint -> limits.
 void TrainingSession::run_steps(int64_t steps, double seconds, int64_t* done) {
   run_t0_ = Clock::now();
+  params_frozen_ = false;
   double& excluded = run_excluded_;  // side work and pauses of this run
   excluded = 0;
   run_seconds_ = 0;
@@ -107,7 +108,9 @@ void TrainingSession::run_steps(int64_t steps, double seconds, int64_t* done) {
     const auto t_step = Clock::now();
     int64_t k = async ? std::min(group, steps - *done) : 1;
     if (every > 0) k = std::min(k, every - steps_ % every);
+    if (before_step_) before_step_();
     trainer_->run(k);
+    if (after_step_) after_step_();
     loss_ = trainer_->last_loss();  // synchronises
     const double per = seconds_since(t_step) / double(k);
     for (int64_t i = 0; i < k; ++i) step_seconds_.push_back(per);
@@ -149,7 +152,7 @@ void TrainingSession::record() {
                       {"sampler", data_ ? data_->kind : opts_.sampler_name},
                       {"device", device_name(trainer_->device())},
                       {"precision", precision ? Json(precision_name(*precision)) : Json(nullptr)}};
-  trainer_->download();  // the model file is written from net.params
+  if (!params_frozen_) trainer_->download();  // the model file is written from net.params
   if (trainer_->has_online_ranges()) model_->macrocells = trainer_->online_ranges();
 }
 
