@@ -169,6 +169,8 @@ TrainingResult TrainingSession::finish(bool with_ssim, int64_t eval_samples) {
   const TrainingData& data = *data_;
   Network& net = *model_->net;
   const Device dev = trainer_->device();
+  // A compact session that was only run(): quantize now (post-training), so the file meets the target.
+  if (opts_.compact.enabled() && model_->param_segments.empty()) compact_session(*this, opts_.compact, 0, 0);
   TrainingResult r;
   r.steps = steps_;
   r.seconds = train_seconds_;
@@ -206,6 +208,7 @@ TrainingResult TrainingSession::finish(bool with_ssim, int64_t eval_samples) {
   r.compression_ratio = double(data.source_bytes()) / double(r.model_bytes);
   r.samples_per_second = double(r.steps) * double(trainer_->batch()) / r.seconds;
   r.report = report_json(r, evaluation);
+  if (!compact_summary_.is_null()) r.report["compact"] = compact_summary_;
   return r;
 }
 
