@@ -123,3 +123,21 @@ TEST(RateControl, ImpossibleBudgetIsRefused) {
   const std::string msg = one_line_error_of([&] { train_compact(*session, 10, 0, session->options().compact); });
   EXPECT_NE(msg.find("below the smallest file this model can make"), std::string::npos) << msg;
 }
+
+// A front end that only run()s a compact session (the Python module, a viewer) still gets a file that
+// meets the target: finish() quantizes after training.
+TEST(RateControl, FinishQuantizesARunOnlySession) {
+  const std::string d = temp_dir("rate_finish");
+  const Int3 dims{40, 32, 24};
+  TrainingSetup s = setup_for(d, write_volume(d, dims, "float32"), dims, "float32");
+  s.target_ratio = 16;
+  auto session = open_training_session(s);
+  session->run(20);
+  const TrainingResult r = session->finish(false, 0);
+  const uint64_t target = session->options().compact.target_bytes;
+  EXPECT_LE(r.model_bytes, target);
+  EXPECT_GE(double(r.model_bytes), 0.95 * double(target));
+  ASSERT_TRUE(r.report.contains("compact"));
+  EXPECT_EQ(r.report["compact"]["qat_steps"].get<int64_t>(), 0);
+  EXPECT_EQ(load_model(s.session.output).net->params_half(), session->network().params_half());
+}

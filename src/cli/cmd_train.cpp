@@ -132,12 +132,11 @@ void run_train(const TrainArgs& a) {
     if (data.out_of_core) extra += fmt::format(" io wait {:.1f}s", data.out_of_core->io_wait_seconds());
     bar.update(by_time ? p.elapsed : double(p.step), extra);
   });
-  Json compact;
   {
     StopSignalGuard guard(*session);
     try {
       if (session->options().compact.enabled())
-        compact = train_compact(*session, by_time ? -1 : steps, a.seconds, session->options().compact, say);
+        train_compact(*session, by_time ? -1 : steps, a.seconds, session->options().compact, say);
       else
         session->run(steps, a.seconds);
     } catch (const std::exception&) {
@@ -150,8 +149,7 @@ void run_train(const TrainArgs& a) {
   if (session->stop_requested())
     std::fprintf(stderr, "interrupted after %lld steps: evaluating and saving the model (Ctrl-C again to abort)\n",
                  (long long)session->steps_done());
-  TrainingResult r = session->finish(!a.no_ssim, a.eval_samples);
-  if (!compact.is_null()) r.report["compact"] = compact;
+  const TrainingResult r = session->finish(!a.no_ssim, a.eval_samples);
   print_result(a, *session, r, preview.get(), preview_opts ? preview_opts->dir : std::string());
   write_report(a.report, r.report);
 }

@@ -210,17 +210,28 @@ double fit_bytes(const Model& model, const std::vector<float>& master, const Qua
   return hi;
 }
 
+bool can_train_quantized(TrainingSession& session) {
+  return session.trainer().device() == Device::Cpu && !session.trainer().asynchronous();
+}
+
 Json train_compact(TrainingSession& session, int64_t steps, double seconds, const CompactOptions& o,
                    const std::function<void(const std::string&)>& message) {
   if (!session.data() || !session.data()->sampler) fail("compact storage needs a session opened on training data");
-  Network& net = session.network();
-  Model& model = session.model();
-  const bool qat = session.trainer().device() == Device::Cpu && !session.trainer().asynchronous() && o.qat_fraction > 0;
-  const double f = qat ? std::clamp(o.qat_fraction, 0.0, 1.0) : 0.0;
+  const double f = can_train_quantized(session) ? std::clamp(o.qat_fraction, 0.0, 1.0) : 0.0;
   const bool by_time = steps < 0 && seconds > 0;
   const int64_t steps1 = by_time ? -1 : int64_t(std::llround(double(steps) * (1 - f)));
   session.run(steps1, by_time ? seconds * (1 - f) : 0);
+  if (f > 0 && !session.stop_requested())
+    return compact_session(session, o, by_time ? -1 : steps - steps1, by_time ? seconds * f : 0, message);
+  return compact_session(session, o, 0, 0, message);
+}
 
+Json compact_session(TrainingSession& session, const CompactOptions& o, int64_t qat_steps_planned,
+                     double qat_seconds, const std::function<void(const std::string&)>& message) {
+  if (!session.data() || !session.data()->sampler) fail("compact storage needs a session opened on training data");
+  Network& net = session.network();
+  Model& model = session.model();
+  const bool qat = (qat_steps_planned != 0 || qat_seconds > 0) && can_train_quantized(session);
   const TrainingData& data = *session.data();
   const uint64_t probe_seed = session.trainer().seed() ^ 0x9e3779b9u;
   const ProbeSet probe = data.vol ? draw_voxel_probe(*data.vol, o.probe_samples, probe_seed)
@@ -247,7 +258,7 @@ Json train_compact(TrainingSession& session, int64_t steps, double seconds, cons
   double g = choose(master, plan, &bytes);
 
   int64_t qat_steps = 0;
-  if (qat && !session.stop_requested()) {
+  if (qat) {
     // Straight-through: each step sees the quantized parameters; its update lands on the master copy.
     std::vector<float> shown;
     const std::vector<ParamSegment> segs = plan.at(g);
@@ -261,7 +272,7 @@ Json train_compact(TrainingSession& session, int64_t steps, double seconds, cons
         });
     const int64_t before = session.steps_done();
     try {
-      session.run(by_time ? -1 : steps - steps1, by_time ? seconds * f : 0);
+      session.run(qat_steps_planned, qat_seconds);
     } catch (...) {
       session.set_step_hooks({}, {});
       throw;
@@ -279,18 +290,19 @@ Json train_compact(TrainingSession& session, int64_t steps, double seconds, cons
   if (message)
     message(fmt::format("compact storage: {} bytes planned, held-back PSNR {:.2f} dB before quantization, {:.2f} dB "
                         "after ({} quantization-aware steps{})",
-                        bytes, psnr_before, psnr_after, qat_steps, qat ? "" : "; not on this trainer"));
+                        bytes, psnr_before, psnr_after, qat_steps,
+                        can_train_quantized(session) ? "" : "; not on this trainer"));
   if (o.target_psnr > 0 && psnr_after < o.target_psnr && message)
     message(fmt::format("warning: --target-psnr {}: this model reaches only {:.2f} dB on held-back samples; train "
                         "longer or with a larger model (a lower --target-ratio)",
                         o.target_psnr, psnr_after));
   Json steps_json = Json::array();
   for (const auto& s : segs) steps_json.push_back(s.step);
-  return Json{{"planned_bytes", bytes},
-              {"heldback_psnr_unquantized", psnr_before},
-              {"heldback_psnr", psnr_after},
-              {"qat_steps", qat_steps},
-              {"steps", steps_json}};
+  return session.note_compact(Json{{"planned_bytes", bytes},
+                                   {"heldback_psnr_unquantized", psnr_before},
+                                   {"heldback_psnr", psnr_after},
+                                   {"qat_steps", qat_steps},
+                                   {"steps", steps_json}});
 }
 
 }  // namespace vnr

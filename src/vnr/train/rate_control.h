@@ -60,5 +60,11 @@ double fit_bytes(const Model& model, const std::vector<float>& master, const Qua
 // session.finish() saves and evaluates the compact model. Returns a summary for the report.
 Json train_compact(TrainingSession& session, int64_t steps, double seconds, const CompactOptions& options,
                    const std::function<void(const std::string&)>& message = {});
+// The second half of train_compact: quantizes the session's model for `options`, first training
+// qat_steps steps (-1: no limit) or qat_seconds quantization-aware when both are not 0 and the
+// trainer allows it. TrainingSession::finish() calls it (no QAT) for a compact session that was only
+// run(), so that every front end writes a file that meets the target.
+Json compact_session(TrainingSession& session, const CompactOptions& options, int64_t qat_steps, double qat_seconds,
+                     const std::function<void(const std::string&)>& message = {});
 
 }  // namespace vnr

@@ -197,6 +197,8 @@ TrainingResult TrainingSession::finish(bool with_ssim, int64_t eval_samples) {
   const TrainingData& data = *data_;
   Network& net = *model_->net;
   const Device dev = trainer_->device();
+  // A compact session that was only run(): quantize now (post-training), so the file meets the target.
+  if (opts_.compact.enabled() && model_->param_segments.empty()) compact_session(*this, opts_.compact, 0, 0);
   TrainingResult r;
   r.steps = steps_;
   r.seconds = train_seconds_;
@@ -241,6 +243,7 @@ TrainingResult TrainingSession::finish(bool with_ssim, int64_t eval_samples) {
     r.report["error_bound"]["holds"] = r.max_abs_error_original <= bound["max_error"].get<double>();
     r.report["error_bound"]["network_bytes"] = r.model_bytes - bound["residual_bytes"].get<uint64_t>();
   }
+  if (!compact_summary_.is_null()) r.report["compact"] = compact_summary_;
   return r;
 }
 

@@ -119,6 +119,8 @@ public:
   // Declares the host parameters final (compact storage quantized them): record() and finish() no
   // longer download the trainer's copy over them, until the next run().
   void freeze_parameters() { params_frozen_ = true; }
+  // The compact-storage summary (rate_control.h) that finish() puts into the report as "compact".
+  const Json& note_compact(Json summary) { return compact_summary_ = std::move(summary); }
   void save_checkpoint();  // record() + "checkpoint": true, written to options().output
   // The end of `vnr train`: records, evaluates (exactly over a volume in memory, else from
   // `eval_samples` random voxels, or not at all with 0), saves the model to options().output and
@@ -140,6 +142,7 @@ private:
   std::vector<StepCallback> step_callbacks_, side_work_;
   std::function<void()> before_step_, after_step_;
   bool params_frozen_ = false;
+  Json compact_summary_;
   std::atomic<bool> stop_{false}, paused_{false};
   std::mutex pause_mutex_;
   std::condition_variable pause_cv_;
