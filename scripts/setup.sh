@@ -6,9 +6,9 @@
 # the tests' files); the ParaView plugin runs in Debian's ParaView (pvpython, under Xvfb in tests).
 set -eu
 PKGS="build-essential cmake ninja-build ccache pkg-config git \
-  nlohmann-json3-dev libcli11-dev libfmt-dev libpng-dev zlib1g-dev libhwy-dev \
+  nlohmann-json3-dev libcli11-dev libfmt-dev libpng-dev zlib1g-dev libhwy-dev libzstd-dev \
   libgtest-dev libgmock-dev libbenchmark-dev \
-  libboost-dev libturbojpeg0-dev chromium chromium-driver python3-selenium \
+  libboost-dev libturbojpeg0-dev libzfp-dev chromium chromium-driver python3-selenium \
   pybind11-dev python3-dev python3-numpy python3-pytest libhdf5-dev libnetcdf-dev python3-h5py \
   python3-netcdf4 python3-matplotlib paraview python3-paraview xvfb xauth"
 missing=""

@@ -46,6 +46,8 @@ public:
   void points(const float* xyz, int64_t n, float* out, ValueUnits units = ValueUnits::Normalised);
   // z-slices [z0, z1) of a grid of dims voxels, sampled at voxel centres ((i + 0.5) / n per axis), x
   // fastest -> out[0 .. dims.x * dims.y * (z1 - z0)): the same z-range of decode(dims), bit for bit.
+  // A model with error-bound residuals decodes at its own dims on the CPU reference plus the residuals,
+  // whatever the device (train/decoder.h), so every voxel is within the bound.
   void slab(Int3 dims, int64_t z0, int64_t z1, float* out, ValueUnits units = ValueUnits::Normalised);
   // The whole grid at dims (zero dims: the model's own) as a Volume with the model's range and dtype.
   Volume decode(Int3 dims = {});
@@ -126,6 +128,10 @@ struct FileEvaluation {
   uint64_t model_bytes = 0, volume_bytes = 0;
   double compression_ratio = 0;    // volume_bytes / model_bytes
   std::vector<std::string> notes;  // e.g. a resolution other than the model's, streaming and why
+  // Error-bound models (Model::residuals): the guaranteed max error in original units, and whether every
+  // voxel compared (Sampled: every sample) is within it.
+  std::optional<double> error_bound_original;
+  bool bound_holds = true;
 };
 FileEvaluation evaluate_model_file(const Model& model, const std::string& volume_path, const FileEvalOptions& options,
                                    const FileEvalProgress& progress = {});

@@ -74,6 +74,7 @@ void add_bench(CLI::App& app);
 void add_render(CLI::App& app);
 void add_view(CLI::App& app);  // only with VNR_VIEW (cmd_view.cpp)
 void add_bench_render(CLI::App& bench);
+void add_bench_rd(CLI::App& bench);  // cmd_bench_rd.cpp
 
 // Rendering options shared by `vnr render` and `vnr bench render`.
 struct RenderArgs {

@@ -153,6 +153,7 @@ void add_bench(CLI::App& app) {
     c->callback([a]() { run_bench(*a); });
   }
   add_bench_render(*bench);
+  add_bench_rd(*bench);
 }
 
 }  // namespace vnr::cli

@@ -47,6 +47,11 @@ void print_evaluation(const FileEvaluation& ev, Json& report) {
                  {"value_range", {ev.value_range.lo, ev.value_range.hi}},
                  {"value_range_source", ev.value_range_source}});
   if (ev.psnr_ci95) report["mse_stderr"] = ev.mse_stderr;
+  if (ev.error_bound_original) {
+    std::printf("error bound %.4g (data units): %s\n", *ev.error_bound_original,
+                ev.bound_holds ? (ev.psnr_ci95 ? "holds at every sampled voxel" : "holds at every voxel") : "VIOLATED");
+    report["error_bound"] = {{"max_error", *ev.error_bound_original}, {"holds", ev.bound_holds}};
+  }
 }
 
 // Progress bars on stderr, one per stage as it starts, and the notes as they arise.
@@ -266,6 +271,13 @@ void add_info(CLI::App& app) {
     } else {
       j["macrocells"] = nullptr;
     }
+    if (m.residuals) {  // only then: the keys of other models stay as they were
+      const Residuals& r = *m.residuals;
+      j["error_bound"] = {{"max_error", r.bound * (m.hi - m.lo)},
+                          {"residual_nonzero", r.nonzero()},
+                          {"residual_bytes", r.encoded ? r.encoded->bytes.size() : 0},
+                          {"codec", r.encoded ? r.encoded->meta.value("codec", "") : ""}};
+    }
     if (a->json) {
       std::printf("%s\n", j.dump(2).c_str());
       return;
@@ -292,6 +304,11 @@ void add_info(CLI::App& app) {
                   m.macrocells->cell_size, (long long)occupied);
     else
       std::printf("macro-cells: none stored (vnr render uses --macrocells grid with --volume, or off)\n");
+    if (m.residuals)
+      std::printf("error bound: %.4g (data units) at every voxel of the model's dims; residuals %s, %.2f%% non-zero\n",
+                  j["error_bound"]["max_error"].get<double>(),
+                  human_bytes(j["error_bound"]["residual_bytes"].get<double>()).c_str(),
+                  100.0 * double(m.residuals->nonzero()) / double(m.dims.count()));
     if (m.training.is_object()) std::printf("training: %s\n", m.training.dump().c_str());
   });
 }

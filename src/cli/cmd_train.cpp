@@ -45,6 +45,9 @@ TrainingSetup setup_of(const TrainArgs& a, bool preview) {
   s.load = a.vol.load();
   s.config = a.config;
   s.target_ratio = a.target_ratio;
+  s.target_psnr = a.target_psnr;
+  s.bits_per_param = a.bits_per_param;
+  s.qat_fraction = a.qat_fraction;
   s.batch = a.batch;
   s.seed = a.seed;
   s.device = a.device;
@@ -61,7 +64,19 @@ TrainingSetup setup_of(const TrainArgs& a, bool preview) {
   s.data.show_progress = !a.quiet;
   s.session.output = a.output;
   s.session.checkpoint_every = a.checkpoint_every;
+  s.session.error_bound = {a.max_error, a.max_rel_error};
   return s;
+}
+
+// The error bound's line (--max-error/--max-rel-error): the guarantee and what the residuals cost.
+void print_error_bound(const Json& report) {
+  if (!report.contains("error_bound")) return;
+  const Json& b = report["error_bound"];
+  std::printf("error bound %.4g (data units) %s; residuals: %.2f%% of voxels non-zero, %s (%.3f bits/voxel), "
+              "network %s\n",
+              b["max_error"].get<double>(), b["holds"].get<bool>() ? "holds at every voxel" : "VIOLATED",
+              100 * b["residual_nonzero_fraction"].get<double>(), human_bytes(b["residual_bytes"].get<double>()).c_str(),
+              b["residual_bits_per_voxel"].get<double>(), human_bytes(b["network_bytes"].get<double>()).c_str());
 }
 
 void print_result(const TrainArgs& a, const TrainingSession& session, const TrainingResult& r,
@@ -78,12 +93,15 @@ void print_result(const TrainArgs& a, const TrainingSession& session, const Trai
   std::printf("model %s: %s, %llu parameters; volume %s; compression ratio %s\n", a.output.c_str(),
               human_bytes(double(r.model_bytes)).c_str(), (unsigned long long)r.report["n_params"].get<uint64_t>(),
               human_bytes(double(data.source_bytes())).c_str(), format_ratio(r.compression_ratio).c_str());
+  print_error_bound(r.report);
 }
 
 void run_train(const TrainArgs& a) {
   set_num_threads(a.threads);
   if (!a.timesteps.empty()) {
     if (a.preview.enabled()) fail("--preview-* options are not supported with --timesteps");
+    if (a.max_error > 0 || a.max_rel_error > 0) fail("--max-error/--max-rel-error are not supported with --timesteps yet");
+    if (a.target_psnr > 0) fail("--target-psnr is not supported with --timesteps yet");
     if (a.device == "cuda") fail("--timesteps trains on the CPU; --device cuda is not supported for time series yet");
     return run_train_series(a);
   }
@@ -117,7 +135,10 @@ void run_train(const TrainArgs& a) {
   {
     StopSignalGuard guard(*session);
     try {
-      session->run(steps, a.seconds);
+      if (session->options().compact.enabled())
+        train_compact(*session, by_time ? -1 : steps, a.seconds, session->options().compact, say);
+      else
+        session->run(steps, a.seconds);
     } catch (const std::exception&) {
       bar.finish();
       throw;
@@ -142,7 +163,21 @@ void add_train(CLI::App& app) {
       ->required();
   c->add_option("-o,--output", a->output, "model file (.vnr; .json/.bson writes instantvnr's BSON)")->required();
   c->add_option("--config", a->config, "preset (paper, small) or tiny-cuda-nn JSON config file")->capture_default_str();
-  c->add_option("--target-ratio", a->target_ratio, "size the hash table so the model is about 1/R of the volume");
+  c->add_option("--max-error", a->max_error,
+                 "guarantee |decoded - original| <= E (data units) at every voxel: quantised residuals of the "
+                 "network are stored in the model (docs/COMPRESSION.md)");
+  c->add_option("--max-rel-error", a->max_rel_error, "the same bound as a fraction of the value range, e.g. 1e-3");
+  c->add_option("--target-ratio", a->target_ratio,
+                 "write a compact (quantized, entropy-coded) model of volume bytes / R, within 5 %");
+  c->add_option("--target-psnr", a->target_psnr,
+                 "quantize as coarsely as keeps this PSNR (dB, estimated on held-back samples); with "
+                 "--target-ratio the file is at most that size");
+  c->add_option("--bits-per-param", a->bits_per_param,
+                 "--target-ratio: size the hash grid for this many bits per parameter after coding")
+      ->capture_default_str();
+  c->add_option("--qat-fraction", a->qat_fraction,
+                 "compact models: the last part of the steps trained on quantized parameters (CPU trainer)")
+      ->capture_default_str();
   c->add_option("--steps", a->steps, "training steps (default 1000, or unlimited with --seconds)");
   c->add_option("--seconds", a->seconds, "stop after this many seconds of training");
   c->add_option("--batch", a->batch, "samples per step (multiple of 256)")->capture_default_str();

@@ -53,9 +53,23 @@ ValueRange file_evaluation_range(const FileEvalPlan& plan, const Model& model, b
 
 namespace {
 
+const Residuals* residuals_of(const Model& m) { return m.residuals ? &*m.residuals : nullptr; }
+
 void note(FileEvaluation& r, const FileEvalProgress& progress, std::string text) {
   if (progress.note) progress.note(text);
   r.notes.push_back(std::move(text));
+}
+
+// The bound an error-bound model guarantees at its own dims, compared with the largest error found.
+void check_bound(FileEvaluation& r, const Model& model, const FileEvalProgress& progress) {
+  if (!model.residuals) return;
+  r.error_bound_original = model.residuals->bound * (model.hi - model.lo);
+  if (!(r.plan.desc.dims == model.dims)) {
+    note(r, progress, "the error bound holds at the model's own dims only: not checked at other dims");
+    r.error_bound_original.reset();
+    return;
+  }
+  r.bound_holds = r.max_abs_error_original <= *r.error_bound_original;
 }
 
 void take_whole(FileEvaluation& r, const EvalResult& ev, bool with_ssim) {
@@ -90,7 +104,8 @@ void evaluate_unheld(FileEvaluation& r, const Model& model, const FileEvalOption
   if (r.value_range_source == "scan" && progress.finished) progress.finished("value range");
   const double lo = r.value_range.lo, hi = r.value_range.hi;
   if (plan.method == EvalMethod::Sampled) {
-    take_sampled(r, evaluate_sampled(*model.net, plan.desc, lo, hi, o.samples, o.seed, o.open.load, o.device));
+    take_sampled(r, evaluate_sampled(*model.net, plan.desc, lo, hi, o.samples, o.seed, o.open.load, o.device,
+                                     residuals_of(model)));
     return;
   }
   note(r, progress,
@@ -102,7 +117,7 @@ void evaluate_unheld(FileEvaluation& r, const Model& model, const FileEvalOption
     if (progress.update) progress.update("eval", f);
   };
   const EvalResult ev = evaluate_streamed(*model.net, plan.desc, lo, hi, o.open.load, o.with_ssim, eval_progress,
-                                          plan.slab_slices * dims.x * dims.y, o.device);
+                                          plan.slab_slices * dims.x * dims.y, o.device, residuals_of(model));
   if (progress.finished) progress.finished("eval");
   take_whole(r, ev, o.with_ssim);
 }
@@ -128,12 +143,14 @@ FileEvaluation evaluate_model_file(const Model& model, const std::string& volume
   r.plan = plan_file_evaluation(desc, o.samples, o.with_ssim, o.memory_budget);
   if (r.plan.method != EvalMethod::Full) {
     evaluate_unheld(r, model, o, progress);
+    check_bound(r, model, progress);
     return r;
   }
   const Volume vol = load_volume(desc, o.open.load);
   r.value_range = {vol.lo, vol.hi};
   r.value_range_source = "volume";
   take_whole(r, evaluate_model(model, vol, o.with_ssim, o.device), o.with_ssim);
+  check_bound(r, model, progress);
   return r;
 }
 

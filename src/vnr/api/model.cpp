@@ -41,7 +41,9 @@ void ModelQuery::points(const float* xyz, int64_t n, float* out, ValueUnits unit
 void ModelQuery::slab(Int3 dims, int64_t z0, int64_t z1, float* out, ValueUnits units) {
   check_grid(dims, z0, z1);
   if (z1 == z0) return;
-  if (gpu_) gpu_->decode_slices(dims, z0, z1, out);  // the Decoder's two paths
+  if (model_.residuals && model_.residuals->dims == dims)  // the bound holds on every device: CPU reference
+    Decoder(*model_.net, Device::Cpu, &*model_.residuals).slices(dims, z0, z1, out);
+  else if (gpu_) gpu_->decode_slices(dims, z0, z1, out);  // the Decoder's two paths
   else decode_slices(*model_.net, dims, z0, z1, out);
   convert_units(model_, units, out, dims.x * dims.y * (z1 - z0));
 }
@@ -59,7 +61,7 @@ Volume ModelQuery::decode(Int3 dims) {
 }
 
 EvalResult evaluate_model(const Model& model, const Volume& volume, bool with_ssim, Device device) {
-  return evaluate(*model.net, volume, with_ssim, device);
+  return evaluate(*model.net, volume, with_ssim, device, model.residuals ? &*model.residuals : nullptr);
 }
 
 }  // namespace vnr

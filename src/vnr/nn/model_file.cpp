@@ -7,6 +7,7 @@
 #include "vnr/core/error.h"
 #include "vnr/core/fileio.h"
 #include "vnr/core/half.h"
+#include "vnr/nn/param_codec.h"
 
 // Both formats store little-endian numbers and this file copies them with memcpy.
 static_assert(std::endian::native == std::endian::little, "model_file.cpp assumes a little-endian host");
@@ -17,7 +18,10 @@ namespace {
 // ---- .vnr layout constants (docs/MODEL_FORMAT.md) ----------------------------------------------
 constexpr char kMagic[8] = {'V', 'N', 'R', 'M', 'O', 'D', 'E', 'L'};
 constexpr char kEndMagic[8] = {'V', 'N', 'R', 'E', 'N', 'D', '\0', '\0'};
-constexpr uint32_t kFormatVersion = 1;
+constexpr uint32_t kFormatVersion = 2;     // the newest this vnr reads
+constexpr uint32_t kPlainFormatVersion = 1;  // written when a model needs nothing of version 2
+constexpr const char* kParamsCodec = "quant-zstd";
+constexpr const char* kMacrocellCodec = "u8-zstd";
 constexpr uint64_t kPreambleBytes = 24;  // magic, version, flags, header length
 constexpr uint64_t kTrailerBytes = 12;   // CRC-32 + end magic
 constexpr uint64_t kAlign = 64;          // every data block starts on a 64-byte boundary
@@ -131,28 +135,12 @@ Int3 parse_int3_object(const Json& j, const std::string& path, const char* key) 
   return d;
 }
 
-// Writes through an AtomicFile while keeping a running CRC-32 of everything written.
-struct CrcWriter {
-  AtomicFile& f;
-  uint32_t crc = 0;
-  uint64_t offset = 0;
-  void write(const void* p, size_t n) {
-    f.write(p, n);
-    crc = crc32_of(p, n, crc);
-    offset += n;
-  }
-  void pad_to(uint64_t align) {
-    static const char zeros[kAlign] = {};
-    uint64_t target = next_multiple(offset, align);
-    write(zeros, size_t(target - offset));
-  }
-};
-
 // ---- .vnr reading ---------------------------------------------------------------------------
 
 // The preamble's checks, in order: magic, size, version, header size; then the end magic and, for a
 // complete file, the CRC. Returns the header's byte count; *complete says whether the end magic is there.
-uint64_t check_vnr_preamble(const std::string& path, const std::string& buf, bool* complete_out) {
+uint64_t check_vnr_preamble(const std::string& path, const std::string& buf, bool* complete_out,
+                            uint32_t* version_out) {
   const uint64_t size = buf.size();
   const uint64_t min_size = kPreambleBytes + kTrailerBytes;
   // A short file that starts like the magic is a truncated model, anything else is not a model.
@@ -184,6 +172,7 @@ uint64_t check_vnr_preamble(const std::string& path, const std::string& buf, boo
       fail("'{}' is corrupted (checksum mismatch)", path);
   }
   *complete_out = complete;
+  *version_out = version;
   return header_bytes;
 }
 
@@ -230,18 +219,60 @@ void read_vnr_descriptors(const std::string& path, const Json& h, ModelFile& m) 
   if (tr != h.end()) m.training = *tr;
 }
 
+// Version-2 header keys (docs/MODEL_FORMAT.md 1.5): the compressed parameter block and the residuals.
+struct V2Blocks {
+  bool compressed = false;
+  uint64_t params_bytes = 0;  // of the compressed block
+  Json segments;
+  bool residuals = false;
+  uint64_t residual_bytes = 0;
+  bool compact_macrocells = false;
+  uint64_t macrocell_bytes = 0;  // of the compressed macro-cell block
+};
+
+uint64_t header_count(const Json& obj, const char* key, const std::string& path, const char* where) {
+  auto it = obj.find(key);
+  if (it == obj.end() || !it->is_number_integer() || it->get<int64_t>() < 0)
+    fail("'{}' has an invalid header: '{}' must be a non-negative integer", path, where);
+  return it->get<uint64_t>();
+}
+
+V2Blocks parse_v2_keys(const std::string& path, const Json& h, uint32_t version) {
+  V2Blocks v;
+  if (version < 2) return v;  // version-1 readers ignored unknown keys: so does this one for v1 files
+  if (auto pe = h.find("params_encoding"); pe != h.end() && !pe->is_null()) {
+    if (!pe->is_object() || !pe->contains("codec") || (*pe)["codec"] != kParamsCodec)
+      fail("'{}' has an unsupported params_encoding {} (this vnr reads codec \"{}\")", path, one_line(pe->dump()),
+           kParamsCodec);
+    v.compressed = true;
+    v.params_bytes = header_count(*pe, "bytes", path, "params_encoding.bytes");
+    v.segments = pe->contains("segments") ? (*pe)["segments"] : Json();
+  }
+  if (auto me = h.find("macrocell_encoding"); me != h.end() && !me->is_null()) {
+    if (!me->is_object() || !me->contains("codec") || (*me)["codec"] != kMacrocellCodec)
+      fail("'{}' has an unsupported macrocell_encoding {} (this vnr reads codec \"{}\")", path,
+           one_line(me->dump()), kMacrocellCodec);
+    v.compact_macrocells = true;
+    v.macrocell_bytes = header_count(*me, "bytes", path, "macrocell_encoding.bytes");
+  }
+  if (auto r = h.find("residuals"); r != h.end() && !r->is_null()) {
+    if (!r->is_object()) fail("'{}' has an invalid header: 'residuals' must be an object", path);
+    v.residuals = true;
+    v.residual_bytes = header_count(h, "residuals_bytes", path, "residuals_bytes");
+  }
+  return v;
+}
+
 ModelFile parse_vnr(const std::string& path, const std::string& buf) {
   const uint64_t size = buf.size();
   bool complete = false;
-  const uint64_t header_bytes = check_vnr_preamble(path, buf, &complete);
+  uint32_t version = 0;
+  const uint64_t header_bytes = check_vnr_preamble(path, buf, &complete, &version);
   const Json h = parse_vnr_header(path, buf, header_bytes, complete);
   ModelFile m;
   uint64_t n_params = 0, mc_count = 0;
   try {
-    auto np = h.find("n_params");
-    if (np == h.end() || !np->is_number_integer() || np->get<int64_t>() < 0)
-      fail("'{}' has an invalid header: 'n_params' must be a non-negative integer", path);
-    n_params = np->get<uint64_t>();
+    n_params = header_count(h, "n_params", path, "n_params");
     auto pd = h.find("params_dtype");
     if (pd != h.end() && !(pd->is_string() && pd->get<std::string>() == "float16"))
       fail("'{}' has an unsupported params_dtype {} (this vnr reads \"float16\")", path, pd->dump());
@@ -250,16 +281,23 @@ ModelFile parse_vnr(const std::string& path, const std::string& buf) {
       m.macrocell_dims = parse_int3_array(*mcd, path, "macrocell_dims");
       if (!cell_count(m.macrocell_dims, mc_count)) fail("'{}' is corrupted (macro-cell dims overflow)", path);
     }
+    const V2Blocks v2 = parse_v2_keys(path, h, version);
 
     // 128-bit so that a damaged count cannot wrap around into a plausible size.
     using u128 = unsigned __int128;
     auto align = [](u128 v) { return (v + kAlign - 1) / kAlign * kAlign; };
     const u128 params_off = align(u128(kPreambleBytes) + header_bytes);
-    u128 end = params_off + u128(n_params) * 2;
-    u128 mc_off = 0;
+    u128 end = params_off + (v2.compressed ? u128(v2.params_bytes) : u128(n_params) * 2);
+    u128 mc_off = 0, res_off = 0;
     if (mc_count) {
       mc_off = align(end);
-      end = mc_off + u128(mc_count) * 8;
+      end = mc_off + (v2.compact_macrocells ? u128(v2.macrocell_bytes) : u128(mc_count) * 8);
+    } else if (v2.compact_macrocells) {
+      fail("'{}' has an invalid header: 'macrocell_encoding' without 'macrocell_dims'", path);
+    }
+    if (v2.residuals) {
+      res_off = align(end);
+      end = res_off + v2.residual_bytes;
     }
     const u128 expected = end + kTrailerBytes;
     if (expected != size) {
@@ -272,10 +310,24 @@ ModelFile parse_vnr(const std::string& path, const std::string& buf) {
     }
     if (!complete) fail("'{}' is corrupted (end marker missing)", path);
     read_vnr_descriptors(path, h, m);
-    m.params.resize(size_t(n_params));
-    if (n_params) std::memcpy(m.params.data(), buf.data() + size_t(params_off), size_t(2 * n_params));
-    m.macrocell_ranges.resize(size_t(2 * mc_count));
-    if (mc_count) std::memcpy(m.macrocell_ranges.data(), buf.data() + size_t(mc_off), size_t(8 * mc_count));
+    if (v2.compressed) {
+      m.params = decode_params(path, buf.data() + size_t(params_off), v2.params_bytes, v2.segments, n_params,
+                               m.param_segments);
+    } else {
+      m.params.resize(size_t(n_params));
+      if (n_params) std::memcpy(m.params.data(), buf.data() + size_t(params_off), size_t(2 * n_params));
+    }
+    if (v2.compact_macrocells) {
+      m.macrocell_ranges = decode_macrocells_u8(path, buf.data() + size_t(mc_off), v2.macrocell_bytes, mc_count);
+      m.compact_macrocells = true;
+    } else {
+      m.macrocell_ranges.resize(size_t(2 * mc_count));
+      if (mc_count) std::memcpy(m.macrocell_ranges.data(), buf.data() + size_t(mc_off), size_t(8 * mc_count));
+    }
+    if (v2.residuals) {
+      m.residuals_meta = h["residuals"];
+      m.residuals_bytes.assign(buf.begin() + ptrdiff_t(res_off), buf.begin() + ptrdiff_t(res_off + v2.residual_bytes));
+    }
   } catch (const Json::exception& e) {
     fail("'{}' has an invalid header ({})", path, one_line(e.what()));
   }
@@ -414,8 +466,17 @@ bool looks_like_vnr(const std::string& buf) {
 
 // ---- public API -----------------------------------------------------------------------------
 
-void write_vnr(const std::string& path, const ModelFile& m) {
+// The whole file in memory: write_vnr writes it atomically, vnr_file_bytes measures it.
+static std::string encode_vnr(const std::string& path, const ModelFile& m) {
   validate_for_write(path, m);
+  if (!m.residuals_meta.is_null() && !m.residuals_meta.is_object())
+    fail("cannot write '{}': the residuals description is not a JSON object", path);
+  if (m.residuals_meta.is_null() && !m.residuals_bytes.empty())
+    fail("cannot write '{}': residual bytes given without their description", path);
+  const bool compressed = !m.param_segments.empty();
+  const bool residuals = !m.residuals_meta.is_null();
+  const bool compact_mc = m.compact_macrocells && has_macrocells(m) && macrocells_fit_u8(m.macrocell_ranges);
+  const std::string mc_block = compact_mc ? encode_macrocells_u8(m.macrocell_ranges) : std::string();
   Json h = Json::object();
   h["config"] = m.config;
   h["dims"] = int3_array(m.dims);
@@ -423,7 +484,21 @@ void write_vnr(const std::string& path, const ModelFile& m) {
   h["value_range"] = Json::array({m.lo, m.hi});
   h["n_params"] = uint64_t(m.params.size());
   h["params_dtype"] = "float16";
+  std::string params_block;
+  if (compressed) {
+    Json segments;
+    params_block = encode_params(m.params, m.param_segments, segments);
+    h["params_encoding"] = {{"codec", kParamsCodec}, {"bytes", uint64_t(params_block.size())},
+                            {"segments", std::move(segments)}};
+  } else {
+    params_block.assign(reinterpret_cast<const char*>(m.params.data()), m.params.size() * 2);
+  }
   if (has_macrocells(m)) h["macrocell_dims"] = int3_array(m.macrocell_dims);
+  if (compact_mc) h["macrocell_encoding"] = {{"codec", kMacrocellCodec}, {"bytes", uint64_t(mc_block.size())}};
+  if (residuals) {
+    h["residuals"] = m.residuals_meta;
+    h["residuals_bytes"] = uint64_t(m.residuals_bytes.size());
+  }
   if (!m.training.is_null()) h["training"] = m.training;
 #ifdef VNR_VERSION
   h["vnr_version"] = VNR_VERSION;
@@ -431,27 +506,32 @@ void write_vnr(const std::string& path, const ModelFile& m) {
   // replace: a stray invalid UTF-8 byte in a user string must not make the model unsavable.
   const std::string header = h.dump(-1, ' ', false, Json::error_handler_t::replace);
 
-  std::string pre(kMagic, sizeof kMagic);
-  append_le<uint32_t>(pre, kFormatVersion);
-  append_le<uint32_t>(pre, 0);  // reserved flags
-  append_le<uint64_t>(pre, header.size());
-
-  AtomicFile f(path);
-  CrcWriter w{f};
-  w.write(pre.data(), pre.size());
-  w.write(header.data(), header.size());
-  w.pad_to(kAlign);
-  w.write(m.params.data(), m.params.size() * 2);
+  // A model that needs nothing of version 2 stays version 1, byte for byte as older vnr wrote it.
+  std::string out(kMagic, sizeof kMagic);
+  append_le<uint32_t>(out, compressed || residuals || compact_mc ? kFormatVersion : kPlainFormatVersion);
+  append_le<uint32_t>(out, 0);  // reserved flags
+  append_le<uint64_t>(out, header.size());
+  auto pad = [&out] { out.resize(size_t(next_multiple(out.size(), kAlign)), '\0'); };
+  out += header;
+  pad();
+  out += params_block;
   if (has_macrocells(m)) {
-    w.pad_to(kAlign);
-    w.write(m.macrocell_ranges.data(), m.macrocell_ranges.size() * 4);
+    pad();
+    if (compact_mc) out += mc_block;
+    else out.append(reinterpret_cast<const char*>(m.macrocell_ranges.data()), m.macrocell_ranges.size() * 4);
   }
-  std::string trailer;
-  append_le<uint32_t>(trailer, w.crc);
-  trailer.append(kEndMagic, sizeof kEndMagic);
-  f.write(trailer);
-  f.commit();
+  if (residuals) {
+    pad();
+    out.append(reinterpret_cast<const char*>(m.residuals_bytes.data()), m.residuals_bytes.size());
+  }
+  append_le<uint32_t>(out, crc32_of(out.data(), out.size()));
+  out.append(kEndMagic, sizeof kEndMagic);
+  return out;
 }
+
+void write_vnr(const std::string& path, const ModelFile& m) { write_file_atomic(path, encode_vnr(path, m)); }
+
+uint64_t vnr_file_bytes(const ModelFile& m) { return encode_vnr("<model>", m).size(); }
 
 ModelFile read_vnr(const std::string& path) { return parse_vnr(path, read_file(path)); }
 

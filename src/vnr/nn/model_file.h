@@ -5,6 +5,7 @@
 #include "vnr/core/json.h"
 #include "vnr/core/math.h"
 #include "vnr/core/dtype.h"
+#include "vnr/nn/param_codec.h"
 
 namespace vnr {
 
@@ -23,14 +24,24 @@ struct ModelFile {
   // described by residuals_meta; both empty when absent. A file with them is format version 2.
   Json residuals_meta;
   std::vector<uint8_t> residuals_bytes;
+  // Optional compact storage (param_codec.h): when non-empty, write_vnr stores `params` quantized
+  // with these per-segment steps and zstd-coded (format version 2); read_vnr fills them back and
+  // dequantizes into `params`. Call quantize_params first so that `params` equal what a read returns.
+  std::vector<ParamSegment> param_segments;
+  // Store the macro-cell ranges in 8 bits, widened outwards (param_codec.h; format version 2). Set by
+  // read_vnr when the file stores them so. Ranges outside [0, 1] are then stored as float32 anyway.
+  bool compact_macrocells = false;
 };
 
 // Native .vnr format (docs/MODEL_FORMAT.md): magic "VNRMODEL", format version, a JSON header (config,
 // dims, dtype, range, macro-cell dims, param count, training summary), then the fp16 parameter
-// block and the macro-cell block, then a CRC-32 of everything before it. Written atomically.
+// block (or, format 2, the compressed one), the macro-cell block and (format 2) the residual block,
+// then a CRC-32 of everything before it. Written atomically; format 1 unless version 2 is needed.
 // Loading a truncated, corrupted or newer-version file is a clear error.
 void write_vnr(const std::string& path, const ModelFile& m);
 ModelFile read_vnr(const std::string& path);
+// The exact size write_vnr would give the file (encodes it in memory; used by rate control).
+uint64_t vnr_file_bytes(const ModelFile& m);
 
 // instantvnr's "params.json" (BSON, docs/semantics.md A.5 and docs/MODEL_FORMAT.md section 2).
 // The BSON file does not carry dtype/range or the optimizer: read_instantvnr leaves source_dtype

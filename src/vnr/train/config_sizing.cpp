@@ -31,4 +31,31 @@ ModelConfig size_config_for_ratio(const ModelConfig& base, uint64_t volume_bytes
   return best;
 }
 
+ModelConfig size_config_for_bytes(const ModelConfig& base, uint64_t target_bytes, double bits_per_param,
+                                  std::string* note) {
+  if (!(bits_per_param > 0 && bits_per_param <= 16)) fail("bits per parameter must be in (0, 16], got {}", bits_per_param);
+  if (base.encoding.type != EncodingType::Grid || base.encoding.grid_type != GridType::Hash)
+    fail("--target-ratio needs a HashGrid encoding (the config has {})", base.to_json()["encoding"]["otype"].dump());
+  const double target_params = double(target_bytes) * 8.0 / bits_per_param;
+  ModelConfig best = base;
+  double best_err = 1e300;
+  uint64_t best_params = 0;
+  const uint32_t L0 = base.encoding.n_levels;
+  for (uint32_t L = L0; L >= 1; --L)
+    for (uint32_t t = 6; t <= 24; ++t) {
+      ModelConfig c = base;
+      c.encoding.n_levels = L;
+      c.encoding.log2_hashmap_size = t;
+      const uint64_t n = count_params(c);
+      // Keep every level while the table can shrink instead: a dropped level costs like a factor 1.5.
+      const double err = std::fabs(std::log(double(n) / target_params)) + 0.4 * (L0 - L);
+      if (err < best_err) best_err = err, best = c, best_params = n;
+    }
+  if (note)
+    *note = fmt::format("compact model: {} levels, 2^{} table, {} parameters for {} bytes (~{:.1f} bits each)",
+                        best.encoding.n_levels, best.encoding.log2_hashmap_size, best_params, target_bytes,
+                        double(target_bytes) * 8.0 / double(best_params));
+  return best;
+}
+
 }  // namespace vnr

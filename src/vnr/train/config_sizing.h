@@ -10,4 +10,11 @@ namespace vnr {
 // volume_bytes / ratio. Returns the adjusted config; `note` describes the choice.
 ModelConfig size_config_for_ratio(const ModelConfig& config, uint64_t volume_bytes, double ratio, std::string* note);
 
+// Compact storage (train/rate_control.h): sizes the grid so that the parameters at `bits_per_param`
+// bits each (after quantization and entropy coding) take about target_bytes. The exact size is then
+// met by the quantization steps. `note` describes the choice.
+constexpr double kDefaultBitsPerParam = 4.0;
+ModelConfig size_config_for_bytes(const ModelConfig& config, uint64_t target_bytes, double bits_per_param,
+                                  std::string* note);
+
 }  // namespace vnr

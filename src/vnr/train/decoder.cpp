@@ -4,12 +4,17 @@
 
 namespace vnr {
 
-Decoder::Decoder(const Network& net, Device device) : net_(net), device_(device) {
+Decoder::Decoder(const Network& net, Device device, const Residuals* residuals)
+    : net_(net), residuals_(residuals), device_(device) {
   if (device == Device::Cuda) gpu_ = std::make_unique<cuda::GpuNetwork>(net);
 }
 Decoder::~Decoder() = default;
 
 void Decoder::slices(Int3 dims, int64_t z0, int64_t z1, float* out) {
+  if (bounded_at(dims)) {
+    reference_slices(net_, dims, z0, z1, out);
+    return apply_residuals(*residuals_, z0, z1, out);
+  }
   if (gpu_) return gpu_->decode_slices(dims, z0, z1, out);  // voxel_centre() in kernels.cu
   const int64_t first = dims.x * dims.y * z0;
   net_.infer_fn(
@@ -18,6 +23,11 @@ void Decoder::slices(Int3 dims, int64_t z0, int64_t z1, float* out) {
 }
 
 void Decoder::voxels(Int3 dims, const int64_t* voxel_index, int64_t n, float* out) {
+  if (bounded_at(dims)) {
+    reference_voxels(net_, dims, voxel_index, n, out);
+    for (int64_t i = 0; i < n; ++i) out[i] += float(double(residuals_->q[size_t(voxel_index[i])]) * residuals_->step);
+    return;
+  }
   if (gpu_) {
     std::vector<float> xyz(size_t(3 * n));
     for (int64_t i = 0; i < n; ++i) voxel_centre(dims, voxel_index[i], &xyz[3 * i], &xyz[3 * i + 1], &xyz[3 * i + 2]);

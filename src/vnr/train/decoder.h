@@ -6,24 +6,32 @@
 #include "vnr/core/math.h"
 #include "vnr/cuda/cuda.h"
 #include "vnr/nn/network.h"
+#include "vnr/train/residuals.h"
 
 namespace vnr {
 
 // Decodes a network at voxel centres ((i + 0.5) / n per axis) on one backend; a GPU decoder keeps its
 // copy of the network between calls. On the GPU the network runs in half precision (tcnn's inference),
 // so values differ from the CPU's by about 1e-3 relative.
+//
+// With residuals (error-bound models), a decode at the residuals' dims is the CPU reference
+// (reference_slices) plus the residuals, on every device, so the bound holds whichever device was
+// asked for; other dims decode the network alone (the bound is defined at the volume's voxels only).
 class Decoder {
 public:
-  Decoder(const Network& net, Device device);
+  Decoder(const Network& net, Device device, const Residuals* residuals = nullptr);
   ~Decoder();
   // z-slices [z0, z1) of `dims` into out (normalised units), x fastest.
   void slices(Int3 dims, int64_t z0, int64_t z1, float* out);
   // n voxels given by index (x + dims.x * (y + dims.y * z)): bit-identical to what slices() gives them.
   void voxels(Int3 dims, const int64_t* voxel_index, int64_t n, float* out);
   Device device() const { return device_; }
+  // Whether a decode at dims applies the residuals.
+  bool bounded_at(Int3 dims) const { return residuals_ && residuals_->dims == dims; }
 
 private:
   const Network& net_;
+  const Residuals* residuals_;
   Device device_;
   std::unique_ptr<cuda::GpuNetwork> gpu_;
 };

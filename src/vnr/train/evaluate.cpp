@@ -13,11 +13,11 @@
 
 namespace vnr {
 
-EvalResult evaluate(const Network& net, const Volume& vol, bool with_ssim, Device device) {
+EvalResult evaluate(const Network& net, const Volume& vol, bool with_ssim, Device device, const Residuals* residuals) {
   EvalResult r;
   std::vector<float> dec(vol.data.size());
   auto t0 = std::chrono::steady_clock::now();
-  Decoder(net, device).slices(vol.dims, 0, vol.dims.z, dec.data());
+  Decoder(net, device, residuals).slices(vol.dims, 0, vol.dims.z, dec.data());
   r.decode_seconds = seconds_since(t0);
   ErrorStats e = error_stats(vol.data.data(), dec.data(), vol.dims);
   r.psnr = e.psnr;
@@ -34,9 +34,9 @@ double psnr_of_mse(double mse) { return mse > 0 ? 10 * std::log10(1 / mse) : 999
 
 EvalResult evaluate_streamed(const Network& net, const VolumeDesc& desc, double lo, double hi,
                              const LoadOptions& opts, bool with_ssim, const std::function<void(double)>& progress,
-                             int64_t slab_voxels, Device device) {
+                             int64_t slab_voxels, Device device, const Residuals* residuals) {
   const Int3 d = desc.dims;
-  Decoder decoder(net, device);
+  Decoder decoder(net, device, residuals);
   if (d.x <= 0 || d.y <= 0 || d.z <= 0) fail("'{}': invalid dims", desc.path);
   const int64_t slice = d.x * d.y, nz = d.z;
   if (slab_voxels <= 0) slab_voxels = int64_t(1) << 24;
@@ -92,8 +92,8 @@ EvalResult evaluate_streamed(const Network& net, const VolumeDesc& desc, double 
 }
 
 SampledEval evaluate_sampled(const Network& net, const VolumeDesc& desc, double lo, double hi, int64_t n_samples,
-                             uint64_t seed, const LoadOptions& opts, Device device) {
-  Decoder decoder(net, device);
+                             uint64_t seed, const LoadOptions& opts, Device device, const Residuals* residuals) {
+  Decoder decoder(net, device, residuals);
   if (n_samples <= 0) fail("the number of samples must be positive, got {}", n_samples);
   const RawVolumeFile file(desc, lo, hi, opts.non_finite, "sampled evaluation",
                            "evaluating without --sample streams gzip data");

@@ -4,6 +4,7 @@
 #include <functional>
 #include "vnr/core/device.h"
 #include "vnr/nn/network.h"
+#include "vnr/train/residuals.h"
 #include "vnr/volume/volume.h"
 
 namespace vnr {
@@ -15,7 +16,9 @@ struct EvalResult {
   double max_abs_error_original = 0;  // original units
   double decode_seconds = 0;
 };
-EvalResult evaluate(const Network& net, const Volume& vol, bool with_ssim = true, Device device = Device::Cpu);
+// With residuals (an error-bound model), the decode applies them where the dims match (Decoder).
+EvalResult evaluate(const Network& net, const Volume& vol, bool with_ssim = true, Device device = Device::Cpu,
+                    const Residuals* residuals = nullptr);
 
 // evaluate() for a volume that is not in memory: the volume (desc, normalised with [lo, hi] as
 // load_volume would) is streamed in z-slabs of about slab_voxels voxels (0: 16 M voxels, i.e.
@@ -28,7 +31,7 @@ EvalResult evaluate(const Network& net, const Volume& vol, bool with_ssim = true
 EvalResult evaluate_streamed(const Network& net, const VolumeDesc& desc, double lo, double hi,
                              const LoadOptions& opts, bool with_ssim = true,
                              const std::function<void(double fraction)>& progress = {}, int64_t slab_voxels = 0,
-                             Device device = Device::Cpu);
+                             Device device = Device::Cpu, const Residuals* residuals = nullptr);
 
 // PSNR estimated from n_samples voxels drawn uniformly (with replacement; deterministic for a
 // seed), read with RawVolumeFile (uncompressed data only) and decoded as evaluate() decodes them.
@@ -45,6 +48,7 @@ struct SampledEval {
   double decode_seconds = 0;
 };
 SampledEval evaluate_sampled(const Network& net, const VolumeDesc& desc, double lo, double hi, int64_t n_samples,
-                             uint64_t seed, const LoadOptions& opts = {}, Device device = Device::Cpu);
+                             uint64_t seed, const LoadOptions& opts = {}, Device device = Device::Cpu,
+                             const Residuals* residuals = nullptr);
 
 }  // namespace vnr

@@ -31,9 +31,18 @@ void save_model(const std::string& path, const Model& m) {
   f.hi = m.hi;
   f.params = m.net->params_half();
   f.training = m.training;
+  f.param_segments = m.param_segments;  // compressed storage (format 2) when set
+  f.compact_macrocells = !m.param_segments.empty();
   if (m.macrocells) {
     f.macrocell_dims = m.macrocells->cells;
     f.macrocell_ranges = m.macrocells->to_pairs();
+  }
+  if (m.residuals) {
+    if (is_instantvnr_path(path))
+      fail("'{}': instantvnr's format cannot hold error-bound residuals; save the model as .vnr", path);
+    const EncodedResiduals e = m.residuals->encoded ? *m.residuals->encoded : encode_residuals(*m.residuals);
+    f.residuals_meta = e.meta;
+    f.residuals_bytes = e.bytes;
   }
   if (is_instantvnr_path(path)) write_instantvnr(path, f);
   else write_vnr(path, f);
@@ -52,6 +61,11 @@ Model load_model(const std::string& path) {
   m.lo = f.lo;
   m.hi = f.hi;
   m.training = f.training;
+  if (!f.residuals_bytes.empty() || !f.residuals_meta.is_null()) {
+    m.residuals = decode_residuals(f.residuals_meta, f.residuals_bytes, f.dims, "'" + path + "'");
+    m.residuals->encoded = std::make_shared<const EncodedResiduals>(EncodedResiduals{f.residuals_meta, f.residuals_bytes});
+  }
+  m.param_segments = f.param_segments;
   if (!(f.macrocell_dims == Int3{}) && f.dims.count() > 0) {
     try {
       m.macrocells = ValueRangeGrid::from_pairs(f.dims, f.macrocell_dims, f.macrocell_ranges);

@@ -4,12 +4,14 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <vector>
 #include "vnr/core/dtype.h"
 #include "vnr/core/json.h"
 #include "vnr/core/math.h"
 #include "vnr/core/value_range_grid.h"
 #include "vnr/nn/model_file.h"
 #include "vnr/nn/network.h"
+#include "vnr/train/residuals.h"
 
 namespace vnr {
 
@@ -22,6 +24,11 @@ struct Model {
   double lo = 0, hi = 1;
   Json training;  // summary written by `vnr train`
   std::optional<ValueRangeGrid> macrocells;  // value ranges built online while training (or imported)
+  // Error-bound residuals at dims (train/residuals.h): decodes at dims apply them on the CPU reference.
+  std::optional<Residuals> residuals;
+  // Quantization steps of compact storage (nn/param_codec.h); empty = plain fp16. The network's
+  // parameters are then already the dequantized values (quantize_params), so the file holds them exactly.
+  std::vector<ParamSegment> param_segments;
   uint64_t param_bytes() const { return net->n_params() * 2; }  // fp16, as stored
 };
 

@@ -91,6 +91,7 @@ int64_t TrainingSession::run(int64_t steps, double seconds) {
 // The loop: step (GPU: a group) -> side work -> divergence check -> callbacks -> checkpoint -> limits.
 void TrainingSession::run_steps(int64_t steps, double seconds, int64_t* done) {
   run_t0_ = Clock::now();
+  params_frozen_ = false;
   double& excluded = run_excluded_;  // side work and pauses of this run
   excluded = 0;
   run_seconds_ = 0;
@@ -107,7 +108,9 @@ void TrainingSession::run_steps(int64_t steps, double seconds, int64_t* done) {
     const auto t_step = Clock::now();
     int64_t k = async ? std::min(group, steps - *done) : 1;
     if (every > 0) k = std::min(k, every - steps_ % every);
+    if (before_step_) before_step_();
     trainer_->run(k);
+    if (after_step_) after_step_();
     loss_ = trainer_->last_loss();  // synchronises
     const double per = seconds_since(t_step) / double(k);
     for (int64_t i = 0; i < k; ++i) step_seconds_.push_back(per);
@@ -149,7 +152,7 @@ void TrainingSession::record() {
                       {"sampler", data_ ? data_->kind : opts_.sampler_name},
                       {"device", device_name(trainer_->device())},
                       {"precision", precision ? Json(precision_name(*precision)) : Json(nullptr)}};
-  trainer_->download();  // the model file is written from net.params
+  if (!params_frozen_) trainer_->download();  // the model file is written from net.params
   if (trainer_->has_online_ranges()) model_->macrocells = trainer_->online_ranges();
 }
 
@@ -160,12 +163,42 @@ void TrainingSession::save_checkpoint() {
   save_model(opts_.output, *model_);
 }
 
+// The error-bound residuals of the trained network (SessionOptions::error_bound), kept in the model
+// (coded once here, so the save reuses the bytes); their summary for the report, or null.
+Json TrainingSession::attach_residuals() {
+  if (!opts_.error_bound.active()) return Json();
+  const TrainingData& data = *data_;
+  if (!data.vol) fail("an error bound needs the volume in memory (in-core sampler)");
+  const double b = normalised_error_bound(opts_.error_bound, data.lo, data.hi, model_->source_dtype);
+  // Residuals are taken against the network as the file stores it (fp16 parameters), not the fp32
+  // master copy, so that a loaded model decodes to the same predictions.
+  model_->net->set_params_half(model_->net->params_half());
+  Residuals res = compute_residuals(*model_->net, data.vol->data.data(), data.vol->dims, b);
+  res.encoded = std::make_shared<const EncodedResiduals>(encode_residuals(res));
+  const int64_t nz = res.nonzero();
+  const uint64_t bytes = res.encoded->bytes.size();
+  Json j = {{"max_error", b * (data.hi - data.lo)},
+            {"max_error_normalised", b},
+            {"step_normalised", res.step},
+            {"residual_nonzero", nz},
+            {"residual_nonzero_fraction", double(nz) / double(data.dims.count())},
+            {"residual_bytes", bytes},
+            {"residual_bits_per_voxel", 8.0 * double(bytes) / double(data.dims.count())},
+            {"codec", res.encoded->meta["codec"]},
+            {"predictor", res.encoded->meta["predictor"]},
+            {"candidate_bytes", res.encoded->meta["candidate_bytes"]}};
+  model_->residuals = std::move(res);
+  return j;
+}
+
 TrainingResult TrainingSession::finish(bool with_ssim, int64_t eval_samples) {
   if (!data_) fail("finish() needs a session opened on training data (open_training_session)");
   if (opts_.output.empty()) fail("finish() needs an output path");
   const TrainingData& data = *data_;
   Network& net = *model_->net;
   const Device dev = trainer_->device();
+  // A compact session that was only run(): quantize now (post-training), so the file meets the target.
+  if (opts_.compact.enabled() && model_->param_segments.empty()) compact_session(*this, opts_.compact, 0, 0);
   TrainingResult r;
   r.steps = steps_;
   r.seconds = train_seconds_;
@@ -174,8 +207,10 @@ TrainingResult TrainingSession::finish(bool with_ssim, int64_t eval_samples) {
   // Exact over the volume in memory; a volume that is not in memory gets a PSNR estimate from random
   // voxels (a full pass can take longer than the training did).
   Json evaluation;
+  const Json bound = attach_residuals();
+  const Residuals* residuals = model_->residuals ? &*model_->residuals : nullptr;
   if (data.vol) {
-    EvalResult ev = evaluate(net, *data.vol, with_ssim, dev);
+    EvalResult ev = evaluate(net, *data.vol, with_ssim, dev, residuals);
     r.psnr = ev.psnr;
     r.max_abs_error = ev.max_abs_error;
     r.max_abs_error_original = ev.max_abs_error_original;
@@ -203,6 +238,12 @@ TrainingResult TrainingSession::finish(bool with_ssim, int64_t eval_samples) {
   r.compression_ratio = double(data.source_bytes()) / double(r.model_bytes);
   r.samples_per_second = double(r.steps) * double(trainer_->batch()) / r.seconds;
   r.report = report_json(r, evaluation);
+  if (!bound.is_null()) {
+    r.report["error_bound"] = bound;
+    r.report["error_bound"]["holds"] = r.max_abs_error_original <= bound["max_error"].get<double>();
+    r.report["error_bound"]["network_bytes"] = r.model_bytes - bound["residual_bytes"].get<uint64_t>();
+  }
+  if (!compact_summary_.is_null()) r.report["compact"] = compact_summary_;
   return r;
 }
 

@@ -24,6 +24,7 @@
 #include <vector>
 #include "vnr/core/json.h"
 #include "vnr/train/model_io.h"
+#include "vnr/train/rate_control.h"
 #include "vnr/train/trainer.h"
 #include "vnr/train/trainer_backend.h"
 #include "vnr/train/training_data.h"
@@ -45,6 +46,11 @@ struct SessionOptions {
   // The error message of a non-finite loss; default: "training diverged at step S (loss L); try a
   // smaller learning rate".
   std::function<std::string(int64_t step, float loss)> divergence_message;
+  // A guaranteed max error (--max-error/--max-rel-error): finish() adds residuals (train/residuals.h).
+  ErrorBoundRequest error_bound;
+  // Compact storage (--target-ratio, --target-psnr): front ends then train with train_compact()
+  // (train/rate_control.h) instead of run(), and finish() saves the quantized model.
+  CompactOptions compact;
 };
 
 // What finish() measured, and the record of `vnr train --report`.
@@ -86,6 +92,12 @@ public:
   void add_step_callback(StepCallback cb) { step_callbacks_.push_back(std::move(cb)); }
   void add_side_work(StepCallback cb) { side_work_.push_back(std::move(cb)); }
   void clear_callbacks() { step_callbacks_.clear(); }
+  // Runs around every trainer step (one step at a time on the CPU): quantization-aware training
+  // (train/rate_control.h) swaps the quantized parameters in and the master copy back. Empty: none.
+  void set_step_hooks(std::function<void()> before, std::function<void()> after) {
+    before_step_ = std::move(before);
+    after_step_ = std::move(after);
+  }
   void clear_side_work() { side_work_.clear(); }
   // Runs fn as side work (its time left out of the training time, counted in side_seconds()).
   void run_side_work(const std::function<void()>& fn);
@@ -104,6 +116,11 @@ public:
   // Writes the training record into model().training (steps, seconds, loss, batch, seed, sampler,
   // device, precision, interrupted) and the trainer's parameters and online ranges into the model.
   void record();
+  // Declares the host parameters final (compact storage quantized them): record() and finish() no
+  // longer download the trainer's copy over them, until the next run().
+  void freeze_parameters() { params_frozen_ = true; }
+  // The compact-storage summary (rate_control.h) that finish() puts into the report as "compact".
+  const Json& note_compact(Json summary) { return compact_summary_ = std::move(summary); }
   void save_checkpoint();  // record() + "checkpoint": true, written to options().output
   // The end of `vnr train`: records, evaluates (exactly over a volume in memory, else from
   // `eval_samples` random voxels, or not at all with 0), saves the model to options().output and
@@ -115,6 +132,7 @@ private:
   void run_steps(int64_t steps, double seconds, int64_t* done);
   void wait_while_paused();
   Json report_json(const TrainingResult& r, const Json& evaluation) const;
+  Json attach_residuals();
 
   std::unique_ptr<Model> owned_model_;
   Model* model_;
@@ -122,6 +140,9 @@ private:
   std::unique_ptr<Trainer> trainer_;
   SessionOptions opts_;
   std::vector<StepCallback> step_callbacks_, side_work_;
+  std::function<void()> before_step_, after_step_;
+  bool params_frozen_ = false;
+  Json compact_summary_;
   std::atomic<bool> stop_{false}, paused_{false};
   std::mutex pause_mutex_;
   std::condition_variable pause_cv_;
@@ -140,7 +161,10 @@ struct TrainingSetup {
   LoadOptions load;
   std::string config = "paper";  // preset or tiny-cuda-nn JSON file
   std::optional<Json> config_json;  // a tiny-cuda-nn config given as JSON (the Python module): wins over config
-  double target_ratio = 0;       // > 0: size the grid for this compression ratio
+  double target_ratio = 0;       // > 0: a compact model file of volume bytes / R (within 5 %)
+  double target_psnr = 0;        // > 0: the coarsest quantization reaching this PSNR (held-back estimate)
+  double bits_per_param = kDefaultBitsPerParam;  // --target-ratio: grid sized for this many bits per parameter
+  double qat_fraction = 0.15;    // compact models: last part of the steps trained quantization-aware
   int64_t batch = 65536;
   uint32_t seed = 1337;
   std::string device = "auto", mlp = "auto", precision = "auto";

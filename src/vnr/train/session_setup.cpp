@@ -6,6 +6,7 @@
 #include "vnr/nn/config.h"
 #include "vnr/train/make_trainer.h"
 #include "vnr/train/session.h"
+#include <cmath>
 
 namespace vnr {
 void check_training_setup(const TrainingSetup& s) {
@@ -15,6 +16,12 @@ void check_training_setup(const TrainingSetup& s) {
   if (s.session.checkpoint_every < 0)
     fail("--checkpoint-every must be non-negative, got {}", s.session.checkpoint_every);
   if (s.data.blocks < 0 || s.data.refresh < 0) fail("--blocks and --refresh must be positive");
+  if (s.target_ratio < 0 || !std::isfinite(s.target_ratio)) fail("--target-ratio must be positive, got {}", s.target_ratio);
+  if (s.target_psnr < 0 || !std::isfinite(s.target_psnr)) fail("--target-psnr must be positive, got {}", s.target_psnr);
+  if (!(s.qat_fraction >= 0 && s.qat_fraction <= 1))
+    fail("--qat-fraction must be in [0, 1], got {}", s.qat_fraction);
+  if (!(s.bits_per_param > 0 && s.bits_per_param <= 16))
+    fail("bits per parameter must be in (0, 16], got {}", s.bits_per_param);
   if (s.device == "cuda") cuda::require_device();
 }
 
@@ -44,11 +51,22 @@ std::unique_ptr<TrainingSession> session_on_data(const TrainingSetup& s, ModelCo
   };
   if (data->hi == data->lo)
     say(fmt::format("note: the volume is constant ({:g}); it is represented as normalised 0", data->lo));
-  std::string note;
-  if (s.target_ratio > 0) {
-    config = size_config_for_ratio(config, data->source_bytes(), s.target_ratio, &note);
-    say(note);
+  if (s.session.error_bound.active()) {  // checked before training, not after it
+    normalised_error_bound(s.session.error_bound, data->lo, data->hi, data->dtype);
+    if (!data->vol) fail("an error bound (--max-error/--max-rel-error) needs the volume in memory (in-core sampler)");
+    if (is_instantvnr_path(s.session.output))
+      fail("'{}': instantvnr's format cannot hold error-bound residuals; save the model as .vnr", s.session.output);
   }
+  std::string note;
+  SessionOptions session_opts = s.session;
+  if (s.target_ratio > 0) {
+    const uint64_t target = uint64_t(double(data->source_bytes()) / s.target_ratio);
+    config = size_config_for_bytes(config, target, s.bits_per_param, &note);
+    say(fmt::format("--target-ratio {}: {}", s.target_ratio, note));
+    session_opts.compact.target_bytes = target;
+  }
+  session_opts.compact.target_psnr = s.target_psnr;
+  session_opts.compact.qat_fraction = s.qat_fraction;
   if (data->out_of_core) {
     config = scale_grid_learning_rate(config, s.data.grid_lr_scale, *data->out_of_core, &note);
     if (!note.empty()) say(note);
@@ -75,7 +93,7 @@ std::unique_ptr<TrainingSession> session_on_data(const TrainingSetup& s, ModelCo
   }
   if (s.macrocell_size > 0) trainer->enable_online_ranges(data->dims, s.macrocell_size);
   if (!trainer->device_summary().empty()) say("training on " + trainer->device_summary());
-  SessionOptions so = s.session;
+  SessionOptions so = session_opts;
   so.sampler_name = data->kind;
   return std::make_unique<TrainingSession>(std::move(model), std::move(data), std::move(trainer), so);
 }

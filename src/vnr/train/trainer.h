@@ -32,8 +32,8 @@ struct TrainOptions {
 };
 
 // --precision of training: "fp32", "bf16" (an error where Network::bf16_training_supported() is
-// false) or "auto": bf16 where supported and the MLP is at least kBf16TrainMinWidth wide (narrower
-// MLPs train slower in bf16: their layout conversions cost more than their tiny products save).
+// false) or "auto" = fp32 (bf16 training lost up to 0.2 dB on some volumes; docs/benchmarks.md).
+// MLPs narrower than kBf16TrainMinWidth also train slower in bf16.
 constexpr uint32_t kBf16TrainMinWidth = 32;
 Precision resolve_training_precision(const std::string& name, const Network& net);
 

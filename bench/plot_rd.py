@@ -1,0 +1,66 @@
+#!/usr/bin/python3
+"""PSNR against compression ratio from a `vnr bench rd --report` file, with peers' figures beside it.
+
+usage: /usr/bin/python3 bench/plot_rd.py REPORT.json -o RD.png [--peers bench/peers_rd.json] [--volume NAME]
+The peers' curves are those of NAME (default: the report volume's file stem, e.g. bonsai).
+"""
+import argparse
+import json
+import os
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+
+STYLE = {"vnr": ("o-", "C3"), "vnr-bound": ("*", "C3"), "zfp-rate": ("s--", "C0"), "zfp-accuracy": ("^--", "C2")}
+PEER_STYLE = {"TTHRESH": ("d:", "C4"), "SZ3": ("v:", "C1"), "ZFP rate": ("s:", "C0"), "ZFP accuracy": ("^:", "C2")}
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("report")
+    ap.add_argument("-o", "--output", required=True)
+    ap.add_argument("--peers")
+    ap.add_argument("--volume")
+    a = ap.parse_args()
+    rep = json.load(open(a.report))
+    name = a.volume or os.path.splitext(os.path.basename(rep["volume"].split(":")[0]))[0]
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    for codec, (fmt, color) in STYLE.items():
+        pts = sorted((p["ratio"], p["psnr"], p["parameter"]) for p in rep["points"] if p["codec"] == codec)
+        if not pts:
+            continue
+        ax.plot([p[0] for p in pts], [p[1] for p in pts], fmt, color=color, label=f"{codec} (this run)",
+                markersize=11 if codec == "vnr-bound" else 5)
+        if codec == "vnr-bound":
+            for r, q, b in pts:
+                ax.annotate(f"|e|<={b:g}", (r, q), textcoords="offset points", xytext=(5, 5), fontsize=8)
+    if a.peers:
+        peers = json.load(open(a.peers))["volumes"].get(name)
+        if peers:
+            cur = peers["psnr_at_ratio"]
+            for codec, vals in cur.items():
+                if codec == "ratios" or codec.startswith("ZFP"):
+                    continue
+                xs = [r for r, v in zip(cur["ratios"], vals) if v is not None]
+                ys = [v for v in vals if v is not None]
+                fmt, color = PEER_STYLE.get(codec, ("x:", "k"))
+                ax.plot(xs, ys, fmt, color=color, label=f"{codec} (peers' figures)")
+            bnd = peers.get("ratio_at_bound", {})
+            for b, r in zip(bnd.get("bounds", []), bnd.get("SZ3", [])):
+                ax.axvline(r, color="C1", alpha=0.25, lw=1)
+                ax.annotate(f"SZ3 |e|<={b:g}", (r, ax.get_ylim()[0]), rotation=90, fontsize=7, color="C1",
+                            xytext=(2, 4), textcoords="offset points")
+    ax.set_xscale("log", base=2)
+    ax.set_xlabel("compression ratio (source bytes / compressed bytes)")
+    ax.set_ylabel("PSNR (dB)")
+    ax.set_title(f"rate-distortion: {name} {'x'.join(str(d) for d in rep['dims'])}")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(a.output, dpi=110)
+
+
+if __name__ == "__main__":
+    main()

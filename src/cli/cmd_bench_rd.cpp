@@ -1,0 +1,98 @@
+// `vnr bench rd VOLUME`: runs the rate-distortion benchmark of include/vnr/rate_distortion.h, prints a
+// line per point, writes the JSON report and, with --plot, the PSNR-ratio plot (bench/plot_rd.py).
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fmt/format.h>
+#include "cli.h"
+#include "vnr/core/error.h"
+#include "vnr/core/fileio.h"
+#include "vnr/core/parallel.h"
+#include "vnr/rate_distortion.h"
+
+namespace vnr::cli {
+namespace {
+
+struct RdArgs {
+  std::string volume, report, plot, peers, ratios, bounds, zfp_rates, config = "paper", device = "auto";
+  double seconds = 60;
+  int64_t steps = -1;
+  int threads = 0;
+  VolumeArgs vol;
+};
+
+std::vector<double> parse_list(const std::string& text, const char* flag) {
+  std::vector<double> out;
+  size_t start = 0;
+  while (start <= text.size()) {
+    const size_t comma = std::min(text.find(',', start), text.size());
+    const std::string item = text.substr(start, comma - start);
+    char* end = nullptr;
+    const double v = std::strtod(item.c_str(), &end);
+    if (item.empty() || *end != '\0' || !(v > 0)) fail("{}: expected positive numbers separated by commas, got '{}'", flag, text);
+    out.push_back(v);
+    start = comma + 1;
+  }
+  return out;
+}
+
+// bench/plot_rd.py beside the sources (or installed under share/vnr), run by Debian's python3.
+void plot(const std::string& report, const RdArgs& a) {
+  std::string script = VNR_PLOT_RD_SCRIPT;
+  if (!std::filesystem::exists(script)) fail("--plot: cannot find the plot script {}", script);
+  std::string cmd = fmt::format("/usr/bin/python3 '{}' '{}' -o '{}'", script, report, a.plot);
+  if (!a.peers.empty()) cmd += fmt::format(" --peers '{}'", a.peers);
+  if (std::system(cmd.c_str()) != 0) fail("--plot: '{}' failed (it needs python3-matplotlib)", cmd);
+  std::printf("plot: %s\n", a.plot.c_str());
+}
+
+void run_rd(const RdArgs& a) {
+  set_num_threads(a.threads);
+  RdOptions o;
+  if (!a.ratios.empty()) o.ratios = parse_list(a.ratios, "--ratios");
+  if (!a.bounds.empty()) o.rel_bounds = parse_list(a.bounds, "--bounds");
+  if (!a.zfp_rates.empty()) o.zfp_rates = parse_list(a.zfp_rates, "--zfp-rates");
+  for (double b : o.rel_bounds)
+    if (b >= 1) fail("--bounds are fractions of the value range (below 1), got {}", b);
+  if (!(a.seconds > 0) && a.steps <= 0) fail("--seconds must be positive");
+  if (!a.plot.empty() && a.report.empty()) fail("--plot needs --report (the plot is drawn from it)");
+  if (!a.peers.empty() && !std::filesystem::exists(a.peers)) fail("--peers: no such file '{}'", a.peers);
+  o.seconds = a.seconds;
+  o.steps = a.steps;
+  o.config = a.config;
+  o.device = a.device;
+  o.message = [](const std::string& line) {
+    std::printf("%s\n", line.c_str());
+    std::fflush(stdout);
+  };
+  const Volume vol = open_volume(a.volume, a.vol.open());
+  std::printf("rate-distortion of %s (%lldx%lldx%lld %s): ZFP, then vnr at %zu ratios, %s each\n", a.volume.c_str(),
+              (long long)vol.dims.x, (long long)vol.dims.y, (long long)vol.dims.z, dtype_name(vol.source_dtype),
+              o.ratios.size(), a.steps > 0 ? fmt::format("{} steps", a.steps).c_str() : fmt::format("{:g}s", a.seconds).c_str());
+  const RdReport rep = run_rate_distortion(a.volume, vol, o);
+  if (!a.report.empty()) write_report(a.report, rep.to_json());
+  if (!a.plot.empty()) plot(a.report, a);
+}
+
+}  // namespace
+
+void add_bench_rd(CLI::App& bench) {
+  auto a = std::make_shared<RdArgs>();
+  CLI::App* c = bench.add_subcommand("rd", "rate-distortion: vnr at target ratios and error bounds beside ZFP");
+  c->add_option("volume", a->volume, "volume")->required();
+  c->add_option("--seconds", a->seconds, "training time per vnr model")->capture_default_str();
+  c->add_option("--steps", a->steps, "training steps per vnr model (instead of --seconds)");
+  c->add_option("--ratios", a->ratios, "vnr target ratios (default 8,16,32,64,128,256,512)");
+  c->add_option("--bounds", a->bounds, "error bounds as fractions of the range (default 1e-2,1e-3)");
+  c->add_option("--zfp-rates", a->zfp_rates, "ZFP fixed rates in bits per value (default 0.5,1,2,4,8)");
+  c->add_option("--config", a->config, "vnr preset or config file")->capture_default_str();
+  c->add_option("--threads", a->threads, "CPU threads (default: all cores)");
+  c->add_option("--report", a->report, "write the points as JSON");
+  c->add_option("--plot", a->plot, "draw PSNR against ratio into a PNG (needs --report and python3-matplotlib)");
+  c->add_option("--peers", a->peers, "other codecs' figures to draw beside (JSON, e.g. bench/peers_rd.json)");
+  add_device_option(c, a->device);
+  a->vol.add(c);
+  c->callback([a]() { run_rd(*a); });
+}
+
+}  // namespace vnr::cli

@@ -1,0 +1,308 @@
+#include "vnr/train/rate_control.h"
+#include <algorithm>
+#include <cmath>
+#include "vnr/core/error.h"
+#include "vnr/core/half.h"
+#include "vnr/core/rng.h"
+#include "vnr/train/session.h"
+
+namespace vnr {
+namespace {
+
+constexpr int kProbeChunk = 4096;
+
+// Parameters no output depends on: the padded output rows of the last matrix and, for a grid, the
+// columns of the first matrix that see the zero padding. Zeroed, they cost nothing once coded.
+void zero_unused(const MlpLayout& m, std::vector<float>& p) {
+  const uint32_t last = m.n_hidden;
+  std::fill(p.begin() + int64_t(m.offset[last] + uint64_t(m.n_out) * m.cols[last]),
+            p.begin() + int64_t(m.offset[last] + m.rows[last] * m.cols[last]), 0.0f);
+  if (m.pad_value == 0.0f)
+    for (uint64_t r = 0; r < m.rows[0]; ++r)
+      for (uint64_t c = m.first_cols; c < m.cols[0]; ++c) p[m.offset[0] + r * m.cols[0] + c] = 0.0f;
+}
+
+float quantized_value(float v, float step) {
+  if (step == 0) return half_to_float(float_to_half(v));
+  if (!std::isfinite(v)) return 0.0f;
+  const float q = std::clamp(std::nearbyint(v / step), -float(kMaxQuantIndex), float(kMaxQuantIndex));
+  return half_to_float(float_to_half(float(int32_t(q)) * step));  // int: -0 becomes +0, as the codec stores it
+}
+
+ModelFile file_of(const Model& model, const std::vector<float>& master, const std::vector<ParamSegment>& segs) {
+  ModelFile f;
+  f.config = model.net->config_json();
+  f.dims = model.dims;
+  f.source_dtype = model.source_dtype;
+  f.lo = model.lo;
+  f.hi = model.hi;
+  f.training = model.training;
+  if (model.macrocells) {
+    f.macrocell_dims = model.macrocells->cells;
+    f.macrocell_ranges = model.macrocells->to_pairs();
+  }
+  f.params.resize(master.size());
+  uint64_t off = 0;
+  for (const ParamSegment& s : segs) {
+    for (uint64_t i = off; i < off + s.count; ++i) f.params[i] = float_to_half(quantized_value(master[i], s.step));
+    off += s.count;
+  }
+  f.param_segments = segs;
+  f.compact_macrocells = true;  // as save_model writes a compact model
+  return f;
+}
+
+// The largest g (coarsest steps) whose probe PSNR still reaches `psnr`; the finest plan when none does.
+double fit_psnr(Network& net, const std::vector<float>& master, const QuantPlan& plan, const ProbeSet& probe,
+                double psnr) {
+  auto ok = [&](double g) {
+    apply_quantization(net, master, plan.at(g));
+    return psnr_of_mse(probe.mse(net)) >= psnr;
+  };
+  double lo = 1e-6, hi = 1e-6;  // g such that ok(lo) and !ok(hi)
+  if (!ok(lo)) return lo;
+  while (ok(hi) && hi < 1e6) lo = hi, hi *= 4;
+  for (int i = 0; i < 14; ++i) {
+    const double mid = std::sqrt(lo * hi);
+    (ok(mid) ? lo : hi) = mid;
+  }
+  return lo;
+}
+
+}  // namespace
+
+double psnr_of_mse(double mse) { return mse > 0 ? -10.0 * std::log10(mse) : 999.0; }
+
+ProbeSet draw_probe(const Sampler& sampler, int64_t n, uint64_t seed) {
+  ProbeSet p;
+  p.x.resize(size_t(n));
+  p.y.resize(size_t(n));
+  p.z.resize(size_t(n));
+  p.target.resize(size_t(n));
+  // A step number no training run reaches: these samples are never trained on.
+  const uint64_t step = ~uint64_t(0) - 1;
+  for (int64_t c = 0; c * kProbeChunk < n; ++c) {
+    const int64_t first = c * kProbeChunk;
+    const int k = int(std::min<int64_t>(kProbeChunk, n - first));
+    sampler.sample(seed, step, uint64_t(c), k, &p.x[first], &p.y[first], &p.z[first], &p.target[first]);
+  }
+  return p;
+}
+
+ProbeSet draw_voxel_probe(const Volume& vol, int64_t n, uint64_t seed) {
+  ProbeSet p;
+  const uint64_t count = uint64_t(vol.dims.count());
+  n = std::min<int64_t>(n, int64_t(count));
+  p.x.resize(size_t(n));
+  p.y.resize(size_t(n));
+  p.z.resize(size_t(n));
+  p.target.resize(size_t(n));
+  Pcg32 rng(seed);
+  for (int64_t i = 0; i < n; ++i) {
+    const uint64_t r = (uint64_t(rng.next_uint()) << 32) | rng.next_uint();
+    const int64_t v = int64_t(r % count);
+    voxel_centre(vol.dims, v, &p.x[i], &p.y[i], &p.z[i]);
+    p.target[i] = vol.data[size_t(v)];
+  }
+  return p;
+}
+
+double ProbeSet::mse(const Network& net) const {
+  const int64_t n = int64_t(target.size());
+  std::vector<float> out(static_cast<size_t>(n));
+  net.infer_fn(
+      n,
+      [&](int64_t first, int64_t count, float* xs, float* ys, float* zs) {
+        std::copy_n(&x[first], count, xs);
+        std::copy_n(&y[first], count, ys);
+        std::copy_n(&z[first], count, zs);
+      },
+      out.data());
+  double sum = 0;
+  for (int64_t i = 0; i < n; ++i) {
+    const double d = double(out[i]) - target[i];
+    sum += d * d;
+  }
+  return sum / double(std::max<int64_t>(n, 1));
+}
+
+std::vector<ParamSegment> QuantPlan::at(double g) const {
+  std::vector<ParamSegment> s = segments;
+  for (size_t i = 0; i < s.size(); ++i) s[i].step = float(std::max(g * shape[i], floor[i]));
+  return s;
+}
+
+QuantPlan plan_quantization(Network& net, const ProbeSet& probe) {
+  QuantPlan plan;
+  plan.segments = param_segments(net.config());
+  std::vector<float> master(net.params.begin(), net.params.end());
+  zero_unused(net.mlp(), master);
+  apply_quantization(net, master, plan.segments);  // steps 0: the fp16 values, unused ones zeroed
+  const double base = probe.mse(net);
+  Pcg32 rng(0x5eed);
+  uint64_t off = 0;
+  for (const ParamSegment& s : plan.segments) {
+    double sq = 0, max_abs = 0;
+    for (uint64_t i = off; i < off + s.count; ++i) {
+      sq += double(master[i]) * master[i];
+      max_abs = std::max(max_abs, double(std::fabs(master[i])));
+    }
+    const double rms = std::sqrt(sq / double(std::max<uint64_t>(s.count, 1)));
+    // Uniform noise of width delta has the variance of quantization with step delta.
+    const double delta = std::max(0.5 * rms, 1e-6);
+    for (uint64_t i = off; i < off + s.count; ++i) net.params[i] = master[i] + float(delta * (rng.next_float() - 0.5));
+    net.sync_half_table();
+    const double grown = std::max(probe.mse(net) - base, 1e-4 * base + 1e-14);
+    for (uint64_t i = off; i < off + s.count; ++i) net.params[i] = master[i];
+    const double a = grown / (delta * delta);
+    plan.shape.push_back(std::sqrt(double(s.count) / a));
+    plan.floor.push_back(max_abs / kMaxQuantIndex);
+    off += s.count;
+  }
+  net.sync_half_table();
+  return plan;
+}
+
+void apply_quantization(Network& net, const std::vector<float>& master, const std::vector<ParamSegment>& segments) {
+  uint64_t off = 0;
+  for (const ParamSegment& s : segments) {
+    for (uint64_t i = off; i < off + s.count; ++i) net.params[i] = quantized_value(master[i], s.step);
+    off += s.count;
+  }
+  if (off != net.n_params()) fail("quantization segments cover {} of {} parameters", off, net.n_params());
+  net.sync_half_table();
+}
+
+double fit_bytes(const Model& model, const std::vector<float>& master, const QuantPlan& plan, uint64_t target,
+                 uint64_t* bytes_out) {
+  auto bytes = [&](double g) { return vnr_file_bytes(file_of(model, master, plan.at(g))); };
+  // Bracket: lo too large a file (or the finest plan), hi within the budget.
+  double hi = 1e-4;
+  uint64_t b_hi = bytes(hi);
+  int guard = 0;
+  while (b_hi > target) {
+    if (++guard > 60) {
+      fail("the target of {} bytes is below the smallest file this model can make ({} bytes: header, "
+           "macro-cells and all parameters zero); choose a smaller model or a lower ratio",
+           target, b_hi);
+    }
+    hi *= 4;
+    b_hi = bytes(hi);
+  }
+  double lo = hi / 4;
+  uint64_t b_lo = bytes(lo);
+  while (b_lo <= target && lo > 1e-12) {
+    hi = lo, b_hi = b_lo;
+    lo /= 4;
+    b_lo = bytes(lo);
+  }
+  if (b_lo <= target) {  // even the finest quantization fits
+    *bytes_out = b_lo;
+    return lo;
+  }
+  for (int i = 0; i < 16 && double(b_hi) < 0.985 * double(target); ++i) {
+    const double mid = std::sqrt(lo * hi);
+    const uint64_t b = bytes(mid);
+    if (b <= target) hi = mid, b_hi = b;
+    else lo = mid;
+  }
+  *bytes_out = b_hi;
+  return hi;
+}
+
+bool can_train_quantized(TrainingSession& session) {
+  return session.trainer().device() == Device::Cpu && !session.trainer().asynchronous();
+}
+
+Json train_compact(TrainingSession& session, int64_t steps, double seconds, const CompactOptions& o,
+                   const std::function<void(const std::string&)>& message) {
+  if (!session.data() || !session.data()->sampler) fail("compact storage needs a session opened on training data");
+  const double f = can_train_quantized(session) ? std::clamp(o.qat_fraction, 0.0, 1.0) : 0.0;
+  const bool by_time = steps < 0 && seconds > 0;
+  const int64_t steps1 = by_time ? -1 : int64_t(std::llround(double(steps) * (1 - f)));
+  session.run(steps1, by_time ? seconds * (1 - f) : 0);
+  if (f > 0 && !session.stop_requested())
+    return compact_session(session, o, by_time ? -1 : steps - steps1, by_time ? seconds * f : 0, message);
+  return compact_session(session, o, 0, 0, message);
+}
+
+Json compact_session(TrainingSession& session, const CompactOptions& o, int64_t qat_steps_planned,
+                     double qat_seconds, const std::function<void(const std::string&)>& message) {
+  if (!session.data() || !session.data()->sampler) fail("compact storage needs a session opened on training data");
+  Network& net = session.network();
+  Model& model = session.model();
+  const bool qat = (qat_steps_planned != 0 || qat_seconds > 0) && can_train_quantized(session);
+  const TrainingData& data = *session.data();
+  const uint64_t probe_seed = session.trainer().seed() ^ 0x9e3779b9u;
+  const ProbeSet probe = data.vol ? draw_voxel_probe(*data.vol, o.probe_samples, probe_seed)
+                                  : draw_probe(*data.sampler, o.probe_samples, probe_seed);
+  // finish() adds the evaluation to the header's training record: leave room for it.
+  const uint64_t aim = o.target_bytes - std::min<uint64_t>(o.target_bytes / 50, 256);
+  auto choose = [&](const std::vector<float>& master, const QuantPlan& plan, uint64_t* bytes) {
+    // The header will hold the training record with the final evaluation: size the file with one
+    // (full-length placeholder numbers).
+    session.record();
+    model.training["psnr"] = 12.345678901234567;
+    model.training["ssim"] = 0.12345678901234567;
+    double g = o.target_psnr > 0 ? fit_psnr(net, master, plan, probe, o.target_psnr) : 0;
+    if (o.target_bytes > 0) g = std::max(g, fit_bytes(model, master, plan, aim, bytes));
+    *bytes = vnr_file_bytes(file_of(model, master, plan.at(g)));
+    return g;
+  };
+  session.trainer().download();
+  const double psnr_before = psnr_of_mse(probe.mse(net));
+  const QuantPlan plan = plan_quantization(net, probe);
+  std::vector<float> master(net.params.begin(), net.params.end());
+  zero_unused(net.mlp(), master);
+  uint64_t bytes = 0;
+  double g = choose(master, plan, &bytes);
+
+  int64_t qat_steps = 0;
+  if (qat) {
+    // Straight-through: each step sees the quantized parameters; its update lands on the master copy.
+    std::vector<float> shown;
+    const std::vector<ParamSegment> segs = plan.at(g);
+    session.set_step_hooks(
+        [&] {
+          apply_quantization(net, master, segs);
+          shown.assign(net.params.begin(), net.params.end());
+        },
+        [&] {
+          for (size_t i = 0; i < master.size(); ++i) master[i] += net.params[i] - shown[i];
+        });
+    const int64_t before = session.steps_done();
+    try {
+      session.run(qat_steps_planned, qat_seconds);
+    } catch (...) {
+      session.set_step_hooks({}, {});
+      throw;
+    }
+    session.set_step_hooks({}, {});
+    qat_steps = session.steps_done() - before;
+    zero_unused(net.mlp(), master);
+    g = choose(master, plan, &bytes);  // the weights moved a little: meet the target again
+  }
+  const std::vector<ParamSegment> segs = plan.at(g);
+  apply_quantization(net, master, segs);
+  model.param_segments = segs;
+  session.freeze_parameters();
+  const double psnr_after = psnr_of_mse(probe.mse(net));
+  if (message)
+    message(fmt::format("compact storage: {} bytes planned, held-back PSNR {:.2f} dB before quantization, {:.2f} dB "
+                        "after ({} quantization-aware steps{})",
+                        bytes, psnr_before, psnr_after, qat_steps,
+                        can_train_quantized(session) ? "" : "; not on this trainer"));
+  if (o.target_psnr > 0 && psnr_after < o.target_psnr && message)
+    message(fmt::format("warning: --target-psnr {}: this model reaches only {:.2f} dB on held-back samples; train "
+                        "longer or with a larger model (a lower --target-ratio)",
+                        o.target_psnr, psnr_after));
+  Json steps_json = Json::array();
+  for (const auto& s : segs) steps_json.push_back(s.step);
+  return session.note_compact(Json{{"planned_bytes", bytes},
+                                   {"heldback_psnr_unquantized", psnr_before},
+                                   {"heldback_psnr", psnr_after},
+                                   {"qat_steps", qat_steps},
+                                   {"steps", steps_json}});
+}
+
+}  // namespace vnr

@@ -1,0 +1,213 @@
+// The residual block's entropy coding (residuals.h): prediction, zig-zag bytes with an escape stream,
+// zstd. Decoding checks every count against the description, so a damaged block is one clear error.
+#include <zstd.h>
+#include <algorithm>
+#include <cstring>
+#include <memory>
+#include "vnr/core/error.h"
+#include "vnr/core/parallel.h"
+#include "vnr/train/residual_context_coder.h"
+#include "vnr/train/residuals.h"
+#include <zlib.h>
+
+namespace vnr {
+
+namespace {
+
+constexpr int kZstdLevel = 19;
+constexpr uint8_t kEscape = 255;
+
+// 3-D Lorenzo prediction of voxel (x, y, z) from the seven neighbours coded before it (zero outside).
+int64_t lorenzo(const int32_t* q, Int3 d, int64_t x, int64_t y, int64_t z) {
+  const int64_t sx = 1, sy = d.x, sz = d.x * d.y, i = x + sy * y + sz * z;
+  auto at = [&](bool ok, int64_t off) -> int64_t { return ok ? q[i - off] : 0; };
+  const bool bx = x > 0, by = y > 0, bz = z > 0;
+  return at(bx, sx) + at(by, sy) + at(bz, sz) - at(bx && by, sx + sy) - at(bx && bz, sx + sz) -
+         at(by && bz, sy + sz) + at(bx && by && bz, sx + sy + sz);
+}
+
+uint32_t zigzag(int64_t v) { return uint32_t((uint64_t(v) << 1) ^ uint64_t(v >> 63)); }
+int64_t unzigzag(uint32_t u) { return int64_t(u >> 1) ^ -int64_t(u & 1); }
+
+// Symbols (one byte per voxel) followed by the escaped values, 4 bytes little-endian each.
+std::vector<uint8_t> byte_layout(const Residuals& r, bool predict, uint64_t* escapes) {
+  const Int3 d = r.dims;
+  const int64_t n = d.count();
+  std::vector<uint32_t> z(static_cast<size_t>(n));
+  parallel_for(d.z, [&](int64_t k) {
+    for (int64_t j = 0; j < d.y; ++j)
+      for (int64_t i = 0; i < d.x; ++i) {
+        const int64_t v = i + d.x * (j + d.y * k);
+        z[size_t(v)] = zigzag(int64_t(r.q[size_t(v)]) - (predict ? lorenzo(r.q.data(), d, i, j, k) : 0));
+      }
+  });
+  std::vector<uint8_t> out(static_cast<size_t>(n));
+  *escapes = 0;
+  for (int64_t v = 0; v < n; ++v) {
+    const uint32_t u = z[size_t(v)];
+    out[size_t(v)] = u < kEscape ? uint8_t(u) : kEscape;
+    if (u >= kEscape) {
+      ++*escapes;
+      for (int b = 0; b < 4; ++b) out.push_back(uint8_t(u >> (8 * b)));
+    }
+  }
+  return out;
+}
+
+// CRC-32 of the values' bytes: the arithmetic-coded stream has no checksum of its own.
+uint64_t values_crc(const std::vector<int32_t>& q) {
+  uLong crc = crc32(0L, Z_NULL, 0);
+  const auto* p = reinterpret_cast<const Bytef*>(q.data());
+  for (size_t done = 0, total = q.size() * sizeof(int32_t); done < total;) {
+    const size_t n = std::min<size_t>(total - done, 1u << 30);
+    crc = crc32(crc, p + done, uInt(n));
+    done += n;
+  }
+  return uint64_t(crc);
+}
+
+// q minus its Lorenzo prediction at every voxel (|q| < 2^27 keeps the differences inside int32).
+std::vector<int32_t> lorenzo_differences(const Residuals& r) {
+  const Int3 d = r.dims;
+  std::vector<int32_t> out(r.q.size());
+  parallel_for(d.z, [&](int64_t k) {
+    for (int64_t j = 0; j < d.y; ++j)
+      for (int64_t i = 0; i < d.x; ++i) {
+        const int64_t v = i + d.x * (j + d.y * k);
+        out[size_t(v)] = int32_t(int64_t(r.q[size_t(v)]) - lorenzo(r.q.data(), d, i, j, k));
+      }
+  });
+  return out;
+}
+
+std::vector<uint8_t> zstd_compress(const std::vector<uint8_t>& raw) {
+  std::vector<uint8_t> out(ZSTD_compressBound(raw.size()));
+  // The frame carries a checksum of its content: a damaged block fails to decode instead of decoding wrong.
+  std::unique_ptr<ZSTD_CCtx, size_t (*)(ZSTD_CCtx*)> cctx(ZSTD_createCCtx(), ZSTD_freeCCtx);
+  ZSTD_CCtx_setParameter(cctx.get(), ZSTD_c_compressionLevel, kZstdLevel);
+  ZSTD_CCtx_setParameter(cctx.get(), ZSTD_c_checksumFlag, 1);
+  const size_t got = ZSTD_compress2(cctx.get(), out.data(), out.size(), raw.data(), raw.size());
+  if (ZSTD_isError(got)) fail("zstd compression of the residuals failed: {}", ZSTD_getErrorName(got));
+  out.resize(got);
+  return out;
+}
+
+}  // namespace
+
+EncodedResiduals encode_residuals(const Residuals& r) {
+  if (r.q.size() != r.dims.count()) fail("residual field of {} values for {} voxels", r.q.size(), r.dims.count());
+  EncodedResiduals best;
+  Json sizes = Json::object();  // every candidate's size, kept in the description for the record
+  for (bool predict : {false, true}) {
+    uint64_t escapes = 0;
+    const std::vector<uint8_t> raw = byte_layout(r, predict, &escapes);
+    std::vector<uint8_t> packed = zstd_compress(raw);
+    sizes[predict ? "zstd-lorenzo" : "zstd"] = packed.size();
+    if (!best.bytes.empty() && packed.size() >= best.bytes.size()) continue;
+    best.bytes = std::move(packed);
+    best.meta = {{"codec", "zstd"},
+                 {"layout", "zigzag-bytes"},
+                 {"predictor", predict ? "lorenzo" : "none"},
+                 {"dims", {r.dims.x, r.dims.y, r.dims.z}},
+                 {"bound", r.bound},
+                 {"step", r.step},
+                 {"nonzero", r.nonzero()},
+                 {"escapes", escapes},
+                 {"raw_bytes", raw.size()}};
+  }
+  for (bool predict : {false, true}) {
+    std::vector<uint8_t> ac = context_encode(predict ? lorenzo_differences(r).data() : r.q.data(), r.dims);
+    sizes[predict ? "context-lorenzo" : "context"] = ac.size();
+    if (ac.size() >= best.bytes.size()) continue;
+    best.meta = {{"codec", "context"},
+                 {"layout", "binary-ac"},
+                 {"predictor", predict ? "lorenzo" : "none"},
+                 {"dims", {r.dims.x, r.dims.y, r.dims.z}},
+                 {"bound", r.bound},
+                 {"step", r.step},
+                 {"nonzero", r.nonzero()},
+                 {"crc32", values_crc(r.q)}};
+    best.bytes = std::move(ac);
+  }
+  best.meta["candidate_bytes"] = sizes;
+  return best;
+}
+
+namespace {
+
+template <typename T>
+T meta_get(const Json& meta, const char* key, const std::string& what) {
+  if (!meta.is_object() || !meta.contains(key)) fail("{}: the residual block's description lacks \"{}\"", what, key);
+  try {
+    return meta.at(key).get<T>();
+  } catch (const std::exception&) {
+    fail("{}: the residual block's \"{}\" has the wrong type", what, key);
+  }
+}
+
+}  // namespace
+
+Residuals decode_residuals(const Json& meta, const std::vector<uint8_t>& bytes, Int3 dims, const std::string& what) {
+  const auto codec = meta_get<std::string>(meta, "codec", what), layout = meta_get<std::string>(meta, "layout", what);
+  const auto predictor = meta_get<std::string>(meta, "predictor", what);
+  const bool context = codec == "context" && layout == "binary-ac" && (predictor == "none" || predictor == "lorenzo");
+  if (!context && (codec != "zstd" || layout != "zigzag-bytes" || (predictor != "none" && predictor != "lorenzo")))
+    fail("{}: unknown residual coding {}/{}/{} (written by a newer vnr?)", what, codec, layout, predictor);
+  const auto md = meta_get<std::vector<int64_t>>(meta, "dims", what);
+  if (md.size() != 3 || !(Int3{md[0], md[1], md[2]} == dims))
+    fail("{}: the residual block does not match the model's dims", what);
+  Residuals r;
+  r.dims = dims;
+  r.bound = meta_get<double>(meta, "bound", what);
+  r.step = meta_get<double>(meta, "step", what);
+  if (!(r.bound > 0) || !(r.step > 0) || !(r.step <= 2 * r.bound) || !std::isfinite(r.bound))
+    fail("{}: invalid residual bound {} / step {}", what, r.bound, r.step);
+  const int64_t n = dims.count();
+  if (context) {
+    const auto crc = meta_get<uint64_t>(meta, "crc32", what);
+    r.q.resize(size_t(n));
+    context_decode(bytes.data(), bytes.size(), dims, r.q.data(), what);
+    if (predictor == "lorenzo") {  // differences back to values, in coding order
+      int64_t v = 0;
+      for (int64_t k = 0; k < dims.z; ++k)
+        for (int64_t j = 0; j < dims.y; ++j)
+          for (int64_t i = 0; i < dims.x; ++i, ++v) {
+            const int64_t q = int64_t(r.q[size_t(v)]) + lorenzo(r.q.data(), dims, i, j, k);
+            if (q < INT32_MIN || q > INT32_MAX) fail("{}: the residual block is corrupted (value out of range)", what);
+            r.q[size_t(v)] = int32_t(q);
+          }
+    }
+    if (values_crc(r.q) != crc) fail("{}: the residual block is corrupted (CRC mismatch)", what);
+    return r;
+  }
+  const auto escapes = meta_get<uint64_t>(meta, "escapes", what), raw_bytes = meta_get<uint64_t>(meta, "raw_bytes", what);
+  if (escapes > uint64_t(n) || raw_bytes != uint64_t(n) + 4 * escapes)
+    fail("{}: the residual block's sizes are inconsistent", what);
+  const unsigned long long content = ZSTD_getFrameContentSize(bytes.data(), bytes.size());
+  if (content != raw_bytes) fail("{}: the residual block is corrupted (not a zstd frame of {} bytes)", what, raw_bytes);
+  std::vector<uint8_t> raw(raw_bytes);
+  const size_t got = ZSTD_decompress(raw.data(), raw.size(), bytes.data(), bytes.size());
+  if (ZSTD_isError(got) || got != raw_bytes)
+    fail("{}: the residual block is corrupted ({})", what, ZSTD_isError(got) ? ZSTD_getErrorName(got) : "short");
+  if (uint64_t(std::count(raw.begin(), raw.begin() + n, kEscape)) != escapes)
+    fail("{}: the residual block is corrupted (escape count)", what);
+  r.q.resize(size_t(n));
+  const bool predict = predictor == "lorenzo";
+  const uint8_t* esc = raw.data() + n;
+  int64_t v = 0;
+  for (int64_t k = 0; k < dims.z; ++k)
+    for (int64_t j = 0; j < dims.y; ++j)
+      for (int64_t i = 0; i < dims.x; ++i, ++v) {
+        uint32_t u = raw[size_t(v)];
+        if (u == kEscape) {
+          u = uint32_t(esc[0]) | uint32_t(esc[1]) << 8 | uint32_t(esc[2]) << 16 | uint32_t(esc[3]) << 24;
+          esc += 4;
+        }
+        const int64_t q = unzigzag(u) + (predict ? lorenzo(r.q.data(), dims, i, j, k) : 0);
+        if (q < INT32_MIN || q > INT32_MAX) fail("{}: the residual block is corrupted (value out of range)", what);
+        r.q[size_t(v)] = int32_t(q);
+      }
+  return r;
+}
+
+}  // namespace vnr

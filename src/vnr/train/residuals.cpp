@@ -1,0 +1,112 @@
+#include "vnr/train/residuals.h"
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <cstring>
+#include <optional>
+#include "vnr/core/error.h"
+#include "vnr/core/parallel.h"
+#include "vnr/volume/volume.h"
+
+namespace vnr {
+
+double normalised_error_bound(const ErrorBoundRequest& req, double lo, double hi, DType source_dtype) {
+  if (req.max_error > 0 && req.max_rel_error > 0) fail("give either --max-error or --max-rel-error, not both");
+  if (!(req.max_error >= 0) || !(req.max_rel_error >= 0) || !std::isfinite(req.max_error) ||
+      !std::isfinite(req.max_rel_error) || !req.active())
+    fail("the error bound must be a positive number, got {}", req.max_error > 0 ? req.max_error : req.max_rel_error);
+  if (req.max_rel_error >= 1) fail("--max-rel-error is a fraction of the value range and must be below 1, got {}", req.max_rel_error);
+  const double range = hi - lo;
+  if (!(range > 0)) fail("the volume's value range [{}, {}] is empty: an error bound needs hi > lo", lo, hi);
+  double e = req.max_error > 0 ? req.max_error : req.max_rel_error * range;  // data units
+  if (dtype_is_integer(source_dtype) && e >= 0.5) e = std::min(e, std::floor(e) + 0.5);
+  return e / range;
+}
+
+double residual_margin(double bound) { return std::min(bound / 16, 1e-5); }
+
+int64_t Residuals::nonzero() const {
+  return int64_t(q.size()) - std::count(q.begin(), q.end(), 0);
+}
+
+namespace {
+// net itself when it infers in fp32, else an fp32 copy held in `copy`.
+const Network& fp32_network(const Network& net, std::optional<Network>& copy) {
+  if (net.inference_precision() == Precision::FP32) return net;
+  copy.emplace(net);
+  copy->set_inference_precision(Precision::FP32);
+  return *copy;
+}
+}  // namespace
+
+void reference_voxels(const Network& net, Int3 dims, const int64_t* voxel_index, int64_t n, float* out) {
+  std::optional<Network> copy;
+  fp32_network(net, copy).infer_fn(
+      n, [&](int64_t i, float* x, float* y, float* z) { voxel_centre(dims, voxel_index[i], x, y, z); }, out);
+}
+
+void reference_slices(const Network& net, Int3 dims, int64_t z0, int64_t z1, float* out) {
+  std::optional<Network> copy;
+  const Network* ref = &fp32_network(net, copy);
+  // Widen [first, last) to chunk boundaries of the whole volume: every voxel then sits in the same chunk
+  // (same kernels, same padding) whatever slab it was asked in.
+  const int64_t total = dims.count(), first = dims.x * dims.y * z0, last = dims.x * dims.y * z1;
+  const int64_t a = first / kChunk * kChunk, b = std::min(total, (last + kChunk - 1) / kChunk * kChunk);
+  std::vector<float> tmp;
+  float* dst = out;
+  if (a != first || b != last) {
+    tmp.resize(size_t(b - a));
+    dst = tmp.data();
+  }
+  ref->infer_fn(
+      b - a, [&](int64_t i, float* x, float* y, float* z) { voxel_centre(dims, a + i, x, y, z); }, dst);
+  if (dst != out) std::copy(tmp.begin() + (first - a), tmp.begin() + (last - a), out);
+}
+
+namespace {
+float correction(const Residuals& r, int32_t q) { return float(double(q) * r.step); }
+}  // namespace
+
+Residuals compute_residuals(const Network& net, const float* original, Int3 dims, double bound) {
+  if (!(bound > 0) || !std::isfinite(bound)) fail("the error bound must be positive, got {}", bound);
+  Residuals r;
+  r.dims = dims;
+  r.bound = bound;
+  r.step = 2 * (bound - residual_margin(bound));
+  const int64_t n = dims.count();
+  std::vector<float> pred(static_cast<size_t>(n));
+  reference_slices(net, dims, 0, dims.z, pred.data());
+  r.q.resize(size_t(n));
+  const double limit = double(1 << 27);  // so that Lorenzo sums of seven stay far inside int32
+  std::atomic<int64_t> violations{0};
+  parallel_for_range(n, 1 << 16, [&](int64_t i0, int64_t i1) {
+    int64_t bad = 0;
+    for (int64_t i = i0; i < i1; ++i) {
+      const double d = std::nearbyint((double(original[i]) - double(pred[size_t(i)])) / r.step);
+      if (!(std::fabs(d) < limit)) {
+        ++bad;
+        continue;
+      }
+      r.q[size_t(i)] = int32_t(d);
+      const float decoded = pred[size_t(i)] + correction(r, r.q[size_t(i)]);
+      if (!(std::fabs(double(decoded) - double(original[i])) <= bound)) ++bad;
+    }
+    violations += bad;
+  });
+  if (violations > 0)
+    fail("cannot meet the error bound {:.3g} (normalised) at {} voxels: the bound is too small for fp32 values, or "
+         "the network's output is not finite", bound, violations.load());
+  return r;
+}
+
+void apply_residuals(const Residuals& r, int64_t z0, int64_t z1, float* values) {
+  const int64_t plane = r.dims.x * r.dims.y, first = plane * z0, n = plane * (z1 - z0);
+  if (z0 < 0 || z1 > r.dims.z || z0 > z1) fail("residual slab [{}, {}) is outside 0..{}", z0, z1, r.dims.z);
+  const int32_t* q = r.q.data() + first;
+  parallel_for_range(n, 1 << 16, [&](int64_t i0, int64_t i1) {
+    for (int64_t i = i0; i < i1; ++i)
+      if (q[i] != 0) values[i] += correction(r, q[i]);
+  });
+}
+
+}  // namespace vnr

@@ -1,0 +1,75 @@
+#pragma once
+// Error-bound residuals (docs/COMPRESSION.md, "Guaranteed error bound"): the network is the predictor,
+// and the quantised difference between the volume and a deterministic evaluation of the network is
+// stored beside it, so that every decoded voxel lies within a bound of the original (SZ3's promise).
+#include <cstdint>
+#include <memory>
+#include <vector>
+#include "vnr/core/dtype.h"
+#include "vnr/core/json.h"
+#include "vnr/core/math.h"
+#include "vnr/nn/network.h"
+
+namespace vnr {
+
+// What the user asked for: a bound in data units (max_error) or as a fraction of the value range
+// (max_rel_error); at most one of them positive. Neither: no residuals.
+struct ErrorBoundRequest {
+  double max_error = 0;
+  double max_rel_error = 0;
+  bool active() const { return max_error > 0 || max_rel_error > 0; }
+};
+
+// The bound in normalised units for a volume of range [lo, hi] and source dtype. For integer dtypes a
+// bound E >= 0.5 data units is lowered to floor(E) + 0.5, so that the decoded values rounded back to
+// the integer type (`vnr decode --dtype source`) still lie within E (and within floor(E)). Fails on a
+// non-positive, non-finite or double request.
+double normalised_error_bound(const ErrorBoundRequest& request, double lo, double hi, DType source_dtype);
+
+// Safety margin between the guaranteed bound and half the quantisation step, normalised units:
+// min(bound / 16, 1e-5). It covers fp32 rounding of the reference on other CPUs (SIMD targets) and of
+// the conversion to original units; every decoder applies residuals on the CPU reference, never on the
+// GPU's half-precision values (whose ~1e-3 relative difference would eat a 1e-3 bound).
+double residual_margin(double bound);
+
+struct EncodedResiduals;
+
+// The quantised residual field: decoded = reference + q * step at voxel i (x fastest) of dims.
+struct Residuals {
+  Int3 dims;
+  double bound = 0;  // guaranteed max |decoded - original|, normalised units
+  double step = 0;   // 2 (bound - residual_margin(bound))
+  std::vector<int32_t> q;
+  // The coded block, when known (after encoding or loading): saving reuses it instead of coding again.
+  std::shared_ptr<const EncodedResiduals> encoded;
+  int64_t nonzero() const;
+};
+
+// The deterministic reference the residuals are taken against and applied on: the network in fp32
+// on the CPU (whatever its inference precision), evaluated in kChunk-sized chunks aligned to the
+// volume's voxel index, so that any slab split and any thread count give the same bits.
+void reference_slices(const Network& net, Int3 dims, int64_t z0, int64_t z1, float* out);
+
+// The same fp32 evaluation at n voxels given by index (chunks are not aligned here: values may differ
+// from reference_slices' in the last bits, well inside residual_margin).
+void reference_voxels(const Network& net, Int3 dims, const int64_t* voxel_index, int64_t n, float* out);
+
+// Residuals of `original` (normalised values, dims voxels) against reference_slices, for bound
+// (normalised). Checks that the bound holds at every voxel.
+Residuals compute_residuals(const Network& net, const float* original, Int3 dims, double bound);
+
+// values (z-slices [z0, z1) of the reference) += q * step.
+void apply_residuals(const Residuals& r, int64_t z0, int64_t z1, float* values);
+
+// The residual block of a model file: a JSON description and the entropy-coded bytes. The integer
+// field is predicted (none, or 3-D Lorenzo from the neighbours already coded, whichever is smaller),
+// zig-zag mapped to bytes (values >= 255 escaped to a 4-byte side stream) and compressed with zstd.
+struct EncodedResiduals {
+  Json meta;
+  std::vector<uint8_t> bytes;
+};
+EncodedResiduals encode_residuals(const Residuals& r);
+// The inverse; any inconsistency between meta, bytes and dims is one clear error naming `what`.
+Residuals decode_residuals(const Json& meta, const std::vector<uint8_t>& bytes, Int3 dims, const std::string& what);
+
+}  // namespace vnr

@@ -1,0 +1,337 @@
+// .vnr format version 2: compressed (quantized, zstd-coded) parameters and the residual block.
+#include <gtest/gtest.h>
+#include <cmath>
+#include <cstring>
+#include <functional>
+#include <random>
+#include "vnr/core/error.h"
+#include "vnr/core/fileio.h"
+#include "vnr/core/half.h"
+#include "vnr/core/math.h"
+#include "vnr/nn/model_file.h"
+#include "vnr/nn/network.h"
+#include "vnr/nn/param_codec.h"
+#include "test_support.h"
+
+using namespace vnr;
+using namespace vnr::test;
+
+namespace {
+
+Json small_config() {
+  return Json::parse(R"({
+    "loss": {"otype": "L2"},
+    "optimizer": {"otype": "Adam", "learning_rate": 1e-2},
+    "encoding": {"otype": "HashGrid", "n_levels": 4, "n_features_per_level": 2, "log2_hashmap_size": 10,
+                 "base_resolution": 4, "per_level_scale": 2.0},
+    "network": {"otype": "FullyFusedMLP", "activation": "ReLU", "n_neurons": 16, "n_hidden_layers": 1,
+                "output_activation": "None"}
+  })");
+}
+
+// A model of `small_config` with trained-looking parameters: Gaussian MLP weights, grid values of a
+// few hundredths, and macro-cells.
+ModelFile make_model(uint32_t seed, bool macrocells = true) {
+  Network net(small_config());
+  std::mt19937 rng(seed);
+  std::normal_distribution<float> nd(0, 1);
+  ModelFile m;
+  m.config = small_config();
+  m.dims = {20, 17, 9};
+  m.source_dtype = DType::UInt8;
+  m.lo = 0;
+  m.hi = 255;
+  m.params.resize(net.n_params());
+  for (size_t i = 0; i < m.params.size(); ++i)
+    m.params[i] = float_to_half(i < net.mlp().n_params ? 0.3f * nd(rng) : 0.05f * nd(rng));
+  if (macrocells) {
+    m.macrocell_dims = {2, 2, 1};
+    m.macrocell_ranges = {0.f, 1.f, 0.25f, 0.5f, 1.f, -1.f, 0.f, 0.125f};
+  }
+  m.training = Json{{"steps", 10}};
+  return m;
+}
+
+std::vector<ParamSegment> segments_with_step(const ModelFile& m, float mlp_step, float grid_step) {
+  auto segs = param_segments(ModelConfig::from_json(m.config));
+  const uint32_t n_matrices = small_config()["network"]["n_hidden_layers"].get<uint32_t>() + 1;
+  for (size_t i = 0; i < segs.size(); ++i) segs[i].step = i < n_matrices ? mlp_step : grid_step;
+  return segs;
+}
+
+uint32_t version_of(const std::string& bytes) {
+  uint32_t v;
+  std::memcpy(&v, bytes.data() + 8, 4);
+  return v;
+}
+
+// Rewrites a .vnr file's header JSON (blocks re-padded behind it, CRC recomputed): damage that the
+// checksum does not catch, as a buggy or hostile writer would produce.
+std::string with_header(const std::string& file, const std::function<void(Json&)>& edit) {
+  uint64_t hlen;
+  std::memcpy(&hlen, file.data() + 16, 8);
+  Json h = Json::parse(file.substr(24, hlen));
+  const uint64_t blocks = next_multiple(24 + hlen, 64), end = file.size() - 12;
+  edit(h);
+  std::string header = h.dump(), out = file.substr(0, 16);
+  const uint64_t n = header.size();
+  out.append(reinterpret_cast<const char*>(&n), 8);
+  out += header;
+  out.resize(next_multiple(out.size(), 64), '\0');
+  out += file.substr(blocks, end - blocks);
+  const uint32_t crc = crc32_of(out.data(), out.size());
+  out.append(reinterpret_cast<const char*>(&crc), 4);
+  out += file.substr(file.size() - 8);
+  return out;
+}
+
+}  // namespace
+
+TEST(ParamCodec, SegmentsFollowTheLayout) {
+  Network net(small_config());
+  auto segs = param_segments(net.config());
+  ASSERT_EQ(segs.size(), 2u + 4u);  // two matrices, four levels
+  uint64_t total = 0;
+  for (auto& s : segs) total += s.count;
+  EXPECT_EQ(total, net.n_params());
+  EXPECT_EQ(segs[0].count, net.mlp().rows[0] * net.mlp().cols[0]);
+  EXPECT_EQ(segs[2].count, uint64_t(net.grid().levels[0].n_entries) * 2);
+}
+
+TEST(ParamCodec, QuantizeMatchesAPlainReference) {
+  ModelFile m = make_model(1);
+  auto segs = segments_with_step(m, 0.01f, 0.002f);
+  std::vector<uint16_t> q = m.params;
+  quantize_params(q, segs);
+  uint64_t off = 0;
+  for (const auto& s : segs) {
+    for (uint64_t i = off; i < off + s.count; ++i) {
+      const double idx = std::clamp(std::nearbyint(double(half_to_float(m.params[i])) / s.step), -1023.0, 1023.0);
+      ASSERT_EQ(q[i], float_to_half(float(int(idx)) * s.step)) << i;  // int: -0 is stored as +0
+      // half a step, plus fp16 rounding of the dequantized value
+      EXPECT_LE(std::fabs(half_to_float(q[i]) - half_to_float(m.params[i])),
+                0.5 * s.step + std::fabs(half_to_float(q[i])) * 0x1p-11 + 1e-7);
+    }
+    off += s.count;
+  }
+  // Quantizing again is exact: what a file holds survives any number of read/write cycles.
+  std::vector<uint16_t> q2 = q;
+  quantize_params(q2, segs);
+  EXPECT_EQ(q2, q);
+  // A step too fine for the index range is raised to max|p| / 1023.
+  auto fine = segments_with_step(m, 1e-9f, 1e-9f);
+  std::vector<uint16_t> q3 = m.params;
+  quantize_params(q3, fine);
+  for (const auto& s : fine) EXPECT_GT(s.step, 1e-5f);
+}
+
+TEST(ParamCodec, CompressedRoundTripIsExactAndVersion2) {
+  TmpDir tmp;
+  const std::string a = tmp.str() + "/a.vnr", b = tmp.str() + "/b.vnr";
+  ModelFile m = make_model(2);
+  m.param_segments = segments_with_step(m, 0.01f, 0.004f);
+  quantize_params(m.params, m.param_segments);
+  write_vnr(a, m);
+  const std::string bytes = read_file(a);
+  EXPECT_EQ(version_of(bytes), 2u);
+  EXPECT_EQ(vnr_file_bytes(m), bytes.size());
+  ModelFile r = read_vnr(a);
+  EXPECT_EQ(r.params, m.params);
+  ASSERT_EQ(r.param_segments.size(), m.param_segments.size());
+  for (size_t i = 0; i < r.param_segments.size(); ++i) {
+    EXPECT_EQ(r.param_segments[i].count, m.param_segments[i].count);
+    EXPECT_EQ(r.param_segments[i].step, m.param_segments[i].step);
+  }
+  EXPECT_EQ(r.macrocell_ranges, m.macrocell_ranges);
+  EXPECT_EQ(r.config, m.config);
+  EXPECT_EQ(r.training, m.training);
+  write_vnr(b, r);  // read then write again: the same bytes
+  EXPECT_EQ(read_file(b), bytes);
+  // A plain copy stays version 1 and is larger (fp16 against a few bits per value).
+  ModelFile plain = m;
+  plain.param_segments.clear();
+  write_vnr(b, plain);
+  EXPECT_EQ(version_of(read_file(b)), 1u);
+  EXPECT_LT(bytes.size() * 2, read_file(b).size());
+  EXPECT_EQ(read_vnr(b).params, m.params);
+}
+
+TEST(ParamCodec, RawSegmentsKeepEveryBitPattern) {
+  TmpDir tmp;
+  const std::string path = tmp.str() + "/m.vnr";
+  ModelFile m = make_model(3, false);
+  m.params[5] = 0x7e00;  // NaN, kept as raw bits in a step-0 segment
+  m.param_segments = segments_with_step(m, 0.0f, 0.01f);
+  quantize_params(m.params, m.param_segments);
+  write_vnr(path, m);
+  ModelFile r = read_vnr(path);
+  EXPECT_EQ(r.params, m.params);
+  EXPECT_EQ(r.params[5], 0x7e00);
+}
+
+// Inference on a loaded compressed model equals inference on the dequantized parameters, value for
+// value: the loader hands the network exactly the dequantized fp16 values.
+TEST(ParamCodec, QuantizedInferenceEqualsDequantizeThenInfer) {
+  TmpDir tmp;
+  const std::string path = tmp.str() + "/m.vnr";
+  ModelFile m = make_model(4, false);
+  const auto segs = segments_with_step(m, 0.02f, 0.003f);
+  m.param_segments = segs;
+  write_vnr(path, m);  // the writer quantizes the unquantized parameters itself
+
+  std::vector<uint16_t> deq = m.params;  // independent dequantization
+  uint64_t off = 0;
+  for (const auto& s : segs) {
+    for (uint64_t i = off; i < off + s.count; ++i)
+      deq[i] = float_to_half(float(int(std::nearbyint(half_to_float(m.params[i]) / s.step))) * s.step);
+    off += s.count;
+  }
+  Network reference(small_config()), loaded(small_config());
+  reference.set_params_half(deq);
+  loaded.set_params_half(read_vnr(path).params);
+  std::mt19937 rng(9);
+  std::uniform_real_distribution<float> u(0, 1);
+  std::vector<float> xyz(3 * 4096);
+  for (float& v : xyz) v = u(rng);
+  std::vector<float> a(4096), b(4096), c(4096);
+  reference.infer(xyz.data(), 4096, a.data());
+  loaded.infer(xyz.data(), 4096, b.data());
+  EXPECT_EQ(0, std::memcmp(a.data(), b.data(), a.size() * 4));
+  Network unquantized(small_config());
+  unquantized.set_params_half(m.params);
+  unquantized.infer(xyz.data(), 4096, c.data());
+  EXPECT_NE(0, std::memcmp(a.data(), c.data(), a.size() * 4));  // quantization did change the model
+}
+
+TEST(ResidualBlock, RoundTripsAlignedAfterTheMacrocells) {
+  TmpDir tmp;
+  const std::string path = tmp.str() + "/m.vnr";
+  for (bool compressed : {false, true})
+    for (bool macrocells : {false, true}) {
+      ModelFile m = make_model(5, macrocells);
+      if (compressed) m.param_segments = segments_with_step(m, 0.01f, 0.01f);
+      quantize_params(m.params, m.param_segments);
+      m.residuals_meta = Json{{"codec", "test"}, {"bound", 0.5}};
+      for (int i = 0; i < 301; ++i) m.residuals_bytes.push_back(uint8_t(i * 7));
+      write_vnr(path, m);
+      const std::string bytes = read_file(path);
+      EXPECT_EQ(version_of(bytes), 2u);
+      // The block is the last before the trailer and starts on a 64-byte boundary.
+      const uint64_t start = bytes.size() - 12 - 301;
+      EXPECT_EQ(start % 64, 0u);
+      EXPECT_EQ(0, std::memcmp(bytes.data() + start, m.residuals_bytes.data(), 301));
+      ModelFile r = read_vnr(path);
+      EXPECT_EQ(r.residuals_meta, m.residuals_meta);
+      EXPECT_EQ(r.residuals_bytes, m.residuals_bytes);
+      EXPECT_EQ(r.params, m.params);
+      EXPECT_EQ(r.macrocell_ranges, m.macrocell_ranges);
+    }
+  ModelFile m = make_model(5);
+  m.residuals_bytes = {1, 2};
+  EXPECT_TRUE(error_of([&] { write_vnr(path, m); }).find("without their description") != std::string::npos);
+}
+
+TEST(ParamCodec, DamagedFilesAreClearErrors) {
+  TmpDir tmp;
+  const std::string path = tmp.str() + "/m.vnr", bad = tmp.str() + "/bad.vnr";
+  ModelFile m = make_model(6);
+  m.param_segments = segments_with_step(m, 0.01f, 0.004f);
+  m.residuals_meta = Json::object();
+  m.residuals_bytes.assign(100, 3);
+  write_vnr(path, m);
+  const std::string b = read_file(path);
+  std::mt19937 rng(77);
+  for (int i = 0; i < 200; ++i) {  // single-byte damage: the checksum (or an earlier check) catches it
+    std::string c = b;
+    const size_t pos = rng() % c.size();
+    c[pos] = char(uint8_t(c[pos]) ^ uint8_t(1 + rng() % 255));
+    write_bytes(bad, c);
+    EXPECT_THROW(read_model(bad), Error) << pos;
+  }
+  for (int i = 0; i < 50; ++i) {
+    write_bytes(bad, b.substr(0, rng() % b.size()));
+    EXPECT_THROW(read_model(bad), Error);
+  }
+  // A consistent checksum over inconsistent content: each is one clear line.
+  auto expect_error = [&](const std::function<void(Json&)>& edit, const std::string& needle) {
+    write_bytes(bad, with_header(b, edit));
+    const std::string msg = one_line_error_of([&] { read_vnr(bad); });
+    EXPECT_NE(msg.find(needle), std::string::npos) << msg;
+  };
+  write_bytes(bad, with_header(b, [](Json&) {}));
+  EXPECT_EQ(read_vnr(bad).params, read_vnr(path).params);  // the helper itself keeps the file valid
+  expect_error([](Json& h) { h["params_encoding"]["codec"] = "lzma"; }, "unsupported params_encoding");
+  expect_error([](Json& h) { h["params_encoding"]["segments"][0]["n"] = 3; }, "n_params is");
+  expect_error([](Json& h) { h["params_encoding"]["segments"][0]["bytes"] = 3; }, "do not add up");
+  expect_error([](Json& h) { h["params_encoding"]["segments"][1]["width"] = 3; }, "width 3");
+  expect_error([](Json& h) { h["params_encoding"]["segments"][1]["step"] = -1; }, "quantization step");
+  expect_error([](Json& h) { h["params_encoding"]["segments"][1].erase("step"); }, "needs n, step");
+  expect_error([](Json& h) { h["params_encoding"]["bytes"] = 1u << 30; }, "header describes");
+  expect_error([](Json& h) { h["residuals_bytes"] = 99; }, "header describes");
+  expect_error([](Json& h) { h["residuals"] = 5; }, "'residuals' must be an object");
+  expect_error([](Json& h) {  // sizes swapped between two segments: zstd frames no longer line up
+    auto& s = h["params_encoding"]["segments"];
+    std::swap(s[0]["bytes"], s[2]["bytes"]);
+  }, "corrupted");
+  // Damage inside a compressed frame under a valid checksum never crashes.
+  uint64_t hlen;
+  std::memcpy(&hlen, b.data() + 16, 8);
+  const uint64_t block = next_multiple(24 + hlen, 64);
+  for (int i = 0; i < 100; ++i) {
+    std::string c = b;
+    const size_t pos = block + rng() % 200;
+    c[pos] = char(uint8_t(c[pos]) ^ uint8_t(1 + rng() % 255));
+    write_bytes(bad, with_header(c, [](Json&) {}));
+    try {
+      read_vnr(bad);
+    } catch (const Error&) {
+    }
+  }
+}
+
+// Compact macro-cells: 8 bits per bound, widened outwards (a decoded range contains the stored one),
+// empty cells stay empty; ranges outside [0, 1] keep float32.
+TEST(CompactMacrocells, WidenOutwardsAndKeepEmptyCells) {
+  TmpDir tmp;
+  const std::string path = tmp.str() + "/m.vnr";
+  ModelFile m = make_model(8);
+  m.macrocell_dims = {3, 2, 2};
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<float> u(0, 1);
+  m.macrocell_ranges.clear();
+  for (int c = 0; c < 12; ++c) {
+    const float a = u(rng), b = u(rng);
+    m.macrocell_ranges.push_back(std::min(a, b));
+    m.macrocell_ranges.push_back(std::max(a, b));
+  }
+  m.macrocell_ranges[2] = m.macrocell_ranges[3] = 0.5f;  // a single value
+  m.macrocell_ranges[4] = 1.0f, m.macrocell_ranges[5] = -1.0f;  // empty
+  m.macrocell_ranges[6] = 0.0f, m.macrocell_ranges[7] = 1.0f;
+  m.compact_macrocells = true;
+  write_vnr(path, m);
+  EXPECT_EQ(version_of(read_file(path)), 2u);
+  ModelFile r = read_vnr(path);
+  EXPECT_TRUE(r.compact_macrocells);
+  ASSERT_EQ(r.macrocell_ranges.size(), m.macrocell_ranges.size());
+  for (size_t c = 0; c < 12; ++c) {
+    const float lo = m.macrocell_ranges[2 * c], hi = m.macrocell_ranges[2 * c + 1];
+    const float dlo = r.macrocell_ranges[2 * c], dhi = r.macrocell_ranges[2 * c + 1];
+    if (lo > hi) {
+      EXPECT_GT(dlo, dhi) << c;
+      continue;
+    }
+    EXPECT_LE(dlo, lo) << c;
+    EXPECT_GE(dhi, hi) << c;
+    EXPECT_LE(lo - dlo, 1.0f / 255 + 1e-7f) << c;
+    EXPECT_LE(dhi - hi, 1.0f / 255 + 1e-7f) << c;
+  }
+  EXPECT_EQ(r.macrocell_ranges[6], 0.0f);
+  EXPECT_EQ(r.macrocell_ranges[7], 1.0f);
+  write_vnr(tmp.str() + "/b.vnr", r);  // stable once stored
+  EXPECT_EQ(read_file(tmp.str() + "/b.vnr"), read_file(path));
+  // Outside [0, 1]: float32 as before, exact.
+  m.macrocell_ranges[1] = 1.5f;
+  write_vnr(path, m);
+  EXPECT_EQ(version_of(read_file(path)), 1u);
+  EXPECT_EQ(read_vnr(path).macrocell_ranges, m.macrocell_ranges);
+}

@@ -1,0 +1,143 @@
+// Compact storage through the library API: --target-ratio's exact file size, --target-psnr, and the
+// quantized model that the file holds (train/rate_control.h).
+#include <gtest/gtest.h>
+#include <cmath>
+#include <cstring>
+#include "vnr/core/fileio.h"
+#include "vnr/train/rate_control.h"
+#include "vnr/train/session.h"
+#include "test_support.h"
+
+using namespace vnr;
+using namespace vnr::test;
+
+namespace {
+
+double smooth_field(double x, double y, double z) {
+  return 0.5 + 0.3 * std::sin(3.0 * x) * std::cos(2.0 * y) + 0.2 * z * z;
+}
+
+// A smooth field stored as `dtype` (uint8, int16 or float32) at d/v.raw.
+std::string write_volume(const std::string& d, Int3 dims, const std::string& dtype) {
+  std::string bytes;
+  for (int64_t z = 0; z < dims.z; ++z)
+    for (int64_t y = 0; y < dims.y; ++y)
+      for (int64_t x = 0; x < dims.x; ++x) {
+        const double v = smooth_field(double(x) / dims.x, double(y) / dims.y, double(z) / dims.z);
+        if (dtype == "uint8") {
+          bytes.push_back(char(uint8_t(std::lround(v * 255))));
+        } else if (dtype == "int16") {
+          const int16_t s = int16_t(std::lround(v * 20000 - 5000));
+          bytes.append(reinterpret_cast<const char*>(&s), 2);
+        } else {
+          const float f = float(v);
+          bytes.append(reinterpret_cast<const char*>(&f), 4);
+        }
+      }
+  const std::string path = d + "/v_" + dtype + ".raw";
+  write_bytes(path, bytes);
+  return path;
+}
+
+TrainingSetup setup_for(const std::string& d, const std::string& volume, Int3 dims, const std::string& dtype) {
+  TrainingSetup s;
+  s.volume = volume;
+  s.raw.dims = dims;
+  s.raw.dtype = dtype;
+  s.config = "small";
+  s.batch = 4096;
+  s.seed = 5;
+  s.device = "cpu";
+  s.session.output = d + "/m.vnr";
+  return s;
+}
+
+}  // namespace
+
+// The file lands within 5 % of volume_bytes / R (vnr aims just under it), for several sizes and dtypes,
+// and the model it holds is the one the session evaluated: quantized values, loaded exactly.
+TEST(RateControl, TargetRatioGivesTheFileSize) {
+  const std::string d = temp_dir("rate_ratio");
+  struct Case {
+    Int3 dims;
+    std::string dtype;
+    double ratio;
+  };
+  for (const Case& c : {Case{{40, 40, 40}, "uint8", 8}, Case{{48, 40, 32}, "float32", 32},
+                        Case{{56, 24, 40}, "int16", 12}}) {
+    SCOPED_TRACE(c.dtype);
+    TrainingSetup s = setup_for(d, write_volume(d, c.dims, c.dtype), c.dims, c.dtype);
+    s.target_ratio = c.ratio;
+    auto session = open_training_session(s);
+    const CompactOptions& o = session->options().compact;
+    const uint64_t volume_bytes = uint64_t(c.dims.count()) * dtype_size(parse_dtype(c.dtype));
+    ASSERT_EQ(o.target_bytes, uint64_t(double(volume_bytes) / c.ratio));
+    const Json summary = train_compact(*session, 40, 0, o);
+    EXPECT_EQ(summary["qat_steps"].get<int64_t>(), 6);  // the last 15 % of 40 steps
+    const TrainingResult r = session->finish(false, 0);
+    const double size = double(file_size(s.session.output));
+    EXPECT_LE(size, double(o.target_bytes));
+    EXPECT_GE(size, 0.95 * double(o.target_bytes));
+    EXPECT_EQ(uint64_t(size), r.model_bytes);
+    Model m = load_model(s.session.output);
+    EXPECT_FALSE(m.param_segments.empty());
+    EXPECT_EQ(m.net->params_half(), session->network().params_half());
+  }
+}
+
+// --target-psnr: the coarsest quantization that keeps the held-back PSNR, far smaller than fp16,
+// and the final full evaluation near the estimate.
+TEST(RateControl, TargetPsnrKeepsTheQualityAtTheSmallestSize) {
+  const std::string d = temp_dir("rate_psnr");
+  const Int3 dims{32, 32, 32};
+  TrainingSetup s = setup_for(d, write_volume(d, dims, "float32"), dims, "float32");
+  s.target_psnr = 32;
+  auto session = open_training_session(s);
+  const Json summary = train_compact(*session, 300, 0, session->options().compact);
+  ASSERT_GE(summary["heldback_psnr_unquantized"].get<double>(), 34.0) << summary.dump();
+  EXPECT_GE(summary["heldback_psnr"].get<double>(), 32.0);
+  EXPECT_LT(summary["heldback_psnr"].get<double>(), 33.0);  // the coarsest steps that still reach it
+  const TrainingResult r = session->finish(false, 0);
+  EXPECT_NEAR(r.psnr, summary["heldback_psnr"].get<double>(), 0.5);  // random voxels estimate the full PSNR
+  EXPECT_LT(double(r.model_bytes), 0.5 * double(session->network().n_params() * 2));
+}
+
+TEST(RateControl, BadTargetsAreOneLineErrors) {
+  TrainingSetup s;
+  s.target_ratio = -2;
+  EXPECT_NE(one_line_error_of([&] { check_training_setup(s); }).find("--target-ratio must be positive"),
+            std::string::npos);
+  s.target_ratio = 0;
+  s.target_psnr = std::nan("");
+  EXPECT_NE(one_line_error_of([&] { check_training_setup(s); }).find("--target-psnr must be positive"),
+            std::string::npos);
+}
+
+// A budget below what the header and macro-cells alone take is refused with the smallest size.
+TEST(RateControl, ImpossibleBudgetIsRefused) {
+  const std::string d = temp_dir("rate_small");
+  const Int3 dims{24, 24, 24};
+  TrainingSetup s = setup_for(d, write_volume(d, dims, "uint8"), dims, "uint8");
+  s.target_ratio = 100;  // 138 bytes
+  auto session = open_training_session(s);
+  const std::string msg = one_line_error_of([&] { train_compact(*session, 10, 0, session->options().compact); });
+  EXPECT_NE(msg.find("below the smallest file this model can make"), std::string::npos) << msg;
+}
+
+// A front end that only run()s a compact session (the Python module, a viewer) still gets a file that
+// meets the target: finish() quantizes after training.
+TEST(RateControl, FinishQuantizesARunOnlySession) {
+  const std::string d = temp_dir("rate_finish");
+  const Int3 dims{40, 32, 24};
+  TrainingSetup s = setup_for(d, write_volume(d, dims, "float32"), dims, "float32");
+  s.target_ratio = 16;
+  auto session = open_training_session(s);
+  session->run(20);
+  const TrainingResult r = session->finish(false, 0);
+  const uint64_t target = session->options().compact.target_bytes;
+  EXPECT_LE(r.model_bytes, target);
+  EXPECT_GE(double(r.model_bytes), 0.95 * double(target));
+  ASSERT_TRUE(r.report.contains("compact"));
+  EXPECT_EQ(r.report["compact"]["qat_steps"].get<int64_t>(), 0);
+  EXPECT_EQ(load_model(s.session.output).net->params_half(), session->network().params_half());
+}
