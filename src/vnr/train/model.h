@@ -13,6 +13,8 @@
 
 namespace vnr {
 
+struct BrickedModel;  // train/bricks.h
+
 // A network together with what it represents: the bridge between the in-memory Network and the
 // model files.
 struct Model {
@@ -22,6 +24,9 @@ struct Model {
   double lo = 0, hi = 1;
   Json training;  // summary written by `vnr train`
   std::optional<ValueRangeGrid> macrocells;  // value ranges built online while training (or imported)
+  // A multi-brick model (a directory, train/bricks.h): net is then a copy of brick 0's network (config,
+  // precision); queries, decodes, evaluation and rendering go through the bricks.
+  std::shared_ptr<BrickedModel> bricks;
   uint64_t param_bytes() const { return net->n_params() * 2; }  // fp16, as stored
 };
 
