@@ -1,5 +1,6 @@
 #include "mpi/comm.h"
 #include <mpi.h>
+#include <cstdint>
 #include <cstdlib>
 #include <exception>
 #include <new>
@@ -104,6 +105,25 @@ std::string broadcast(const std::string& s, int root) {
   check(MPI_Bcast(&n, 1, MPI_INT64_T, root, MPI_COMM_WORLD), "broadcast");
   std::string out = g_rank == root ? s : std::string(size_t(n), '\0');
   if (n > 0) check(MPI_Bcast(out.data(), int(n), MPI_CHAR, root, MPI_COMM_WORLD), "broadcast");
+  return out;
+}
+
+std::vector<std::string> gather(const std::string& s, int root) {
+  if (!g_active) return {s};
+  const std::vector<int64_t> lengths = all_gather(int64_t(s.size()));
+  std::vector<int> counts(lengths.size()), offsets(lengths.size());
+  int64_t total = 0;
+  for (size_t r = 0; r < lengths.size(); ++r) {
+    if (total + lengths[r] > INT32_MAX) fail("MPI gather: more than 2 GiB of text");
+    counts[r] = int(lengths[r]), offsets[r] = int(total), total += lengths[r];
+  }
+  std::string all(g_rank == root ? size_t(total) : 0, '\0');
+  check(MPI_Gatherv(s.data(), int(s.size()), MPI_CHAR, all.data(), counts.data(), offsets.data(), MPI_CHAR, root,
+                    MPI_COMM_WORLD),
+        "gather");
+  std::vector<std::string> out;
+  if (g_rank == root)
+    for (size_t r = 0; r < lengths.size(); ++r) out.push_back(all.substr(size_t(offsets[r]), size_t(counts[r])));
   return out;
 }
 

@@ -49,6 +49,8 @@ int64_t sum(int64_t v);
 double max(double v);
 // root's string on every rank.
 std::string broadcast(const std::string& s, int root = 0);
+// Every rank's string on root (indexed by rank); empty elsewhere.
+std::vector<std::string> gather(const std::string& s, int root = 0);
 // Every rank's value of v, indexed by rank.
 std::vector<int64_t> all_gather(int64_t v);
 

@@ -55,6 +55,9 @@ void check_error_agreement() {
   expect(!threw, "agree() threw without a failure");
   expect(sum(int64_t(rank() + 1)) == int64_t(size()) * (size() + 1) / 2, "sum");
   expect(broadcast(rank() == 0 ? "hello" : "", 0) == "hello", "broadcast");
+  const std::vector<std::string> texts = gather(std::string(size_t(rank()), char('a' + rank())));
+  for (int r = 0; r < size() && rank() == 0; ++r)
+    expect(texts.size() == size_t(size()) && texts[size_t(r)] == std::string(size_t(r), char('a' + r)), "gather");
 }
 
 // Each rank writes an uneven slab of a byte pattern; the committed file is the pattern, no temporary left.
