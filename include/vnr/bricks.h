@@ -15,10 +15,6 @@ namespace vnr {
 // The bricked part of a model opened by load_model (null for a single-network model).
 inline const BrickedModel* bricked(const Model& m) { return m.bricks.get(); }
 
-// A Model (as load_model returns it) over an already opened multi-brick model: for a rank that loaded
-// only some bricks (load_bricked_model(dir, &only)).
-Model model_of_bricks(std::shared_ptr<BrickedModel> bricks);
-
 // Sort-last rendering: the part of every ray inside brick `index`'s owned box, as premultiplied RGBA
 // (no background), from the renderer's current settings. Samples lie on the same global t grid as the
 // whole-volume frame, so compositing the bricks' images front to back in visibility order

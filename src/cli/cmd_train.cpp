@@ -38,6 +38,8 @@ struct StopSignalGuard {
   std::optional<StopSignalScope> signals;
 };
 
+}  // namespace
+
 TrainingSetup setup_of(const TrainArgs& a, bool preview) {
   TrainingSetup s;
   s.volume = a.volume;
@@ -64,6 +66,8 @@ TrainingSetup setup_of(const TrainArgs& a, bool preview) {
   return s;
 }
 
+namespace {
+
 void print_result(const TrainArgs& a, const TrainingSession& session, const TrainingResult& r,
                   const TrainPreview* preview, const std::string& preview_dir) {
   const TrainingData& data = *session.data();
@@ -87,6 +91,7 @@ void run_train(const TrainArgs& a) {
     if (a.device == "cuda") fail("--timesteps trains on the CPU; --device cuda is not supported for time series yet");
     return run_train_series(a);
   }
+  if (!a.bricks.empty() || a.resume) return run_train_bricks(a);
   // Everything that can be checked without the data is checked first, so mistakes fail fast.
   TrainingSetup setup = setup_of(a, a.preview.enabled());
   if (a.eval_samples < 0) fail("--eval-samples must be non-negative, got {}", a.eval_samples);
@@ -188,6 +193,7 @@ void add_train(CLI::App& app) {
   c->add_flag("-q,--quiet", a->quiet, "no progress output");
   a->vol.add(c);
   a->preview.add(c);
+  add_train_bricks_options(c, *a);
   c->callback([a]() { run_train(*a); });
 }
 

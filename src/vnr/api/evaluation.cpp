@@ -6,6 +6,7 @@
 #include "vnr/core/fileio.h"
 #include "vnr/core/units.h"
 #include "vnr/model.h"
+#include "vnr/train/bricks.h"
 #include "vnr/train/training_data.h"
 
 namespace vnr {
@@ -90,7 +91,7 @@ void evaluate_unheld(FileEvaluation& r, const Model& model, const FileEvalOption
   if (r.value_range_source == "scan" && progress.finished) progress.finished("value range");
   const double lo = r.value_range.lo, hi = r.value_range.hi;
   if (plan.method == EvalMethod::Sampled) {
-    take_sampled(r, evaluate_sampled(*model.net, plan.desc, lo, hi, o.samples, o.seed, o.open.load, o.device));
+    take_sampled(r, evaluate_sampled(model, plan.desc, lo, hi, o.samples, o.seed, o.open.load, o.device));
     return;
   }
   note(r, progress,
@@ -101,7 +102,7 @@ void evaluate_unheld(FileEvaluation& r, const Model& model, const FileEvalOption
   auto eval_progress = [&](double f) {
     if (progress.update) progress.update("eval", f);
   };
-  const EvalResult ev = evaluate_streamed(*model.net, plan.desc, lo, hi, o.open.load, o.with_ssim, eval_progress,
+  const EvalResult ev = evaluate_streamed(model, plan.desc, lo, hi, o.open.load, o.with_ssim, eval_progress,
                                           plan.slab_slices * dims.x * dims.y, o.device);
   if (progress.finished) progress.finished("eval");
   take_whole(r, ev, o.with_ssim);
@@ -113,7 +114,7 @@ FileEvaluation evaluate_model_file(const Model& model, const std::string& volume
                                    const FileEvalProgress& progress) {
   if (!model.net) fail("the model has no network");
   if (o.samples < 0) fail("the number of sampled voxels must be positive, got {}", o.samples);
-  if (o.device == Device::Cuda) cuda::check_supported(*model.net);  // before reading the volume
+  if (o.device == Device::Cuda && !model.bricks) cuda::check_supported(*model.net);  // before reading the volume
   FileEvaluation r;
   r.device = o.device;
   const VolumeDesc desc = describe_volume_file(volume_path, o.open);
@@ -122,7 +123,7 @@ FileEvaluation evaluate_model_file(const Model& model, const std::string& volume
     note(r, progress,
          fmt::format("model was trained on {}x{}x{}, evaluating at {}x{}x{}", model.dims.x, model.dims.y,
                      model.dims.z, dims.x, dims.y, dims.z));
-  r.model_bytes = o.model_path.empty() ? model.param_bytes() : file_size(o.model_path);
+  r.model_bytes = o.model_path.empty() ? (model.bricks ? model.bricks->param_bytes() : model.param_bytes()) : model_file_bytes(o.model_path);
   r.volume_bytes = dims.count() * dtype_size(desc.dtype);
   r.compression_ratio = double(r.volume_bytes) / double(r.model_bytes);
   r.plan = plan_file_evaluation(desc, o.samples, o.with_ssim, o.memory_budget);

@@ -47,6 +47,8 @@ constexpr uint64_t auto_brick_voxels = uint64_t(256) * 256 * 256;
 // dims % n bricks of an axis get one voxel more). Deterministic; every brick at least ghost + 1 voxels
 // wide and at least 1 voxel (else an error saying how many bricks the axis allows).
 BrickPlan plan_bricks(Int3 dims, Int3 grid, int ghost, uint32_t seed);
+// The brick's boxes, seed and file as JSON (the manifest's entry; a brick file's training["brick"]).
+Json brick_record(const BrickSpec& brick);
 // Seed of brick `index` for the user's seed: a hash of both (never of the rank that trains it).
 uint32_t brick_seed(uint32_t seed, int index);
 // Bricks of each of n_ranks ranks, balanced by trained voxels (greedy largest-first onto the least
@@ -82,6 +84,34 @@ ValueRange brick_value_range(const TrainingSetup& setup, const MessageFn& messag
 BrickResult train_brick(const TrainingSetup& setup, const BrickPlan& plan, int index, const std::string& out_dir,
                         const ValueRange& range, const BrickTrainOptions& options = {});
 
+// Creates out_dir for plan. Without resume an existing non-empty directory is an error (no data is
+// replaced); with resume an existing manifest must describe the same plan (dims, grid, ghost, seed).
+void prepare_brick_dir(const std::string& out_dir, const BrickPlan& plan, bool resume);
+// The training summaries recorded in the brick files of the bricks marked done.
+std::vector<BrickResult> brick_results_on_disk(const std::string& out_dir, const BrickPlan& plan,
+                                               const std::vector<bool>& done);
+
+// The single-process run of `vnr train --bricks`: prepare the directory, write the manifest, train every
+// brick not done (in index order, or those in `only`), rewrite the manifest with every finished brick.
+struct BricksRunOptions {
+  bool resume = false;
+  BrickTrainOptions brick;
+  std::function<void(const BrickSpec& brick, int k, int n)> on_brick_start;  // k of n bricks to train
+  std::function<void(const BrickResult& result)> on_brick_done;
+};
+struct BricksRunResult {
+  BrickPlan plan;
+  ValueRange range;
+  int already_done = 0;              // bricks found complete on disk (--resume)
+  std::vector<BrickResult> trained;  // this run's bricks
+  bool interrupted = false;          // a stop was requested: the remaining bricks are missing
+  int done = 0;                      // bricks complete on disk after this run
+  bool complete = false;             // every brick is done
+  double seconds = 0;
+};
+BricksRunResult train_bricks(const TrainingSetup& setup, Int3 grid, int ghost, const std::string& out_dir,
+                             const BricksRunOptions& options);
+
 // Which bricks of plan are already trained in out_dir: the file loads (CRC checked), covers the brick's
 // trained box with the brick's seed and is complete. A damaged or foreign file counts as missing.
 std::vector<bool> bricks_done(const std::string& out_dir, const BrickPlan& plan, const std::string& config_text);
@@ -92,11 +122,14 @@ void write_manifest(const std::string& out_dir, const BrickPlan& plan, DType dty
 // The plan a manifest describes (checked: boxes tile the volume, files named).
 BrickPlan read_manifest_plan(const Json& manifest, const std::string& where);
 bool is_bricked_model_dir(const std::string& path);  // a directory holding manifest.json
+// Bytes of a model on disk: the file, or a multi-brick directory's manifest and brick files.
+uint64_t model_file_bytes(const std::string& path);
 
 // A multi-brick model in memory: its plan and the bricks' models (a brick not loaded is empty).
 struct BrickedModel {
   std::string dir;
   BrickPlan plan;
+  BrickLayout layout;  // the plan's boxes, for blending
   Json manifest;
   DType source_dtype = DType::Float32;
   double lo = 0, hi = 1;
@@ -107,6 +140,10 @@ struct BrickedModel {
 // Opens MODEL/ (only the bricks in `only` when given: a rank's bricks and their neighbours). A missing or
 // damaged brick file is one error naming the brick and suggesting --resume.
 std::shared_ptr<BrickedModel> load_bricked_model(const std::string& dir, const std::vector<int>* only = nullptr);
+// The Model load_model(dir) returns: dims, dtype, range, training summary and merged macro-cells of the
+// whole volume, bricks = m, net = a network of the bricks' config (for its description and precision).
+Model model_of_bricks(std::shared_ptr<BrickedModel> m);
+BrickLayout layout_of(const BrickPlan& plan);
 // Bricks whose trained box meets `region` (voxels of the model's grid): what must be loaded to answer it.
 std::vector<int> bricks_touching(const BrickPlan& plan, const Box3& region);
 

@@ -1,5 +1,6 @@
 #include "vnr/train/decoder.h"
 #include <vector>
+#include "vnr/train/bricks.h"
 #include "vnr/volume/volume.h"
 
 namespace vnr {
@@ -7,9 +8,14 @@ namespace vnr {
 Decoder::Decoder(const Network& net, Device device) : net_(net), device_(device) {
   if (device == Device::Cuda) gpu_ = std::make_unique<cuda::GpuNetwork>(net);
 }
+Decoder::Decoder(const Model& model, Device device)
+    : net_(*model.net), device_(model.bricks ? Device::Cpu : device), bricks_(model.bricks.get()) {
+  if (device_ == Device::Cuda) gpu_ = std::make_unique<cuda::GpuNetwork>(net_);
+}
 Decoder::~Decoder() = default;
 
 void Decoder::slices(Int3 dims, int64_t z0, int64_t z1, float* out) {
+  if (bricks_) return decode_bricked_region(*bricks_, dims, Box3{{0, 0, z0}, {dims.x, dims.y, z1}}, out);
   if (gpu_) return gpu_->decode_slices(dims, z0, z1, out);  // voxel_centre() in kernels.cu
   const int64_t first = dims.x * dims.y * z0;
   net_.infer_fn(
@@ -18,10 +24,10 @@ void Decoder::slices(Int3 dims, int64_t z0, int64_t z1, float* out) {
 }
 
 void Decoder::voxels(Int3 dims, const int64_t* voxel_index, int64_t n, float* out) {
-  if (gpu_) {
+  if (gpu_ || bricks_) {
     std::vector<float> xyz(size_t(3 * n));
     for (int64_t i = 0; i < n; ++i) voxel_centre(dims, voxel_index[i], &xyz[3 * i], &xyz[3 * i + 1], &xyz[3 * i + 2]);
-    return gpu_->infer(xyz.data(), n, out);
+    return bricks_ ? bricked_points(*bricks_, xyz.data(), n, out) : gpu_->infer(xyz.data(), n, out);
   }
   net_.infer_fn(
       n, [&](int64_t i, float* x, float* y, float* z) { voxel_centre(dims, voxel_index[i], x, y, z); }, out);

@@ -8,6 +8,8 @@
 
 namespace vnr {
 
+struct Model;  // train/model.h: the overloads taking a Model decode a multi-brick model blended (train/bricks.h)
+
 // Evaluation against the ground truth at voxel centres (docs/semantics.md B.4).
 struct EvalResult {
   double psnr = 0, ssim = 0, mse = 0;
@@ -16,6 +18,7 @@ struct EvalResult {
   double decode_seconds = 0;
 };
 EvalResult evaluate(const Network& net, const Volume& vol, bool with_ssim = true, Device device = Device::Cpu);
+EvalResult evaluate(const Model& model, const Volume& vol, bool with_ssim = true, Device device = Device::Cpu);
 
 // evaluate() for a volume that is not in memory: the volume (desc, normalised with [lo, hi] as
 // load_volume would) is streamed in z-slabs of about slab_voxels voxels (0: 16 M voxels, i.e.
@@ -26,6 +29,10 @@ EvalResult evaluate(const Network& net, const Volume& vol, bool with_ssim = true
 // slab boundary see the 6 slices before it), equal to ssim3d's up to rounding (~1e-14).
 // `progress` gets the fraction of slices done.
 EvalResult evaluate_streamed(const Network& net, const VolumeDesc& desc, double lo, double hi,
+                             const LoadOptions& opts, bool with_ssim = true,
+                             const std::function<void(double fraction)>& progress = {}, int64_t slab_voxels = 0,
+                             Device device = Device::Cpu);
+EvalResult evaluate_streamed(const Model& model, const VolumeDesc& desc, double lo, double hi,
                              const LoadOptions& opts, bool with_ssim = true,
                              const std::function<void(double fraction)>& progress = {}, int64_t slab_voxels = 0,
                              Device device = Device::Cpu);
@@ -45,6 +52,8 @@ struct SampledEval {
   double decode_seconds = 0;
 };
 SampledEval evaluate_sampled(const Network& net, const VolumeDesc& desc, double lo, double hi, int64_t n_samples,
+                             uint64_t seed, const LoadOptions& opts = {}, Device device = Device::Cpu);
+SampledEval evaluate_sampled(const Model& model, const VolumeDesc& desc, double lo, double hi, int64_t n_samples,
                              uint64_t seed, const LoadOptions& opts = {}, Device device = Device::Cpu);
 
 }  // namespace vnr
