@@ -1,5 +1,7 @@
 // MpiCli: MPI start-up, the distributed commands swapped in, errors printed once per job.
+#include <algorithm>
 #include <cstdio>
+#include <iterator>
 #include <optional>
 #include <thread>
 #include "mpi_cli.h"
@@ -15,14 +17,30 @@ struct MpiCli::State {
 };
 
 namespace {
+#ifdef VNR_MPI_RENDER
+constexpr const char* kDistributed[] = {"train", "decode", "eval", "render"};
+#else
+constexpr const char* kDistributed[] = {"train", "decode", "eval"};
+#endif
 bool is_distributed_command(const std::string& name) {
-  return name == "train" || name == "decode" || name == "eval" || name == "render";
+  return std::find(std::begin(kDistributed), std::end(kDistributed), name) != std::end(kDistributed);
 }
 }  // namespace
 
 // Replaces the one-process train, decode, eval and render by their distributed forms.
 void add_distributed_commands(CLI::App& app) {
-  (void)app;  // the commands follow with the multi-brick models (cmd_mpi_*.cpp)
+  for (const std::string name : kDistributed)
+    for (CLI::App* sub : app.get_subcommands({}))
+      if (sub->get_name() == name) {
+        app.remove_subcommand(sub);
+        break;
+      }
+  add_train_mpi(app);
+  add_decode_mpi(app);
+  add_eval_mpi(app);
+#ifdef VNR_MPI_RENDER
+  add_render_mpi(app);
+#endif
 }
 
 int rank_threads(int requested) {
@@ -40,8 +58,8 @@ MpiCli::MpiCli(int* argc, char*** argv, CLI::App& app) : state_(std::make_unique
     const std::string name = sub->get_name();
     if (is_distributed_command(name)) continue;
     sub->callback([name] {
-      throw AllRanksError(fmt::format("'vnr {}' runs in one process: start it without mpirun (train, decode, eval and "
-                                      "render of multi-brick models are what runs distributed)", name));
+      throw AllRanksError(fmt::format("'vnr {}' runs in one process: start it without mpirun (train, decode and eval "
+                                      "of multi-brick models run distributed)", name));
     });
   }
 }
@@ -52,14 +70,15 @@ bool MpiCli::agreed(const Error& e) const {
   return dynamic_cast<const mpi::RankFailure*>(&e) || dynamic_cast<const AllRanksError*>(&e);
 }
 
-void MpiCli::print_error(const std::string& msg, bool agreed) const {
+int MpiCli::print_error(const std::string& msg, bool agreed, int status) const {
   if (!mpi::active() || mpi::size() == 1) {
     std::fprintf(stderr, "vnr: error: %s\n", msg.c_str());
-    return;
+    return status;
   }
   if (agreed) {
-    if (mpi::rank() == 0) std::fprintf(stderr, "vnr: error: %s\n", msg.c_str());
-    return;
+    if (mpi::rank() != 0) return 0;
+    std::fprintf(stderr, "vnr: error: %s\n", msg.c_str());
+    return status;
   }
   std::fprintf(stderr, "vnr: error: rank %d of %d: %s\n", mpi::rank(), mpi::size(), msg.c_str());
   std::fflush(stderr);
@@ -70,7 +89,10 @@ struct MpiCli::State {};
 MpiCli::MpiCli(int*, char***, CLI::App&) {}
 MpiCli::~MpiCli() = default;
 bool MpiCli::agreed(const Error&) const { return true; }
-void MpiCli::print_error(const std::string& msg, bool) const { std::fprintf(stderr, "vnr: error: %s\n", msg.c_str()); }
+int MpiCli::print_error(const std::string& msg, bool, int status) const {
+  std::fprintf(stderr, "vnr: error: %s\n", msg.c_str());
+  return status;
+}
 #endif
 
 }  // namespace vnr::cli

@@ -167,17 +167,14 @@ int main(int argc, char** argv) {
     return app.exit(e);
   } catch (const CLI::ParseError& e) {
     // One line, like every other error; --help has the details.
-    mpi.print_error(fmt::format("{} (see 'vnr --help' or 'vnr COMMAND --help')", e.what()), true);
-    return e.get_exit_code() != 0 ? e.get_exit_code() : 2;
+    return mpi.print_error(fmt::format("{} (see 'vnr --help' or 'vnr COMMAND --help')", e.what()), true,
+                           e.get_exit_code() != 0 ? e.get_exit_code() : 2);
   } catch (const vnr::Error& e) {
-    mpi.print_error(e.what(), mpi.agreed(e));
-    return 1;
+    return mpi.print_error(e.what(), mpi.agreed(e), 1);
   } catch (const std::bad_alloc&) {
-    mpi.print_error("out of memory", false);
-    return 1;
+    return mpi.print_error("out of memory", false, 1);
   } catch (const std::exception& e) {
-    mpi.print_error(e.what(), false);
-    return 1;
+    return mpi.print_error(e.what(), false, 1);
   }
   return 0;
 }

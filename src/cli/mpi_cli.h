@@ -23,9 +23,11 @@ public:
   MpiCli(const MpiCli&) = delete;
   MpiCli& operator=(const MpiCli&) = delete;
 
-  // "vnr: error: MSG" on stderr. Distributed, only rank 0 prints an error every rank has (agreed); any
-  // other error is printed with its rank and ends the whole job, since other ranks may be waiting for it.
-  void print_error(const std::string& msg, bool agreed) const;
+  // "vnr: error: MSG" on stderr; returns the exit status. Distributed, only rank 0 prints an error every
+  // rank has (agreed) and exits with `status` (the others with 0, so that mpirun reports one failure and
+  // kills no rank still finalising); any other error is printed with its rank and ends the whole job,
+  // since other ranks may be waiting for it.
+  int print_error(const std::string& msg, bool agreed, int status) const;
   // Whether every rank threw e alike (RankFailure from the MPI layer, or AllRanksError).
   bool agreed(const Error& e) const;
 
@@ -39,7 +41,7 @@ private:
 void add_train_mpi(CLI::App& app);
 void add_decode_mpi(CLI::App& app);
 void add_eval_mpi(CLI::App& app);
-void add_render_mpi(CLI::App& app);
+void add_render_mpi(CLI::App& app);  // with VNR_MPI_RENDER (cmake/mpi.cmake)
 // CPU threads of a rank: --threads, else the node's cores shared by its ranks.
 int rank_threads(int requested);
 #endif
