@@ -52,7 +52,11 @@ std::string describe_box(const Box3& b) {
 std::vector<BrickResult> train_my_bricks(const TrainingSetup& setup, const BrickPlan& plan, const std::vector<int>& mine,
                                          const ValueRange& range, const TrainMpiArgs& a) {
   std::vector<BrickResult> results;
-  for (int b : mine) {
+  for (size_t k = 0; k < mine.size(); ++k) {
+    const int b = mine[k];
+    // Which brick a rank was on is what a killed rank's user needs: mpirun names only the rank.
+    if (!a.quiet)
+      std::fprintf(stderr, "rank %d: training brick %d (%zu of %zu on this rank)\n", mpi::rank(), b, k + 1, mine.size());
     BrickTrainOptions o;
     o.steps = a.steps;
     o.seconds = a.seconds;
