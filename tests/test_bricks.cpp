@@ -307,6 +307,27 @@ TEST(BrickModel, EveryPathOpensTheDirectoryLikeOneModel) {
   EXPECT_GT(sum, 10.0);  // something is drawn
   EXPECT_LT(diff, 2e-3);
   EXPECT_TRUE(m.macrocells);  // the bricks' ranges merged over the volume
+
+  // Sort-last: every brick's segment composited in per-pixel depth order = the whole frame, with and
+  // without gradient shading (whose neighbour points reach across faces).
+  for (bool shade : {false, true}) {
+    r.set_shading(shade);
+    r.set_background(Vec3f{0.2f, 0.3f, 0.4f});
+    const Image whole = r.render_frame();
+    std::vector<BrickSegment> segs;
+    for (int i = 0; i < 4; ++i) segs.push_back(render_brick_segment(r, i));
+    std::vector<const BrickSegment*> ptrs;
+    for (const BrickSegment& sg : segs) ptrs.push_back(&sg);
+    const Image comp = composite_brick_segments(ptrs, Vec3f{0.2f, 0.3f, 0.4f});
+    double worst = 0;
+    for (size_t i = 0; i < whole.pixels.size(); ++i) {
+      const Vec4f a = whole.pixels[i], b = comp.pixels[i];
+      for (float d : {a.x - b.x, a.y - b.y, a.z - b.z, a.w - b.w}) worst = std::max(worst, double(std::fabs(d)));
+    }
+    EXPECT_LT(worst, 1e-4) << "shade " << shade;
+  }
+  r.set_mode(RenderMode::PathTrace);
+  EXPECT_HAS(test::error_of([&] { render_brick_segment(r, 0); }), "ray marching");
 }
 
 #ifdef VNR_CLI_PATH
