@@ -16,12 +16,6 @@ if(VNR_MPI)
   target_compile_definitions(vnr_mpi PUBLIC OMPI_SKIP_MPICXX=1 MPICH_SKIP_MPICXX=1)
   target_link_libraries(vnr_cli PRIVATE vnr_mpi)
   target_compile_definitions(vnr_cli PRIVATE VNR_HAVE_MPI=1)
-  # `mpirun vnr render`: sort-last over render_brick_segment (include/vnr/bricks.h), which the multi-brick
-  # models do not implement yet; until they do, render runs in one process (docs/MPI.md).
-  option(VNR_MPI_RENDER "Distributed sort-last rendering (needs render_brick_segment)" OFF)
-  if(VNR_MPI_RENDER)
-    target_compile_definitions(vnr_cli PRIVATE VNR_MPI_RENDER=1)
-  endif()
   if(VNR_BUILD_TESTS)
     # Tests under mpirun: as root in containers Open MPI needs the two ALLOW_RUN_AS_ROOT variables.
     find_program(VNR_MPIEXEC NAMES mpirun mpiexec HINTS ${MPIEXEC_EXECUTABLE})

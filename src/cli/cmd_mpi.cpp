@@ -17,11 +17,7 @@ struct MpiCli::State {
 };
 
 namespace {
-#ifdef VNR_MPI_RENDER
 constexpr const char* kDistributed[] = {"train", "decode", "eval", "render"};
-#else
-constexpr const char* kDistributed[] = {"train", "decode", "eval"};
-#endif
 bool is_distributed_command(const std::string& name) {
   return std::find(std::begin(kDistributed), std::end(kDistributed), name) != std::end(kDistributed);
 }
@@ -38,9 +34,7 @@ void add_distributed_commands(CLI::App& app) {
   add_train_mpi(app);
   add_decode_mpi(app);
   add_eval_mpi(app);
-#ifdef VNR_MPI_RENDER
   add_render_mpi(app);
-#endif
 }
 
 int rank_threads(int requested) {
@@ -58,8 +52,8 @@ MpiCli::MpiCli(int* argc, char*** argv, CLI::App& app) : state_(std::make_unique
     const std::string name = sub->get_name();
     if (is_distributed_command(name)) continue;
     sub->callback([name] {
-      throw AllRanksError(fmt::format("'vnr {}' runs in one process: start it without mpirun (train, decode and eval "
-                                      "of multi-brick models run distributed)", name));
+      throw AllRanksError(fmt::format("'vnr {}' runs in one process: start it without mpirun (train, decode, eval "
+                                      "and render of multi-brick models run distributed)", name));
     });
   }
 }

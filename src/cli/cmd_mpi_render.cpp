@@ -1,8 +1,9 @@
 // `mpirun -n N vnr render MODEL_DIR -o IMAGE`: each rank renders the ray segments inside its bricks
 // (render_brick_segment: premultiplied RGBA on the whole frame's sample grid), the images are composited
-// sort-last by direct send in visibility order (src/mpi), and rank 0 puts the result over the
+// sort-last by direct send in visibility order (src/mpi; for every ray the same order as its segments'
+// first samples, which composite_brick_segments sorts by), and rank 0 puts the result over the
 // background and writes it.
-#if defined(VNR_HAVE_MPI) && defined(VNR_MPI_RENDER)
+#ifdef VNR_HAVE_MPI
 #include <chrono>
 #include <cstdio>
 #include "mpi/comm.h"
@@ -42,7 +43,7 @@ void run_render_mpi(const RenderMpiArgs& a) {
   std::vector<Image> images(mine.size());
   mpi::agree("rendering", [&] {
     r.prepare();
-    for (size_t i = 0; i < mine.size(); ++i) images[i] = render_brick_segment(r, mine[i]);
+    for (size_t i = 0; i < mine.size(); ++i) images[i] = std::move(render_brick_segment(r, mine[i]).rgba);
   });
   const double render_seconds = mpi::max(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
   std::vector<int> owner(m->plan.bricks.size());

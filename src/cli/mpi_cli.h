@@ -41,7 +41,7 @@ private:
 void add_train_mpi(CLI::App& app);
 void add_decode_mpi(CLI::App& app);
 void add_eval_mpi(CLI::App& app);
-void add_render_mpi(CLI::App& app);  // with VNR_MPI_RENDER (cmake/mpi.cmake)
+void add_render_mpi(CLI::App& app);
 // CPU threads of a rank: --threads, else the node's cores shared by its ranks.
 int rank_threads(int requested);
 #endif

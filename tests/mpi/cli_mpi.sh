@@ -1,6 +1,7 @@
 #!/bin/bash
 # ctest mpi_cli_n2 / mpi_cli_n4: `mpirun -n N vnr train|decode|eval` of a multi-brick model against one
 # rank and one process. Usage: cli_mpi.sh N SCRATCH_DIR (VNR_CLI names the vnr binary).
+# Render: the N-rank sort-last image against 1 rank (bit for bit) and the one-process frame.
 # Checks: the model trained on 1 and N ranks and by one process is the same (brick losses, bit-identical
 # decodes); the
 # N-rank decode is bit-identical to the one-process `vnr decode` (raw and NRRD); the N-rank eval's PSNR
@@ -49,6 +50,20 @@ run "$N" "$V" eval m1 vol.json --precision fp32 --report eN.json > /dev/null
 check "eval PSNR on $N ranks = one process" $PY -c "
 import json; a=json.load(open('e1.json')); b=json.load(open('eN.json'))
 assert abs(a['psnr']-b['psnr']) < 1e-9 and a['max_abs_error'] == b['max_abs_error'], (a['psnr'], b['psnr'])"
+
+# Render: the N-rank sort-last composite is the 1-rank one bit for bit (same segments, same order, same
+# arithmetic), and the one-process frame up to early ray termination: a segment behind a pixel already
+# at alpha_stop still adds < 1 - alpha_stop there, and float rounding (the bound below: 40 dB).
+VIEW=(--size 64x48 --orbit 30,20 --tf cool-warm --precision fp32 --threads 1)
+run 1 "$V" render m1 -o r1.pfm "${VIEW[@]}" -q > /dev/null
+run "$N" "$V" render m1 -o rN.pfm "${VIEW[@]}" --report render.json > /dev/null
+check "render on $N ranks = on 1 rank, bit for bit" cmp -s r1.pfm rN.pfm
+"$V" render m1 -o one.pfm "${VIEW[@]}" -q --reference rN.pfm --report r.json > /dev/null
+check "render on $N ranks = the one-process frame (image PSNR >= 40 dB), not blank" $PY -c "
+import json, numpy as np
+p = json.load(open('r.json'))['image_psnr']; print('image PSNR', p); assert p >= 40, p
+head, data = open('rN.pfm', 'rb').read().split(b'\n', 3)[1:3], open('rN.pfm', 'rb').read().split(b'\n', 3)[3]
+assert np.frombuffer(data, np.float32).std() > 0.05, 'blank image'"
 
 # A rank that fails: brick 1 of 3 along x is the widest with its ghosts (17 voxels) and alone exceeds the budget.
 run "$N" "$V" train vol.json -o mf --bricks 3,1,1 --ghost 2 --steps 20 --config small --threads 1 -q \

@@ -116,7 +116,7 @@ FileEvaluation evaluate_model_file(const Model& model, const std::string& volume
   if (o.samples < 0) fail("the number of sampled voxels must be positive, got {}", o.samples);
   if (o.device == Device::Cuda && !model.bricks) cuda::check_supported(*model.net);  // before reading the volume
   FileEvaluation r;
-  r.device = o.device;
+  r.device = model.bricks ? Device::Cpu : o.device;  // multi-brick models decode on the CPU
   const VolumeDesc desc = describe_volume_file(volume_path, o.open);
   const Int3 dims = desc.dims;
   if (!(dims == model.dims))

@@ -30,11 +30,11 @@ inline Box3 intersect(const Box3& a, const Box3& b) {
 
 // A brick's weight at position p (in voxel units of the whole volume: voxel i spans [i, i + 1)):
 // 1 inside its owned box, falling linearly to 0 at the edge of its trained box (owned + ghost) on
-// each axis, so the weights of neighbouring bricks sum to 1 across a face and a brick's least
-// accurate voxels (its ghost edge) count for nothing. 0 outside the trained box.
+// each axis: continuous, so the normalised blend of neighbouring bricks is continuous across a face,
+// and a brick's least accurate voxels (its ghost edge) count for nothing. 0 outside the trained box.
 VNR_HD inline float brick_blend_ramp(float p, float lo, float hi, float tlo, float thi) {
-  if (p < lo && tlo < lo) return p <= tlo ? 0.f : (p - tlo) / (lo - tlo);  // no ghost (volume edge): 1
-  if (p > hi && thi > hi) return p >= thi ? 0.f : (thi - p) / (thi - hi);
+  if (p < lo) return p > tlo ? (p - tlo) / (lo - tlo) : 0.f;  // p > tlo implies tlo < lo
+  if (p > hi) return p < thi ? (thi - p) / (thi - hi) : 0.f;
   return 1.f;
 }
 VNR_HD inline float brick_blend_weight(const Box3& owned, const Box3& trained, float px, float py, float pz) {

@@ -40,6 +40,8 @@ int64_t BrickedField::render_inshader(const InshaderJob& job) const {
   return run_inshader(job, BrickedPointFn{&layout_, points_.data()});
 }
 
+float BrickedField::point(float x, float y, float z) const { return BrickedPointFn{&layout_, points_.data()}(x, y, z); }
+
 GpuFieldSource BrickedField::gpu_source() const {
   fail("multi-brick models render on the CPU (--device cpu)");
 }

@@ -15,6 +15,8 @@ uint64_t BrickedModel::param_bytes() const {
   return n;
 }
 
+uint64_t model_n_params(const Model& m) { return m.bricks ? m.bricks->param_bytes() / 2 : m.net->n_params(); }
+
 uint64_t BrickedModel::file_bytes() const { return model_file_bytes(dir); }
 
 std::shared_ptr<BrickedModel> load_bricked_model(const std::string& dir, const std::vector<int>* only) {

@@ -24,6 +24,9 @@ Model create_model(const ModelConfig& config, Int3 dims, DType source_dtype, dou
 }
 
 void save_model(const std::string& path, const Model& m) {
+  if (m.bricks)
+    fail("'{}': a multi-brick model is a directory of brick files written by `vnr train --bricks`; it cannot be "
+         "saved as one model file", path);
   ModelFile f;
   f.config = m.net->config_json();
   f.dims = m.dims;
