@@ -72,8 +72,11 @@ void agree(const std::string& phase, const std::function<void()>& work) {
   if (first == g_size) return;
   check(MPI_Allreduce(&one, &count, 1, MPI_INT, MPI_SUM, MPI_COMM_WORLD), "allreduce");
   message = broadcast(message, first);
-  std::string text = fmt::format("rank {} of {} failed {}: {}", first, g_size, phase, message);
-  if (count > 1) text += fmt::format(" ({} other rank{} failed too)", count - 1, count == 2 ? "" : "s");
+  // Every rank failing is usually one cause (a missing file): said once, as the lowest rank saw it.
+  std::string text = count == g_size && g_size > 1
+                         ? fmt::format("all {} ranks failed {}: {}", g_size, phase, message)
+                         : fmt::format("rank {} of {} failed {}: {}", first, g_size, phase, message);
+  if (count > 1 && count < g_size) text += fmt::format(" ({} other rank{} failed too)", count - 1, count == 2 ? "" : "s");
   throw RankFailure(text);
 }
 

@@ -40,7 +40,8 @@ public:
 };
 
 // Runs work on this rank, then all ranks learn whether any threw; if one did every rank throws
-// RankFailure "rank R of N failed <phase>: <its message>" (+ "; K other ranks failed too").
+// RankFailure "rank R of N failed <phase>: <its message>" (+ " (K other ranks failed too)"), or "all N
+// ranks failed <phase>: <rank 0's message>" when every rank did.
 void agree(const std::string& phase, const std::function<void()>& work);
 
 void barrier();
