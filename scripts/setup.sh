@@ -10,7 +10,7 @@ PKGS="build-essential cmake ninja-build ccache pkg-config git \
   libgtest-dev libgmock-dev libbenchmark-dev \
   libboost-dev libturbojpeg0-dev libzfp-dev chromium chromium-driver python3-selenium \
   pybind11-dev python3-dev python3-numpy python3-pytest libhdf5-dev libnetcdf-dev python3-h5py \
-  python3-netcdf4 python3-matplotlib paraview python3-paraview xvfb xauth"
+  python3-netcdf4 python3-matplotlib paraview python3-paraview xvfb xauth libopenmpi-dev openmpi-bin"
 missing=""
 for p in $PKGS; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing="$missing $p"

@@ -110,6 +110,7 @@ public:
   void save(const std::string& path) const;  // .png (8-bit) or .pfm (float)
 
 private:
+  friend struct BrickSegment render_brick_segment(Renderer& renderer, int index);  // vnr/bricks.h
   Renderer(const Model* model, const Volume* volume, Device device);
   void restart() { frames_ = 0; }
   void invalidate() { backend_.reset(); restart(); }

@@ -6,6 +6,7 @@
 #include <map>
 #include <memory>
 #include "cli.h"
+#include "train_cli.h"
 #include "vnr/core/error.h"
 #include "vnr/core/fileio.h"
 #include "vnr/core/parallel.h"
@@ -247,7 +248,7 @@ void add_info(CLI::App& app) {
     if (is_dataset_argument(a->model)) return print_dataset_info(a->model, a->json);
     Model m = load_model(a->model);
     const Network& n = *m.net;
-    const uint64_t bytes = file_size(a->model);
+    const uint64_t bytes = model_file_bytes(a->model);
     Json j = {{"file", a->model},
               {"format", is_instantvnr_path(a->model) ? "instantvnr-bson" : "vnr"},
               {"dims", {m.dims.x, m.dims.y, m.dims.z}},
@@ -278,6 +279,7 @@ void add_info(CLI::App& app) {
                           {"residual_bytes", r.encoded ? r.encoded->bytes.size() : 0},
                           {"codec", r.encoded ? r.encoded->meta.value("codec", "") : ""}};
     }
+    if (m.bricks) add_brick_info(m, j);  // cmd_train_bricks.cpp
     if (a->json) {
       std::printf("%s\n", j.dump(2).c_str());
       return;
@@ -296,7 +298,8 @@ void add_info(CLI::App& app) {
                 cfg.network.n_neurons, cfg.network.n_hidden_layers, activation_name(cfg.network.activation),
                 loss_name(cfg.loss));
     std::printf("parameters: %llu (%s in fp16); file %s; compression ratio %s\n",
-                (unsigned long long)n.n_params(), human_bytes(2.0 * n.n_params()).c_str(), human_bytes(double(bytes)).c_str(),
+                (unsigned long long)j["n_params"].get<uint64_t>(), human_bytes(2.0 * j["n_params"].get<double>()).c_str(),
+                human_bytes(double(bytes)).c_str(),
                 format_ratio(compression_ratio(m, bytes)).c_str());
     if (m.macrocells)
       std::printf("macro-cells: %lldx%lldx%lld cells of %d voxels (%lld with a value range), recorded while training\n",
@@ -310,6 +313,7 @@ void add_info(CLI::App& app) {
                   human_bytes(j["error_bound"]["residual_bytes"].get<double>()).c_str(),
                   100.0 * double(m.residuals->nonzero()) / double(m.dims.count()));
     if (m.training.is_object()) std::printf("training: %s\n", m.training.dump().c_str());
+    if (m.bricks) print_brick_info(j);
   });
 }
 

@@ -38,6 +38,8 @@ struct StopSignalGuard {
   std::optional<StopSignalScope> signals;
 };
 
+}  // namespace
+
 TrainingSetup setup_of(const TrainArgs& a, bool preview) {
   TrainingSetup s;
   s.volume = a.volume;
@@ -67,6 +69,8 @@ TrainingSetup setup_of(const TrainArgs& a, bool preview) {
   s.session.error_bound = {a.max_error, a.max_rel_error};
   return s;
 }
+
+namespace {
 
 // The error bound's line (--max-error/--max-rel-error): the guarantee and what the residuals cost.
 void print_error_bound(const Json& report) {
@@ -105,6 +109,7 @@ void run_train(const TrainArgs& a) {
     if (a.device == "cuda") fail("--timesteps trains on the CPU; --device cuda is not supported for time series yet");
     return run_train_series(a);
   }
+  if (!a.bricks.empty() || a.resume) return run_train_bricks(a);
   // Everything that can be checked without the data is checked first, so mistakes fail fast.
   TrainingSetup setup = setup_of(a, a.preview.enabled());
   if (a.eval_samples < 0) fail("--eval-samples must be non-negative, got {}", a.eval_samples);
@@ -223,6 +228,7 @@ void add_train(CLI::App& app) {
   c->add_flag("-q,--quiet", a->quiet, "no progress output");
   a->vol.add(c);
   a->preview.add(c);
+  add_train_bricks_options(c, *a);
   c->callback([a]() { run_train(*a); });
 }
 

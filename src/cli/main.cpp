@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include "cli.h"
+#include "mpi_cli.h"
 #include "vnr/core/error.h"
 #include "vnr/core/fileio.h"
 #include "vnr/core/parallel.h"
@@ -155,6 +156,7 @@ int main(int argc, char** argv) {
 #ifdef VNR_HAVE_VIEW
   add_view(app);
 #endif
+  MpiCli mpi(&argc, &argv, app);  // a no-op unless built with MPI and started by mpirun/srun
   try {
     app.parse(argc, argv);
   } catch (const CLI::CallForHelp& e) {
@@ -165,17 +167,14 @@ int main(int argc, char** argv) {
     return app.exit(e);
   } catch (const CLI::ParseError& e) {
     // One line, like every other error; --help has the details.
-    std::fprintf(stderr, "vnr: error: %s (see 'vnr --help' or 'vnr COMMAND --help')\n", e.what());
-    return e.get_exit_code() != 0 ? e.get_exit_code() : 2;
+    return mpi.print_error(fmt::format("{} (see 'vnr --help' or 'vnr COMMAND --help')", e.what()), true,
+                           e.get_exit_code() != 0 ? e.get_exit_code() : 2);
   } catch (const vnr::Error& e) {
-    std::fprintf(stderr, "vnr: error: %s\n", e.what());
-    return 1;
+    return mpi.print_error(e.what(), mpi.agreed(e), 1);
   } catch (const std::bad_alloc&) {
-    std::fprintf(stderr, "vnr: error: out of memory\n");
-    return 1;
+    return mpi.print_error("out of memory", false, 1);
   } catch (const std::exception& e) {
-    std::fprintf(stderr, "vnr: error: %s\n", e.what());
-    return 1;
+    return mpi.print_error(e.what(), false, 1);
   }
   return 0;
 }

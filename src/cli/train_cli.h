@@ -4,6 +4,8 @@
 #include <string>
 #include "cli.h"
 #include "preview.h"
+#include "vnr/train/bricks.h"
+#include "vnr/train/session.h"
 #include "vnr/train/training_data.h"
 
 namespace vnr::cli {
@@ -32,9 +34,21 @@ struct TrainArgs {
   std::string timesteps;
   bool continuous = false;
   int64_t switch_every = 0;  // --continuous: steps per timestep
+  // Multi-brick models (issue 30, cmd_train_bricks.cpp): "" = one network; "BX,BY,BZ" or "auto".
+  std::string bricks;
+  int ghost = 4;
+  bool resume = false;
 };
 
 // `vnr train SERIES --timesteps ... -o DIR`, with or without --continuous.
 void run_train_series(const TrainArgs& a);
+// `vnr train VOLUME --bricks BX,BY,BZ|auto [--ghost G] [--resume] -o DIR`: a multi-brick model.
+void run_train_bricks(const TrainArgs& a);
+void add_train_bricks_options(CLI::App* c, TrainArgs& a);
+// `vnr info` of a multi-brick model: the bricks into the JSON (totals of parameters), and their lines.
+void add_brick_info(const Model& m, Json& j);
+void print_brick_info(const Json& j);
+// The setup of one training run from the arguments (cmd_train.cpp).
+TrainingSetup setup_of(const TrainArgs& a, bool preview);
 
 }  // namespace vnr::cli

@@ -6,6 +6,7 @@
 #include "vnr/core/error.h"
 #include "vnr/core/fileio.h"
 #include "vnr/core/parallel.h"
+#include "vnr/train/bricks.h"
 #include "vnr/volume/sample_io.h"
 #include "vnr/volume/writer.h"
 
@@ -137,10 +138,10 @@ original units of the volume. Arrays are (nz, ny, nx), x fastest (see vnr.Volume
         pyb::gil_scoped_release release;
         h->model = load_model(path);
         h->model.net->set_inference_precision(parse_precision("auto"));
-        h->file_bytes = file_size(path);
+        h->file_bytes = model_file_bytes(path);  // a multi-brick directory: its files together
         return h;
       },
-      pyb::arg("path"), "Loads a model file (.vnr, or instantvnr's BSON) as `vnr decode` does.");
+      pyb::arg("path"), "Loads a model file (.vnr, or instantvnr's BSON), or a multi-brick model directory (`vnr train --bricks`), as `vnr decode` does.");
   c.def(
       "save",
       [](ModelHolder& h, const std::string& path) {
@@ -162,7 +163,7 @@ float64 array of normalised x, y, z in [0, 1] (voxel i's centre is (i + 0.5) / n
 all cores (or the GPU) with the GIL released; a C-ordered float32 array is used without a copy.)");
   c.def_property_readonly("config", [](const ModelHolder& h) { return json_to_python(h.model.net->config_json()); },
                           "The network's tiny-cuda-nn config as a dict.");
-  c.def_property_readonly("n_params", [](const ModelHolder& h) { return h.model.net->n_params(); },
+  c.def_property_readonly("n_params", [](const ModelHolder& h) { return model_n_params(h.model); },
                           "Number of parameters (stored as fp16).");
   c.def_property_readonly(
       "compression_ratio", [](const ModelHolder& h) { return compression_ratio(h.model, h.file_bytes); },
@@ -181,7 +182,7 @@ all cores (or the GPU) with the GIL released; a C-ordered float32 array is used 
   c.def("__repr__", [](const ModelHolder& h) {
     const Model& md = h.model;
     return fmt::format("vnr.Model({}x{}x{} {}, {} params, value_range=({:g}, {:g}))", md.dims.x, md.dims.y, md.dims.z,
-                       dtype_name(md.source_dtype), md.net->n_params(), md.lo, md.hi);
+                       dtype_name(md.source_dtype), model_n_params(md), md.lo, md.hi);
   });
 }
 

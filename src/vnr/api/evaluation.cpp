@@ -6,6 +6,7 @@
 #include "vnr/core/fileio.h"
 #include "vnr/core/units.h"
 #include "vnr/model.h"
+#include "vnr/train/bricks.h"
 #include "vnr/train/training_data.h"
 
 namespace vnr {
@@ -53,7 +54,6 @@ ValueRange file_evaluation_range(const FileEvalPlan& plan, const Model& model, b
 
 namespace {
 
-const Residuals* residuals_of(const Model& m) { return m.residuals ? &*m.residuals : nullptr; }
 
 void note(FileEvaluation& r, const FileEvalProgress& progress, std::string text) {
   if (progress.note) progress.note(text);
@@ -104,8 +104,7 @@ void evaluate_unheld(FileEvaluation& r, const Model& model, const FileEvalOption
   if (r.value_range_source == "scan" && progress.finished) progress.finished("value range");
   const double lo = r.value_range.lo, hi = r.value_range.hi;
   if (plan.method == EvalMethod::Sampled) {
-    take_sampled(r, evaluate_sampled(*model.net, plan.desc, lo, hi, o.samples, o.seed, o.open.load, o.device,
-                                     residuals_of(model)));
+    take_sampled(r, evaluate_sampled(model, plan.desc, lo, hi, o.samples, o.seed, o.open.load, o.device));
     return;
   }
   note(r, progress,
@@ -116,8 +115,8 @@ void evaluate_unheld(FileEvaluation& r, const Model& model, const FileEvalOption
   auto eval_progress = [&](double f) {
     if (progress.update) progress.update("eval", f);
   };
-  const EvalResult ev = evaluate_streamed(*model.net, plan.desc, lo, hi, o.open.load, o.with_ssim, eval_progress,
-                                          plan.slab_slices * dims.x * dims.y, o.device, residuals_of(model));
+  const EvalResult ev = evaluate_streamed(model, plan.desc, lo, hi, o.open.load, o.with_ssim, eval_progress,
+                                          plan.slab_slices * dims.x * dims.y, o.device);
   if (progress.finished) progress.finished("eval");
   take_whole(r, ev, o.with_ssim);
 }
@@ -128,16 +127,16 @@ FileEvaluation evaluate_model_file(const Model& model, const std::string& volume
                                    const FileEvalProgress& progress) {
   if (!model.net) fail("the model has no network");
   if (o.samples < 0) fail("the number of sampled voxels must be positive, got {}", o.samples);
-  if (o.device == Device::Cuda) cuda::check_supported(*model.net);  // before reading the volume
+  if (o.device == Device::Cuda && !model.bricks) cuda::check_supported(*model.net);  // before reading the volume
   FileEvaluation r;
-  r.device = o.device;
+  r.device = model.bricks ? Device::Cpu : o.device;  // multi-brick models decode on the CPU
   const VolumeDesc desc = describe_volume_file(volume_path, o.open);
   const Int3 dims = desc.dims;
   if (!(dims == model.dims))
     note(r, progress,
          fmt::format("model was trained on {}x{}x{}, evaluating at {}x{}x{}", model.dims.x, model.dims.y,
                      model.dims.z, dims.x, dims.y, dims.z));
-  r.model_bytes = o.model_path.empty() ? model.param_bytes() : file_size(o.model_path);
+  r.model_bytes = o.model_path.empty() ? (model.bricks ? model.bricks->param_bytes() : model.param_bytes()) : model_file_bytes(o.model_path);
   r.volume_bytes = dims.count() * dtype_size(desc.dtype);
   r.compression_ratio = double(r.volume_bytes) / double(r.model_bytes);
   r.plan = plan_file_evaluation(desc, o.samples, o.with_ssim, o.memory_budget);

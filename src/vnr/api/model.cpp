@@ -1,6 +1,7 @@
 // vnr::Model's constructors, queries and decodes (the train layer's Model, Network and GpuNetwork).
 #include "vnr/model.h"
 #include "vnr/core/error.h"
+#include "vnr/train/bricks.h"
 
 namespace vnr {
 
@@ -11,11 +12,18 @@ Model create_model(const ModelConfig& config, const Volume& volume, uint32_t see
 uint64_t source_bytes(const Model& m) { return m.dims.count() * dtype_size(m.source_dtype); }
 
 double compression_ratio(const Model& m, uint64_t model_bytes) {
-  return double(source_bytes(m)) / double(model_bytes ? model_bytes : m.param_bytes());
+  const uint64_t params = m.bricks ? m.bricks->param_bytes() : m.param_bytes();
+  return double(source_bytes(m)) / double(model_bytes ? model_bytes : params);
 }
 
 ModelQuery::ModelQuery(const Model& model, Device device, cuda::MlpPath mlp) : model_(model), device_(device) {
   if (!model.net) fail("the model has no network");
+  if (model.bricks) {
+    device_ = Device::Cpu;  // multi-brick models are queried on the CPU (docs/MODEL_FORMAT.md)
+    for (auto& b : model.bricks->bricks)
+      if (b) b->net->set_inference_precision(model.net->inference_precision());
+    return;
+  }
   if (device == Device::Cuda) gpu_ = std::make_unique<cuda::GpuNetwork>(*model.net, mlp);
 }
 ModelQuery::~ModelQuery() = default;
@@ -33,7 +41,8 @@ void check_grid(Int3 dims, int64_t z0, int64_t z1) {
 
 void ModelQuery::points(const float* xyz, int64_t n, float* out, ValueUnits units) {
   if (n <= 0) return;
-  if (gpu_) gpu_->infer(xyz, n, out);
+  if (model_.bricks) bricked_points(*model_.bricks, xyz, n, out);
+  else if (gpu_) gpu_->infer(xyz, n, out);
   else model_.net->infer(xyz, n, out);
   convert_units(model_, units, out, n);
 }
@@ -41,7 +50,8 @@ void ModelQuery::points(const float* xyz, int64_t n, float* out, ValueUnits unit
 void ModelQuery::slab(Int3 dims, int64_t z0, int64_t z1, float* out, ValueUnits units) {
   check_grid(dims, z0, z1);
   if (z1 == z0) return;
-  if (model_.residuals && model_.residuals->dims == dims)  // the bound holds on every device: CPU reference
+  if (model_.bricks) decode_bricked_region(*model_.bricks, dims, Box3{{0, 0, z0}, {dims.x, dims.y, z1}}, out);
+  else if (model_.residuals && model_.residuals->dims == dims)  // the bound holds on every device: CPU reference
     Decoder(*model_.net, Device::Cpu, &*model_.residuals).slices(dims, z0, z1, out);
   else if (gpu_) gpu_->decode_slices(dims, z0, z1, out);  // the Decoder's two paths
   else decode_slices(*model_.net, dims, z0, z1, out);
@@ -61,7 +71,7 @@ Volume ModelQuery::decode(Int3 dims) {
 }
 
 EvalResult evaluate_model(const Model& model, const Volume& volume, bool with_ssim, Device device) {
-  return evaluate(*model.net, volume, with_ssim, device, model.residuals ? &*model.residuals : nullptr);
+  return evaluate(model, volume, with_ssim, device);
 }
 
 }  // namespace vnr

@@ -10,11 +10,13 @@
 #include "vnr/core/progress.h"
 #include "vnr/core/rng.h"
 #include "vnr/fields/fields.h"
+#include "vnr/api/model_field.h"
 #include "vnr/render_cuda/gpu_renderer.h"
 
 namespace vnr {
 
 bool is_model_path(const std::string& path) {
+  if (is_bricked_model_dir(path)) return true;  // a multi-brick model (train/bricks.h)
   std::ifstream f(path, std::ios::binary);
   if (!f && path.find(':') != std::string::npos) return false;  // FILE.h5:/DATASET, FILE.nc:VAR: open_volume's
   if (!f) fail("cannot open '{}'", path);
@@ -64,7 +66,8 @@ RenderInput open_render_input(const std::string& input, const std::string& groun
 Device choose_render_device(const std::string& name, const Model* model, std::string* note) {
   const Device asked = cuda::resolve_device(name);
   if (asked == Device::Cpu) return Device::Cpu;
-  const std::string why_not = model ? cuda::unsupported_reason(*model->net) : "";
+  const std::string why_not =
+      !model ? "" : (model->bricks ? "multi-brick models render on the CPU" : cuda::unsupported_reason(*model->net));
   if (why_not.empty()) return Device::Cuda;
   if (name == "cuda") fail("{}; use --device cpu", why_not);
   if (note) *note = "rendering on the CPU: " + why_not;
@@ -88,7 +91,8 @@ Renderer::Renderer(const Model* model, const Volume* volume, Device device)
     if (volume && !(volume->dims == dims))
       fail("the model represents {}x{}x{} voxels but its ground-truth volume has {}x{}x{}", dims.x, dims.y, dims.z,
            volume->dims.x, volume->dims.y, volume->dims.z);
-    field_ = std::make_unique<NetworkField>(*model->net, dims);
+    field_ = make_model_field(*model);
+    if (model->bricks) device_ = Device::Cpu;  // choose_render_device says so
   } else {
     dims = volume->dims;
     field_ = std::make_unique<GridField>(view_of(*volume));

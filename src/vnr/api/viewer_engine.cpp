@@ -3,6 +3,7 @@
 #include <chrono>
 #include <cmath>
 #include "vnr/api/viewer_impl.h"
+#include "vnr/train/bricks.h"
 #include "vnr/core/error.h"
 #include "vnr/core/fileio.h"
 #include "vnr/cuda/cuda.h"
@@ -70,9 +71,9 @@ void ViewerEngine::Impl::open(const ViewerSetup& s) {
   info.hi = volume ? volume->hi : model->hi;
   info.has_volume = volume != nullptr;
   info.has_model = input.model.has_value();
-  info.can_train = volume != nullptr;
+  info.can_train = volume != nullptr && !model->bricks;  // a multi-brick model is viewed, not retrained
   info.device = device_description(render_device);
-  info.n_params = int64_t(model->net->n_params());
+  info.n_params = int64_t(model->bricks ? model->bricks->param_bytes() / 2 : model->net->n_params());
   info.colormaps = tf_preset_names();
   info.save_dir = s.save_dir;
   online_available = info.can_train || model->macrocells.has_value();

@@ -2,6 +2,7 @@
 // interacting), the slice images and the value histogram.
 #include <algorithm>
 #include <cmath>
+#include "vnr/api/model_field.h"
 #include "vnr/api/viewer_impl.h"
 #include "vnr/core/error.h"
 #include "vnr/render_cuda/gpu_renderer.h"
@@ -143,7 +144,7 @@ void ViewerEngine::Impl::update_network_content(MacroCellMode mode) {
   if (c.field && c.version == model_version && c.mode == mode) return;
   net_pass.backend.reset();  // it refers to the old field and cells
   if (run.session) run.session->trainer().download();
-  c.field = std::make_unique<NetworkField>(*model->net, model->dims);
+  c.field = make_model_field(*model);
   const bool trained = run.session && run.session->steps_done() > 0;
   if (mode == MacroCellMode::Online && trained)
     c.mc = std::make_unique<MacroCells>(run.session->trainer().online_ranges(), box);

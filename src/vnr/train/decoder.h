@@ -10,6 +10,9 @@
 
 namespace vnr {
 
+struct BrickedModel;  // train/bricks.h
+struct Model;
+
 // Decodes a network at voxel centres ((i + 0.5) / n per axis) on one backend; a GPU decoder keeps its
 // copy of the network between calls. On the GPU the network runs in half precision (tcnn's inference),
 // so values differ from the CPU's by about 1e-3 relative.
@@ -20,6 +23,9 @@ namespace vnr {
 class Decoder {
 public:
   Decoder(const Network& net, Device device, const Residuals* residuals = nullptr);
+  // A model's decoder: its residuals apply (error-bound models); a multi-brick model (Model::bricks)
+  // decodes its bricks blended, on the CPU.
+  Decoder(const Model& model, Device device);
   ~Decoder();
   // z-slices [z0, z1) of `dims` into out (normalised units), x fastest.
   void slices(Int3 dims, int64_t z0, int64_t z1, float* out);
@@ -34,6 +40,7 @@ private:
   const Residuals* residuals_;
   Device device_;
   std::unique_ptr<cuda::GpuNetwork> gpu_;
+  const BrickedModel* bricks_ = nullptr;
 };
 
 // Decoder(net, Device::Cpu).slices / .voxels.

@@ -13,11 +13,13 @@
 
 namespace vnr {
 
-EvalResult evaluate(const Network& net, const Volume& vol, bool with_ssim, Device device, const Residuals* residuals) {
+namespace {
+
+EvalResult evaluate_with(Decoder& decoder, const Volume& vol, bool with_ssim) {
   EvalResult r;
   std::vector<float> dec(vol.data.size());
   auto t0 = std::chrono::steady_clock::now();
-  Decoder(net, device, residuals).slices(vol.dims, 0, vol.dims.z, dec.data());
+  decoder.slices(vol.dims, 0, vol.dims.z, dec.data());
   r.decode_seconds = seconds_since(t0);
   ErrorStats e = error_stats(vol.data.data(), dec.data(), vol.dims);
   r.psnr = e.psnr;
@@ -28,15 +30,10 @@ EvalResult evaluate(const Network& net, const Volume& vol, bool with_ssim, Devic
   return r;
 }
 
-namespace {
 double psnr_of_mse(double mse) { return mse > 0 ? 10 * std::log10(1 / mse) : 999.0; }  // error_stats' convention
-}  // namespace
-
-EvalResult evaluate_streamed(const Network& net, const VolumeDesc& desc, double lo, double hi,
-                             const LoadOptions& opts, bool with_ssim, const std::function<void(double)>& progress,
-                             int64_t slab_voxels, Device device, const Residuals* residuals) {
+EvalResult streamed_with(Decoder& decoder, const VolumeDesc& desc, double lo, double hi, const LoadOptions& opts,
+                         bool with_ssim, const std::function<void(double)>& progress, int64_t slab_voxels) {
   const Int3 d = desc.dims;
-  Decoder decoder(net, device, residuals);
   if (d.x <= 0 || d.y <= 0 || d.z <= 0) fail("'{}': invalid dims", desc.path);
   const int64_t slice = d.x * d.y, nz = d.z;
   if (slab_voxels <= 0) slab_voxels = int64_t(1) << 24;
@@ -91,9 +88,8 @@ EvalResult evaluate_streamed(const Network& net, const VolumeDesc& desc, double 
   return r;
 }
 
-SampledEval evaluate_sampled(const Network& net, const VolumeDesc& desc, double lo, double hi, int64_t n_samples,
-                             uint64_t seed, const LoadOptions& opts, Device device, const Residuals* residuals) {
-  Decoder decoder(net, device, residuals);
+SampledEval sampled_with(Decoder& decoder, const VolumeDesc& desc, double lo, double hi, int64_t n_samples,
+                         uint64_t seed, const LoadOptions& opts) {
   if (n_samples <= 0) fail("the number of samples must be positive, got {}", n_samples);
   const RawVolumeFile file(desc, lo, hi, opts.non_finite, "sampled evaluation",
                            "evaluating without --sample streams gzip data");
@@ -134,6 +130,40 @@ SampledEval evaluate_sampled(const Network& net, const VolumeDesc& desc, double 
   s.psnr_ci95_hi = psnr_of_mse(s.mse - z95 * s.mse_stderr);
   s.max_abs_error_original = s.max_abs_error * (hi - lo);
   return s;
+}
+
+}  // namespace
+
+// Every evaluation runs through a Decoder: of a network, or of a model (multi-brick models blend bricks).
+EvalResult evaluate(const Network& net, const Volume& vol, bool with_ssim, Device device, const Residuals* residuals) {
+  Decoder d(net, device, residuals);
+  return evaluate_with(d, vol, with_ssim);
+}
+EvalResult evaluate(const Model& model, const Volume& vol, bool with_ssim, Device device) {
+  Decoder d(model, device);
+  return evaluate_with(d, vol, with_ssim);
+}
+EvalResult evaluate_streamed(const Network& net, const VolumeDesc& desc, double lo, double hi, const LoadOptions& opts,
+                             bool with_ssim, const std::function<void(double)>& progress, int64_t slab_voxels,
+                             Device device, const Residuals* residuals) {
+  Decoder d(net, device, residuals);
+  return streamed_with(d, desc, lo, hi, opts, with_ssim, progress, slab_voxels);
+}
+EvalResult evaluate_streamed(const Model& model, const VolumeDesc& desc, double lo, double hi, const LoadOptions& opts,
+                             bool with_ssim, const std::function<void(double)>& progress, int64_t slab_voxels,
+                             Device device) {
+  Decoder d(model, device);
+  return streamed_with(d, desc, lo, hi, opts, with_ssim, progress, slab_voxels);
+}
+SampledEval evaluate_sampled(const Network& net, const VolumeDesc& desc, double lo, double hi, int64_t n_samples,
+                             uint64_t seed, const LoadOptions& opts, Device device, const Residuals* residuals) {
+  Decoder d(net, device, residuals);
+  return sampled_with(d, desc, lo, hi, n_samples, seed, opts);
+}
+SampledEval evaluate_sampled(const Model& model, const VolumeDesc& desc, double lo, double hi, int64_t n_samples,
+                             uint64_t seed, const LoadOptions& opts, Device device) {
+  Decoder d(model, device);
+  return sampled_with(d, desc, lo, hi, n_samples, seed, opts);
 }
 
 }  // namespace vnr

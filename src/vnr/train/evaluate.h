@@ -9,6 +9,8 @@
 
 namespace vnr {
 
+struct Model;  // train/model.h: the overloads taking a Model decode a multi-brick model blended (train/bricks.h)
+
 // Evaluation against the ground truth at voxel centres (docs/semantics.md B.4).
 struct EvalResult {
   double psnr = 0, ssim = 0, mse = 0;
@@ -16,9 +18,10 @@ struct EvalResult {
   double max_abs_error_original = 0;  // original units
   double decode_seconds = 0;
 };
-// With residuals (an error-bound model), the decode applies them where the dims match (Decoder).
 EvalResult evaluate(const Network& net, const Volume& vol, bool with_ssim = true, Device device = Device::Cpu,
                     const Residuals* residuals = nullptr);
+// A model's evaluation applies its residuals (error-bound models) and blends its bricks (multi-brick).
+EvalResult evaluate(const Model& model, const Volume& vol, bool with_ssim = true, Device device = Device::Cpu);
 
 // evaluate() for a volume that is not in memory: the volume (desc, normalised with [lo, hi] as
 // load_volume would) is streamed in z-slabs of about slab_voxels voxels (0: 16 M voxels, i.e.
@@ -32,6 +35,10 @@ EvalResult evaluate_streamed(const Network& net, const VolumeDesc& desc, double 
                              const LoadOptions& opts, bool with_ssim = true,
                              const std::function<void(double fraction)>& progress = {}, int64_t slab_voxels = 0,
                              Device device = Device::Cpu, const Residuals* residuals = nullptr);
+EvalResult evaluate_streamed(const Model& model, const VolumeDesc& desc, double lo, double hi,
+                             const LoadOptions& opts, bool with_ssim = true,
+                             const std::function<void(double fraction)>& progress = {}, int64_t slab_voxels = 0,
+                             Device device = Device::Cpu);
 
 // PSNR estimated from n_samples voxels drawn uniformly (with replacement; deterministic for a
 // seed), read with RawVolumeFile (uncompressed data only) and decoded as evaluate() decodes them.
@@ -50,5 +57,7 @@ struct SampledEval {
 SampledEval evaluate_sampled(const Network& net, const VolumeDesc& desc, double lo, double hi, int64_t n_samples,
                              uint64_t seed, const LoadOptions& opts = {}, Device device = Device::Cpu,
                              const Residuals* residuals = nullptr);
+SampledEval evaluate_sampled(const Model& model, const VolumeDesc& desc, double lo, double hi, int64_t n_samples,
+                             uint64_t seed, const LoadOptions& opts = {}, Device device = Device::Cpu);
 
 }  // namespace vnr

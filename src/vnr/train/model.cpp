@@ -3,6 +3,7 @@
 #include <cstring>
 #include "vnr/core/error.h"
 #include "vnr/core/fileio.h"
+#include "vnr/train/bricks.h"
 
 namespace vnr {
 
@@ -23,6 +24,9 @@ Model create_model(const ModelConfig& config, Int3 dims, DType source_dtype, dou
 }
 
 void save_model(const std::string& path, const Model& m) {
+  if (m.bricks)
+    fail("'{}': a multi-brick model is a directory of brick files written by `vnr train --bricks`; it cannot be "
+         "saved as one model file", path);
   ModelFile f;
   f.config = m.net->config_json();
   f.dims = m.dims;
@@ -49,6 +53,7 @@ void save_model(const std::string& path, const Model& m) {
 }
 
 Model load_model(const std::string& path) {
+  if (is_bricked_model_dir(path)) return model_of_bricks(load_bricked_model(path));  // docs/MODEL_FORMAT.md
   ModelFile f = read_model(path);
   Model m;
   m.net = std::make_unique<Network>(f.config);
@@ -78,6 +83,7 @@ Model load_model(const std::string& path) {
 
 bool model_file_has_value_range(const std::string& path) {
   // The .vnr magic (docs/MODEL_FORMAT.md); vnr always writes value_range into that header.
+  if (is_bricked_model_dir(path)) return true;  // the manifest's value_range
   char magic[8] = {};
   std::FILE* f = std::fopen(path.c_str(), "rb");
   if (!f) return false;

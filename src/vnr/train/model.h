@@ -15,6 +15,8 @@
 
 namespace vnr {
 
+struct BrickedModel;  // train/bricks.h
+
 // A network together with what it represents: the bridge between the in-memory Network and the
 // model files.
 struct Model {
@@ -29,6 +31,9 @@ struct Model {
   // Quantization steps of compact storage (nn/param_codec.h); empty = plain fp16. The network's
   // parameters are then already the dequantized values (quantize_params), so the file holds them exactly.
   std::vector<ParamSegment> param_segments;
+  // A multi-brick model (a directory, train/bricks.h): net is then a copy of brick 0's network (config,
+  // precision); queries, decodes, evaluation and rendering go through the bricks.
+  std::shared_ptr<BrickedModel> bricks;
   uint64_t param_bytes() const { return net->n_params() * 2; }  // fp16, as stored
 };
 

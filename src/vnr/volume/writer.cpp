@@ -51,14 +51,53 @@ VolumeWriter::VolumeWriter(const std::string& path, Int3 dims, DType dtype, Vec3
   if (!is_nrrd_path(path) && sidecar_path() == path)
     fail("cannot write '{}': a raw volume needs a data file name other than its .json sidecar", path);
   file_ = std::make_unique<AtomicFile>(path);
-  if (is_nrrd_path(path)) {
-    // Nothing in the header depends on the data, so it goes first and the slices follow it.
-    std::string h = "NRRD0004\n# written by vnr\n";
-    h += fmt::format("type: {}\ndimension: 3\nsizes: {} {} {}\nendian: little\nencoding: raw\n", nrrd_type(dtype),
-                     dims.x, dims.y, dims.z);
-    h += fmt::format("spacings: {} {} {}\n\n", spacing.x, spacing.y, spacing.z);
-    file_->write(h);
+  // Nothing in the header depends on the data, so it goes first and the slices follow it.
+  const std::string h = volume_file_header(path, dims, dtype, spacing);
+  if (!h.empty()) file_->write(h);
+}
+
+std::string volume_file_header(const std::string& path, Int3 dims, DType dtype, Vec3f spacing) {
+  if (!is_nrrd_path(path)) return {};
+  std::string h = "NRRD0004\n# written by vnr\n";
+  h += fmt::format("type: {}\ndimension: 3\nsizes: {} {} {}\nendian: little\nencoding: raw\n", nrrd_type(dtype),
+                   dims.x, dims.y, dims.z);
+  h += fmt::format("spacings: {} {} {}\n\n", spacing.x, spacing.y, spacing.z);
+  return h;
+}
+
+std::pair<double, double> store_values(DType dtype, const float* values, int64_t n, unsigned char* out) {
+  const size_t esize = dtype_size(dtype);
+  double lo = 1e308, hi = -1e308;
+  for (int64_t i = 0; i < n; ++i) {
+    unsigned char* dst = out + i * esize;
+    const float v = values[i];
+    double s = 0;
+    switch (dtype) {
+      case DType::Int8: s = store<int8_t>(dst, v); break;
+      case DType::UInt8: s = store<uint8_t>(dst, v); break;
+      case DType::Int16: s = store<int16_t>(dst, v); break;
+      case DType::UInt16: s = store<uint16_t>(dst, v); break;
+      case DType::Int32: s = store<int32_t>(dst, v); break;
+      case DType::UInt32: s = store<uint32_t>(dst, v); break;
+      case DType::Float32: s = store<float>(dst, v); break;
+      case DType::Float64: s = store<double>(dst, v); break;
+    }
+    if (std::isfinite(s)) lo = std::min(lo, s), hi = std::max(hi, s);
   }
+  return {lo, hi};
+}
+
+std::string raw_sidecar_text(const std::string& path, Int3 dims, DType dtype, Vec3f spacing,
+                             std::optional<std::pair<double, double>> r) {
+  std::string j = "{\n";
+  j += fmt::format("  \"file\": {},\n", Json(basename_of(path)).dump());
+  j += fmt::format("  \"dims\": [{}, {}, {}],\n", dims.x, dims.y, dims.z);
+  j += fmt::format("  \"dtype\": \"{}\",\n  \"byte_order\": \"little\",\n", dtype_name(dtype));
+  // Spacing is float: printing the float (not its double widening) keeps 0.88 as "0.88".
+  j += fmt::format("  \"spacing\": [{}, {}, {}]", spacing.x, spacing.y, spacing.z);
+  if (r) j += fmt::format(",\n  \"value_range\": [{}, {}]", json_number(r->first), json_number(r->second));
+  j += "\n}\n";
+  return j;
 }
 
 std::vector<std::string> volume_output_files(const std::string& path) {
@@ -82,25 +121,9 @@ void VolumeWriter::write_slices(const float* values, int64_t n_slices) {
   std::vector<unsigned char> buf(size_t(std::min(n, block)) * esize);
   for (int64_t i0 = 0; i0 < n; i0 += block) {
     int64_t m = std::min(block, n - i0);
-    for (int64_t i = 0; i < m; ++i) {
-      unsigned char* dst = buf.data() + i * esize;
-      float v = values[i0 + i];
-      double s = 0;
-      switch (dtype_) {
-        case DType::Int8: s = store<int8_t>(dst, v); break;
-        case DType::UInt8: s = store<uint8_t>(dst, v); break;
-        case DType::Int16: s = store<int16_t>(dst, v); break;
-        case DType::UInt16: s = store<uint16_t>(dst, v); break;
-        case DType::Int32: s = store<int32_t>(dst, v); break;
-        case DType::UInt32: s = store<uint32_t>(dst, v); break;
-        case DType::Float32: s = store<float>(dst, v); break;
-        case DType::Float64: s = store<double>(dst, v); break;
-      }
-      if (std::isfinite(s)) {
-        seen_lo_ = std::min(seen_lo_, s);
-        seen_hi_ = std::max(seen_hi_, s);
-      }
-    }
+    const auto [lo, hi] = store_values(dtype_, values + i0, m, buf.data());
+    seen_lo_ = std::min(seen_lo_, lo);
+    seen_hi_ = std::max(seen_hi_, hi);
     file_->write(buf.data(), size_t(m) * esize);
   }
   slices_written_ += n_slices;
@@ -114,16 +137,9 @@ void VolumeWriter::commit() {
   file_->commit();
   file_.reset();
   if (is_nrrd_path(path_)) return;
-  std::string j = "{\n";
-  j += fmt::format("  \"file\": {},\n", Json(basename_of(path_)).dump());
-  j += fmt::format("  \"dims\": [{}, {}, {}],\n", dims_.x, dims_.y, dims_.z);
-  j += fmt::format("  \"dtype\": \"{}\",\n  \"byte_order\": \"little\",\n", dtype_name(dtype_));
-  // Spacing is float: printing the float (not its double widening) keeps 0.88 as "0.88".
-  j += fmt::format("  \"spacing\": [{}, {}, {}]", spacing_.x, spacing_.y, spacing_.z);
   std::optional<std::pair<double, double>> r = range_;
   if (!r && seen_lo_ <= seen_hi_) r = std::make_pair(seen_lo_, seen_hi_);
-  if (r) j += fmt::format(",\n  \"value_range\": [{}, {}]", json_number(r->first), json_number(r->second));
-  j += "\n}\n";
+  const std::string j = raw_sidecar_text(path_, dims_, dtype_, spacing_, r);
   write_file_atomic(sidecar_path(), j);
 }
 

@@ -55,6 +55,14 @@ private:
   std::unique_ptr<AtomicFile> file_;
 };
 
+// What VolumeWriter writes, for writers that place the bytes themselves (the MPI layer's parallel
+// decode): the NRRD header ("" for raw output), the values converted to dtype's little-endian bytes
+// (returns the finite min/max stored, lo > hi when none), and the raw sidecar's text.
+std::string volume_file_header(const std::string& path, Int3 dims, DType dtype, Vec3f spacing);
+std::pair<double, double> store_values(DType dtype, const float* values, int64_t n, unsigned char* out);
+std::string raw_sidecar_text(const std::string& path, Int3 dims, DType dtype, Vec3f spacing,
+                             std::optional<std::pair<double, double>> value_range);
+
 // The files a VolumeWriter for `path` creates (the data file, and the sidecar for raw output).
 std::vector<std::string> volume_output_files(const std::string& path);
 

@@ -1,0 +1,214 @@
+// `mpirun -n N vnr decode|eval MODEL_DIR ...` of a multi-brick model: each rank takes an even share of
+// the z-slices, loads only the bricks those slices touch, and decodes them; decode writes its slabs
+// into one output file at their offsets (committed atomically), eval sums squared errors across ranks.
+#ifdef VNR_HAVE_MPI
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include "mpi/comm.h"
+#include "mpi/parallel_file.h"
+#include "cli.h"
+#include "mpi_cli.h"
+#include "vnr/bricks.h"
+#include "vnr/core/fileio.h"
+#include "vnr/core/parallel.h"
+#include "vnr/core/units.h"
+#include "vnr/volume/raw_access.h"
+#include "vnr/volume/writer.h"
+
+namespace vnr::cli {
+
+namespace {
+
+double seconds_since(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+// The z-slices [z0, z1) of `depth` that rank r of n takes.
+std::pair<int64_t, int64_t> my_slices(int64_t depth) {
+  const int64_t r = mpi::rank(), n = mpi::size();
+  return {depth * r / n, depth * (r + 1) / n};
+}
+
+// The plan of MODEL_DIR and this rank's bricks for output slices [z0, z1) of an out_dims grid.
+std::shared_ptr<BrickedModel> open_my_bricks(const std::string& dir, Int3 out_dims, int64_t z0, int64_t z1,
+                                             const std::string& precision) {
+  if (!is_bricked_model_dir(dir))
+    fail("'{}' is not a multi-brick model directory (manifest.json): under mpirun, decode, eval and render run "
+         "over the bricks of a model trained with --bricks; run a single model without mpirun", dir);
+  const std::vector<int> none;
+  const BrickPlan plan = load_bricked_model(dir, &none)->plan;
+  // The slices' extent in the model's grid, one voxel wider for the trilinear reach of resampling.
+  const double scale = double(plan.dims.z) / double(out_dims.z);
+  Box3 region{{0, 0, std::max<int64_t>(0, int64_t(std::floor(z0 * scale)) - 1)},
+              {plan.dims.x, plan.dims.y, std::min<int64_t>(plan.dims.z, int64_t(std::ceil(z1 * scale)) + 1)}};
+  const std::vector<int> only = z1 > z0 ? bricks_touching(plan, region) : none;
+  std::shared_ptr<BrickedModel> m = load_bricked_model(dir, &only);
+  for (std::optional<Model>& b : m->bricks)
+    if (b) b->net->set_inference_precision(parse_precision(precision));
+  return m;
+}
+
+// Slabs of about 16 M voxels of [z0, z1): fn(za, zb, values in original units).
+template <typename Fn>
+void for_each_decoded_slab(const BrickedModel& m, Int3 dims, int64_t z0, int64_t z1, Fn fn) {
+  const int64_t slab = std::max<int64_t>(1, (int64_t(1) << 24) / std::max<int64_t>(1, dims.x * dims.y));
+  std::vector<float> buf;
+  for (int64_t za = z0; za < z1; za += slab) {
+    const int64_t zb = std::min(z1, za + slab);
+    buf.resize(size_t(dims.x * dims.y * (zb - za)));
+    decode_bricked_region(m, dims, Box3{{0, 0, za}, {dims.x, dims.y, zb}}, buf.data());
+    fn(za, zb, buf);
+  }
+}
+
+struct DecodeMpiArgs {
+  std::string model, output, dims, dtype = "float32", precision = "auto";
+  int threads = 0;
+  bool quiet = false, force = false;
+};
+
+void run_decode_mpi(const DecodeMpiArgs& a) {
+  std::shared_ptr<BrickedModel> m;
+  Int3 dims;
+  DType out_t = DType::Float32;
+  int64_t z0 = 0, z1 = 0;
+  mpi::agree("to open the model", [&] {
+    check_no_overwrite(volume_output_files(a.output), a.force);
+    const std::vector<int> none;
+    const std::shared_ptr<BrickedModel> header = is_bricked_model_dir(a.model) ? load_bricked_model(a.model, &none) : nullptr;
+    dims = a.dims.empty() && header ? header->plan.dims : a.dims.empty() ? Int3{1, 1, 1} : parse_dims(a.dims);
+    std::tie(z0, z1) = my_slices(dims.z);
+    m = open_my_bricks(a.model, dims, z0, z1, a.precision);
+    out_t = a.dtype == "source" ? m->source_dtype : parse_dtype(a.dtype);
+  });
+  const auto t0 = std::chrono::steady_clock::now();
+  // As `vnr decode` writes it: voxel size relative to the model's grid, the model's value range.
+  const Vec3f spacing{float(double(m->plan.dims.x) / dims.x), float(double(m->plan.dims.y) / dims.y),
+                      float(double(m->plan.dims.z) / dims.z)};
+  const std::string header = volume_file_header(a.output, dims, out_t, spacing);
+  const uint64_t slice_bytes = uint64_t(dims.x * dims.y) * dtype_size(out_t);
+  mpi::ParallelFile file(a.output, header.size() + slice_bytes * uint64_t(dims.z));
+  mpi::agree("decoding", [&] {
+    if (mpi::rank() == 0 && !header.empty()) file.write_at(0, header.data(), header.size());
+    std::vector<unsigned char> bytes;
+    for_each_decoded_slab(*m, dims, z0, z1, [&](int64_t za, int64_t zb, std::vector<float>& values) {
+      for (float& v : values) v = float(m->lo + double(v) * (m->hi - m->lo));  // to_original_units
+      bytes.resize(values.size() * dtype_size(out_t));
+      store_values(out_t, values.data(), int64_t(values.size()), bytes.data());
+      file.write_at(header.size() + slice_bytes * uint64_t(za), bytes.data(), bytes.size());
+      (void)zb;
+    });
+  });
+  file.commit();
+  mpi::agree("to write the sidecar", [&] {
+    const std::vector<std::string> files = volume_output_files(a.output);
+    if (mpi::rank() == 0 && files.size() > 1)
+      write_file_atomic(files[1], raw_sidecar_text(a.output, dims, out_t, spacing, std::make_pair(m->lo, m->hi)));
+  });
+  const double seconds = mpi::max(seconds_since(t0));
+  if (mpi::rank() == 0)
+    std::printf("decoded %lldx%lldx%lld %s to %s in %.2fs (%d ranks)\n", (long long)dims.x, (long long)dims.y,
+                (long long)dims.z, dtype_name(out_t), a.output.c_str(), seconds, mpi::size());
+}
+
+struct EvalMpiArgs {
+  std::string model, volume, report, precision = "auto";
+  int threads = 0;
+  bool quiet = false, no_ssim = false;
+  VolumeArgs vol;
+};
+
+void run_eval_mpi(const EvalMpiArgs& a) {
+  std::shared_ptr<BrickedModel> m;
+  VolumeDesc desc;
+  ValueRange range;
+  std::string range_source;
+  int64_t z0 = 0, z1 = 0;
+  mpi::agree("to open the model and the volume", [&] {
+    desc = describe_volume(a.volume, a.vol.raw());
+    std::tie(z0, z1) = my_slices(desc.dims.z);
+    m = open_my_bricks(a.model, desc.dims, z0, z1, a.precision);
+    if (!(desc.dims == m->plan.dims))
+      fail("'{}' has {}x{}x{} voxels but the model {}x{}x{}", a.volume, desc.dims.x, desc.dims.y, desc.dims.z,
+           m->plan.dims.x, m->plan.dims.y, m->plan.dims.z);
+  });
+  // The range `vnr eval` normalises the volume with (its sidecar's, else one scan, on rank 0).
+  mpi::agree("to find the volume's value range", [&] {
+    if (mpi::rank() != 0) return;
+    const FileEvalPlan plan = plan_file_evaluation(desc, 0, false);
+    range = file_evaluation_range(plan, model_of_bricks(m), false, a.vol.load(), &range_source);
+  });
+  const std::string bytes = mpi::broadcast(std::string(reinterpret_cast<const char*>(&range), sizeof range));
+  std::memcpy(&range, bytes.data(), sizeof range);
+  const auto t0 = std::chrono::steady_clock::now();
+  double sse = 0, max_err = 0;
+  mpi::agree("evaluating", [&] {
+    RawVolumeFile file(desc, range.lo, range.hi, a.vol.load().non_finite, "distributed evaluation",
+                       "convert the volume to raw or NRRD (uncompressed)");
+    std::vector<float> truth;
+    std::vector<unsigned char> scratch;
+    for_each_decoded_slab(*m, desc.dims, z0, z1, [&](int64_t za, int64_t zb, std::vector<float>& values) {
+      const Int3 size{desc.dims.x, desc.dims.y, zb - za};
+      truth.resize(values.size());
+      scratch.resize(file.scratch_bytes(size));
+      file.read_box(Int3{0, 0, za}, size, truth.data(), scratch.data());
+      for (size_t i = 0; i < values.size(); ++i) {
+        const double d = double(values[i]) - double(truth[i]);
+        sse += d * d;
+        max_err = std::max(max_err, std::abs(d));
+      }
+    });
+  });
+  const double total = mpi::sum(sse), worst = mpi::max(max_err), seconds = mpi::max(seconds_since(t0));
+  if (mpi::rank() != 0) return;
+  const double mse = total / double(desc.dims.count());
+  const double psnr = mse > 0 ? 10.0 * std::log10(1.0 / mse) : 999.0;
+  const double worst_original = worst * (range.hi - range.lo);
+  std::printf("PSNR %.2f dB, max |error| %.4g (%.4g in data units), decoded in %.2fs on %d ranks\n", psnr, worst,
+              worst_original, seconds, mpi::size());
+  write_report(a.report, Json{{"psnr", psnr}, {"mse", mse}, {"max_abs_error", worst}, {"max_abs_error_original", worst_original},
+                              {"samples", desc.dims.count()}, {"decode_seconds", seconds}, {"ranks", mpi::size()},
+                              {"value_range", {range.lo, range.hi}}, {"value_range_source", range_source}, {"ssim", nullptr}});
+}
+
+}  // namespace
+
+void add_decode_mpi(CLI::App& app) {
+  auto a = std::make_shared<DecodeMpiArgs>();
+  CLI::App* c = app.add_subcommand("decode", "decode a multi-brick model, each rank its slabs of one file (under mpirun)");
+  c->add_option("model", a->model, "multi-brick model directory")->required();
+  c->add_option("-o,--output", a->output, "OUT.raw (with OUT.json sidecar) or OUT.nrrd, in a directory every rank sees")->required();
+  c->add_option("--dims", a->dims, "output resolution X,Y,Z (default: the model's)");
+  c->add_option("--dtype", a->dtype, "float32, or 'source' for the original data type")->capture_default_str();
+  c->add_option("--threads", a->threads, "CPU threads per rank (default: the node's cores / its ranks)");
+  c->add_flag("-q,--quiet", a->quiet, "no progress output");
+  c->add_flag("--force", a->force, "replace existing output files");
+  add_precision_option(c, a->precision);
+  c->callback([a] {
+    set_num_threads(rank_threads(a->threads));
+    run_decode_mpi(*a);
+  });
+}
+
+void add_eval_mpi(CLI::App& app) {
+  auto a = std::make_shared<EvalMpiArgs>();
+  CLI::App* c = app.add_subcommand("eval", "PSNR and max error of a multi-brick model, each rank its slabs (under mpirun)");
+  c->add_option("model", a->model, "multi-brick model directory")->required();
+  c->add_option("volume", a->volume, "the ground-truth volume (uncompressed)")->required();
+  c->add_option("--report", a->report, "write a JSON report (rank 0)");
+  c->add_option("--threads", a->threads, "CPU threads per rank (default: the node's cores / its ranks)");
+  c->add_flag("--no-ssim", a->no_ssim, "accepted for compatibility: the distributed evaluation computes no SSIM");
+  c->add_flag("-q,--quiet", a->quiet, "no progress output");
+  add_precision_option(c, a->precision);
+  a->vol.add(c);
+  c->callback([a] {
+    set_num_threads(rank_threads(a->threads));
+    run_eval_mpi(*a);
+  });
+}
+
+}  // namespace vnr::cli
+#endif

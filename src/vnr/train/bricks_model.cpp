@@ -1,0 +1,166 @@
+// Opening a multi-brick model, its blended point queries and region decodes, and its merged
+// macro-cells (train/bricks.h).
+#include <algorithm>
+#include <cmath>
+#include "vnr/core/error.h"
+#include "vnr/core/fileio.h"
+#include "vnr/train/bricks.h"
+
+namespace vnr {
+
+uint64_t BrickedModel::param_bytes() const {
+  uint64_t n = 0;
+  for (const auto& b : bricks)
+    if (b) n += b->param_bytes();
+  return n;
+}
+
+uint64_t model_n_params(const Model& m) { return m.bricks ? m.bricks->param_bytes() / 2 : m.net->n_params(); }
+
+uint64_t BrickedModel::file_bytes() const { return model_file_bytes(dir); }
+
+std::shared_ptr<BrickedModel> load_bricked_model(const std::string& dir, const std::vector<int>* only) {
+  const std::string where = join_path(dir, "manifest.json");
+  auto m = std::make_shared<BrickedModel>();
+  m->dir = dir;
+  m->manifest = parse_json_file(where);
+  m->plan = read_manifest_plan(m->manifest, where);
+  m->layout = layout_of(m->plan);
+  try {
+    m->source_dtype = parse_dtype(m->manifest.at("dtype").get<std::string>());
+    m->lo = m->manifest.at("value_range").at(0).get<double>();
+    m->hi = m->manifest.at("value_range").at(1).get<double>();
+  } catch (const Error&) {
+    throw;
+  } catch (const std::exception&) {
+    fail("{}: the manifest needs dtype and value_range [lo, hi]", where);
+  }
+  m->bricks.resize(m->plan.bricks.size());
+  for (const BrickSpec& b : m->plan.bricks) {
+    if (only && std::find(only->begin(), only->end(), b.index) == only->end()) continue;
+    const std::string path = join_path(dir, b.file);
+    if (!file_exists(path))
+      fail("'{}': brick {} ({}) is missing; `vnr train ... --bricks ... --resume -o {}` trains the missing bricks", dir,
+           b.index, b.file, dir);
+    Model bm;
+    try {
+      bm = load_model(path);
+    } catch (const Error& e) {
+      fail("'{}': brick {} cannot be read ({}); `vnr train --resume` trains it again", dir, b.index, e.what());
+    }
+    if (!(bm.dims == b.trained.size()))
+      fail("'{}': brick {} ({}) represents {}x{}x{} voxels, its trained box is {}x{}x{}", dir, b.index, b.file,
+           bm.dims.x, bm.dims.y, bm.dims.z, b.trained.size().x, b.trained.size().y, b.trained.size().z);
+    if (bm.lo != m->lo || bm.hi != m->hi)
+      fail("'{}': brick {} was normalised with [{}, {}], the model with [{}, {}]", dir, b.index, bm.lo, bm.hi, m->lo, m->hi);
+    m->bricks[size_t(b.index)] = std::move(bm);
+  }
+  return m;
+}
+
+Model model_of_bricks(std::shared_ptr<BrickedModel> bm) {
+  Model m;
+  for (const auto& b : bm->bricks)
+    if (b) {
+      m.net = std::make_unique<Network>(b->net->config_json());
+      m.net->set_params_half(b->net->params_half());
+      break;
+    }
+  if (!m.net) fail("'{}': no brick is loaded", bm->dir);
+  m.dims = bm->plan.dims;
+  m.source_dtype = bm->source_dtype;
+  m.lo = bm->lo;
+  m.hi = bm->hi;
+  m.training = bm->manifest.value("training", Json());
+  m.macrocells = merged_macrocells(*bm);
+  m.bricks = std::move(bm);
+  return m;
+}
+
+BrickLayout layout_of(const BrickPlan& plan) {
+  BrickLayout l;
+  l.dims = plan.dims;
+  l.grid = plan.grid;
+  for (const BrickSpec& b : plan.bricks) {
+    l.owned.push_back(b.owned);
+    l.trained.push_back(b.trained);
+  }
+  return l;
+}
+
+void bricked_points(const BrickedModel& m, const float* xyz, int64_t n, float* out) {
+  m.layout.blend_batch(
+      n,
+      [&](int64_t i, float* x, float* y, float* z) {
+        *x = xyz[3 * i];
+        *y = xyz[3 * i + 1];
+        *z = xyz[3 * i + 2];
+      },
+      out,
+      [&](int b, const float* local, int64_t count, float* vals) {
+        if (!m.bricks[size_t(b)]) fail("brick {} of '{}' is needed here but not loaded", b, m.dir);
+        m.bricks[size_t(b)]->net->infer(local, count, vals);
+      });
+}
+
+void decode_bricked_region(const BrickedModel& m, Int3 out_dims, const Box3& region, float* out) {
+  for (int a = 0; a < 3; ++a)
+    if (out_dims[a] < 1 || region.lo[a] < 0 || region.hi[a] > out_dims[a] || region.lo[a] > region.hi[a])
+      fail("decode region [{}, {}) x [{}, {}) x [{}, {}) is outside the {}x{}x{} grid", region.lo.x, region.hi.x,
+           region.lo.y, region.hi.y, region.lo.z, region.hi.z, out_dims.x, out_dims.y, out_dims.z);
+  const Int3 rs = region.size();
+  const int64_t total = int64_t(rs.count());
+  const int64_t chunk = int64_t(1) << 20;  // bounded memory whatever the region
+  std::vector<float> xyz;
+  for (int64_t first = 0; first < total; first += chunk) {
+    const int64_t count = std::min(chunk, total - first);
+    xyz.resize(size_t(count) * 3);
+    for (int64_t k = 0; k < count; ++k) {
+      const int64_t v = first + k;
+      const int64_t ix = region.lo.x + v % rs.x, iy = region.lo.y + (v / rs.x) % rs.y, iz = region.lo.z + v / (rs.x * rs.y);
+      xyz[size_t(3 * k)] = (float(ix) + 0.5f) / float(out_dims.x);  // voxel_centre's expression
+      xyz[size_t(3 * k + 1)] = (float(iy) + 0.5f) / float(out_dims.y);
+      xyz[size_t(3 * k + 2)] = (float(iz) + 0.5f) / float(out_dims.z);
+    }
+    bricked_points(m, xyz.data(), count, out + first);
+  }
+}
+
+std::optional<ValueRangeGrid> merged_macrocells(const BrickedModel& m) {
+  int cell_size = 0;
+  for (const auto& b : m.bricks)
+    if (b && b->macrocells) cell_size = b->macrocells->cell_size;
+  if (cell_size == 0) return std::nullopt;
+  ValueRangeGrid g(m.plan.dims, cell_size);
+  g.clear();
+  for (const BrickSpec& spec : m.plan.bricks) {
+    const auto& bm = m.bricks[size_t(spec.index)];
+    if (!bm || !bm->macrocells) return std::nullopt;  // a brick without ranges: no safe skipping anywhere
+    const ValueRangeGrid& src = *bm->macrocells;
+    for (int64_t cz = 0; cz < src.cells.z; ++cz)
+      for (int64_t cy = 0; cy < src.cells.y; ++cy)
+        for (int64_t cx = 0; cx < src.cells.x; ++cx) {
+          const int64_t c = cx + src.cells.x * (cy + src.cells.y * cz);
+          if (src.empty(c)) continue;
+          // The brick cell's voxels [c*cs, (c+1)*cs] in global voxels, and the global cells they meet.
+          const int64_t cc[3] = {cx, cy, cz};
+          int64_t g0[3], g1[3];
+          for (int a = 0; a < 3; ++a) {
+            const int64_t v0 = spec.trained.lo[a] + cc[a] * src.cell_size - 1;
+            const int64_t v1 = spec.trained.lo[a] + (cc[a] + 1) * src.cell_size + 1;
+            g0[a] = std::clamp<int64_t>(v0 / cell_size, 0, g.cells[a] - 1);
+            g1[a] = std::clamp<int64_t>(v1 / cell_size, 0, g.cells[a] - 1);
+          }
+          for (int64_t z = g0[2]; z <= g1[2]; ++z)
+            for (int64_t y = g0[1]; y <= g1[1]; ++y)
+              for (int64_t x = g0[0]; x <= g1[0]; ++x) {
+                const int64_t d = x + g.cells.x * (y + g.cells.y * z);
+                g.lo[size_t(d)] = std::min(g.lo[size_t(d)], src.lo[size_t(c)]);
+                g.hi[size_t(d)] = std::max(g.hi[size_t(d)], src.hi[size_t(c)]);
+              }
+        }
+  }
+  return g;
+}
+
+}  // namespace vnr
