@@ -7,6 +7,7 @@
 set -eu
 cd "$(dirname "$0")/.."
 MODE=${1:-address}
+BUILD=${VNR_SANITIZE_BUILD:-build-asan}
 JOBS=$(nproc)
 LAUNCHER=""
 command -v ccache >/dev/null 2>&1 && LAUNCHER="-DCMAKE_CXX_COMPILER_LAUNCHER=ccache"
@@ -29,12 +30,12 @@ if [ "$MODE" = address ] || [ "$MODE" = address-full ]; then
   [ "$MODE" = address-full ] && VIEW=ON TARGETS=all
   # -O1: the sanitizers' checks, not the optimiser, dominate the run, and it builds faster than -O2.
   # shellcheck disable=SC2086
-  cmake -S . -B build-asan $COMMON -DVNR_VIEW=$VIEW -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g1" \
+  cmake -S . -B "$BUILD" $COMMON -DVNR_VIEW=$VIEW -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g1" \
     -DVNR_SANITIZE=address,undefined >/dev/null
   # shellcheck disable=SC2086
-  cmake --build build-asan -j "$JOBS" --target $TARGETS
+  cmake --build "$BUILD" -j "$JOBS" --target $TARGETS
   # Executables not built (address mode) appear to ctest as *_NOT_BUILT: not failures of this run.
-  ctest --test-dir build-asan --output-on-failure -j "$JOBS" -E "$SLOW|_NOT_BUILT"
+  ctest --test-dir "$BUILD" --output-on-failure -j "$JOBS" -E "$SLOW|_NOT_BUILT"
 else
   echo "usage: sh scripts/sanitize.sh [address|address-full]" >&2
   exit 2
