@@ -9,20 +9,26 @@ SECONDS_PER_TARGET=${1:-60}
 ROOT=$(cd "$(dirname "$0")/.." && pwd)
 BUILD=${VNR_FUZZ_BUILD:-$ROOT/build-fuzz}
 TARGETS=(fuzz_sidecar fuzz_nrrd fuzz_nhdr fuzz_scene fuzz_tf fuzz_config fuzz_vnr_model fuzz_bson_model
-         fuzz_viewer_message)
+         fuzz_vnr_decode fuzz_viewer_message)
 if [[ -n "${VNR_FUZZ_TARGETS:-}" ]]; then read -r -a TARGETS <<< "$VNR_FUZZ_TARGETS"; fi
 
-if [[ ! -f "$BUILD/CMakeCache.txt" ]]; then
+if ! command -v clang++ >/dev/null; then
+  echo "scripts/fuzz.sh needs clang and libFuzzer: sudo sh scripts/setup.sh (Debian: clang libclang-rt-dev libomp-dev)" >&2
+  exit 1
+fi
+# build.ninja, not CMakeCache.txt: a configure that failed half-way is redone.
+if [[ ! -f "$BUILD/build.ninja" ]]; then
+  mkdir -p "$BUILD"
   launcher=()
   command -v ccache >/dev/null && launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache)
   CC=clang CXX=clang++ cmake -S "$ROOT" -B "$BUILD" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
     -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g" -DVNR_FUZZ=ON \
     -DVNR_CUDA=OFF -DVNR_PYTHON=OFF -DVNR_PARAVIEW=OFF -DVNR_VIEW=OFF -DVNR_BUILD_TESTS=OFF \
-    -DVNR_BUILD_BENCH=OFF "${launcher[@]}" >/dev/null
+    -DVNR_BUILD_BENCH=OFF "${launcher[@]}" >"$BUILD/configure.log" || { cat "$BUILD/configure.log" >&2; exit 1; }
 fi
 [[ -n "${VNR_FUZZ_NO_BUILD:-}" ]] || cmake --build "$BUILD" -j"${VNR_FUZZ_JOBS:-2}" --target "${TARGETS[@]}"
 
-printf '%-22s %12s %8s %8s\n' target executions edges crashes
+printf '%-22s %12s %8s %8s %8s\n' target executions edges corpus findings
 for t in "${TARGETS[@]}"; do
   corpus="$BUILD/corpus/$t" findings="$BUILD/findings/$t"
   mkdir -p "$corpus" "$findings"
@@ -33,9 +39,11 @@ for t in "${TARGETS[@]}"; do
     -artifact_prefix="$findings/" -print_final_stats=1 -fork=1 -ignore_crashes=1 -ignore_timeouts=1 \
     -ignore_ooms=1 >"$log" 2>&1 || true
   # fork mode's status lines carry the totals: "#N: cov: E ft: F corp: C exec/s: X oom/timeout/crash: A/B/C"
-  execs=$(grep -oE '^#[0-9]+' "$log" | tail -1 | tr -d '#')
-  edges=$(grep -oE 'cov: [0-9]+' "$log" | tail -1 | awk '{print $2}')
+  # (|| true: a target that dies before its first status line must not end the script under pipefail)
+  execs=$(grep -oE '^#[0-9]+' "$log" | tail -1 | tr -d '#' || true)
+  edges=$(grep -oE 'cov: [0-9]+' "$log" | tail -1 | awk '{print $2}' || true)
+  corp=$(grep -oE 'corp: [0-9]+' "$log" | tail -1 | awk '{print $2}' || true)
   crashes=$(find "$findings" -maxdepth 1 -type f \( -name 'crash-*' -o -name 'timeout-*' -o -name 'leak-*' \
             -o -name 'oom-*' \) | wc -l)
-  printf '%-22s %12s %8s %8s\n' "$t" "${execs:-?}" "${edges:-?}" "$crashes"
+  printf '%-22s %12s %8s %8s %8s\n' "$t" "${execs:-?}" "${edges:-?}" "${corp:-?}" "$crashes"
 done

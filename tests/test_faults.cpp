@@ -203,7 +203,11 @@ void expect_nothing_lost(const std::string& dir, const Child& c, const std::stri
 TEST_F(Faults, SignalsWhileLoadingLoseNothing) {
   for (int sig : {SIGTERM, SIGINT}) {
     Child c = spawn(long_train(), dir);
+#ifdef VNR_SANITIZE_BUILD
+    sleep_ms(800);  // a sanitized vnr takes longer to reach main() (and its handler) and to load
+#else
     sleep_ms(150);
+#endif
     ASSERT_EQ(::kill(c.pid, sig), 0);
     expect_nothing_lost(dir, c, previous_model, sig);
   }

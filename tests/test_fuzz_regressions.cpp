@@ -7,6 +7,7 @@
 #include <map>
 #include <sstream>
 #include "test_support.h"
+#include "vnr/model.h"
 #include "vnr/nn/config.h"
 #include "vnr/render/scene.h"
 #include "vnr/render/transfer_function.h"
@@ -80,6 +81,19 @@ std::map<std::string, Runner> runners() {
   };
   r["fuzz_vnr_model"] = model_file("model.vnr");
   r["fuzz_bson_model"] = model_file("params.bson");
+  r["fuzz_vnr_decode"] = [](const std::string& bytes, const fs::path& dir, const std::string&) {
+    write_bytes(dir / "model.vnr", bytes);
+    const Model m = load_model((dir / "model.vnr").string());
+    ModelQuery query(m, Device::Cpu);
+    const Volume v = query.decode();
+    ASSERT_EQ(v.data.size(), m.dims.count());
+    // The decode's last voxel is the network at that voxel's centre.
+    const float centre[3] = {float((m.dims.x - 0.5) / m.dims.x), float((m.dims.y - 0.5) / m.dims.y),
+                             float((m.dims.z - 0.5) / m.dims.z)};
+    float at_centre = 0;
+    query.points(centre, 1, &at_centre);
+    EXPECT_NEAR(v.data.back(), at_centre, 1e-5);
+  };
 #ifdef VNR_HAVE_VIEW
   r["fuzz_viewer_message"] = [](const std::string& bytes, const fs::path&, const std::string& name) {
     if (name.ends_with(".bin")) view::split_frame_message(bytes);

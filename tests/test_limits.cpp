@@ -6,12 +6,15 @@
 #include <sys/wait.h>
 #include <unistd.h>
 #include <zlib.h>
+#include <filesystem>
 #include <fstream>
 #include "test_support.h"
 #include "vnr/core/error.h"
 #include "vnr/core/units.h"
+#include "vnr/model.h"
 #include "vnr/nn/config.h"
 #include "vnr/nn/network.h"
+#include "vnr/train/model.h"
 #include "vnr/volume/volume.h"
 
 namespace vnr::test {
@@ -52,6 +55,9 @@ TEST(Limits, InCoreLoadOfTeraVoxelsIsRefusedWithTheSizes) {
 // The same load in a child whose address space is capped at 1 GiB: had it tried the allocation, the
 // message would be the allocator's failure, not the limit's.
 TEST(Limits, TeraVoxelRefusalAllocatesNothingLarge) {
+#ifdef VNR_SANITIZE_BUILD
+  GTEST_SKIP() << "a sanitizer's shadow memory already exceeds any address-space cap (RLIMIT_AS)";
+#endif
   const std::string path = tera_voxel_gzip_nrrd(temp_dir("vnr_limits"));
   const pid_t pid = ::fork();
   if (pid == 0) {
@@ -124,6 +130,79 @@ TEST(Limits, ModelWhoseParametersDisagreeWithItsSizeIsRefused) {
                        std::to_string(bytes.size() + (1 << 20))),
             std::string::npos)
       << r.err;
+}
+
+// Sets VNR_MEMORY_LIMIT for one test (and the `vnr` processes it starts), restoring it after.
+struct MemoryLimit {
+  explicit MemoryLimit(const char* limit) { ::setenv("VNR_MEMORY_LIMIT", limit, 1); }
+  ~MemoryLimit() { ::unsetenv("VNR_MEMORY_LIMIT"); }
+};
+
+TEST(Limits, MemoryLimitFromTheEnvironmentCapsTheAvailableMemory) {
+  const uint64_t unlimited = available_memory_bytes();
+  {
+    MemoryLimit limit("3MiB");
+    EXPECT_EQ(available_memory_bytes(), std::min<uint64_t>(unlimited, 3 << 20));
+  }
+  MemoryLimit bad("lots");
+  EXPECT_NE(error_of([] { available_memory_bytes(); }).find("VNR_MEMORY_LIMIT: invalid size 'lots'"), std::string::npos);
+}
+
+// With a 1 GiB limit the 96 GiB dense grid above is refused on any machine.
+TEST(Limits, ParameterCountIsRefusedUnderAMemoryLimit) {
+  MemoryLimit limit("1GiB");
+  Json j = preset_config("small");
+  j["encoding"] = {{"otype", "DenseGrid"}, {"n_levels", 1}, {"n_features_per_level", 8}, {"base_resolution", 1300}};
+  const std::string msg = error_of([&] { Network net(ModelConfig::from_json(j), 1); });
+  EXPECT_NE(msg.find("= 96.00 GiB exceeding the memory available (1.00 GiB)"), std::string::npos) << msg;
+}
+
+// A model whose parameters fit (6 bytes each) but whose training state does not (16 more: gradient,
+// Adam's two moments and step count) is refused before training allocates, naming the sizes.
+TEST(Limits, TrainingStateIsCountedBeforeAllocating) {
+  const std::string dir = temp_dir("vnr_limits_training");
+  ASSERT_EQ(run("synth marschner-lobb --dims 12,12,12 -o " + dir + "/s.json").code, 0);
+  Json j = preset_config("small");
+  j["encoding"] = {{"otype", "HashGrid"}, {"n_levels", 8}, {"n_features_per_level", 2}, {"log2_hashmap_size", 19},
+                   {"base_resolution", 16}};
+  write_text(dir + "/big.json", j.dump());
+  MemoryLimit limit("64MiB");  // 5.8 M parameters: 33 MiB as a network, 89 MiB more to train
+  const Result r = run("train " + dir + "/s.json -o " + dir + "/s.vnr --config " + dir + "/big.json --steps 2 -q");
+  EXPECT_NE(r.code, 0);
+  EXPECT_EQ(count_lines(r.err), 1) << r.err;
+  EXPECT_NE(r.err.find("exceeding the memory available (64.00 MiB)"), std::string::npos) << r.err;
+}
+
+// A .vnr header may claim dims up to 2^31 per axis; their product may wrap a 64-bit count (here to 0)
+// or exceed what any loader accepts. Refused at load, naming the dims.
+TEST(Limits, ModelWithHugeDimsIsRefusedAtLoad) {
+  const std::string path = std::string(VNR_TEST_DATA_DIR) + "/fuzz/fuzz_vnr_decode/count_wraps_to_zero.vnr";
+  const std::string msg = error_of([&] { load_model(path); });
+  EXPECT_NE(msg.find("volume dims 4194304x2097152x2097152 = 1.845e+19 voxels exceed the limit of 2^40"),
+            std::string::npos)
+      << msg;
+}
+
+// dims 100000x100000x100 (1e12 voxels, within the load limit): decoding is refused before it allocates,
+// through the API and through `vnr decode`, which leaves no output behind.
+TEST(Limits, DecodeOfHugeDimsIsRefusedBeforeAllocating) {
+  const std::string path = std::string(VNR_TEST_DATA_DIR) + "/fuzz/fuzz_vnr_decode/tera_voxels.vnr";
+  MemoryLimit limit("1GiB");
+  const Model m = load_model(path);
+  ModelQuery query(m, Device::Cpu);
+  const std::string msg = error_of([&] { query.decode(); });
+  EXPECT_NE(msg.find("decoding 100000x100000x100 (100 z-slices at a time) needs 3.64 TiB of float32, exceeding the "
+                     "memory available (1.00 GiB)"),
+            std::string::npos)
+      << msg;
+  const std::string dir = temp_dir("vnr_limits_decode");
+  const std::string one_slice = std::string(VNR_TEST_DATA_DIR) + "/fuzz/fuzz_vnr_decode/one_huge_slice.vnr";
+  expect_error("decode " + one_slice + " -o " + dir + "/out.raw", "decoding 1048576x1048576x1 (1 z-slices");
+  // --dims whose plane overflows a 64-bit product
+  const std::string plain = std::string(VNR_TEST_DATA_DIR) + "/../../fuzz/corpus/fuzz_vnr_decode/plain.vnr";
+  expect_error("decode " + plain + " --dims 9223372036854775807,2,1 -o " + dir + "/out.raw",
+               "decoding 9223372036854775807x2x1 (1 z-slices at a time) needs 67108864.00 TiB");
+  EXPECT_TRUE(std::filesystem::is_empty(dir));
 }
 
 }  // namespace

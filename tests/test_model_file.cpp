@@ -127,7 +127,8 @@ void expect_same(const ModelFile& a, const ModelFile& b) {
   EXPECT_EQ(a.params, b.params);  // uint16 bit patterns: exact, NaNs included
   EXPECT_EQ(a.macrocell_dims, b.macrocell_dims);
   ASSERT_EQ(a.macrocell_ranges.size(), b.macrocell_ranges.size());
-  EXPECT_EQ(0, std::memcmp(a.macrocell_ranges.data(), b.macrocell_ranges.data(), a.macrocell_ranges.size() * 4));
+  if (!a.macrocell_ranges.empty())  // memcmp on an empty vector's null data() is undefined (UBSan)
+    EXPECT_EQ(0, std::memcmp(a.macrocell_ranges.data(), b.macrocell_ranges.data(), a.macrocell_ranges.size() * 4));
   EXPECT_EQ(a.training, b.training);
 }
 

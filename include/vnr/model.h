@@ -35,6 +35,10 @@ inline float to_original_units(const Model& m, float u) { return float(m.lo + do
 // once, at construction, and runs in half precision (values differ from the CPU's by ~1e-3 relative);
 // on the CPU it infers with the network's inference precision (Network::set_inference_precision).
 // The model must outlive this object and not change while it lives.
+// Throws, naming dims and bytes, unless `slices` z-slices of a dims grid (float32, dims.x * dims.y *
+// slices voxels) fit the memory available: what a decode checks before allocating its output.
+void check_decode_fits_memory(Int3 dims, int64_t slices);
+
 class ModelQuery {
 public:
   ModelQuery(const Model& model, Device device, cuda::MlpPath mlp = cuda::MlpPath::Auto);
@@ -50,6 +54,7 @@ public:
   // whatever the device (train/decoder.h), so every voxel is within the bound.
   void slab(Int3 dims, int64_t z0, int64_t z1, float* out, ValueUnits units = ValueUnits::Normalised);
   // The whole grid at dims (zero dims: the model's own) as a Volume with the model's range and dtype.
+  // Refused with the sizes, before allocating, when it cannot fit the memory (check_decode_fits_memory).
   Volume decode(Int3 dims = {});
 
   Device device() const { return device_; }

@@ -166,9 +166,11 @@ void add_decode(CLI::App& app) {
     Int3 dims = a->dims.empty() ? m.dims : parse_dims(a->dims);
     DType out_t = a->dtype == "source" ? m.source_dtype : parse_dtype(a->dtype);
     // Slabs of ~16 M voxels: memory stays bounded whatever the output size.
-    const int64_t slab = std::max<int64_t>(1, (int64_t(1) << 24) / std::max<int64_t>(1, dims.x * dims.y));
+    // (in double: a hostile --dims must not overflow before check_decode_fits_memory refuses it)
+    const int64_t slab = std::max<int64_t>(1, int64_t(double(int64_t(1) << 24) / (double(dims.x) * double(dims.y))));
     // Voxel size relative to the model's grid (model files carry no physical spacing).
     Vec3f spacing{float(double(m.dims.x) / dims.x), float(double(m.dims.y) / dims.y), float(double(m.dims.z) / dims.z)};
+    check_decode_fits_memory(dims, std::min<int64_t>(slab, dims.z));
     VolumeWriter w(a->output, dims, out_t, spacing, std::make_pair(m.lo, m.hi));
     std::vector<float> buf(size_t(dims.x * dims.y * std::min<int64_t>(slab, dims.z)));
     Progress bar("decode", double(dims.z), a->quiet);

@@ -2,6 +2,7 @@
 #include "vnr/model.h"
 #include "vnr/core/error.h"
 #include "vnr/train/bricks.h"
+#include "vnr/core/units.h"
 
 namespace vnr {
 
@@ -58,8 +59,18 @@ void ModelQuery::slab(Int3 dims, int64_t z0, int64_t z1, float* out, ValueUnits 
   convert_units(model_, units, out, dims.x * dims.y * (z1 - z0));
 }
 
+void check_decode_fits_memory(Int3 dims, int64_t slices) {
+  if (dims.x < 1 || dims.y < 1 || dims.z < 1) fail("decode dims must be positive, got {}x{}x{}", dims.x, dims.y, dims.z);
+  const double bytes = double(dims.x) * double(dims.y) * double(slices) * sizeof(float);
+  const uint64_t available = available_memory_bytes();
+  if (bytes <= double(available)) return;
+  fail("decoding {}x{}x{} ({} z-slices at a time) needs {} of float32, exceeding the memory available ({})", dims.x,
+       dims.y, dims.z, slices, human_bytes(bytes), human_bytes(double(available)));
+}
+
 Volume ModelQuery::decode(Int3 dims) {
-  if (dims.count() == 0) dims = model_.dims;
+  if (dims.x == 0 || dims.y == 0 || dims.z == 0) dims = model_.dims;
+  check_decode_fits_memory(dims, dims.z);
   Volume v;
   v.dims = dims;
   v.source_dtype = model_.source_dtype;

@@ -1,8 +1,10 @@
 #include "vnr/core/units.h"
 #include <unistd.h>
+#include <algorithm>
 #include <cctype>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include "vnr/core/error.h"
 
@@ -36,7 +38,19 @@ uint64_t physical_memory_bytes() {
   return pages > 0 && page > 0 ? uint64_t(pages) * uint64_t(page) : (uint64_t(8) << 30);
 }
 
-uint64_t available_memory_bytes() {
+namespace {
+// VNR_MEMORY_LIMIT caps what the memory checks allow (a shared node, a test, a fuzzer's small budget).
+uint64_t memory_limit_from_env() {
+  const char* text = std::getenv("VNR_MEMORY_LIMIT");
+  if (!text || !*text) return UINT64_MAX;
+  try {
+    return parse_byte_size(text);
+  } catch (const Error& e) {
+    fail("VNR_MEMORY_LIMIT: {}", e.what());
+  }
+}
+
+uint64_t meminfo_available_bytes() {
   if (std::FILE* f = std::fopen("/proc/meminfo", "r")) {
     char line[256];
     unsigned long long kb = 0;
@@ -51,6 +65,9 @@ uint64_t available_memory_bytes() {
   }
   return physical_memory_bytes();
 }
+}  // namespace
+
+uint64_t available_memory_bytes() { return std::min(meminfo_available_bytes(), memory_limit_from_env()); }
 
 std::string human_bytes(double b) {
   const char* u[] = {"B", "KiB", "MiB", "GiB", "TiB"};

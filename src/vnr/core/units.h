@@ -11,7 +11,7 @@ uint64_t parse_byte_size(const std::string& text);
 std::string human_bytes(double bytes);
 
 // Physical memory and memory currently available to new allocations (/proc/meminfo MemAvailable,
-// falling back to total), in bytes.
+// falling back to total), in bytes; available_memory_bytes() is at most VNR_MEMORY_LIMIT (e.g. "4GiB") when set.
 uint64_t physical_memory_bytes();
 uint64_t available_memory_bytes();
 

@@ -27,6 +27,7 @@ constexpr uint64_t kTrailerBytes = 12;   // CRC-32 + end magic
 constexpr uint64_t kAlign = 64;          // every data block starts on a 64-byte boundary
 constexpr int kMaxHeaderDepth = 256;     // nlohmann parses recursively: refuse absurd nesting
 constexpr int64_t kMaxDim = std::numeric_limits<int32_t>::max();  // instantvnr stores dims as int
+constexpr uint64_t kMaxVoxels = uint64_t(1) << 40;  // the volume loaders' limit (volume.cpp)
 
 // instantvnr: 16 voxels per macro-cell per axis (MACROCELL_SIZE_MIP = 4).
 constexpr int64_t kIvnrMacrocellVoxels = 16;
@@ -121,6 +122,16 @@ Int3 parse_int3_array(const Json& j, const std::string& path, const char* key) {
   return d;
 }
 
+// A model's volume dims: no volume vnr loads has more than 2^40 voxels, and a hostile header must not
+// reach a decode whose voxel count overflows or asks for terabytes.
+Int3 checked_volume_dims(const Int3& d, const std::string& path) {
+  uint64_t n = 0;
+  if (!cell_count(d, n) || n > kMaxVoxels)
+    fail("'{}' has an invalid header: volume dims {}x{}x{} = {:.4g} voxels exceed the limit of 2^40", path, d.x, d.y,
+         d.z, double(d.x) * double(d.y) * double(d.z));
+  return d;
+}
+
 // {"x","y","z"} of positive integers (instantvnr "dims").
 Int3 parse_int3_object(const Json& j, const std::string& path, const char* key) {
   if (!j.is_object()) fail("'{}': '{}' is not an object {{x, y, z}}", path, key);
@@ -199,7 +210,7 @@ void read_vnr_descriptors(const std::string& path, const Json& h, ModelFile& m) 
   m.config = *cfg;
   auto dims = h.find("dims");
   if (dims == h.end()) fail("'{}' has an invalid header: 'dims' missing", path);
-  m.dims = parse_int3_array(*dims, path, "dims");
+  m.dims = checked_volume_dims(parse_int3_array(*dims, path, "dims"), path);
   if (auto dt = h.find("dtype"); dt != h.end()) {
     if (!dt->is_string()) fail("'{}' has an invalid header: 'dtype' must be a string", path);
     try {
@@ -436,7 +447,7 @@ ModelFile parse_instantvnr(const std::string& path, const std::string& buf, bool
 
     if (auto v = root.find("volume"); v != root.end()) {
       if (!v->is_object() || !v->contains("dims")) fail("'{}': 'volume' has no 'dims'", path);
-      m.dims = parse_int3_object((*v)["dims"], path, "volume.dims");
+      m.dims = checked_volume_dims(parse_int3_object((*v)["dims"], path, "volume.dims"), path);
     }
 
     if (auto mc = root.find("macrocell"); mc != root.end()) read_ivnr_macrocells(path, *mc, m);

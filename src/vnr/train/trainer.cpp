@@ -5,6 +5,7 @@
 #include <cstring>
 #include "vnr/core/error.h"
 #include "vnr/core/parallel.h"
+#include "vnr/core/units.h"
 #include "vnr/nn/loss.h"
 #include "vnr/nn/mlp_bf16.h"
 
@@ -38,6 +39,20 @@ double loss_and_grads(LossType loss, Activation act, const float* out, const flo
   fail("unknown loss type");
 }
 
+// The network's parameters fit (Network checks them); training adds, per parameter, Adam's two moments
+// and step count and the gradient (16 bytes), plus each thread's MLP gradient. Refuse what cannot fit
+// before the first of those vectors is allocated, naming the sizes. Returns n_params for Adam.
+uint64_t checked_training_params(const Network& net) {
+  const double bytes =
+      double(net.n_params()) * (3 * sizeof(float) + sizeof(uint32_t)) + double(num_threads()) * net.mlp().n_params * 4;
+  const uint64_t available = available_memory_bytes();
+  if (bytes <= double(available))
+    return net.n_params();
+  fail("training the model's {} parameters needs {} more (gradients, Adam's moments and step counts), exceeding the "
+       "memory available ({}); reduce n_levels, log2_hashmap_size or the grid resolution",
+       net.n_params(), human_bytes(bytes), human_bytes(double(available)));
+}
+
 }  // namespace
 
 Precision resolve_training_precision(const std::string& name, const Network& net) {
@@ -54,7 +69,7 @@ Precision resolve_training_precision(const std::string& name, const Network& net
 
 CpuTrainer::CpuTrainer(Network& net, std::shared_ptr<Sampler> sampler, TrainOptions opts)
     : net_(net), sampler_(std::move(sampler)), opts_(opts),
-      adam_(net.config().adam, net.config().decay, net.n_params(), net.mlp().n_params) {
+      adam_(net.config().adam, net.config().decay, checked_training_params(net), net.mlp().n_params) {
   if (opts_.batch <= 0 || opts_.batch % kChunk != 0)
     fail("batch size must be a positive multiple of {}, got {}", kChunk, opts_.batch);
   n_threads_ = num_threads();
