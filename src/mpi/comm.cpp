@@ -4,6 +4,7 @@
 #include <cstdlib>
 #include <exception>
 #include <new>
+#include <string>
 
 namespace vnr::mpi {
 
@@ -25,7 +26,13 @@ bool env_set(const char* name) {
 }
 }  // namespace
 
-bool launched_by_mpi() { return env_set("OMPI_COMM_WORLD_SIZE") || env_set("PMI_SIZE") || env_set("PMIX_RANK"); }
+bool launched_by_mpi() {
+  // A program that called MPI_Init without a launcher (an Open MPI "singleton", e.g. pvpython) passes
+  // PMIX_RANK to its children; that is not a launch by mpirun, and vnr must run as one process there.
+  const char* ess = std::getenv("OMPI_MCA_ess");
+  if (ess && std::string(ess) == "singleton" && !env_set("OMPI_COMM_WORLD_SIZE")) return false;
+  return env_set("OMPI_COMM_WORLD_SIZE") || env_set("PMI_SIZE") || env_set("PMIX_RANK");
+}
 
 Session::Session(int* argc, char*** argv) {
   if (g_active) fail("MPI is already initialised");

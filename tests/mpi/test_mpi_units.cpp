@@ -4,6 +4,8 @@
 #include <algorithm>
 #include <cmath>
 #include <random>
+#include <cstdlib>
+#include "mpi/comm.h"
 #include "mpi/composite.h"
 #include "mpi/sort_last.h"
 #include "vnr/core/error.h"
@@ -119,4 +121,18 @@ TEST(MpiComposite, DirectSendInOneProcessIsTheReference) {
   // A brick image of the wrong size is one clear error.
   Image small(3, 3);
   EXPECT_THROW(composite_direct_send({{0, &small}}, {0}, {0}, 9, 6), Error);
+}
+
+// pvpython (ParaView's Python) initialises MPI as a singleton and passes PMIX_RANK to the processes it
+// starts; a `vnr` started from it must stay one process (train -o x.vnr writes a file, not bricks).
+TEST(MpiLaunch, AnOpenMpiSingletonParentIsNotALaunch) {
+  for (const char* v : {"OMPI_COMM_WORLD_SIZE", "PMI_SIZE", "PMIX_RANK", "OMPI_MCA_ess"}) unsetenv(v);
+  EXPECT_FALSE(vnr::mpi::launched_by_mpi());
+  setenv("PMIX_RANK", "0", 1);
+  EXPECT_TRUE(vnr::mpi::launched_by_mpi());  // srun with PMIx
+  setenv("OMPI_MCA_ess", "singleton", 1);
+  EXPECT_FALSE(vnr::mpi::launched_by_mpi());
+  setenv("OMPI_COMM_WORLD_SIZE", "2", 1);
+  EXPECT_TRUE(vnr::mpi::launched_by_mpi());  // mpirun
+  for (const char* v : {"OMPI_COMM_WORLD_SIZE", "PMIX_RANK", "OMPI_MCA_ess"}) unsetenv(v);
 }
