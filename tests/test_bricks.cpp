@@ -9,6 +9,7 @@
 #include "vnr/bricks.h"
 #include "vnr/core/metrics.h"
 #include "vnr/fields/bricked_field.h"
+#include "vnr/viewer.h"
 
 namespace vnr {
 namespace {
@@ -180,6 +181,24 @@ TEST(BrickTraining, SameSeedSameBricksInAnyOrderAndResumeTrainsOnlyMissingOrDama
   EXPECT_EQ(r.trained[0].index, 0);
   EXPECT_EQ(r.already_done, 1);
   EXPECT_EQ(brick_params(tmp / "a", 0), p0);
+  // A stop during a brick (Ctrl-C): that brick's file is kept but incomplete, no later brick starts, and
+  // --resume trains it again.
+  std::atomic<bool> stop{false};
+  BricksRunOptions stopping = steps(20);
+  stopping.brick.stop = &stop;
+  stopping.brick.on_step = [&](const TrainingProgress& pr) { stop.store(pr.step >= 5); };
+  const BricksRunResult cut = train_bricks(s, Int3{2, 1, 1}, 2, tmp / "c", stopping);
+  EXPECT_TRUE(cut.interrupted);
+  EXPECT_FALSE(cut.complete);
+  ASSERT_EQ(cut.trained.size(), 1u);
+  EXPECT_LT(cut.trained[0].steps, 20);
+  EXPECT_TRUE(file_exists(tmp / "c/brick_00000.vnr"));
+  EXPECT_FALSE(file_exists(tmp / "c/brick_00001.vnr"));
+  EXPECT_EQ(bricks_done(tmp / "c", all.plan, s.config_json->dump()), (std::vector<bool>{false, false}));
+  const BricksRunResult finished = train_bricks(s, Int3{2, 1, 1}, 2, tmp / "c", resume);
+  EXPECT_EQ(finished.trained.size(), 2u);
+  EXPECT_EQ(brick_params(tmp / "c", 0), p0);
+
   std::filesystem::remove(tmp / "a/brick_00001.vnr");
   EXPECT_HAS(test::error_of([&] { load_model(tmp / "a"); }), "brick 1 (brick_00001.vnr) is missing");
   EXPECT_EQ(train_bricks(s, Int3{2, 1, 1}, 2, tmp / "a", resume).trained.size(), 1u);
@@ -328,6 +347,39 @@ TEST(BrickModel, EveryPathOpensTheDirectoryLikeOneModel) {
   }
   r.set_mode(RenderMode::PathTrace);
   EXPECT_HAS(test::error_of([&] { render_brick_segment(r, 0); }), "ray marching");
+}
+
+TEST(BrickModel, TheViewerShowsItAsTheRendererDoes) {
+  TmpDir tmp;
+  const std::string vol = tmp / "v.json";
+  synth_volume("marschner-lobb", Int3{16, 16, 16}, vol);
+  train_bricks(small_setup(vol), Int3{1, 2, 1}, 2, tmp / "m", steps(20));
+  ViewerSetup setup;
+  setup.input = tmp / "m";
+  setup.device = "auto";  // the CPU for a multi-brick model
+  ViewerEngine engine(setup);
+  EXPECT_FALSE(engine.info().can_train);  // viewed, not retrained
+  EXPECT_EQ(engine.info().n_params, int64_t(model_n_params(load_model(tmp / "m"))));
+  ViewerRender vr = engine.state().render;
+  vr.max_frames = 1;
+  engine.set_viewport(64, 48);
+  engine.set_render(vr);
+  std::shared_ptr<const ViewerFrame> f;
+  for (uint64_t last = 0; !f;) {
+    auto g = engine.wait_frame(last, 30);
+    ASSERT_TRUE(g);
+    last = g->id;
+    if (g->refined && g->accumulated == 1 && !g->images.empty() && g->images[0].width == 64) f = g;
+  }
+  const ViewerState st = engine.state();
+  const RenderInput input = open_render_input(setup.input, "", {}, parse_precision("auto"));
+  Renderer r(*input.model, Device::Cpu);
+  r.set_scene(input.scene);
+  r.set_camera(st.camera);
+  r.set_transfer_function(to_transfer_function(st.tf));
+  r.set_size(st.width, st.height);
+  r.render_frame();
+  EXPECT_EQ(f->images[0].rgba, to_rgba8(r.image()));
 }
 
 #ifdef VNR_CLI_PATH

@@ -23,6 +23,9 @@ inline const BrickedModel* bricked(const Model& m) { return m.bricks.get(); }
 // brick owning its position), so composite_brick_segments of every brick's segment gives the
 // single-process frame up to float rounding. Needs the bricks within ghost + 1 voxels of the brick
 // loaded (gradients and the blend reach into them): bricks_touching(plan, owned box grown by ghost + 1).
+// The march must see the same macro-cells on every rank: the merged online ranges need every brick
+// loaded (model_of_bricks gives none when some are missing), so a rank holding only some bricks sets
+// MacroCellMode::Off (or Grid from the volume) on its Renderer, as the reference frame must.
 struct BrickSegment {
   int index = 0;
   Image rgba;                 // premultiplied, no background
