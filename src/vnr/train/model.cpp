@@ -23,24 +23,29 @@ Model create_model(const ModelConfig& config, Int3 dims, DType source_dtype, dou
   return model;
 }
 
-void save_model(const std::string& path, const Model& m) {
-  if (m.bricks)
-    fail("'{}': a multi-brick model is a directory of brick files written by `vnr train --bricks`; it cannot be "
-         "saved as one model file", path);
+ModelFile model_file_without_params(const Model& m) {
   ModelFile f;
   f.config = m.net->config_json();
   f.dims = m.dims;
   f.source_dtype = m.source_dtype;
   f.lo = m.lo;
   f.hi = m.hi;
-  f.params = m.net->params_half();
   f.training = m.training;
-  f.param_segments = m.param_segments;  // compressed storage (format 2) when set
-  f.compact_macrocells = !m.param_segments.empty();
   if (m.macrocells) {
     f.macrocell_dims = m.macrocells->cells;
     f.macrocell_ranges = m.macrocells->to_pairs();
   }
+  return f;
+}
+
+void save_model(const std::string& path, const Model& m) {
+  if (m.bricks)
+    fail("'{}': a multi-brick model is a directory of brick files written by `vnr train --bricks`; it cannot be "
+         "saved as one model file", path);
+  ModelFile f = model_file_without_params(m);
+  f.params = m.net->params_half();
+  f.param_segments = m.param_segments;  // compressed storage (format 2) when set
+  f.compact_macrocells = !m.param_segments.empty();
   if (m.residuals) {
     if (is_instantvnr_path(path))
       fail("'{}': instantvnr's format cannot hold error-bound residuals; save the model as .vnr", path);

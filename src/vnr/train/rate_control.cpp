@@ -30,17 +30,7 @@ float quantized_value(float v, float step) {
 }
 
 ModelFile file_of(const Model& model, const std::vector<float>& master, const std::vector<ParamSegment>& segs) {
-  ModelFile f;
-  f.config = model.net->config_json();
-  f.dims = model.dims;
-  f.source_dtype = model.source_dtype;
-  f.lo = model.lo;
-  f.hi = model.hi;
-  f.training = model.training;
-  if (model.macrocells) {
-    f.macrocell_dims = model.macrocells->cells;
-    f.macrocell_ranges = model.macrocells->to_pairs();
-  }
+  ModelFile f = model_file_without_params(model);
   f.params.resize(master.size());
   uint64_t off = 0;
   for (const ParamSegment& s : segs) {
