@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstring>
 #include "vnr/core/fileio.h"
+#include "vnr/train/psnr_search.h"
 #include "vnr/train/rate_control.h"
 #include "vnr/train/session.h"
 #include "test_support.h"
@@ -140,4 +141,54 @@ TEST(RateControl, FinishQuantizesARunOnlySession) {
   ASSERT_TRUE(r.report.contains("compact"));
   EXPECT_EQ(r.report["compact"]["qat_steps"].get<int64_t>(), 0);
   EXPECT_EQ(load_model(s.session.output).net->params_half(), session->network().params_half());
+}
+
+namespace {
+
+PsnrSearch search_on(const std::string& d, double target_psnr) {
+  const Int3 dims{32, 32, 32};
+  TrainingSetup s = setup_for(d, write_volume(d, dims, "float32"), dims, "float32");
+  s.target_psnr = target_psnr;
+  return search_size_for_psnr(s, 150, 0, [](const TrainingSetup& c) { return open_training_session(c); });
+}
+
+double ratio_of(const Json& tried, bool reached_wanted, bool smallest) {
+  double best = 0;
+  for (const Json& t : tried)
+    if (t["reached"].get<bool>() == reached_wanted) {
+      const double r = t["ratio"].get<double>();
+      if (best == 0 || (smallest ? r > best : r < best)) best = r;
+    }
+  return best;
+}
+
+}  // namespace
+
+// --target-psnr alone: bisection over the sizes returns the smallest that reaches the target. The next
+// smaller size was trained and fell short, no smaller size reached it, and the full evaluation of the
+// chosen (quantized) model agrees with its held-back estimate.
+TEST(RateControl, TargetPsnrSearchFindsTheSmallestModelThatReachesIt) {
+  const std::string d = temp_dir("rate_search");
+  PsnrSearch found = search_on(d, 30);
+  ASSERT_TRUE(found.reached) << found.tried.dump();
+  ASSERT_TRUE(found.session);
+  EXPECT_LE(found.tried.size(), 4u);  // 9 sizes: at most ceil(log2 9) trainings
+  const uint64_t volume_bytes = 32 * 32 * 32 * 4;
+  const double chosen = double(volume_bytes) / double(found.session->options().compact.target_bytes);
+  EXPECT_EQ(chosen, ratio_of(found.tried, true, true)) << found.tried.dump();  // the smallest that reached
+  if (chosen < 1024) EXPECT_EQ(ratio_of(found.tried, false, false), chosen * 2) << found.tried.dump();
+  const TrainingResult r = found.session->finish(false, 0);
+  EXPECT_GE(r.psnr, 29.5);
+  EXPECT_LE(r.model_bytes, found.session->options().compact.target_bytes);
+}
+
+// A target no size reaches: the largest model, marked as short of it, after log2(9) trainings.
+TEST(RateControl, TargetPsnrSearchOutOfReachKeepsTheLargestModel) {
+  const std::string d = temp_dir("rate_search_far");
+  PsnrSearch found = search_on(d, 80);
+  EXPECT_FALSE(found.reached);
+  ASSERT_TRUE(found.session);
+  EXPECT_EQ(found.session->options().compact.target_bytes, uint64_t(32 * 32 * 32 * 4 / 4));
+  EXPECT_EQ(found.tried.size(), 4u);
+  EXPECT_EQ(ratio_of(found.tried, true, true), 0);
 }

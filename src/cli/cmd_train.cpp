@@ -1,6 +1,7 @@
 // `vnr train VOLUME -o MODEL`: parses the options into a TrainingSetup, runs the library's
 // TrainingSession and prints its progress and result (time series: cmd_train_series.cpp).
 #include <atomic>
+#include <cmath>
 #include <csignal>
 #include <cstdio>
 #include <optional>
@@ -11,6 +12,8 @@
 #include "vnr/core/progress.h"
 #include "vnr/core/units.h"
 #include "vnr/online/preview.h"
+#include "vnr/train/psnr_search.h"
+#include "vnr/train/rate_control.h"
 #include "vnr/train/session.h"
 
 namespace vnr::cli {
@@ -121,40 +124,64 @@ void run_train(const TrainArgs& a) {
   auto say = [&](const std::string& line) {
     if (!a.quiet) std::fprintf(stderr, "%s\n", line.c_str());
   };
-  std::unique_ptr<TrainingSession> session = open_training_session(setup, say);
-  const TrainingData& data = *session->data();
-
-  std::unique_ptr<TrainPreview> preview;
-  if (preview_opts) {
-    preview = std::make_unique<TrainPreview>(*preview_opts, *session, data.dims);
-    session->add_side_work([&](const TrainingProgress& p) { preview->after_step(p.step); });
-  }
   const int64_t steps = a.steps >= 0 ? a.steps : (a.seconds > 0 ? INT64_MAX : 1000);
   const bool by_time = a.seconds > 0 && a.steps < 0;
-  Progress bar("train", by_time ? a.seconds : double(steps), a.quiet);
-  session->add_step_callback([&](const TrainingProgress& p) {
-    std::string extra = fmt::format("step {} loss {:.5f} {:.2f} M samples/s", p.step, p.loss, p.samples_per_second / 1e6);
-    if (data.out_of_core) extra += fmt::format(" io wait {:.1f}s", data.out_of_core->io_wait_seconds());
-    bar.update(by_time ? p.elapsed : double(p.step), extra);
-  });
-  {
-    StopSignalGuard guard(*session);
-    try {
+  std::optional<Progress> bar;
+  std::optional<StopSignalGuard> guard;
+  std::unique_ptr<TrainPreview> preview;
+  // Before a session trains: the progress bar, Ctrl-C, and the previews.
+  auto before_training = [&](TrainingSession& s) {
+    guard.reset();
+    guard.emplace(s);
+    if (bar) bar->finish();  // the previous candidate's (--target-psnr)
+    bar.emplace("train", by_time ? a.seconds : double(steps), a.quiet);
+    const TrainingData& data = *s.data();
+    s.add_step_callback([&bar, &data, by_time](const TrainingProgress& p) {
+      std::string extra = fmt::format("step {} loss {:.5f} {:.2f} M samples/s", p.step, p.loss, p.samples_per_second / 1e6);
+      if (data.out_of_core) extra += fmt::format(" io wait {:.1f}s", data.out_of_core->io_wait_seconds());
+      bar->update(by_time ? p.elapsed : double(p.step), extra);
+    });
+    if (preview_opts) {
+      preview = std::make_unique<TrainPreview>(*preview_opts, s, data.dims);
+      s.add_side_work([&](const TrainingProgress& p) { preview->after_step(p.step); });
+    }
+  };
+  std::unique_ptr<TrainingSession> session;
+  std::optional<PsnrSearch> search;
+  try {
+    if (setup.target_psnr > 0 && setup.target_ratio <= 0) {
+      if (preview_opts) fail("--preview-* options are not supported with --target-psnr alone (it trains several models)");
+      auto open = [&](const TrainingSetup& s) { return open_training_session(s, say); };
+      search.emplace(search_size_for_psnr(setup, by_time ? -1 : steps, a.seconds, open, say, before_training));
+      session = std::move(search->session);
+    } else {
+      session = open_training_session(setup, say);
+      before_training(*session);
       if (session->options().compact.enabled())
         train_compact(*session, by_time ? -1 : steps, a.seconds, session->options().compact, say);
       else
         session->run(steps, a.seconds);
-    } catch (const std::exception&) {
-      bar.finish();
-      throw;
     }
+  } catch (const std::exception&) {
+    if (bar) bar->finish();
+    throw;
   }
+  guard.reset();
   if (preview) session->run_side_work([&] { preview->finish(session->steps_done()); });  // the final state
-  bar.finish(fmt::format("({} steps, loss {:.5f})", session->steps_done(), session->last_loss()));
+  bar->finish(fmt::format("({} steps, loss {:.5f})", session->steps_done(), session->last_loss()));
   if (session->stop_requested())
     std::fprintf(stderr, "interrupted after %lld steps: evaluating and saving the model (Ctrl-C again to abort)\n",
                  (long long)session->steps_done());
-  const TrainingResult r = session->finish(!a.no_ssim, a.eval_samples);
+  TrainingResult r = session->finish(!a.no_ssim, a.eval_samples);
+  if (search) {
+    r.report["psnr_search"] = {{"target_psnr", setup.target_psnr}, {"reached", search->reached}, {"tried", search->tried}};
+    std::printf("--target-psnr %g: %s after %zu model(s)\n", setup.target_psnr,
+                search->reached ? "the smallest model that reaches it" : "NOT reached; the largest model",
+                search->tried.size());
+    if (search->reached && std::isfinite(r.psnr) && r.psnr < setup.target_psnr)
+      std::fprintf(stderr, "note: the full evaluation gives %.2f dB, below the held-back estimate that chose this "
+                           "model; a larger --target-psnr margin or more training closes the gap\n", r.psnr);
+  }
   print_result(a, *session, r, preview.get(), preview_opts ? preview_opts->dir : std::string());
   write_report(a.report, r.report);
 }
@@ -175,8 +202,9 @@ void add_train(CLI::App& app) {
   c->add_option("--target-ratio", a->target_ratio,
                  "write a compact (quantized, entropy-coded) model of volume bytes / R, within 5 %");
   c->add_option("--target-psnr", a->target_psnr,
-                 "quantize as coarsely as keeps this PSNR (dB, estimated on held-back samples); with "
-                 "--target-ratio the file is at most that size");
+                 "the smallest compact model reaching this PSNR (dB, held-back voxels): bisection over sizes "
+                 "1/1024..1/4 of the volume, each trained --steps/--seconds; with --target-ratio, one model of "
+                 "that size quantized as coarsely as keeps the PSNR");
   c->add_option("--bits-per-param", a->bits_per_param,
                  "--target-ratio: size the hash grid for this many bits per parameter after coding")
       ->capture_default_str();

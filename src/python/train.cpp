@@ -4,6 +4,8 @@
 #include "bindings.h"
 #include "vnr/core/error.h"
 #include "vnr/core/parallel.h"
+#include "vnr/train/psnr_search.h"
+#include "vnr/train/rate_control.h"
 
 namespace vnr::py {
 
@@ -19,6 +21,7 @@ struct TrainArgs {
   int macrocell_size = 16;
   std::optional<int> threads;
   bool verbose = false;
+  std::optional<double> target_psnr, bits_per_param, qat_fraction, max_error, max_rel_error;
 };
 
 // What happened in the step callback that the session must not see as its own error.
@@ -57,6 +60,10 @@ TrainingSetup setup_of(const TrainArgs& a) {
   s.macrocell_size = a.macrocell_size;
   s.steps = a.steps.value_or(-1);
   s.target_ratio = a.target_ratio.value_or(0);
+  s.target_psnr = a.target_psnr.value_or(0);
+  if (a.bits_per_param) s.bits_per_param = *a.bits_per_param;
+  if (a.qat_fraction) s.qat_fraction = *a.qat_fraction;
+  s.session.error_bound = {a.max_error.value_or(0), a.max_rel_error.value_or(0)};
   s.data.sampler = a.sampler;
   if (a.seconds && *a.seconds <= 0) fail("seconds must be positive, got {}", *a.seconds);
   if (pyb::isinstance<pyb::dict>(a.config)) {
@@ -70,12 +77,13 @@ TrainingSetup setup_of(const TrainArgs& a) {
   return s;
 }
 
-std::unique_ptr<TrainingSession> open_session(const TrainArgs& a, TrainingSetup& s, const MessageFn& say) {
+// Opens sessions for a setup over the volume argument: a path (read by the library) or a volume in memory
+// (shared, not copied). --target-psnr's search opens several.
+SessionOpener opener_of(const TrainArgs& a, TrainingSetup& s, const MessageFn& say) {
   if (pyb::isinstance<pyb::str>(a.volume) || pyb::hasattr(a.volume, "__fspath__")) {
     s.volume = pyb::str(pyb::module_::import("os").attr("fspath")(a.volume)).cast<std::string>();
     require_file(s.volume, "volume");
-    pyb::gil_scoped_release release;
-    return open_training_session(s, say);
+    return [say](const TrainingSetup& setup) { return open_training_session(setup, say); };
   }
   std::shared_ptr<const Volume> vol;
   if (pyb::isinstance<Volume>(a.volume)) {
@@ -86,8 +94,7 @@ std::unique_ptr<TrainingSession> open_session(const TrainArgs& a, TrainingSetup&
     vol = std::make_shared<const Volume>(volume_from_numpy(arr, std::nullopt, std::nullopt));
   }
   s.volume = "array";
-  pyb::gil_scoped_release release;
-  return open_training_session(s, std::move(vol), say);
+  return [say, vol](const TrainingSetup& setup) { return open_training_session(setup, vol, say); };
 }
 
 ModelPtr train(const TrainArgs& a) {
@@ -99,20 +106,32 @@ ModelPtr train(const TrainArgs& a) {
     std::lock_guard lock(lines_mutex);
     lines.push_back(line);
   };
-  std::unique_ptr<TrainingSession> session = open_session(a, setup, say);
-  if (a.verbose)
-    for (const std::string& l : lines) pyb::print(l, pyb::arg("file") = pyb::module_::import("sys").attr("stderr"));
+  const SessionOpener open = opener_of(a, setup, say);
+  const int64_t steps = a.steps ? *a.steps : (a.seconds ? INT64_MAX : 1000);
+  const bool by_time = a.seconds && !a.steps;
   CallbackState st;
   st.callback = a.callback;
-  TrainingSession& s = *session;
-  s.add_step_callback([&](const TrainingProgress& p) { on_step(s, st, p); });
-  const int64_t steps = a.steps ? *a.steps : (a.seconds ? INT64_MAX : 1000);
+  auto attach = [&](TrainingSession& s) { s.add_step_callback([&](const TrainingProgress& p) { on_step(s, st, p); }); };
+  std::unique_ptr<TrainingSession> session;
   {
     pyb::gil_scoped_release release;
-    s.run(steps, a.seconds.value_or(0));
-    s.record();
+    if (setup.target_psnr > 0 && setup.target_ratio <= 0) {
+      check_training_setup(setup);
+      session = search_size_for_psnr(setup, by_time ? -1 : steps, a.seconds.value_or(0), open, say, attach).session;
+    } else {
+      session = open(setup);
+      attach(*session);
+      if (session->options().compact.enabled())
+        train_compact(*session, by_time ? -1 : steps, a.seconds.value_or(0), session->options().compact, say);
+      else
+        session->run(steps, a.seconds.value_or(0));
+    }
+    session->finalize_model();  // quantized (compact), residuals attached (error bound)
   }
+  if (a.verbose)
+    for (const std::string& l : lines) pyb::print(l, pyb::arg("file") = pyb::module_::import("sys").attr("stderr"));
   if (st.error) throw std::move(*st.error);
+  TrainingSession& s = *session;
   if (st.interrupted)
     PyErr_WarnFormat(PyExc_RuntimeWarning, 1, "vnr.train interrupted after %lld steps: returning the model so far",
                      (long long)s.steps_done());
@@ -139,7 +158,13 @@ steps / seconds: stop after this many steps or seconds of training (default: 100
 seed: 0 by default (note: the CLI's --seed defaults to 1337).
 device: "auto" (a visible GPU, else the CPU), "cpu" or "cuda".
 sampler: "incore" for arrays and volumes in memory; a path may also use "outofcore" or "mmap".
-target_ratio: size the hash table so the model is about 1/R of the volume's bytes.
+target_ratio: a compact model (quantized, entropy-coded parameters) of 1/R of the volume's bytes, as
+`vnr train --target-ratio` writes it (bits_per_param sizes its grid; the last qat_fraction of the steps
+train quantization-aware).
+target_psnr: the smallest compact model whose PSNR on held-back voxels reaches this (dB): several
+sizes are trained (each for steps/seconds); with target_ratio, one model quantized as coarsely as
+keeps it. max_error / max_rel_error: every voxel of decode() within this of the original (data units /
+fraction of the value range): residuals of the network are kept in the model (docs/COMPRESSION.md).
 callback(step, loss, samples_per_second): called after each step (GPU: each step group); returning
 False stops training. Ctrl-C stops training cleanly and returns the model trained so far (with a
 RuntimeWarning). threads: CPU threads (vnr.set_num_threads); verbose: print the CLI's notes to stderr.)";
@@ -152,16 +177,21 @@ void bind_train(pyb::module_& m) {
       [](pyb::object volume, pyb::object config, std::optional<int64_t> steps, std::optional<double> seconds,
          uint32_t seed, const std::string& device, const std::string& sampler, std::optional<double> target_ratio,
          pyb::object callback, int64_t batch, const std::string& precision, int macrocell_size,
-         std::optional<int> threads, bool verbose) {
-        TrainArgs a{volume, config, callback, steps, seconds, target_ratio, seed, device, sampler, precision,
-                    batch, macrocell_size, threads, verbose};
+         std::optional<int> threads, bool verbose, std::optional<double> target_psnr,
+         std::optional<double> bits_per_param, std::optional<double> qat_fraction, std::optional<double> max_error,
+         std::optional<double> max_rel_error) {
+        TrainArgs a{volume,   config,         callback,     steps,     seconds,      target_ratio,  seed,
+                    device,   sampler,        precision,    batch,     macrocell_size, threads,      verbose,
+                    target_psnr, bits_per_param, qat_fraction, max_error, max_rel_error};
         return train(a);
       },
       pyb::arg("volume"), pyb::arg("config") = "paper", pyb::arg("steps") = pyb::none(),
       pyb::arg("seconds") = pyb::none(), pyb::arg("seed") = 0, pyb::arg("device") = "auto",
       pyb::arg("sampler") = "incore", pyb::arg("target_ratio") = pyb::none(), pyb::arg("callback") = pyb::none(),
       pyb::kw_only(), pyb::arg("batch") = 65536, pyb::arg("precision") = "auto", pyb::arg("macrocell_size") = 16,
-      pyb::arg("threads") = pyb::none(), pyb::arg("verbose") = false, kTrainDoc);
+      pyb::arg("threads") = pyb::none(), pyb::arg("verbose") = false, pyb::arg("target_psnr") = pyb::none(),
+      pyb::arg("bits_per_param") = pyb::none(), pyb::arg("qat_fraction") = pyb::none(),
+      pyb::arg("max_error") = pyb::none(), pyb::arg("max_rel_error") = pyb::none(), kTrainDoc);
 }
 
 }  // namespace vnr::py

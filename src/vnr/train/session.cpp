@@ -191,23 +191,28 @@ Json TrainingSession::attach_residuals() {
   return j;
 }
 
+Json TrainingSession::finalize_model() {
+  if (!data_) fail("finalize_model() needs a session opened on training data (open_training_session)");
+  // A compact session that was only run(): quantize now (post-training), so the file meets the target.
+  if (opts_.compact.enabled() && model_->param_segments.empty()) compact_session(*this, opts_.compact, 0, 0);
+  record();
+  return attach_residuals();
+}
+
 TrainingResult TrainingSession::finish(bool with_ssim, int64_t eval_samples) {
   if (!data_) fail("finish() needs a session opened on training data (open_training_session)");
   if (opts_.output.empty()) fail("finish() needs an output path");
   const TrainingData& data = *data_;
   Network& net = *model_->net;
   const Device dev = trainer_->device();
-  // A compact session that was only run(): quantize now (post-training), so the file meets the target.
-  if (opts_.compact.enabled() && model_->param_segments.empty()) compact_session(*this, opts_.compact, 0, 0);
   TrainingResult r;
   r.steps = steps_;
   r.seconds = train_seconds_;
   r.final_loss = loss_;
-  record();
+  const Json bound = finalize_model();
   // Exact over the volume in memory; a volume that is not in memory gets a PSNR estimate from random
   // voxels (a full pass can take longer than the training did).
   Json evaluation;
-  const Json bound = attach_residuals();
   const Residuals* residuals = model_->residuals ? &*model_->residuals : nullptr;
   if (data.vol) {
     EvalResult ev = evaluate(net, *data.vol, with_ssim, dev, residuals);

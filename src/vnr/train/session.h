@@ -122,6 +122,10 @@ public:
   // The compact-storage summary (rate_control.h) that finish() puts into the report as "compact".
   const Json& note_compact(Json summary) { return compact_summary_ = std::move(summary); }
   void save_checkpoint();  // record() + "checkpoint": true, written to options().output
+  // The model as finish() saves it, without evaluating or saving: a compact session that was only run()
+  // is quantized, the training record written, and the error bound's residuals attached (returns their
+  // summary, null without a bound). For front ends that keep the model in memory (the Python module).
+  Json finalize_model();
   // The end of `vnr train`: records, evaluates (exactly over a volume in memory, else from
   // `eval_samples` random voxels, or not at all with 0), saves the model to options().output and
   // builds the report.
