@@ -1,5 +1,8 @@
 // `vnr bench rd VOLUME`: runs the rate-distortion benchmark of include/vnr/rate_distortion.h, prints a
 // line per point, writes the JSON report and, with --plot, the PSNR-ratio plot (bench/plot_rd.py).
+#include <spawn.h>
+#include <sys/wait.h>
+#include <cerrno>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
@@ -9,6 +12,8 @@
 #include "vnr/core/fileio.h"
 #include "vnr/core/parallel.h"
 #include "vnr/rate_distortion.h"
+
+extern char** environ;
 
 namespace vnr::cli {
 namespace {
@@ -36,13 +41,34 @@ std::vector<double> parse_list(const std::string& text, const char* flag) {
   return out;
 }
 
-// bench/plot_rd.py beside the sources (or installed under share/vnr), run by Debian's python3.
+// plot_rd.py installed beside the executable (<prefix>/share/vnr/, from bench/), else the source tree's.
+std::string plot_script() {
+  std::error_code ec;
+  const std::filesystem::path exe = std::filesystem::read_symlink("/proc/self/exe", ec);
+  if (!ec) {
+    const std::filesystem::path installed = exe.parent_path().parent_path() / "share" / "vnr" / "plot_rd.py";
+    if (std::filesystem::exists(installed)) return installed.string();
+  }
+  if (std::filesystem::exists(VNR_PLOT_RD_SCRIPT)) return VNR_PLOT_RD_SCRIPT;
+  fail("--plot: cannot find plot_rd.py (looked in {}/../share/vnr and {})", exe.parent_path().string(),
+       VNR_PLOT_RD_SCRIPT);
+}
+
+// Runs Debian's python3 on the script with the paths as arguments (no shell: any file name is safe).
 void plot(const std::string& report, const RdArgs& a) {
-  std::string script = VNR_PLOT_RD_SCRIPT;
-  if (!std::filesystem::exists(script)) fail("--plot: cannot find the plot script {}", script);
-  std::string cmd = fmt::format("/usr/bin/python3 '{}' '{}' -o '{}'", script, report, a.plot);
-  if (!a.peers.empty()) cmd += fmt::format(" --peers '{}'", a.peers);
-  if (std::system(cmd.c_str()) != 0) fail("--plot: '{}' failed (it needs python3-matplotlib)", cmd);
+  std::vector<std::string> args = {"/usr/bin/python3", plot_script(), report, "-o", a.plot};
+  if (!a.peers.empty()) args.insert(args.end(), {"--peers", a.peers});
+  std::vector<char*> argv;
+  for (std::string& s : args) argv.push_back(s.data());
+  argv.push_back(nullptr);
+  pid_t pid = 0;
+  if (posix_spawn(&pid, argv[0], nullptr, nullptr, argv.data(), environ) != 0)
+    fail("--plot: cannot run /usr/bin/python3 (Debian's python3 and python3-matplotlib draw the plot)");
+  int status = 0;
+  while (waitpid(pid, &status, 0) < 0 && errno == EINTR) {
+  }
+  if (!WIFEXITED(status) || WEXITSTATUS(status) != 0)
+    fail("--plot: {} {} failed (it needs python3-matplotlib)", args[0], args[1]);
   std::printf("plot: %s\n", a.plot.c_str());
 }
 

@@ -177,7 +177,12 @@ RdReport run_rate_distortion(const std::string& volume_path, const Volume& volum
     for (double ratio : o.ratios) {
       Model trained;
       const std::string path = dir + fmt::format("/r{}.vnr", ratio);
-      add(train_point(shared, volume_path, ratio, o, path, &trained));
+      try {
+        add(train_point(shared, volume_path, ratio, o, path, &trained));
+      } catch (const BudgetBelowSmallestFile& e) {  // a small volume at a high ratio: the other points stand
+        if (o.message) o.message(fmt::format("vnr           {:<8g} skipped: {}", ratio, e.what()));
+        continue;
+      }
       const Model m = load_model(path);  // the network as stored, as a decoder sees it
       for (size_t k = 0; k < o.rel_bounds.size(); ++k) {
         RdPoint p = bound_point(volume, m, file_size(path), o.rel_bounds[k], ratio);

@@ -44,10 +44,8 @@ PsnrSearch search_size_for_psnr(const TrainingSetup& setup, int64_t steps, doubl
     try {
       const Json summary = train_compact(*c.session, steps, seconds, o, quiet);
       c.psnr = summary["heldback_psnr"].get<double>();
-    } catch (const Error& e) {
-      // The only size-dependent refusal: a budget below the header and macro-cells of this volume.
-      if (std::string(e.what()).find("below the smallest file") == std::string::npos) throw;
-      c.psnr = 0;
+    } catch (const BudgetBelowSmallestFile&) {
+      c.psnr = 0;  // a budget below the header and macro-cells of this volume: a size that cannot be made
     }
     c.reached = c.psnr >= setup.target_psnr;
     out.interrupted = c.session->stop_requested();

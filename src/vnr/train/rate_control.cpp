@@ -172,9 +172,10 @@ double fit_bytes(const Model& model, const std::vector<float>& master, const Qua
   int guard = 0;
   while (b_hi > target) {
     if (++guard > 60) {
-      fail("the target of {} bytes is below the smallest file this model can make ({} bytes: header, "
-           "macro-cells and all parameters zero); choose a smaller model or a lower ratio",
-           target, b_hi);
+      throw BudgetBelowSmallestFile(
+          fmt::format("the target of {} bytes is below the smallest file this model can make ({} bytes: header, "
+                      "macro-cells and all parameters zero); choose a smaller model or a lower ratio",
+                      target, b_hi));
     }
     hi *= 4;
     b_hi = bytes(hi);

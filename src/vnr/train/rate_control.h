@@ -7,6 +7,7 @@
 #include <functional>
 #include <string>
 #include <vector>
+#include "vnr/core/error.h"
 #include "vnr/core/json.h"
 #include "vnr/nn/network.h"
 #include "vnr/nn/param_codec.h"
@@ -49,6 +50,13 @@ QuantPlan plan_quantization(Network& net, const ProbeSet& probe);
 // Sets the network's parameters (and its fp16 grid copy) to `master` quantized with `segments`:
 // exactly the values a model file written with those segments returns.
 void apply_quantization(Network& net, const std::vector<float>& master, const std::vector<ParamSegment>& segments);
+
+// fit_bytes' refusal: the budget is below the header and macro-cells alone. Searches over sizes (the
+// --target-psnr search, `vnr bench rd`) count it as a size that cannot be made, not as a failure.
+class BudgetBelowSmallestFile : public Error {
+public:
+  using Error::Error;
+};
 
 // The scale g whose file (model written with plan.at(g)) is at most target_bytes and as close to it
 // as the search finds; `bytes` receives that size. Fails when even the coarsest quantization is larger.
