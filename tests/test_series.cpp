@@ -499,6 +499,38 @@ TEST(SeriesCli, ContinuousReportsRecovery) {
   EXPECT_FALSE(m.net->config().decay.enabled);
 }
 
+// Compact and error-bounded series: every timestep's file meets --target-ratio, every timestep's decode
+// holds --max-rel-error against that timestep, and warm starts continue from unquantized parameters.
+TEST(SeriesCli, CompactAndErrorBoundedModelsPerTimestep) {
+  TmpDir tmp;
+  const std::string d = tmp.str();
+  ASSERT_EQ(run("synth noise --dims 24,24,24 --timesteps 3 -o " + d + "/s.json").code, 0);
+  const std::string base = "train " + d + "/s.json --timesteps all --config small --steps 40 --batch 4096 -q --no-ssim ";
+  Result t = run(base + "--target-ratio 16 -o " + d + "/compact");
+  ASSERT_EQ(t.code, 0) << t.err;
+  const double budget = 24.0 * 24 * 24 * 4 / 16;  // float32 frames
+  for (int k = 0; k < 3; ++k) {
+    const std::string model = d + "/compact/t000" + std::to_string(k) + ".vnr";
+    const double bytes = double(file_size(model));
+    EXPECT_LE(bytes, budget) << model;
+    EXPECT_GE(bytes, 0.95 * budget) << model;
+    EXPECT_FALSE(load_model(model).param_segments.empty());
+  }
+  t = run(base + "--max-rel-error 1e-2 -o " + d + "/bounded");
+  ASSERT_EQ(t.code, 0) << t.err;
+  const Json rep = parse_json_file(d + "/bounded/series.json");
+  for (int k = 0; k < 3; ++k) {
+    EXPECT_EQ(rep["rows"][size_t(k)]["error_bound"]["holds"], true);
+    Result e = run("eval " + d + "/bounded/t000" + std::to_string(k) + ".vnr " + d + "/s.json --timestep " +
+                   std::to_string(k) + " --no-ssim --report " + d + "/e.json");
+    ASSERT_EQ(e.code, 0) << e.err;
+    const Json ev = parse_json_file(d + "/e.json");
+    EXPECT_LE(ev["max_abs_error"].get<double>(), 1e-2 + 1e-9) << ev.dump();  // normalised units
+  }
+  expect_error("train " + d + "/s.json --timesteps all --continuous --switch-every 5 --max-error 1 -o " + d + "/o4",
+               "not with --continuous");
+}
+
 TEST(SeriesCli, ClearErrors) {
   TmpDir tmp;
   const std::string d = tmp.str();

@@ -107,7 +107,6 @@ void run_train(const TrainArgs& a) {
   set_num_threads(a.threads);
   if (!a.timesteps.empty()) {
     if (a.preview.enabled()) fail("--preview-* options are not supported with --timesteps");
-    if (a.max_error > 0 || a.max_rel_error > 0) fail("--max-error/--max-rel-error are not supported with --timesteps yet");
     if (a.target_psnr > 0) fail("--target-psnr is not supported with --timesteps yet");
     if (a.device == "cuda") fail("--timesteps trains on the CPU; --device cuda is not supported for time series yet");
     return run_train_series(a);

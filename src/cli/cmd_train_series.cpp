@@ -59,6 +59,8 @@ void check_series_args(const TrainArgs& a) {
       fail("--continuous needs --switch-every N (training steps per timestep, N > 0), got {}", a.switch_every);
     if (a.steps >= 0 || a.seconds > 0)
       fail("--continuous trains --switch-every steps per timestep; --steps and --seconds do not apply");
+    if (a.target_ratio > 0 || a.max_error > 0 || a.max_rel_error > 0)
+      fail("--target-ratio, --max-error and --max-rel-error make per-timestep models; not with --continuous");
   } else if (a.switch_every != 0) {
     fail("--switch-every needs --continuous");
   }
@@ -159,6 +161,8 @@ void train_per_timestep(SeriesRun& run) {
   so.seconds = a.seconds;
   so.macrocell_size = a.macrocell_size;
   so.ssim = !a.no_ssim;
+  if (a.target_ratio > 0) so.compact.target_bytes = uint64_t(double(run.frame_bytes) / a.target_ratio);
+  so.error_bound = {a.max_error, a.max_rel_error};
   run.report["steps_per_timestep"] = so.steps >= 0 ? Json(so.steps) : Json(nullptr);
   run.report["seconds_per_timestep"] = a.seconds;
   run.report["config"] = run.model.net->config_json();
@@ -176,6 +180,11 @@ void train_per_timestep(SeriesRun& run) {
     run.bar->finish(fmt::format("({} steps, loss {:.5f})", r.steps, r.final_loss));
     Json row = run.save(m, r);
     row["warm_start"] = r.warm_started;
+    if (!r.compact.is_null()) row["compact"] = r.compact;
+    if (!r.error_bound.is_null()) {
+      row["error_bound"] = r.error_bound;
+      row["error_bound"]["holds"] = r.eval.max_abs_error_original <= r.error_bound["max_error"].get<double>();
+    }
     const std::string path = row["model"].get<std::string>();
     run.add_row(std::move(row));
     std::printf("t%04d     %-5s  %5lld  %7.2f  %10.6f  %9.2f%s  %s\n", r.timestep, r.warm_started ? "warm" : "init",
@@ -296,10 +305,10 @@ void run_train_series(const TrainArgs& a) {
     describe_volume(a.volume, r);
   }
   const uint64_t frame_bytes = desc0.dims.count() * dtype_size(desc0.dtype);
-  if (a.target_ratio > 0) {
+  if (a.target_ratio > 0) {  // compact models of frame bytes / R, one per timestep (docs/COMPRESSION.md)
     std::string note;
-    config = size_config_for_ratio(config, frame_bytes, a.target_ratio, &note);
-    if (!a.quiet) std::fprintf(stderr, "%s (per timestep)\n", note.c_str());
+    config = size_config_for_bytes(config, uint64_t(double(frame_bytes) / a.target_ratio), a.bits_per_param, &note);
+    if (!a.quiet) std::fprintf(stderr, "--target-ratio %g: %s (per timestep)\n", a.target_ratio, note.c_str());
   }
   make_output_dir(a.output);
   const std::string report_path = a.report.empty() ? join_path(a.output, "series.json") : a.report;

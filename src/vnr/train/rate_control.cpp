@@ -59,6 +59,24 @@ double fit_psnr(Network& net, const std::vector<float>& master, const QuantPlan&
   return lo;
 }
 
+// The scale g that meets o's targets for `master`; *bytes gets that file's size. The model's header
+// (training record included) must already be as it will be saved.
+double choose_scale(const Model& model, Network& net, const std::vector<float>& master, const QuantPlan& plan,
+                    const ProbeSet& probe, const CompactOptions& o, uint64_t* bytes) {
+  // Aim a little under the budget: the final evaluation's numbers may lengthen the header.
+  const uint64_t aim = o.target_bytes - std::min<uint64_t>(o.target_bytes / 50, 256);
+  double g = o.target_psnr > 0 ? fit_psnr(net, master, plan, probe, o.target_psnr) : 0;
+  if (o.target_bytes > 0) g = std::max(g, fit_bytes(model, master, plan, aim, bytes));
+  *bytes = vnr_file_bytes(file_of(model, master, plan.at(g)));
+  return g;
+}
+
+// Full-length placeholders for the numbers the final evaluation writes into the header.
+void reserve_evaluation_record(Model& model) {
+  model.training["psnr"] = 12.345678901234567;
+  model.training["ssim"] = 0.12345678901234567;
+}
+
 }  // namespace
 
 double psnr_of_mse(double mse) { return mse > 0 ? -10.0 * std::log10(mse) : 999.0; }
@@ -227,18 +245,11 @@ Json compact_session(TrainingSession& session, const CompactOptions& o, int64_t 
   const uint64_t probe_seed = session.trainer().seed() ^ 0x9e3779b9u;
   const ProbeSet probe = data.vol ? draw_voxel_probe(*data.vol, o.probe_samples, probe_seed)
                                   : draw_probe(*data.sampler, o.probe_samples, probe_seed);
-  // finish() adds the evaluation to the header's training record: leave room for it.
-  const uint64_t aim = o.target_bytes - std::min<uint64_t>(o.target_bytes / 50, 256);
+  // The header will hold the training record with the final evaluation: size the file with one.
   auto choose = [&](const std::vector<float>& master, const QuantPlan& plan, uint64_t* bytes) {
-    // The header will hold the training record with the final evaluation: size the file with one
-    // (full-length placeholder numbers).
     session.record();
-    model.training["psnr"] = 12.345678901234567;
-    model.training["ssim"] = 0.12345678901234567;
-    double g = o.target_psnr > 0 ? fit_psnr(net, master, plan, probe, o.target_psnr) : 0;
-    if (o.target_bytes > 0) g = std::max(g, fit_bytes(model, master, plan, aim, bytes));
-    *bytes = vnr_file_bytes(file_of(model, master, plan.at(g)));
-    return g;
+    reserve_evaluation_record(model);
+    return choose_scale(model, net, master, plan, probe, o, bytes);
   };
   session.trainer().download();
   const double psnr_before = psnr_of_mse(probe.mse(net));
@@ -294,6 +305,29 @@ Json compact_session(TrainingSession& session, const CompactOptions& o, int64_t 
                                    {"heldback_psnr", psnr_after},
                                    {"qat_steps", qat_steps},
                                    {"steps", steps_json}});
+}
+
+}  // namespace vnr
+
+namespace vnr {
+
+Json quantize_model(Model& model, const ProbeSet& probe, const CompactOptions& o) {
+  Network& net = *model.net;
+  const double psnr_before = psnr_of_mse(probe.mse(net));
+  const QuantPlan plan = plan_quantization(net, probe);
+  std::vector<float> master(net.params.begin(), net.params.end());
+  zero_unused(net.mlp(), master);
+  const Json record = model.training;
+  reserve_evaluation_record(model);
+  uint64_t bytes = 0;
+  const std::vector<ParamSegment> segs = plan.at(choose_scale(model, net, master, plan, probe, o, &bytes));
+  model.training = record;
+  apply_quantization(net, master, segs);
+  model.param_segments = segs;
+  return Json{{"planned_bytes", bytes},
+              {"heldback_psnr_unquantized", psnr_before},
+              {"heldback_psnr", psnr_of_mse(probe.mse(net))},
+              {"qat_steps", 0}};
 }
 
 }  // namespace vnr

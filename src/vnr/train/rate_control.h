@@ -75,4 +75,9 @@ Json train_compact(TrainingSession& session, int64_t steps, double seconds, cons
 Json compact_session(TrainingSession& session, const CompactOptions& options, int64_t qat_steps, double qat_seconds,
                      const std::function<void(const std::string&)>& message = {});
 
+// Post-training quantization of a model outside a session (a time series' per-timestep models): its
+// network's parameters are quantized for o's targets (QAT needs a session) and model.param_segments set,
+// so that save_model writes the compact file. Returns the summary train_compact reports.
+Json quantize_model(Model& model, const ProbeSet& probe, const CompactOptions& o);
+
 }  // namespace vnr

@@ -147,18 +147,32 @@ std::vector<TimestepResult> train_series(Model& model, const std::vector<int>& t
     r.seconds = session.training_seconds();
     r.final_loss = session.last_loss();
     r.loss_history = trainer.losses();
-    r.eval = evaluate(net, vol, opts.ssim);
 
     describe_model(model, vol);
     model.training = {{"steps", r.steps},         {"seconds", r.seconds},         {"interrupted", r.interrupted},
                       {"batch", to.batch},        {"seed", to.seed},              {"final_loss", r.final_loss},
-                      {"psnr", r.eval.psnr},      {"threads", num_threads()},     {"timestep", t},
-                      {"series_index", i},        {"warm_start", r.warm_started}, {"continuous", false}};
-    if (opts.ssim) model.training["ssim"] = r.eval.ssim;
+                      {"threads", num_threads()}, {"timestep", t},                {"series_index", i},
+                      {"warm_start", r.warm_started}, {"continuous", false}};
     model.macrocells.reset();
     if (trainer.has_online_ranges()) model.macrocells = trainer.online_ranges();
+    // The saved model may be quantized and carry residuals; the next timestep warm-starts from the
+    // trained parameters, not from those.
+    const std::vector<float> trained(net.params.begin(), net.params.end());
+    if (opts.compact.enabled())
+      r.compact = quantize_model(model, draw_voxel_probe(vol, opts.compact.probe_samples, to.seed ^ 0x9e3779b9u),
+                                 opts.compact);
+    if (opts.error_bound.active()) r.error_bound = attach_error_bound(model, vol, opts.error_bound);
+    r.eval = evaluate(net, vol, opts.ssim, Device::Cpu, model.residuals ? &*model.residuals : nullptr);
+    model.training["psnr"] = r.eval.psnr;
+    if (opts.ssim) model.training["ssim"] = r.eval.ssim;
     results.push_back(r);
     if (done) done(results.back(), model);
+    if (!model.param_segments.empty() || model.residuals) {
+      std::copy(trained.begin(), trained.end(), net.params.begin());
+      net.sync_half_table();
+      model.param_segments.clear();
+      model.residuals.reset();
+    }
     if (r.interrupted) break;
   }
   return results;

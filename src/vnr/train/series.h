@@ -35,6 +35,8 @@
 #include <vector>
 #include "vnr/core/json.h"
 #include "vnr/train/model_io.h"
+#include "vnr/train/rate_control.h"
+#include "vnr/train/residuals.h"
 #include "vnr/train/sampler.h"
 #include "vnr/train/trainer.h"
 #include "vnr/volume/volume.h"
@@ -73,6 +75,8 @@ struct SeriesOptions {
   uint32_t init_seed = 1337; // only with warm_start = false
   int macrocell_size = 16;   // online macro-cells recorded per timestep's own training (0: none)
   bool ssim = false;         // also compute the 3-D SSIM at the end of each timestep
+  CompactOptions compact;    // each timestep's model quantized for these targets (after training, no QAT)
+  ErrorBoundRequest error_bound;  // each timestep's model carries the residuals that guarantee it
 };
 
 struct TimestepResult {
@@ -86,6 +90,7 @@ struct TimestepResult {
   double lo = 0, hi = 1;    // the timestep's value range (original units)
   bool interrupted = false; // hooks.stop ended this timestep (and the run)
   std::vector<float> loss_history;
+  Json compact, error_bound;  // the summaries of SeriesOptions' compact storage and error bound (null: off)
 };
 
 // Trains `model` through the selected timesteps. On entry model.net holds the first timestep's

@@ -165,30 +165,34 @@ void TrainingSession::save_checkpoint() {
 
 // The error-bound residuals of the trained network (SessionOptions::error_bound), kept in the model
 // (coded once here, so the save reuses the bytes); their summary for the report, or null.
-Json TrainingSession::attach_residuals() {
-  if (!opts_.error_bound.active()) return Json();
-  const TrainingData& data = *data_;
-  if (!data.vol) fail("an error bound needs the volume in memory (in-core sampler)");
-  const double b = normalised_error_bound(opts_.error_bound, data.lo, data.hi, model_->source_dtype);
+Json attach_error_bound(Model& model, const Volume& volume, const ErrorBoundRequest& request) {
+  const double b = normalised_error_bound(request, volume.lo, volume.hi, model.source_dtype);
   // Residuals are taken against the network as the file stores it (fp16 parameters), not the fp32
   // master copy, so that a loaded model decodes to the same predictions.
-  model_->net->set_params_half(model_->net->params_half());
-  Residuals res = compute_residuals(*model_->net, data.vol->data.data(), data.vol->dims, b);
+  model.net->set_params_half(model.net->params_half());
+  Residuals res = compute_residuals(*model.net, volume.data.data(), volume.dims, b);
   res.encoded = std::make_shared<const EncodedResiduals>(encode_residuals(res));
   const int64_t nz = res.nonzero();
   const uint64_t bytes = res.encoded->bytes.size();
-  Json j = {{"max_error", b * (data.hi - data.lo)},
+  const double voxels = double(volume.dims.count());
+  Json j = {{"max_error", b * (volume.hi - volume.lo)},
             {"max_error_normalised", b},
             {"step_normalised", res.step},
             {"residual_nonzero", nz},
-            {"residual_nonzero_fraction", double(nz) / double(data.dims.count())},
+            {"residual_nonzero_fraction", double(nz) / voxels},
             {"residual_bytes", bytes},
-            {"residual_bits_per_voxel", 8.0 * double(bytes) / double(data.dims.count())},
+            {"residual_bits_per_voxel", 8.0 * double(bytes) / voxels},
             {"codec", res.encoded->meta["codec"]},
             {"predictor", res.encoded->meta["predictor"]},
             {"candidate_bytes", res.encoded->meta["candidate_bytes"]}};
-  model_->residuals = std::move(res);
+  model.residuals = std::move(res);
   return j;
+}
+
+Json TrainingSession::attach_residuals() {
+  if (!opts_.error_bound.active()) return Json();
+  if (!data_->vol) fail("an error bound needs the volume in memory (in-core sampler)");
+  return attach_error_bound(*model_, *data_->vol, opts_.error_bound);
 }
 
 Json TrainingSession::finalize_model() {

@@ -158,6 +158,11 @@ private:
   std::vector<double> step_seconds_;
 };
 
+// The error bound's residuals (train/residuals.h) of `model`'s network against `volume` (normalised, in
+// memory), attached to the model; the network's parameters are rounded to fp16 first, as a file stores
+// them. Returns the summary that `vnr train --report` shows as "error_bound".
+Json attach_error_bound(Model& model, const Volume& volume, const ErrorBoundRequest& request);
+
 // Everything `vnr train VOLUME` needs to set a session up.
 struct TrainingSetup {
   std::string volume;  // path (also its name in messages)
