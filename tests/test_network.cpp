@@ -508,14 +508,15 @@ TEST(TargetRatio, SizesTheModelNearTheRequestedRatio) {
   const uint64_t volume_bytes = 16u << 20;  // bonsai: 256^3 uint8
   for (double ratio : {4.0, 16.0, 50.0, 200.0}) {
     std::string note;
-    ModelConfig c = size_config_for_ratio(ModelConfig::from_json(preset_config("paper")), volume_bytes, ratio, &note);
-    const double bytes = double(count_params(c)) * 2;
-    const double achieved = double(volume_bytes) / bytes;
-    EXPECT_GT(achieved, ratio / 2) << note;
-    EXPECT_LT(achieved, ratio * 2) << note;
+    const uint64_t budget = uint64_t(double(volume_bytes) / ratio);
+    ModelConfig c = size_config_for_bytes(ModelConfig::from_json(preset_config("paper")), budget, 4.0, &note);
+    // The table moves in factors of two: the parameters at 4 bits each land within 2x of the budget.
+    const double bytes = double(count_params(c)) * 4 / 8;
+    EXPECT_GT(bytes, double(budget) / 2) << note;
+    EXPECT_LT(bytes, double(budget) * 2) << note;
     EXPECT_NE(note.find("levels"), std::string::npos);
     // The MLP and everything but the grid size is kept.
     EXPECT_EQ(c.to_json()["network"], Network(preset_config("paper")).config_json()["network"]);
   }
-  EXPECT_THROW(size_config_for_ratio(load_config("paper"), volume_bytes, -1, nullptr), std::exception);
+  EXPECT_THROW(size_config_for_bytes(load_config("paper"), 1000, -1, nullptr), std::exception);
 }

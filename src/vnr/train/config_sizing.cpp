@@ -5,32 +5,6 @@
 
 namespace vnr {
 
-ModelConfig size_config_for_ratio(const ModelConfig& base, uint64_t volume_bytes, double ratio, std::string* note) {
-  if (!(ratio > 0)) fail("--target-ratio must be positive, got {}", ratio);
-  const double target = double(volume_bytes) / ratio;
-  if (base.encoding.type != EncodingType::Grid || base.encoding.grid_type != GridType::Hash)
-    fail("--target-ratio needs a HashGrid encoding (the config has {})", base.to_json()["encoding"]["otype"].dump());
-  ModelConfig best;
-  double best_err = 1e300;
-  uint64_t best_bytes = 0;
-  const uint32_t L0 = base.encoding.n_levels;
-  for (uint32_t L = L0; L >= 1; --L)
-    for (uint32_t t = 8; t <= 24; ++t) {
-      ModelConfig c = base;
-      c.encoding.n_levels = L;
-      c.encoding.log2_hashmap_size = t;
-      uint64_t bytes = count_params(c) * 2;
-      // Prefer keeping all levels: penalise each dropped level by a factor 1.5 in size error.
-      double err = std::fabs(std::log(double(bytes) / target)) + 0.4 * (L0 - L);
-      if (err < best_err) best_err = err, best = c, best_bytes = bytes;
-    }
-  if (note)
-    *note = fmt::format("--target-ratio {}: {} levels, 2^{} table, {:.2f} MiB model (ratio {:.1f})", ratio,
-                        best.encoding.n_levels, best.encoding.log2_hashmap_size, best_bytes / 1048576.0,
-                        double(volume_bytes) / best_bytes);
-  return best;
-}
-
 ModelConfig size_config_for_bytes(const ModelConfig& base, uint64_t target_bytes, double bits_per_param,
                                   std::string* note) {
   if (!(bits_per_param > 0 && bits_per_param <= 16)) fail("bits per parameter must be in (0, 16], got {}", bits_per_param);

@@ -1,14 +1,10 @@
 #pragma once
-// Sizing a config to a target compression ratio (--target-ratio).
+// Sizing a config to a byte budget (--target-ratio).
 #include <cstdint>
 #include <string>
 #include "vnr/nn/config.h"
 
 namespace vnr {
-
-// Sizes the grid of `config` (log2_hashmap_size, and n_levels if needed) so the fp16 model is about
-// volume_bytes / ratio. Returns the adjusted config; `note` describes the choice.
-ModelConfig size_config_for_ratio(const ModelConfig& config, uint64_t volume_bytes, double ratio, std::string* note);
 
 // Compact storage (train/rate_control.h): sizes the grid so that the parameters at `bits_per_param`
 // bits each (after quantization and entropy coding) take about target_bytes. The exact size is then
