@@ -19,8 +19,8 @@ namespace vnr::cli {
 
 namespace {
 
-// Steps of each brick: --steps, else 1000.
-int64_t brick_steps(const TrainArgs& a) { return a.steps >= 0 ? a.steps : 1000; }
+// Steps of each brick as `vnr train` counts them: --steps, else 1000, or no limit (-1) with --seconds.
+int64_t brick_steps(const TrainArgs& a) { return a.steps >= 0 ? a.steps : (a.seconds > 0 ? -1 : 1000); }
 
 // The setup `vnr train` builds (setup_of), checked, with the bricks' refusals; the fill bars of
 // out-of-core bricks stay off (ranks would interleave them).
@@ -77,8 +77,9 @@ void write_manifest_now(const TrainArgs& a, const TrainingSetup& setup, const Br
   int64_t steps = 0;
   double seconds = 0;
   for (const BrickResult& b : all) steps += b.steps, seconds += b.seconds;
+  const Json steps_per_brick = brick_steps(a) >= 0 ? Json(brick_steps(a)) : Json(nullptr);  // null: by --seconds
   const Json training = {{"bricks_done", all.size()}, {"bricks", plan.bricks.size()},
-                         {"complete", all.size() == plan.bricks.size()}, {"steps_per_brick", brick_steps(a)},
+                         {"complete", all.size() == plan.bricks.size()}, {"steps_per_brick", steps_per_brick},
                          {"brick_steps", steps}, {"brick_seconds", seconds}, {"batch", setup.batch},
                          {"seed", setup.seed}, {"target_ratio", setup.target_ratio}, {"ranks", mpi::size()}};
   write_manifest(a.output, plan, dtype, range, config, all, training);
