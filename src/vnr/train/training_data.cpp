@@ -33,7 +33,7 @@ void sample_in_core(TrainingData& t, std::shared_ptr<const Volume> vol) {
 
 // Regions never loaded are never learned: the note when a run cannot be expected to see (almost) the
 // whole volume, with the --refresh (or steps) that would.
-void note_coverage(const OutOfCoreSampler& s, int64_t steps, const MessageFn& message) {
+void note_coverage(const OutOfCoreSampler& s, int64_t steps, const std::string& what, const MessageFn& message) {
   if (steps <= 0) return;
   const double cover = s.expected_coverage(steps);
   if (cover >= 0.95) return;
@@ -44,9 +44,9 @@ void note_coverage(const OutOfCoreSampler& s, int64_t steps, const MessageFn& me
                           : fmt::format("{} steps with --refresh {} cover about 95%",
                                         int64_t(std::ceil(3.0 * double(s.volume_blocks()) / double(max_refresh))),
                                         max_refresh);
-  say(message, fmt::format("note: over {} steps the buffer is expected to load only {:.0f}% of the volume's {} "
+  say(message, fmt::format("note: over {} steps the buffer is expected to load only {:.0f}% of the {}'s {} "
                            "blocks, and regions never loaded are not learned; {}",
-                           steps, 100 * cover, s.volume_blocks(), fix));
+                           steps, 100 * cover, what, s.volume_blocks(), fix));
 }
 
 void open_out_of_core(TrainingData& t, const TrainingDataOptions& o, const MessageFn& message) {
@@ -65,7 +65,7 @@ void open_out_of_core(TrainingData& t, const TrainingDataOptions& o, const Messa
   say(message, fmt::format("out-of-core buffer: {} blocks of {} voxels, {} replaced per step; {} held of a {} budget",
                            s.blocks(), dims_text(s.block_dims()), s.refresh(), human_bytes(double(s.bytes_held())),
                            human_bytes(double(o.memory_budget))));
-  note_coverage(s, o.steps, message);
+  note_coverage(s, o.steps, o.region.empty() ? "volume" : "region", message);
   t.sampler = t.out_of_core;
 }
 
