@@ -9,6 +9,7 @@
 #include "mpi/comm.h"
 #include "cli.h"
 #include "mpi_cli.h"
+#include "train_options.h"
 #include "vnr/bricks.h"
 #include "vnr/core/fileio.h"
 #include "vnr/core/parallel.h"
@@ -18,28 +19,15 @@ namespace vnr::cli {
 
 namespace {
 
-struct TrainMpiArgs {
-  std::string volume, output, bricks = "auto", config = "paper", report, memory_budget, device = "auto";
-  int ghost = 4, threads = 0;
-  int64_t steps = 1000, batch = 65536;
-  double seconds = 0, target_ratio = 0;
-  uint32_t seed = 1337;
-  bool resume = false, quiet = false;
-  VolumeArgs vol;
-};
+// Steps of each brick as `vnr train` counts them: --steps, else 1000, or no limit (-1) with --seconds.
+int64_t brick_steps(const TrainArgs& a) { return a.steps >= 0 ? a.steps : (a.seconds > 0 ? -1 : 1000); }
 
-TrainingSetup setup_of(const TrainMpiArgs& a) {
-  TrainingSetup s;
-  s.volume = a.volume;
-  s.raw = a.vol.raw();
-  s.load = a.vol.load();
-  s.config = a.config;
-  s.target_ratio = a.target_ratio;
-  s.batch = a.batch;
-  s.seed = a.seed;
-  s.device = a.device;
-  s.steps = a.steps;
-  if (!a.memory_budget.empty()) s.data.memory_budget = parse_byte_size(a.memory_budget);
+// The setup `vnr train` builds (setup_of), checked, with the bricks' refusals; the fill bars of
+// out-of-core bricks stay off (ranks would interleave them).
+TrainingSetup mpi_setup_of(const TrainArgs& a) {
+  check_brick_args(a, true);
+  TrainingSetup s = setup_of(a, false);
+  s.data.show_progress = false;
   check_training_setup(s);
   return s;
 }
@@ -50,7 +38,7 @@ std::string describe_box(const Box3& b) {
 
 // This rank's bricks, trained one after another; a failure names the brick.
 std::vector<BrickResult> train_my_bricks(const TrainingSetup& setup, const BrickPlan& plan, const std::vector<int>& mine,
-                                         const ValueRange& range, const TrainMpiArgs& a) {
+                                         const ValueRange& range, const TrainArgs& a) {
   std::vector<BrickResult> results;
   for (size_t k = 0; k < mine.size(); ++k) {
     const int b = mine[k];
@@ -58,8 +46,11 @@ std::vector<BrickResult> train_my_bricks(const TrainingSetup& setup, const Brick
     if (!a.quiet)
       std::fprintf(stderr, "rank %d: training brick %d (%zu of %zu on this rank)\n", mpi::rank(), b, k + 1, mine.size());
     BrickTrainOptions o;
-    o.steps = a.steps;
+    o.steps = brick_steps(a);
     o.seconds = a.seconds;
+    o.message = [&](const std::string& line) {  // notes, e.g. that the brick trains out of core and why
+      if (!a.quiet && line.rfind("note:", 0) == 0) std::fprintf(stderr, "rank %d: %s\n", mpi::rank(), line.c_str());
+    };
     try {
       results.push_back(train_brick(setup, plan, b, a.output, range, o));
     } catch (const std::exception& e) {
@@ -77,7 +68,7 @@ std::string config_text(const TrainingSetup& s) { return s.config_json ? s.confi
 
 // The manifest as `vnr train --bricks` writes it (train/bricks_run.cpp), from the brick files on disk:
 // before training (complete: false, so that --resume finds the plan) and after.
-void write_manifest_now(const TrainMpiArgs& a, const TrainingSetup& setup, const BrickPlan& plan, DType dtype,
+void write_manifest_now(const TrainArgs& a, const TrainingSetup& setup, const BrickPlan& plan, DType dtype,
                         const ValueRange& range, bool final) {
   const std::vector<bool> done = bricks_done(a.output, plan, config_text(setup));
   const std::vector<BrickResult> all = brick_results_on_disk(a.output, plan, done);
@@ -86,20 +77,21 @@ void write_manifest_now(const TrainMpiArgs& a, const TrainingSetup& setup, const
   int64_t steps = 0;
   double seconds = 0;
   for (const BrickResult& b : all) steps += b.steps, seconds += b.seconds;
+  const Json steps_per_brick = brick_steps(a) >= 0 ? Json(brick_steps(a)) : Json(nullptr);  // null: by --seconds
   const Json training = {{"bricks_done", all.size()}, {"bricks", plan.bricks.size()},
-                         {"complete", all.size() == plan.bricks.size()}, {"steps_per_brick", a.steps},
+                         {"complete", all.size() == plan.bricks.size()}, {"steps_per_brick", steps_per_brick},
                          {"brick_steps", steps}, {"brick_seconds", seconds}, {"batch", setup.batch},
                          {"seed", setup.seed}, {"target_ratio", setup.target_ratio}, {"ranks", mpi::size()}};
   write_manifest(a.output, plan, dtype, range, config, all, training);
 }
 
-void run_train_mpi(const TrainMpiArgs& a) {
+void run_train_mpi(const TrainArgs& a) {
   const int me = mpi::rank(), n = mpi::size();
   TrainingSetup setup;
   BrickPlan plan;
   DType dtype = DType::Float32;
   mpi::agree("to plan the bricks", [&] {
-    setup = setup_of(a);
+    setup = mpi_setup_of(a);
     const VolumeDesc desc = describe_volume(a.volume, setup.raw);
     dtype = desc.dtype;
     plan = plan_bricks(desc.dims, parse_brick_grid(a.bricks), a.ghost, a.seed);
@@ -145,25 +137,14 @@ void run_train_mpi(const TrainMpiArgs& a) {
 }  // namespace
 
 void add_train_mpi(CLI::App& app) {
-  auto a = std::make_shared<TrainMpiArgs>();
+  auto a = std::make_shared<TrainArgs>();
+  a->bricks = "auto";
   CLI::App* c = app.add_subcommand("train", "train a multi-brick model, each rank its bricks (under mpirun; docs/MPI.md)");
   c->add_option("volume", a->volume, "volume (sidecar, NRRD or raw with --dims --dtype; uncompressed)")->required();
   c->add_option("-o,--output", a->output, "model directory (manifest.json + one .vnr per brick)")->required();
-  c->add_option("--bricks", a->bricks, "bricks per axis BX,BY,BZ or auto")->capture_default_str();
-  c->add_option("--ghost", a->ghost, "ghost voxels on each side of a brick")->capture_default_str();
-  c->add_flag("--resume", a->resume, "train only the bricks not yet in the model directory");
-  c->add_option("--config", a->config, "preset (paper, small) or tiny-cuda-nn JSON config file")->capture_default_str();
-  c->add_option("--target-ratio", a->target_ratio, "size every brick so the whole model is about 1/R of the volume");
-  c->add_option("--steps", a->steps, "training steps per brick")->capture_default_str();
-  c->add_option("--seconds", a->seconds, "stop each brick after this many seconds");
-  c->add_option("--batch", a->batch, "samples per step (multiple of 256)")->capture_default_str();
-  c->add_option("--seed", a->seed, "seed of the model (each brick's seed derives from it and the brick)")->capture_default_str();
-  c->add_option("--memory-budget", a->memory_budget, "memory a rank may use for one brick's data, e.g. 4GiB");
-  c->add_option("--threads", a->threads, "CPU threads per rank (default: the node's cores / its ranks)");
-  c->add_option("--report", a->report, "write a JSON report (rank 0)");
-  c->add_flag("-q,--quiet", a->quiet, "no progress output");
-  add_device_option(c, a->device);
-  a->vol.add(c);
+  // The options of `vnr train` (train_options.h): --steps and --seconds apply per brick, --memory-budget
+  // per rank (a brick over it trains out of core), --threads per rank (default: the node's cores / its ranks).
+  add_training_options(c, *a);
   c->callback([a] {
     set_num_threads(rank_threads(a->threads));
     run_train_mpi(*a);

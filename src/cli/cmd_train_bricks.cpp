@@ -4,6 +4,7 @@
 #include <cstdio>
 #include <optional>
 #include "train_cli.h"
+#include "train_options.h"
 #include "vnr/core/error.h"
 #include "vnr/core/fileio.h"
 #include "vnr/core/parallel.h"
@@ -22,18 +23,6 @@ std::atomic<bool> g_stop_bricks{false};
 extern "C" void on_stop_bricks(int) {
   g_stop_bricks.store(true);
   handle_stop_signals(exit_on_signal);
-}
-
-void check_brick_args(const TrainArgs& a) {
-  if (a.bricks.empty()) fail("--resume needs --bricks (the same as the run it continues)");
-  if (a.preview.enabled()) fail("--preview-* options are not supported with --bricks");
-  if (a.checkpoint_every) fail("--checkpoint-every is not supported with --bricks (each finished brick is kept; --resume continues)");
-  if (a.seconds > 0) fail("--seconds is not supported with --bricks; give --steps (per brick)");
-  if (a.max_error > 0 || a.max_rel_error > 0)
-    fail("--max-error/--max-rel-error are not supported with --bricks yet (residuals are per single model)");
-  if (a.target_psnr > 0) fail("--target-psnr is not supported with --bricks yet; give --target-ratio or a config");
-  if (is_instantvnr_path(a.output) || extension_of(a.output) == ".vnr")
-    fail("with --bricks, -o names a directory (the manifest and one .vnr per brick), got '{}'", a.output);
 }
 
 void print_summary(const TrainArgs& a, const BricksRunResult& r) {
@@ -108,11 +97,9 @@ void add_train_bricks_options(CLI::App* c, TrainArgs& a) {
 }
 
 void run_train_bricks(const TrainArgs& a) {
-  check_brick_args(a);
+  check_brick_args(a, false);
   TrainingSetup setup = setup_of(a, false);
   if (a.eval_samples < 0) fail("--eval-samples must be non-negative, got {}", a.eval_samples);
-  if (!a.memory_budget.empty() && (setup.data.memory_budget = parse_byte_size(a.memory_budget)) == 0)
-    fail("--memory-budget must be positive");
   const Int3 grid = parse_brick_grid(a.bricks);
   BricksRunOptions o;
   o.resume = a.resume;

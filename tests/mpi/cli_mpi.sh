@@ -20,6 +20,7 @@ check() {  # check "what" command...
   shift
   if "$@"; then echo "ok: $what"; else echo "FAIL: $what"; failures=$((failures + 1)); fi
 }
+differ() { ! cmp -s "$1" "$2"; }
 run() { mpirun -n "$1" --oversubscribe "${@:2}"; }
 COMMON=(--bricks 2,2,2 --ghost 2 --config small --threads 1 -q)
 
@@ -65,7 +66,8 @@ p = json.load(open('r.json'))['image_psnr']; print('image PSNR', p); assert p >=
 head, data = open('rN.pfm', 'rb').read().split(b'\n', 3)[1:3], open('rN.pfm', 'rb').read().split(b'\n', 3)[3]
 assert np.frombuffer(data, np.float32).std() > 0.05, 'blank image'"
 
-# A rank that fails: brick 1 of 3 along x is the widest with its ghosts (17 voxels) and alone exceeds the budget.
+# A rank that fails: brick 1 of 3 along x is the widest with its ghosts (17 voxels) and alone exceeds the budget,
+# and its out-of-core buffer (default blocks, 17x31x31) does not fit it either.
 run "$N" "$V" train vol.json -o mf --bricks 3,1,1 --ghost 2 --steps 20 --config small --threads 1 -q \
   --memory-budget 76000 > /dev/null 2> fail.txt
 status=$?
@@ -91,6 +93,28 @@ run "$N" "$V" train vol.json -o mk "${COMMON[@]}" --steps 60 --resume > /dev/nul
 check "--resume completes the model" [ "$(complete mk/manifest.json)" == True ]
 "$V" decode mk -o resumed.raw --precision fp32 -q > /dev/null
 check "the resumed model = the uninterrupted one" cmp -s resumed.raw manyN.raw
+
+# `vnr train`'s options under mpirun (one setup for both): --precision, --macrocell-size and the out-of-core
+# options reach every brick, and bricks over --memory-budget train out of core (saying so), to the model one
+# process trains with the same options.
+OPTS=(--bricks 2,2,2 --ghost 2 --config small --threads 1 --steps 20 --macrocell-size 0 --memory-budget 30KiB
+      --block-dims 4,4,4)
+"$V" train vol.json -o o1 "${OPTS[@]}" --precision fp32 -q > /dev/null
+run "$N" "$V" train vol.json -o oN "${OPTS[@]}" --precision fp32 > /dev/null 2> ooc.txt
+check "bricks over the budget train out of core under mpirun, each saying so" \
+  [ "$(grep -c '^rank [0-9]*: note: brick [0-7] trains out of core: its 2.x2.x1. voxels with ghosts need' ooc.txt)" == 8 ]
+"$V" decode o1 -o o1.raw --precision fp32 -q > /dev/null
+"$V" decode oN -o oN.raw --precision fp32 -q > /dev/null
+check "out-of-core bricks on $N ranks = one process" cmp -s o1.raw oN.raw
+if "$V" train vol.json -o b1 "${OPTS[@]}" --precision bf16 -q > /dev/null 2>&1; then  # a CPU with AVX512-BF16
+  run "$N" "$V" train vol.json -o bN "${OPTS[@]}" --precision bf16 -q > /dev/null
+  "$V" decode b1 -o b1.raw --precision fp32 -q > /dev/null
+  "$V" decode bN -o bN.raw --precision fp32 -q > /dev/null
+  check "--precision bf16 reaches the bricks on $N ranks" cmp -s b1.raw bN.raw
+  check "--precision bf16 trains another model than fp32" differ b1.raw o1.raw
+fi
+run "$N" "$V" train vol.json -o tp "${OPTS[@]}" --target-psnr 30 -q > /dev/null 2> tp.txt
+check "--target-psnr refused under mpirun with one line" grep -q "target-psnr is not supported with --bricks" tp.txt
 
 echo "$failures failed checks"
 [ $failures -eq 0 ]

@@ -1,9 +1,13 @@
 // Training one brick of a multi-brick model from its region of the volume (train/bricks.h).
+#include <algorithm>
 #include <chrono>
+#include <cmath>
 #include "vnr/core/error.h"
 #include "vnr/core/fileio.h"
+#include "vnr/core/metrics.h"
 #include "vnr/core/units.h"
 #include "vnr/train/bricks.h"
+#include "vnr/train/decoder.h"
 #include "vnr/train/evaluate.h"
 #include "vnr/volume/raw_access.h"
 
@@ -18,21 +22,48 @@ ValueRange brick_value_range(const TrainingSetup& setup, const MessageFn& messag
 
 namespace {
 
-// The brick's trained box read with pread and normalised with the whole volume's range.
-std::shared_ptr<Volume> read_brick_volume(const TrainingSetup& setup, const BrickPlan& plan, const BrickSpec& b,
-                                          const ValueRange& range) {
+// The volume file, checked against the plan.
+VolumeDesc brick_source(const TrainingSetup& setup, const BrickPlan& plan) {
   const VolumeDesc desc = describe_volume(setup.volume, setup.raw);
   if (!(desc.dims == plan.dims))
     fail("'{}' has {}x{}x{} voxels but the brick plan is for {}x{}x{}", setup.volume, desc.dims.x, desc.dims.y,
          desc.dims.z, plan.dims.x, plan.dims.y, plan.dims.z);
+  return desc;
+}
+
+RawVolumeFile brick_file(const VolumeDesc& desc, const TrainingSetup& setup, const ValueRange& range) {
+  return RawVolumeFile(desc, range.lo, range.hi, setup.load.non_finite, "brick training",
+                       "convert the volume to raw or NRRD (uncompressed)");
+}
+
+std::string box_text(const Box3& b) { return fmt::format("{}x{}x{}", b.size().x, b.size().y, b.size().z); }
+
+// Whether brick b trains out of core: --sampler outofcore, or (no --sampler) its trained box as float
+// does not fit the memory budget. `why` gets the reason for people.
+bool brick_out_of_core(const TrainingSetup& setup, const BrickSpec& b, uint64_t budget, std::string* why) {
+  const std::string& sampler = setup.data.sampler;
+  if (sampler == "mmap") fail("--sampler mmap is not supported with bricks (they train in core or out of core)");
+  if (!sampler.empty() && sampler != "incore" && sampler != "outofcore")
+    fail("unknown --sampler '{}' (allowed: incore, outofcore)", sampler);
   const uint64_t need = b.trained.voxels() * sizeof(float);
-  const uint64_t budget = setup.data.memory_budget ? setup.data.memory_budget : available_memory_bytes() / 2;
-  if (need > budget)
-    fail("brick {} needs {} MiB in memory ({}x{}x{} voxels with ghosts), more than the memory budget of {} MiB; "
-         "use more bricks (--bricks)",
-         b.index, need >> 20, b.trained.size().x, b.trained.size().y, b.trained.size().z, budget >> 20);
-  RawVolumeFile file(desc, range.lo, range.hi, setup.load.non_finite, "brick training",
-                     "convert the volume to raw or NRRD (uncompressed)");
+  if (sampler == "outofcore") {
+    *why = "--sampler outofcore";
+    return true;
+  }
+  if (need <= budget) return false;
+  if (sampler == "incore")
+    fail("brick {} needs {} in memory ({} voxels with ghosts), more than the memory budget of {}; omit --sampler "
+         "incore to train it out of core, or raise --memory-budget",
+         b.index, human_bytes(double(need)), box_text(b.trained), human_bytes(double(budget)));
+  *why = fmt::format("its {} voxels with ghosts need {} as float, more than the memory budget of {}",
+                     box_text(b.trained), human_bytes(double(need)), human_bytes(double(budget)));
+  return true;
+}
+
+// The brick's trained box read with pread and normalised with the whole volume's range.
+std::shared_ptr<Volume> read_brick_volume(const VolumeDesc& desc, const TrainingSetup& setup, const BrickSpec& b,
+                                          const ValueRange& range) {
+  const RawVolumeFile file = brick_file(desc, setup, range);
   auto v = std::make_shared<Volume>();
   v->dims = b.trained.size();
   v->source_dtype = desc.dtype;
@@ -44,23 +75,66 @@ std::shared_ptr<Volume> read_brick_volume(const TrainingSetup& setup, const Bric
   return v;
 }
 
+// PSNR of net over box of the file, read and decoded in z-slabs of about slab_bytes (two float copies, at
+// least one slice): what evaluate() gives on the box loaded, without holding it.
+double streamed_box_psnr(const Network& net, const RawVolumeFile& file, const Box3& box, uint64_t slab_bytes) {
+  const Int3 d = box.size();
+  const int64_t slice = d.x * d.y;
+  const int64_t slab = std::clamp<int64_t>(int64_t(slab_bytes / (2 * sizeof(float) * uint64_t(slice))), 1, d.z);
+  std::vector<float> ref(size_t(slab * slice)), dec(size_t(slab * slice));
+  std::vector<unsigned char> scratch(file.scratch_bytes(Int3{d.x, d.y, slab}));
+  double se = 0;
+  for (int64_t z0 = 0; z0 < d.z; z0 += slab) {
+    const int64_t k = std::min(slab, d.z - z0);
+    file.read_box(Int3{box.lo.x, box.lo.y, box.lo.z + z0}, Int3{d.x, d.y, k}, ref.data(), scratch.data());
+    decode_slices(net, d, z0, z0 + k, dec.data());
+    se += error_stats(ref.data(), dec.data(), Int3{d.x, d.y, k}).mse * double(k * slice);
+  }
+  const double mse = se / double(d.count());
+  return mse > 0 ? 10 * std::log10(1 / mse) : 999.0;  // error_stats' convention
+}
+
+// The brick's session: on its box in memory, or out of core on its box of the file.
+std::unique_ptr<TrainingSession> open_brick_session(const TrainingSetup& s, const VolumeDesc& desc, const BrickSpec& b,
+                                                    const ValueRange& range, bool out_of_core, uint64_t budget,
+                                                    const MessageFn& message) {
+  if (!out_of_core) {
+    TrainingSetup in_core = s;
+    in_core.volume = fmt::format("{} brick {}", s.volume, b.index);
+    in_core.data.sampler = "";
+    return open_training_session(in_core, read_brick_volume(desc, s, b, range), message);
+  }
+  TrainingSetup ooc = s;
+  ooc.data.sampler = "outofcore";
+  ooc.data.region = b.trained;
+  ooc.data.range = range;
+  ooc.data.memory_budget = budget;
+  try {
+    return open_training_session(ooc, message);
+  } catch (const Error& e) {
+    fail("brick {} trains out of core, but {}", b.index, e.what());
+  }
+}
+
 }  // namespace
 
 BrickResult train_brick(const TrainingSetup& setup, const BrickPlan& plan, int index, const std::string& out_dir,
                         const ValueRange& range, const BrickTrainOptions& o) {
   if (index < 0 || size_t(index) >= plan.bricks.size()) fail("brick {} is not in the plan (0..{})", index, plan.bricks.size() - 1);
   const BrickSpec& b = plan.bricks[size_t(index)];
-  std::shared_ptr<const Volume> vol = read_brick_volume(setup, plan, b, range);
+  const VolumeDesc desc = brick_source(setup, plan);
+  const uint64_t budget = setup.data.memory_budget ? setup.data.memory_budget : available_memory_bytes() / 2;
+  std::string why;
+  const bool out_of_core = brick_out_of_core(setup, b, budget, &why);
+  if (out_of_core && o.message) o.message(fmt::format("note: brick {} trains out of core: {}", index, why));
 
   TrainingSetup s = setup;
-  s.volume = fmt::format("{} brick {}", setup.volume, index);
   s.seed = b.seed;
-  s.data.sampler = "";
   s.steps = o.steps;
   s.session.output = join_path(out_dir, b.file);
   // --target-ratio is the whole model's: each brick gets the parameters of its owned voxels.
   if (setup.target_ratio > 0) s.target_ratio = setup.target_ratio * double(b.trained.voxels()) / double(b.owned.voxels());
-  std::unique_ptr<TrainingSession> session = open_training_session(s, vol, o.message);
+  std::unique_ptr<TrainingSession> session = open_brick_session(s, desc, b, range, out_of_core, budget, o.message);
   if (o.on_step) session->add_step_callback(o.on_step);
   if (o.stop)
     session->add_step_callback([&](const TrainingProgress&) {
@@ -76,13 +150,15 @@ BrickResult train_brick(const TrainingSetup& setup, const BrickPlan& plan, int i
   r.interrupted = session->stop_requested();
   session->record();
   Model& m = session->model();
-  const EvalResult ev = evaluate(*m.net, *vol, o.with_ssim, Device::Cpu);
-  r.psnr = ev.psnr;
+  // Out of core the brick is never held: its PSNR is streamed in slabs of an eighth of the budget.
+  r.psnr = out_of_core ? streamed_box_psnr(*m.net, brick_file(desc, setup, range), b.trained, budget / 8)
+                       : evaluate(*m.net, *session->data()->vol, o.with_ssim, Device::Cpu).psnr;
   r.n_params = m.net->n_params();
   Json rec = brick_record(b);
   rec["complete"] = !r.interrupted;
   rec["config"] = setup.config_json ? setup.config_json->dump() : setup.config;
-  rec["psnr"] = ev.psnr;
+  rec["psnr"] = r.psnr;
+  rec["sampler"] = out_of_core ? "outofcore" : "incore";
   m.training["brick"] = rec;
   save_model(s.session.output, m);  // atomic: a brick file is whole or absent
   r.file_bytes = file_size(s.session.output);

@@ -28,7 +28,19 @@ int64_t OutOfCoreSampler::default_refresh(int64_t blocks) {
 OutOfCoreSampler::OutOfCoreSampler(std::shared_ptr<const RawVolumeFile> file, uint64_t seed,
                                    const OutOfCoreOptions& opts)
     : file_(std::move(file)), seed_(seed), dims_(file_->dims()) {
+  if (!opts.region.empty()) {
+    const Box3 whole{{0, 0, 0}, dims_};
+    if (!(intersect(opts.region, whole) == opts.region))
+      fail("region x {}..{}, y {}..{}, z {}..{} is not inside the volume {}x{}x{}", opts.region.lo.x, opts.region.hi.x,
+           opts.region.lo.y, opts.region.hi.y, opts.region.lo.z, opts.region.hi.z, dims_.x, dims_.y, dims_.z);
+    in_region_ = !(opts.region == whole);
+    origin_ = opts.region.lo;
+    dims_ = opts.region.size();
+  }
   bd_ = opts.block_dims.x > 0 ? opts.block_dims : default_block_dims(dims_, file_->desc().dtype);
+  // One --block-dims serves every brick of a multi-brick model: a brick narrower than a block gets blocks
+  // as wide as itself.
+  if (in_region_) bd_ = Int3{std::min(bd_.x, dims_.x), std::min(bd_.y, dims_.y), std::min(bd_.z, dims_.z)};
   for (int a = 0; a < 3; ++a)
     if (bd_[a] <= 0 || bd_[a] > dims_[a])
       fail("block size {}x{}x{} does not fit the volume {}x{}x{}", bd_.x, bd_.y, bd_.z, dims_.x, dims_.y, dims_.z);
@@ -75,9 +87,21 @@ OutOfCoreSampler::OutOfCoreSampler(std::shared_ptr<const RawVolumeFile> file, ui
   scratch_.assign(size_t(threads), std::vector<unsigned char>(file_->scratch_bytes(stored_)));
   for (int t = 0; t < threads; ++t) readers_.emplace_back([this, t] { reader_loop(t); });
 
+  // A failed fill (an unreadable block, NaN under NonFinitePolicy::Error) must still stop the readers: the
+  // destructor does not run for an object whose constructor throws.
+  const auto t0 = std::chrono::steady_clock::now();
+  try {
+    fill_buffer(opts);
+  } catch (...) {
+    stop_readers();
+    throw;
+  }
+  fill_seconds_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+void OutOfCoreSampler::fill_buffer(const OutOfCoreOptions& opts) {
   // Initial fill: R random blocks, read in file order (kinder to disks than random order).
-  auto t0 = std::chrono::steady_clock::now();
-  Pcg32 rng(seed * 0xA24BAED4963EE407ULL + 0x0C0FFEE, 0xB10C);
+  Pcg32 rng(seed_ * 0xA24BAED4963EE407ULL + 0x0C0FFEE, 0xB10C);
   std::vector<Job> fill(static_cast<size_t>(R_));
   for (int64_t s = 0; s < R_; ++s) fill[size_t(s)] = Job{s, int64_t(rng_below(rng, uint32_t(n_blocks_))), int32_t(s)};
   std::vector<Job> ordered = fill;
@@ -90,17 +114,19 @@ OutOfCoreSampler::OutOfCoreSampler(std::shared_ptr<const RawVolumeFile> file, ui
     if (opts.fill_progress) opts.fill_progress(double(std::min(ordered.size(), b + batch)) / double(R_));
   }
   for (const Job& j : fill) slot_storage_[size_t(j.slot)] = j.storage;
-  fill_seconds_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
 
-OutOfCoreSampler::~OutOfCoreSampler() {
+void OutOfCoreSampler::stop_readers() {
   {
     std::unique_lock<std::mutex> lock(mu_);
     stop_ = true;
   }
   work_cv_.notify_all();
-  for (auto& t : readers_) t.join();
+  for (auto& t : readers_)
+    if (t.joinable()) t.join();
 }
+
+OutOfCoreSampler::~OutOfCoreSampler() { stop_readers(); }
 
 uint64_t OutOfCoreSampler::bytes_held() const {
   uint64_t b = storage_.size() * sizeof(float);
@@ -131,8 +157,7 @@ void OutOfCoreSampler::reader_loop(int thread) {
     try {
       const Int3 o = block_origin(j.block);
       storage_origin_[size_t(j.storage)] = o;
-      file_->read_box(Int3{o.x - 1, o.y - 1, o.z - 1}, stored_, storage_.data() + size_t(j.storage) * block_floats_,
-                      scratch_[size_t(thread)].data());
+      read_block(Int3{o.x - 1, o.y - 1, o.z - 1}, storage_.data() + size_t(j.storage) * block_floats_, thread);
     } catch (...) {
       lock.lock();
       if (!error_) error_ = std::current_exception();
@@ -140,6 +165,27 @@ void OutOfCoreSampler::reader_loop(int thread) {
     }
     lock.lock();
     if (++jobs_done_ == jobs_->size()) done_cv_.notify_all();
+  }
+}
+
+void OutOfCoreSampler::read_block(Int3 origin, float* out, int thread) {
+  unsigned char* scratch = scratch_[size_t(thread)].data();
+  if (!in_region_) return file_->read_box(origin, stored_, out, scratch);  // the file's clamp is the region's
+  // Only the part inside the region is read (packed at the start of out); ghosts beyond its faces repeat
+  // its edge voxels. Expanded in place from the last voxel back: every voxel's source index is at most its
+  // own (the part is no larger and starts no later on any axis), so no source is overwritten before use.
+  const Box3 want{origin, Int3{origin.x + stored_.x, origin.y + stored_.y, origin.z + stored_.z}};
+  const Box3 in = intersect(want, Box3{{0, 0, 0}, dims_});
+  const Int3 n = in.size();
+  file_->read_box(Int3{origin_.x + in.lo.x, origin_.y + in.lo.y, origin_.z + in.lo.z}, n, out, scratch);
+  auto at = [](int64_t v, int64_t lo, int64_t hi) { return std::clamp<int64_t>(v, lo, hi - 1) - lo; };
+  for (int64_t k = stored_.z - 1; k >= 0; --k) {
+    const int64_t z = at(origin.z + k, in.lo.z, in.hi.z);
+    for (int64_t j = stored_.y - 1; j >= 0; --j) {
+      const int64_t src_row = (z * n.y + at(origin.y + j, in.lo.y, in.hi.y)) * n.x;
+      float* row = out + (k * stored_.y + j) * stored_.x;
+      for (int64_t i = stored_.x - 1; i >= 0; --i) row[i] = out[src_row + at(origin.x + i, in.lo.x, in.hi.x)];
+    }
   }
 }
 

@@ -7,6 +7,7 @@
 #include <mutex>
 #include <thread>
 #include <vector>
+#include "vnr/core/brick_box.h"
 #include "vnr/core/memory.h"
 #include "vnr/train/sampler.h"
 #include "vnr/volume/raw_access.h"
@@ -20,6 +21,10 @@ struct OutOfCoreOptions {
   Int3 block_dims{0, 0, 0};  // interior voxels of a block; 0 = default_block_dims()
   int io_threads = 16;       // reader threads (each blocks in pread; many keep the disk queue full)
   std::function<void(double fraction)> fill_progress;  // during the initial fill
+  // Empty: the whole volume. Else only these voxels of the file (a brick's trained box) are sampled
+  // and read, as if the box were the volume: coordinates are normalised to the box and ghost voxels
+  // beyond its faces repeat its edge voxels (as a volume loaded from the box would).
+  Box3 region;
 };
 
 // Interior size of a block when none is given: 256 voxels along x (rows are contiguous in the
@@ -47,6 +52,8 @@ public:
   static int64_t default_refresh(int64_t blocks);     // S when --refresh is not given
 
   int64_t blocks() const { return R_; }
+  Int3 dims() const { return dims_; }          // of the sampled region
+  Int3 region_origin() const { return origin_; }  // of the sampled region in the file
   int64_t volume_blocks() const { return n_blocks_; }  // blocks the volume is divided into
   // Fraction of the volume's voxels the buffer holds at a time (block interiors, within the volume).
   double resident_fraction() const;
@@ -71,10 +78,15 @@ private:
   void run_jobs(std::vector<Job>& jobs);  // hands jobs to the readers (returns at once)
   void wait_jobs();                        // rethrows a reader's error
   void reader_loop(int thread);
+  void fill_buffer(const OutOfCoreOptions& opts);  // the initial R blocks
+  void stop_readers();
+  void read_block(Int3 origin, float* out, int thread);  // a stored block whose first ghost is `origin`
 
   std::shared_ptr<const RawVolumeFile> file_;
   uint64_t seed_;
-  Int3 dims_, bd_, stored_, grid_;  // volume, block interior, block with ghosts, blocks per axis
+  Int3 dims_, bd_, stored_, grid_;  // region, block interior, block with ghosts, blocks per axis
+  Int3 origin_{0, 0, 0};            // of the region in the file
+  bool in_region_ = false;          // reads are clipped to the region (not only to the file)
   int64_t n_blocks_ = 0, R_ = 0, S_ = 0, block_floats_ = 0;
   big_vector<float> storage_;              // (R + S) stored blocks
   std::vector<Int3> storage_origin_;       // interior origin of the block in each storage

@@ -33,7 +33,7 @@ void sample_in_core(TrainingData& t, std::shared_ptr<const Volume> vol) {
 
 // Regions never loaded are never learned: the note when a run cannot be expected to see (almost) the
 // whole volume, with the --refresh (or steps) that would.
-void note_coverage(const OutOfCoreSampler& s, int64_t steps, const MessageFn& message) {
+void note_coverage(const OutOfCoreSampler& s, int64_t steps, const std::string& what, const MessageFn& message) {
   if (steps <= 0) return;
   const double cover = s.expected_coverage(steps);
   if (cover >= 0.95) return;
@@ -44,9 +44,9 @@ void note_coverage(const OutOfCoreSampler& s, int64_t steps, const MessageFn& me
                           : fmt::format("{} steps with --refresh {} cover about 95%",
                                         int64_t(std::ceil(3.0 * double(s.volume_blocks()) / double(max_refresh))),
                                         max_refresh);
-  say(message, fmt::format("note: over {} steps the buffer is expected to load only {:.0f}% of the volume's {} "
+  say(message, fmt::format("note: over {} steps the buffer is expected to load only {:.0f}% of the {}'s {} "
                            "blocks, and regions never loaded are not learned; {}",
-                           steps, 100 * cover, s.volume_blocks(), fix));
+                           steps, 100 * cover, what, s.volume_blocks(), fix));
 }
 
 void open_out_of_core(TrainingData& t, const TrainingDataOptions& o, const MessageFn& message) {
@@ -58,13 +58,14 @@ void open_out_of_core(TrainingData& t, const TrainingDataOptions& o, const Messa
   if (o.block_dims) oo.block_dims = *o.block_dims;
   Progress fill_bar("fill blocks", 1.0, !o.show_progress);
   oo.fill_progress = [&](double f) { fill_bar.update(f); };
+  oo.region = o.region;
   t.out_of_core = std::make_shared<OutOfCoreSampler>(t.raw_file, o.seed, oo);
   const OutOfCoreSampler& s = *t.out_of_core;
   fill_bar.finish(fmt::format("({} blocks in {:.1f}s)", s.blocks(), s.fill_seconds()));
   say(message, fmt::format("out-of-core buffer: {} blocks of {} voxels, {} replaced per step; {} held of a {} budget",
                            s.blocks(), dims_text(s.block_dims()), s.refresh(), human_bytes(double(s.bytes_held())),
                            human_bytes(double(o.memory_budget))));
-  note_coverage(s, o.steps, message);
+  note_coverage(s, o.steps, o.region.empty() ? "volume" : "region", message);
   t.sampler = t.out_of_core;
 }
 
@@ -76,9 +77,11 @@ TrainingData open_training_data(const std::string& name, const VolumeDesc& desc,
   t.desc = desc;
   t.load = load;
   t.memory_budget = o.memory_budget;
-  t.dims = desc.dims;
+  t.dims = o.region.empty() ? desc.dims : o.region.size();
   t.dtype = desc.dtype;
-  const uint64_t in_core_bytes = desc.dims.count() * sizeof(float);
+  if (!o.region.empty() && (o.sampler != "outofcore" || !o.range))
+    fail("open_training_data: a region of the volume is sampled out of core with a given value range");
+  const uint64_t in_core_bytes = t.dims.count() * sizeof(float);
   t.kind = o.sampler.empty() ? (in_core_bytes <= o.memory_budget ? "incore" : "outofcore") : o.sampler;
   if (t.kind != "outofcore" && (o.blocks > 0 || o.refresh > 0 || o.block_dims || o.grid_lr_scale != "1"))
     fail("--blocks, --refresh, --block-dims and --grid-lr-scale apply to --sampler outofcore (this run samples {})", t.kind);
@@ -101,14 +104,14 @@ TrainingData open_training_data(const std::string& name, const VolumeDesc& desc,
   else
     require_random_access(desc, "--sampler " + t.kind);
   // The value range: the descriptor's, or one streaming pass (the volume is never loaded).
-  const bool known_range = desc.range_lo && desc.range_hi;
+  const bool known_range = (desc.range_lo && desc.range_hi) || o.range;
   Progress scan_bar("value range", 1.0, !o.show_progress || known_range);
-  ValueRange r = scan_value_range(desc, load, [&](double f) { scan_bar.update(f); });
+  ValueRange r = o.range ? *o.range : scan_value_range(desc, load, [&](double f) { scan_bar.update(f); });
   scan_bar.finish();
   t.lo = r.lo;
   t.hi = r.hi;
   say(message, head + fmt::format("{:g}, {:g}]{}; sampled {}", t.lo, t.hi,
-                                  known_range ? " (from the descriptor)"
+                                  o.range ? " (the whole volume's)" : known_range ? " (from the descriptor)"
                                               : fmt::format(" (scanned in {:.1f}s)", seconds_since(t0)),
                                   t.kind == "mmap" ? "through a memory map" : "out of core"));
   if (t.kind == "mmap") {

@@ -12,6 +12,7 @@
 #include "vnr/train/sampler.h"
 #include "vnr/train/streaming_samplers.h"
 #include "vnr/volume/raw_access.h"
+#include "vnr/volume/stream.h"
 #include "vnr/volume/volume.h"
 
 namespace vnr {
@@ -28,6 +29,11 @@ struct TrainingDataOptions {
   uint32_t seed = 1337;            // outofcore: which blocks are loaded
   int64_t steps = -1;              // the planned steps (> 0: warn when the buffer cannot cover the volume)
   bool show_progress = false;      // progress bars on stderr for the value-range scan and the buffer fill
+  // outofcore: sample only this box of the file as if it were the volume (a brick's trained box; dims,
+  // coordinates and source bytes are the box's), normalised with `range` (the whole volume's, known
+  // beforehand: no scan). Empty: the whole volume.
+  Box3 region;
+  std::optional<ValueRange> range;
 };
 
 // Where the training samples come from, and the volume when it is in memory.
