@@ -6,12 +6,13 @@
 #   sh scripts/sanitize.sh thread     ThreadSanitizer in build-tsan/ (clang, LLVM's libomp + Archer) over
 #                                     the threaded trainer, training sessions, out-of-core reader pool,
 #                                     viewer engine and server (TSAN_TESTS below; CI runs it after address)
+#   sh scripts/sanitize.sh thread-full    the same with the slow tests CI leaves out (TSAN_SLOW)
 # Any report fails the run: UBSan aborts (-fno-sanitize-recover); ASan, LeakSanitizer and TSan exit non-zero.
 set -eu
 cd "$(dirname "$0")/.."
 MODE=${1:-address}
 BUILD=${VNR_SANITIZE_BUILD:-build-asan}
-if [ "$MODE" = thread ]; then BUILD=${VNR_SANITIZE_BUILD:-build-tsan}; fi
+case $MODE in thread*) BUILD=${VNR_SANITIZE_BUILD:-build-tsan} ;; esac
 JOBS=$(nproc)
 LAUNCHER=""
 command -v ccache >/dev/null 2>&1 && LAUNCHER="-DCMAKE_CXX_COMPILER_LAUNCHER=ccache"
@@ -30,7 +31,7 @@ CI_TESTS="test_fuzz_regressions test_limits test_faults test_model_file test_vol
 # precision sweeps, the kernel-vs-reference sweeps, and the browser test (Chromium, not our code);
 # and one timing assertion (a thread slowed by 300 us claims fewer chunks), which ASan's own slowdown voids.
 SLOW='OutOfCore\.|OutOfCoreCli\.|Series\.|SeriesCli\.|Cli\.TrainingPrecision|Cli\.InferencePrecision|MlpKernels\.|PointEval\.|OnlineLoop\.|Strategies\.|StreamEval\.|browser_viewer|CpuTrainer\.SharedTailChunks'
-# The threaded code (docs/reliability.md, Sanitizers), every test of these executables: the CPU trainer
+# The threaded code (docs/reliability.md, Sanitizers), the tests of these executables: the CPU trainer
 # (parallel_threads, for_each_claimed, gradient sums; test_network), training sessions stopped and paused
 # from other threads, the out-of-core reader pool, the viewer engine thread, the server's network,
 # broadcaster and worker threads (and `vnr view` under SIGTERM), and the OpenMP loops of the parameter
@@ -60,7 +61,8 @@ if [ "$MODE" = address ] || [ "$MODE" = address-full ]; then
   # Executables not built (address mode) appear to ctest as *_NOT_BUILT: not failures of this run.
   # install_and_consume builds an unsanitized program against the install: nothing for ASan to check.
   ctest --test-dir "$BUILD" --output-on-failure -j "$JOBS" -E "$SLOW|_NOT_BUILT|^install_and_consume$"
-elif [ "$MODE" = thread ]; then
+elif [ "$MODE" = thread ] || [ "$MODE" = thread-full ]; then
+  if [ "$MODE" = thread-full ]; then TSAN_SLOW='^$'; fi
   # GCC's libgomp is not TSan-instrumented: every OpenMP barrier would be reported. clang links LLVM's
   # libomp, and Archer (an OMPT tool of libomp) tells TSan what the OpenMP constructs synchronise, so
   # our parallel_for/parallel_threads code runs as in the release build, OpenMP and all.
@@ -95,6 +97,6 @@ elif [ "$MODE" = thread ]; then
   # server tests drive the same server over 127.0.0.1), and TSAN_SLOW.
   ctest --test-dir "$BUILD" --output-on-failure -j "$JOBS" -R "$TSAN_FILTER" -E "$TSAN_SLOW"
 else
-  echo "usage: sh scripts/sanitize.sh [address|address-full|thread]" >&2
+  echo "usage: sh scripts/sanitize.sh [address|address-full|thread|thread-full]" >&2
   exit 2
 fi
