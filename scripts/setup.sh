@@ -5,7 +5,8 @@
 # (numpy, pytest); HDF5 and NetCDF volumes read through libhdf5 and libnetcdf (h5py and netCDF4 write
 # the tests' files); the ParaView plugin runs in Debian's ParaView (pvpython, under Xvfb in tests).
 # clang builds the libFuzzer targets (scripts/fuzz.sh; libFuzzer and the sanitizer runtimes are in
-# libclang-rt-dev, clang's OpenMP in libomp-dev).
+# libclang-rt-dev, clang's OpenMP in libomp-dev) and the ThreadSanitizer build (scripts/sanitize.sh thread:
+# LLVM's libomp and its Archer tool, in libomp-dev).
 set -eu
 PKGS="build-essential cmake ninja-build ccache pkg-config git \
   nlohmann-json3-dev libcli11-dev libfmt-dev libpng-dev zlib1g-dev libhwy-dev libzstd-dev \

@@ -71,6 +71,19 @@ std::vector<std::string> temporaries_in(const std::string& dir) {
 
 void sleep_ms(int ms) { std::this_thread::sleep_for(std::chrono::milliseconds(ms)); }
 
+// Waits until the child catches `sig` (its SigCgt mask in /proc), i.e. main() has installed vnr's
+// handler: a signal before that point is the kernel's default action, which no program can change.
+void wait_for_handler(pid_t pid, int sig) {
+  const uint64_t bit = uint64_t(1) << (sig - 1);
+  for (int i = 0; i < 3000; ++i) {
+    std::istringstream status(read_file("/proc/" + std::to_string(pid) + "/status"));
+    for (std::string line; std::getline(status, line);)
+      if (line.rfind("SigCgt:", 0) == 0 && (std::stoull(line.substr(7), nullptr, 16) & bit)) return;
+    sleep_ms(1);
+  }
+  FAIL() << "vnr never installed a handler for signal " << sig;
+}
+
 // Training has begun once its first checkpoint replaced the previous model (up to 60 s on a busy machine).
 void wait_for_first_checkpoint(const std::string& model, const std::string& previous) {
   for (int i = 0; i < 600 && bytes_of(model) == previous; ++i) sleep_ms(100);
@@ -203,11 +216,8 @@ void expect_nothing_lost(const std::string& dir, const Child& c, const std::stri
 TEST_F(Faults, SignalsWhileLoadingLoseNothing) {
   for (int sig : {SIGTERM, SIGINT}) {
     Child c = spawn(long_train(), dir);
-#ifdef VNR_SANITIZE_BUILD
-    sleep_ms(800);  // a sanitized vnr takes longer to reach main() (and its handler) and to load
-#else
-    sleep_ms(150);
-#endif
+    wait_for_handler(c.pid, sig);
+    sleep_ms(20);  // into loading the volume
     ASSERT_EQ(::kill(c.pid, sig), 0);
     expect_nothing_lost(dir, c, previous_model, sig);
   }

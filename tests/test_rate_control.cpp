@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstring>
 #include "vnr/core/fileio.h"
+#include "vnr/core/parallel.h"
 #include "vnr/train/psnr_search.h"
 #include "vnr/train/rate_control.h"
 #include "vnr/train/session.h"
@@ -41,6 +42,9 @@ std::string write_volume(const std::string& d, Int3 dims, const std::string& dty
 }
 
 TrainingSetup setup_for(const std::string& d, const std::string& volume, Int3 dims, const std::string& dtype) {
+  // The trained networks (and so the PSNR thresholds below) depend on the thread count: fix it, so that
+  // a machine with more cores runs the same numbers.
+  set_num_threads(2);
   TrainingSetup s;
   s.volume = volume;
   s.raw.dims = dims;

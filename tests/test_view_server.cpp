@@ -284,6 +284,9 @@ TEST_F(ViewServerTest, AClientThatNeverReadsDoesNotStallTheOthers) {
   // replaced by the next one while the write of the hello hangs.
   auto stalled = client(/*receive_buffer*/ 1024);
   auto reader = client();
+  // The window below counts frames, not the engine's start (a probe, a first training chunk), which a
+  // sanitizer build on a loaded machine can stretch past it.
+  ASSERT_TRUE(engine_->wait_frame(0, 60)) << "the engine published no frame";
   const view::ServerStats before = server_->stats();
   const Camera cam = engine_->state().camera;
   int frames = 0;
