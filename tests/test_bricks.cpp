@@ -5,6 +5,7 @@
 #include <filesystem>
 #include <fstream>
 #include <numeric>
+#include "bricks_test_support.h"
 #include "test_support.h"
 #include "vnr/bricks.h"
 #include "vnr/core/metrics.h"
@@ -119,23 +120,6 @@ TEST(BrickBlend, ReproducesAnyFieldTheBricksAgreeOnAndIsContinuousAcrossFaces) {
 
 // ---- training, resume, opening ----------------------------------------------------------------------
 
-TrainingSetup small_setup(const std::string& volume, uint32_t seed = 5) {
-  TrainingSetup s;
-  s.volume = volume;
-  s.config_json = test::small_hash_config(10, 16, 1);
-  s.batch = 4096;
-  s.seed = seed;
-  s.device = "cpu";
-  s.macrocell_size = 8;
-  return s;
-}
-
-BricksRunOptions steps(int64_t n) {
-  BricksRunOptions o;
-  o.brick.steps = n;
-  return o;
-}
-
 std::vector<uint16_t> brick_params(const std::string& dir, int index) {
   return load_model(join_path(dir, fmt::format("brick_{:05d}.vnr", index))).net->params_half();
 }
@@ -144,21 +128,21 @@ TEST(BrickTraining, SameSeedSameBricksInAnyOrderAndResumeTrainsOnlyMissingOrDama
   TmpDir tmp;
   const std::string vol = tmp / "v.json";
   synth_volume("marschner-lobb", Int3{24, 16, 12}, vol);
-  const TrainingSetup s = small_setup(vol);
-  const BricksRunResult all = train_bricks(s, Int3{2, 1, 1}, 2, tmp / "a", steps(20));
+  const TrainingSetup s = test::small_brick_setup(vol);
+  const BricksRunResult all = train_bricks(s, Int3{2, 1, 1}, 2, tmp / "a", test::brick_steps(20));
   EXPECT_TRUE(all.complete);
   EXPECT_EQ(all.trained.size(), 2u);
   // Brick 1 first, then brick 0, into another directory: the same parameters bit for bit.
   const std::string b = tmp / "b";
   prepare_brick_dir(b, all.plan, false);
-  for (int i : {1, 0}) train_brick(s, all.plan, i, b, all.range, steps(20).brick);
+  for (int i : {1, 0}) train_brick(s, all.plan, i, b, all.range, test::brick_steps(20).brick);
   for (int i : {0, 1}) EXPECT_EQ(brick_params(b, i), brick_params(tmp / "a", i)) << "brick " << i;
   EXPECT_NE(brick_params(b, 0), brick_params(b, 1));
 
   // Without --resume an existing model is never overwritten.
-  EXPECT_HAS(test::error_of([&] { train_bricks(s, Int3{2, 1, 1}, 2, tmp / "a", steps(20)); }), "--resume");
+  EXPECT_HAS(test::error_of([&] { train_bricks(s, Int3{2, 1, 1}, 2, tmp / "a", test::brick_steps(20)); }), "--resume");
   // A different plan is refused on resume.
-  BricksRunOptions resume = steps(20);
+  BricksRunOptions resume = test::brick_steps(20);
   resume.resume = true;
   EXPECT_HAS(test::error_of([&] { train_bricks(s, Int3{1, 2, 1}, 2, tmp / "a", resume); }), "was started with");
   // Nothing missing: nothing trained.
@@ -184,7 +168,7 @@ TEST(BrickTraining, SameSeedSameBricksInAnyOrderAndResumeTrainsOnlyMissingOrDama
   // A stop during a brick (Ctrl-C): that brick's file is kept but incomplete, no later brick starts, and
   // --resume trains it again.
   std::atomic<bool> stop{false};
-  BricksRunOptions stopping = steps(20);
+  BricksRunOptions stopping = test::brick_steps(20);
   stopping.brick.stop = &stop;
   stopping.brick.on_step = [&](const TrainingProgress& pr) { stop.store(pr.step >= 5); };
   const BricksRunResult cut = train_bricks(s, Int3{2, 1, 1}, 2, tmp / "c", stopping);
@@ -233,9 +217,9 @@ TEST(BrickTraining, QualityMatchesOneModelOfTheSameSizeWithAccurateFacesAndNoSea
   const Int3 dims{48, 24, 24};
   const std::string vol = tmp / "v.json";
   synth_volume("marschner-lobb", dims, vol);
-  TrainingSetup s = small_setup(vol);
+  TrainingSetup s = test::small_brick_setup(vol);
   s.target_ratio = 6;  // the whole model's: both get the same parameter budget
-  const BricksRunResult br = train_bricks(s, Int3{2, 1, 1}, 4, tmp / "m", steps(250));
+  const BricksRunResult br = train_bricks(s, Int3{2, 1, 1}, 4, tmp / "m", test::brick_steps(250));
   ASSERT_TRUE(br.complete);
   s.session.output = tmp / "one.vnr";
   s.steps = 500;  // the bricks' steps together
@@ -266,7 +250,7 @@ TEST(BrickTraining, QualityMatchesOneModelOfTheSameSizeWithAccurateFacesAndNoSea
   interior_jump /= planes;
   const double face_jump = error_jump_x(vm, truth, face);
   s.session.output.clear();
-  train_bricks(s, Int3{2, 1, 1}, 0, tmp / "g0", steps(250));
+  train_bricks(s, Int3{2, 1, 1}, 0, tmp / "g0", test::brick_steps(250));
   const Volume d0 = ModelQuery(load_model(tmp / "g0"), Device::Cpu).decode();
   const double face_jump_g0 = error_jump_x(std::vector<float>(d0.data.begin(), d0.data.end()), truth, face);
   std::printf("multi %.2f dB (face %.2f, inside %.2f; error jump at the face %.4f, interior mean %.4f, ghost 0 "
@@ -281,7 +265,7 @@ TEST(BrickModel, EveryPathOpensTheDirectoryLikeOneModel) {
   const Int3 dims{20, 16, 12};
   const std::string vol = tmp / "v.json";
   synth_volume("marschner-lobb", dims, vol);
-  train_bricks(small_setup(vol), Int3{2, 2, 1}, 2, tmp / "m", steps(30));
+  train_bricks(test::small_brick_setup(vol), Int3{2, 2, 1}, 2, tmp / "m", test::brick_steps(30));
   const Model m = load_model(tmp / "m");
   ASSERT_TRUE(m.bricks);
   EXPECT_EQ(m.dims, dims);
@@ -353,7 +337,7 @@ TEST(BrickModel, TheViewerShowsItAsTheRendererDoes) {
   TmpDir tmp;
   const std::string vol = tmp / "v.json";
   synth_volume("marschner-lobb", Int3{16, 16, 16}, vol);
-  train_bricks(small_setup(vol), Int3{1, 2, 1}, 2, tmp / "m", steps(20));
+  train_bricks(test::small_brick_setup(vol), Int3{1, 2, 1}, 2, tmp / "m", test::brick_steps(20));
   ViewerSetup setup;
   setup.input = tmp / "m";
   setup.device = "auto";  // the CPU for a multi-brick model

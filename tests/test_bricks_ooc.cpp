@@ -7,6 +7,7 @@
 #include <cmath>
 #include <fstream>
 #include <limits>
+#include "bricks_test_support.h"
 #include "test_support.h"
 #include "vnr/bricks.h"
 #include "vnr/core/metrics.h"
@@ -17,23 +18,6 @@ namespace vnr {
 namespace {
 
 using test::TmpDir;
-
-TrainingSetup small_setup(const std::string& volume) {
-  TrainingSetup s;
-  s.volume = volume;
-  s.config_json = test::small_hash_config(10, 16, 1);
-  s.batch = 4096;
-  s.seed = 11;
-  s.device = "cpu";
-  s.macrocell_size = 8;
-  return s;
-}
-
-BricksRunOptions steps(int64_t n) {
-  BricksRunOptions o;
-  o.brick.steps = n;
-  return o;
-}
 
 // A float32 raw volume: f(x, y, z) inside `box`, NaN outside (std::nullopt box: f everywhere).
 std::string write_raw(const std::string& path, Int3 d, const std::optional<Box3>& box) {
@@ -103,13 +87,13 @@ TEST(OutOfCoreBricks, TrainLikeInCoreBricks) {
   const Int3 dims{64, 48, 32};
   const std::string vol = tmp / "v.json";
   synth_volume("marschner-lobb", dims, vol);
-  TrainingSetup s = small_setup(vol);
+  TrainingSetup s = test::small_brick_setup(vol, 11);
   s.data.block_dims = Int3{16, 8, 8};
-  const BricksRunResult in_core = train_bricks(s, Int3{2, 1, 1}, 2, tmp / "in", steps(150));
+  const BricksRunResult in_core = train_bricks(s, Int3{2, 1, 1}, 2, tmp / "in", test::brick_steps(150));
   // A brick with ghosts is 34x48x32 floats = 204 KiB: 200 KiB hold 18 of its 72 blocks (with their ghosts).
   s.data.memory_budget = 200 << 10;
   std::vector<std::string> notes;
-  BricksRunOptions o = steps(150);
+  BricksRunOptions o = test::brick_steps(150);
   o.brick.message = [&](const std::string& line) { notes.push_back(line); };
   const BricksRunResult ooc = train_bricks(s, Int3{2, 1, 1}, 2, tmp / "ooc", o);
   ASSERT_TRUE(ooc.complete);
@@ -140,7 +124,7 @@ TEST(OutOfCoreBricks, TrainLikeInCoreBricks) {
   // The same bricks out of core with every block resident (--sampler outofcore, a large budget).
   s.data.memory_budget = 0;
   s.data.sampler = "outofcore";
-  const BricksRunResult all_resident = train_bricks(s, Int3{2, 1, 1}, 2, tmp / "ooc_all", steps(150));
+  const BricksRunResult all_resident = train_bricks(s, Int3{2, 1, 1}, 2, tmp / "ooc_all", test::brick_steps(150));
   s.data.sampler = "";
   ASSERT_TRUE(all_resident.complete);
   const double in = evaluate_model_file(load_model(tmp / "in"), vol, {}).psnr;
@@ -162,7 +146,7 @@ TEST(OutOfCoreBricks, ReadOnlyTheirBox) {
   const Int3 d{48, 24, 16};
   const BrickPlan plan = plan_bricks(d, Int3{2, 1, 1}, 2, 11);
   const std::string raw = write_raw(tmp / "v.raw", d, plan.bricks[0].trained);
-  TrainingSetup s = small_setup(raw);
+  TrainingSetup s = test::small_brick_setup(raw, 11);
   s.raw.dims = d;
   s.raw.dtype = "float32";
   s.load.non_finite = NonFinitePolicy::Error;
