@@ -157,6 +157,16 @@ TEST(Limits, ParameterCountIsRefusedUnderAMemoryLimit) {
   EXPECT_NE(msg.find("= 96.00 GiB exceeding the memory available (1.00 GiB)"), std::string::npos) << msg;
 }
 
+// A fuzzer's 2 KB BSON file whose damaged config falls back to a 16-million-parameter network: refused by
+// the parameter count before that network is allocated (it took 0.9 s and 260 MB), so even a 64 MiB
+// memory limit sees the count message, not the memory one.
+TEST(Limits, ModelFileWithTooFewParametersIsRefusedBeforeTheNetworkExists) {
+  MemoryLimit limit("64MiB");
+  const std::string path = std::string(VNR_TEST_DATA_DIR) + "/fuzz/fuzz_bson_model/default_config_few_params.bson";
+  const std::string msg = error_of([&] { load_model(path); });
+  EXPECT_NE(msg.find("the file holds 768 parameters but its configuration needs 16363648"), std::string::npos) << msg;
+}
+
 // A model whose parameters fit (6 bytes each) but whose training state does not (16 more: gradient,
 // Adam's two moments and step count) is refused before training allocates, naming the sizes.
 TEST(Limits, TrainingStateIsCountedBeforeAllocating) {
