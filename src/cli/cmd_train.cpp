@@ -121,9 +121,13 @@ void run_train(const TrainArgs& a) {
     } else {
       session = open_training_session(setup, say);
       before_training(*session);
-      if (session->options().compact.enabled())
-        train_compact(*session, by_time ? -1 : steps, a.seconds, session->options().compact, say);
-      else
+      if (session->options().compact.enabled()) {
+        const Json c = train_compact(*session, by_time ? -1 : steps, a.seconds, session->options().compact, say);
+        if (setup.target_psnr > 0 && c["heldback_psnr"].get<double>() < setup.target_psnr)
+          say(fmt::format("warning: --target-psnr {}: this model reaches only {:.2f} dB on held-back samples; train "
+                          "longer or with a larger model (a lower --target-ratio)",
+                          setup.target_psnr, c["heldback_psnr"].get<double>()));
+      } else
         session->run(steps, a.seconds);
     }
   } catch (const std::exception&) {

@@ -28,10 +28,6 @@ PsnrSearch search_size_for_psnr(const TrainingSetup& setup, int64_t steps, doubl
   auto say = [&](const std::string& line) {
     if (message) message(line);
   };
-  // A candidate's own "does not reach the target" warning is the search's business, not the user's.
-  const MessageFn quiet = [&](const std::string& line) {
-    if (line.rfind("warning: --target-psnr", 0) != 0) say(line);
-  };
   const std::vector<double> ratios = psnr_search_ratios();
   PsnrSearch out;
   auto train = [&](size_t i) {
@@ -42,7 +38,7 @@ PsnrSearch search_size_for_psnr(const TrainingSetup& setup, int64_t steps, doubl
     CompactOptions o = c.session->options().compact;
     if (before_training) before_training(*c.session);
     try {
-      const Json summary = train_compact(*c.session, steps, seconds, o, quiet);
+      const Json summary = train_compact(*c.session, steps, seconds, o, message);
       c.psnr = summary["heldback_psnr"].get<double>();
     } catch (const BudgetBelowSmallestFile&) {
       c.psnr = 0;  // a budget below the header and macro-cells of this volume: a size that cannot be made
@@ -60,16 +56,16 @@ PsnrSearch search_size_for_psnr(const TrainingSetup& setup, int64_t steps, doubl
     return c;
   };
   // Bisection for the first index (smallest model) that reaches the target.
+  // The largest size (hi's start) is only trained when no smaller one reached the target.
   size_t lo = 0, hi = ratios.size() - 1;
   Candidate best, last;
-  bool have_hi = false;
   while (lo < hi && !out.interrupted) {
     const size_t mid = (lo + hi) / 2;
     last = train(mid);
-    if (last.reached) hi = mid, best = std::move(last), have_hi = true;
+    if (last.reached) hi = mid, best = std::move(last);
     else lo = mid + 1;
   }
-  if (!out.interrupted && !(have_hi && hi == lo)) {
+  if (!out.interrupted && !best.session) {
     last = train(lo);
     if (last.reached) best = std::move(last);
   }

@@ -77,7 +77,41 @@ void reserve_evaluation_record(Model& model) {
   model.training["ssim"] = 0.12345678901234567;
 }
 
+// The network's trained parameters ready to quantize: the plan, the master copy (unused entries
+// zeroed) and the held-back PSNR before quantization.
+struct Quantization {
+  QuantPlan plan;
+  std::vector<float> master;
+  double psnr_before = 0;
+};
+Quantization start_quantization(Network& net, const ProbeSet& probe) {
+  Quantization q;
+  q.psnr_before = psnr_of_mse(probe.mse(net));
+  q.plan = plan_quantization(net, probe);
+  q.master.assign(net.params.begin(), net.params.end());
+  zero_unused(net.mlp(), q.master);
+  return q;
+}
+
+// Quantizes the network with scale g into model (what save_model then writes) and returns the summary
+// both front ends report.
+Json finish_quantization(Model& model, const Quantization& q, double g, uint64_t bytes, const ProbeSet& probe,
+                         int64_t qat_steps) {
+  const std::vector<ParamSegment> segs = q.plan.at(g);
+  apply_quantization(*model.net, q.master, segs);
+  model.param_segments = segs;
+  Json steps = Json::array();
+  for (const auto& s : segs) steps.push_back(s.step);
+  return Json{{"planned_bytes", bytes},
+              {"heldback_psnr_unquantized", q.psnr_before},
+              {"heldback_psnr", psnr_of_mse(probe.mse(*model.net))},
+              {"qat_steps", qat_steps},
+              {"steps", steps}};
+}
+
 }  // namespace
+
+uint64_t probe_seed(uint64_t training_seed) { return training_seed ^ 0x9e3779b9u; }
 
 double psnr_of_mse(double mse) { return mse > 0 ? -10.0 * std::log10(mse) : 999.0; }
 
@@ -242,35 +276,32 @@ Json compact_session(TrainingSession& session, const CompactOptions& o, int64_t 
   Model& model = session.model();
   const bool qat = (qat_steps_planned != 0 || qat_seconds > 0) && can_train_quantized(session);
   const TrainingData& data = *session.data();
-  const uint64_t probe_seed = session.trainer().seed() ^ 0x9e3779b9u;
-  const ProbeSet probe = data.vol ? draw_voxel_probe(*data.vol, o.probe_samples, probe_seed)
-                                  : draw_probe(*data.sampler, o.probe_samples, probe_seed);
+  const uint64_t seed = probe_seed(session.trainer().seed());
+  const ProbeSet probe = data.vol ? draw_voxel_probe(*data.vol, o.probe_samples, seed)
+                                  : draw_probe(*data.sampler, o.probe_samples, seed);
+  session.trainer().download();
+  Quantization q = start_quantization(net, probe);
   // The header will hold the training record with the final evaluation: size the file with one.
-  auto choose = [&](const std::vector<float>& master, const QuantPlan& plan, uint64_t* bytes) {
+  uint64_t bytes = 0;
+  auto choose = [&] {
     session.record();
     reserve_evaluation_record(model);
-    return choose_scale(model, net, master, plan, probe, o, bytes);
+    return choose_scale(model, net, q.master, q.plan, probe, o, &bytes);
   };
-  session.trainer().download();
-  const double psnr_before = psnr_of_mse(probe.mse(net));
-  const QuantPlan plan = plan_quantization(net, probe);
-  std::vector<float> master(net.params.begin(), net.params.end());
-  zero_unused(net.mlp(), master);
-  uint64_t bytes = 0;
-  double g = choose(master, plan, &bytes);
+  double g = choose();
 
   int64_t qat_steps = 0;
   if (qat) {
     // Straight-through: each step sees the quantized parameters; its update lands on the master copy.
     std::vector<float> shown;
-    const std::vector<ParamSegment> segs = plan.at(g);
+    const std::vector<ParamSegment> segs = q.plan.at(g);
     session.set_step_hooks(
         [&] {
-          apply_quantization(net, master, segs);
+          apply_quantization(net, q.master, segs);
           shown.assign(net.params.begin(), net.params.end());
         },
         [&] {
-          for (size_t i = 0; i < master.size(); ++i) master[i] += net.params[i] - shown[i];
+          for (size_t i = 0; i < q.master.size(); ++i) q.master[i] += net.params[i] - shown[i];
         });
     const int64_t before = session.steps_done();
     try {
@@ -281,53 +312,28 @@ Json compact_session(TrainingSession& session, const CompactOptions& o, int64_t 
     }
     session.set_step_hooks({}, {});
     qat_steps = session.steps_done() - before;
-    zero_unused(net.mlp(), master);
-    g = choose(master, plan, &bytes);  // the weights moved a little: meet the target again
+    zero_unused(net.mlp(), q.master);
+    g = choose();  // the weights moved a little: meet the target again
   }
-  const std::vector<ParamSegment> segs = plan.at(g);
-  apply_quantization(net, master, segs);
-  model.param_segments = segs;
+  const Json summary = finish_quantization(model, q, g, bytes, probe, qat_steps);
   session.freeze_parameters();
-  const double psnr_after = psnr_of_mse(probe.mse(net));
+  const double psnr_after = summary["heldback_psnr"].get<double>();
   if (message)
     message(fmt::format("compact storage: {} bytes planned, held-back PSNR {:.2f} dB before quantization, {:.2f} dB "
                         "after ({} quantization-aware steps{})",
-                        bytes, psnr_before, psnr_after, qat_steps,
+                        bytes, q.psnr_before, psnr_after, qat_steps,
                         can_train_quantized(session) ? "" : "; not on this trainer"));
-  if (o.target_psnr > 0 && psnr_after < o.target_psnr && message)
-    message(fmt::format("warning: --target-psnr {}: this model reaches only {:.2f} dB on held-back samples; train "
-                        "longer or with a larger model (a lower --target-ratio)",
-                        o.target_psnr, psnr_after));
-  Json steps_json = Json::array();
-  for (const auto& s : segs) steps_json.push_back(s.step);
-  return session.note_compact(Json{{"planned_bytes", bytes},
-                                   {"heldback_psnr_unquantized", psnr_before},
-                                   {"heldback_psnr", psnr_after},
-                                   {"qat_steps", qat_steps},
-                                   {"steps", steps_json}});
+  return session.note_compact(summary);
 }
 
-}  // namespace vnr
-
-namespace vnr {
-
 Json quantize_model(Model& model, const ProbeSet& probe, const CompactOptions& o) {
-  Network& net = *model.net;
-  const double psnr_before = psnr_of_mse(probe.mse(net));
-  const QuantPlan plan = plan_quantization(net, probe);
-  std::vector<float> master(net.params.begin(), net.params.end());
-  zero_unused(net.mlp(), master);
+  const Quantization q = start_quantization(*model.net, probe);
   const Json record = model.training;
   reserve_evaluation_record(model);
   uint64_t bytes = 0;
-  const std::vector<ParamSegment> segs = plan.at(choose_scale(model, net, master, plan, probe, o, &bytes));
+  const double g = choose_scale(model, *model.net, q.master, q.plan, probe, o, &bytes);
   model.training = record;
-  apply_quantization(net, master, segs);
-  model.param_segments = segs;
-  return Json{{"planned_bytes", bytes},
-              {"heldback_psnr_unquantized", psnr_before},
-              {"heldback_psnr", psnr_of_mse(probe.mse(net))},
-              {"qat_steps", 0}};
+  return finish_quantization(model, q, g, bytes, probe, 0);
 }
 
 }  // namespace vnr

@@ -32,6 +32,8 @@ struct ProbeSet {
   double mse(const Network& net) const;
 };
 ProbeSet draw_probe(const Sampler& sampler, int64_t n, uint64_t seed);
+// The held-back probe's seed for a training seed: one that training never draws with.
+uint64_t probe_seed(uint64_t training_seed);
 // Random voxels of a volume in memory at their centres, with their exact values: what the final
 // evaluation measures (sampler targets are interpolated between voxels and read ~1 dB optimistic).
 ProbeSet draw_voxel_probe(const Volume& vol, int64_t n, uint64_t seed);
@@ -65,7 +67,8 @@ double fit_bytes(const Model& model, const std::vector<float>& master, const Qua
 
 // Runs the session `steps` steps (or `seconds`), the last qat_fraction of them quantization-aware,
 // then leaves model().param_segments and quantized parameters that meet the target, so that
-// session.finish() saves and evaluates the compact model. Returns a summary for the report.
+// session.finish() saves and evaluates the compact model. Returns a summary for the report (its
+// heldback_psnr below o.target_psnr is for the caller to report).
 Json train_compact(TrainingSession& session, int64_t steps, double seconds, const CompactOptions& options,
                    const std::function<void(const std::string&)>& message = {});
 // The second half of train_compact: quantizes the session's model for `options`, first training
@@ -77,7 +80,7 @@ Json compact_session(TrainingSession& session, const CompactOptions& options, in
 
 // Post-training quantization of a model outside a session (a time series' per-timestep models): its
 // network's parameters are quantized for o's targets (QAT needs a session) and model.param_segments set,
-// so that save_model writes the compact file. Returns the summary train_compact reports.
+// so that save_model writes the compact file. Returns the summary compact_session reports.
 Json quantize_model(Model& model, const ProbeSet& probe, const CompactOptions& o);
 
 }  // namespace vnr

@@ -159,7 +159,7 @@ std::vector<TimestepResult> train_series(Model& model, const std::vector<int>& t
     // trained parameters, not from those.
     const std::vector<float> trained(net.params.begin(), net.params.end());
     if (opts.compact.enabled())
-      r.compact = quantize_model(model, draw_voxel_probe(vol, opts.compact.probe_samples, to.seed ^ 0x9e3779b9u),
+      r.compact = quantize_model(model, draw_voxel_probe(vol, opts.compact.probe_samples, probe_seed(to.seed)),
                                  opts.compact);
     if (opts.error_bound.active()) r.error_bound = attach_error_bound(model, vol, opts.error_bound);
     r.eval = evaluate(net, vol, opts.ssim, Device::Cpu, model.residuals ? &*model.residuals : nullptr);
