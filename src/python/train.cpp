@@ -113,11 +113,14 @@ ModelPtr train(const TrainArgs& a) {
   st.callback = a.callback;
   auto attach = [&](TrainingSession& s) { s.add_step_callback([&](const TrainingProgress& p) { on_step(s, st, p); }); };
   std::unique_ptr<TrainingSession> session;
+  bool psnr_short = false;  // target_psnr alone, and no size reached it
   {
     pyb::gil_scoped_release release;
     if (setup.target_psnr > 0 && setup.target_ratio <= 0) {
       check_training_setup(setup);
-      session = search_size_for_psnr(setup, by_time ? -1 : steps, a.seconds.value_or(0), open, say, attach).session;
+      PsnrSearch found = search_size_for_psnr(setup, by_time ? -1 : steps, a.seconds.value_or(0), open, say, attach);
+      psnr_short = !found.reached && !found.interrupted;
+      session = std::move(found.session);
     } else {
       session = open(setup);
       attach(*session);
@@ -132,6 +135,11 @@ ModelPtr train(const TrainArgs& a) {
     for (const std::string& l : lines) pyb::print(l, pyb::arg("file") = pyb::module_::import("sys").attr("stderr"));
   if (st.error) throw std::move(*st.error);
   TrainingSession& s = *session;
+  if (psnr_short)
+    PyErr_WarnFormat(PyExc_RuntimeWarning, 1,
+                     "vnr.train: no model up to 1/4 of the volume reaches target_psnr=%S on held-back voxels; "
+                     "returning the largest (train longer or give a larger config)",
+                     pyb::float_(setup.target_psnr).ptr());
   if (st.interrupted)
     PyErr_WarnFormat(PyExc_RuntimeWarning, 1, "vnr.train interrupted after %lld steps: returning the model so far",
                      (long long)s.steps_done());

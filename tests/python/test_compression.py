@@ -65,6 +65,13 @@ def test_target_psnr_search_reaches_the_target(tmp_path):
     assert os.path.getsize(path) <= array.nbytes / 8  # far smaller than the volume
 
 
+def test_target_psnr_out_of_reach_warns_and_returns_the_largest_model():
+    array = smooth_volume(SHAPE, "float32", seed=8)
+    with pytest.warns(RuntimeWarning, match="target_psnr=80"):
+        model = vnr.train(array, target_psnr=80, **TRAIN)
+    assert model.decode(device="cpu").shape == array.shape
+
+
 def test_bad_compression_options_raise():
     array = smooth_volume((8, 8, 8), "float32")
     with pytest.raises(ValueError, match="--target-psnr must be positive"):
