@@ -389,6 +389,26 @@ TEST(BrickCli, TrainInfoDecodeAndErrors) {
   test::expect_error("train " + tmp / "v.json" + " --bricks 2,1,1 -q -o " + tmp / "n.vnr", "directory");
   EXPECT_EQ(test::run(train + " --resume").code, 0);
 }
+
+// --seconds limits each brick by time, as under mpirun: every brick trains about that long, and the
+// manifest records no fixed step count.
+TEST(BrickCli, SecondsApplyPerBrick) {
+  TmpDir tmp;
+  test::run("synth marschner-lobb --dims 16,16,16 -o " + tmp / "v.json");
+  const std::string cfg = tmp / "c.json";
+  write_file_atomic(cfg, test::small_hash_config(8, 16, 1).dump());
+  test::Result t = test::run("train " + tmp / "v.json" + " --config " + cfg +
+                             " --seconds 0.4 --batch 1024 --threads 1 --no-ssim -q --bricks 2,1,1 --ghost 2 -o " + tmp / "m");
+  ASSERT_EQ(t.code, 0) << t.err;
+  const Json manifest = parse_json_file(tmp / "m/manifest.json");
+  EXPECT_TRUE(manifest["training"]["steps_per_brick"].is_null());
+  for (const char* brick : {"m/brick_00000.vnr", "m/brick_00001.vnr"}) {
+    const Model m = load_model(tmp / brick);
+    EXPECT_GE(m.training.value("seconds", 0.0), 0.4) << brick;
+    EXPECT_LT(m.training.value("seconds", 0.0), 5.0) << brick;
+    EXPECT_GT(m.training.value("steps", int64_t(0)), 1) << brick;
+  }
+}
 #endif
 
 }  // namespace

@@ -183,7 +183,8 @@ TEST_F(DatasetVolumes, FourDimensionalDatasetsAreTimeSeries) {
   }
 }
 
-// The out-of-core sampler's reader: boxes (with clamp-to-edge ghost layers) and scattered voxels.
+// The out-of-core sampler's reader: boxes (with clamp-to-edge ghost layers, at the volume's faces or an inner
+// box's) and scattered voxels.
 TEST_F(DatasetVolumes, RandomAccessEqualsTheRawFile) {
   for (const std::string src : {at("vols.h5:/float64/shuffle_gzip"), at("vols.h5:/int16/slices")}) {
     SCOPED_TRACE(src);
@@ -199,6 +200,11 @@ TEST_F(DatasetVolumes, RandomAccessEqualsTheRawFile) {
       h5.read_box(origin, size, a.data(), nullptr);
       raw.read_box(origin, size, b.data(), scratch.data());
       for (size_t i = 0; i < a.size(); ++i) ASSERT_EQ(bits(a[i]), bits(b[i])) << "box at " << origin.x << "," << i;
+      // Clamped at the faces of an inner box (a brick's region) instead of the volume's.
+      const Box3 inner{{4, 6, 2}, {desc.dims.x - 3, desc.dims.y - 2, desc.dims.z - 4}};
+      h5.read_box(origin, size, a.data(), nullptr, inner);
+      raw.read_box(origin, size, b.data(), scratch.data(), inner);
+      for (size_t i = 0; i < a.size(); ++i) ASSERT_EQ(bits(a[i]), bits(b[i])) << "clamped box at " << origin.x << "," << i;
     }
     std::vector<int64_t> idx;
     for (int64_t i = 0; i < 500; ++i) idx.push_back((i * 7919 + 13) % int64_t(desc.dims.count()));

@@ -11,6 +11,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <optional>
 #include <random>
 #include <thread>
 #include <fmt/format.h>
@@ -52,15 +53,17 @@ struct Samples {
   std::vector<float> x, y, z, t;
 };
 // read_box's result for the box [origin, origin + size) must be load_volume's voxels, clamped to the
-// edge outside the volume, bit for bit.
-void expect_box_is_clamped_copy(const Volume& vol, Int3 origin, Int3 size, const std::vector<float>& box) {
+// edge outside the volume (or outside clamp_to), bit for bit.
+void expect_box_is_clamped_copy(const Volume& vol, Int3 origin, Int3 size, const std::vector<float>& box,
+                                std::optional<Box3> clamp_to = std::nullopt) {
   const Int3 d = vol.dims;
-  auto clamp = [](int64_t v, int64_t n) { return std::clamp<int64_t>(v, 0, n - 1); };
+  const Box3 c = clamp_to ? *clamp_to : Box3{{0, 0, 0}, d};
+  auto clamp = [&](int64_t v, int a) { return std::clamp<int64_t>(v, c.lo[a], c.hi[a] - 1); };
   for (int64_t z = 0; z < size.z; ++z)
     for (int64_t y = 0; y < size.y; ++y)
       for (int64_t x = 0; x < size.x; ++x) {
         const float want = vol.data[size_t(
-            (clamp(origin.z + z, d.z) * d.y + clamp(origin.y + y, d.y)) * d.x + clamp(origin.x + x, d.x))];
+            (clamp(origin.z + z, 2) * d.y + clamp(origin.y + y, 1)) * d.x + clamp(origin.x + x, 0))];
         const float got = box[size_t((z * size.y + y) * size.x + x)];
         ASSERT_EQ(std::memcmp(&got, &want, sizeof(float)), 0) << "box voxel " << x << "," << y << "," << z;
       }
@@ -179,6 +182,36 @@ TEST(OutOfCore, ReadBoxCoalescesShortRowsAndMatchesTheVolume) {
     }
     EXPECT_GE(file.min_read_begin(), header);
     EXPECT_LE(file.max_read_end(), header + d.count() * 2);
+  }
+}
+
+// With a clamp box, read_box reads as if the box were the volume: boxes inside it, across its faces,
+// around it whole and reaching past the volume itself repeat its edge voxels, and only its voxels are read.
+TEST(OutOfCore, ReadBoxWithAClampBoxReadsOnlyThatBox) {
+  for (const Int3 d : {Int3{37, 11, 6}, Int3{8300, 3, 4}}) {
+    const uint64_t header = 64;
+    const std::string json = write_u16_volume(fmt::format("clamp{}", d.x), d, header);
+    VolumeDesc desc = describe_volume(json);
+    Volume vol = load_volume(desc);
+    const Box3 c{{2, 1, 1}, {d.x - 3, d.y - 1, d.z - 1}};
+    for (const auto& [origin, size] : {std::pair{Int3{-4, -1, -2}, Int3{d.x + 8, d.y + 2, d.z + 4}},
+                                       std::pair{Int3{3, 1, 1}, Int3{9, 2, 3}},
+                                       std::pair{Int3{d.x - 6, d.y - 3, d.z - 3}, Int3{7, 5, 4}},
+                                       std::pair{Int3{0, 0, 0}, Int3{3, 1, 1}}}) {
+      RawVolumeFile file(desc, vol.lo, vol.hi, NonFinitePolicy::Error);
+      std::vector<float> box(size.count());
+      std::vector<unsigned char> scratch(file.scratch_bytes(size));
+      file.read_box(origin, size, box.data(), scratch.data(), c);
+      SCOPED_TRACE(fmt::format("{} at {},{},{}", d.x, origin.x, origin.y, origin.z));
+      expect_box_is_clamped_copy(vol, origin, size, box, c);
+      EXPECT_GE(file.min_read_begin(), header + 2 * uint64_t((c.lo.z * d.y + c.lo.y) * d.x + c.lo.x));
+      EXPECT_LE(file.max_read_end(), header + 2 * uint64_t(((c.hi.z - 1) * d.y + c.hi.y - 1) * d.x + c.hi.x));
+    }
+    RawVolumeFile file(desc, vol.lo, vol.hi, NonFinitePolicy::Error);
+    std::vector<float> one(1);
+    std::vector<unsigned char> scratch(file.scratch_bytes(Int3{1, 1, 1}));
+    for (const Box3& bad : {Box3{{0, 0, 0}, {d.x + 1, d.y, d.z}}, Box3{{1, 1, 1}, {1, 2, 2}}})
+      EXPECT_THROW(file.read_box(Int3{0, 0, 0}, Int3{1, 1, 1}, one.data(), scratch.data(), bad), Error);
   }
 }
 

@@ -374,6 +374,44 @@ TEST(StreamEval, StreamedEqualsInMemoryEvaluation) {
   }
 }
 
+// A box of a file evaluated in parts (as MPI ranks evaluate their slices) adds up to evaluate() on the
+// box loaded: the same PSNR and max error, and the same SSIM, whose windows cross every part boundary.
+TEST(StreamEval, BoxSlicesAddUpToTheEvaluationOfTheLoadedBox) {
+  TmpDir dir;
+  auto net = varied_network(4);
+  const std::string json = dir / "v.json";
+  synth_volume("marschner-lobb", Int3{22, 19, 26}, json);
+  const VolumeDesc d = describe_volume(json);
+  const Volume v = load_volume(d);
+  const RawVolumeFile file(d, v.lo, v.hi, NonFinitePolicy::Error);
+  const Box3 box{{3, 2, 4}, {20, 19, 21}};  // 17 slices: a thin part holds fewer than a window
+  Volume loaded = v;
+  loaded.dims = box.size();
+  loaded.data.assign(box.voxels(), 0.f);
+  std::vector<unsigned char> scratch(file.scratch_bytes(box.size()));
+  file.read_box(box.lo, box.size(), loaded.data.data(), scratch.data());
+  for (bool with_ssim : {true, false}) {
+    SCOPED_TRACE(with_ssim ? "with SSIM" : "without SSIM");
+    const EvalResult full = evaluate(*net, loaded, with_ssim);
+    for (const std::vector<int64_t>& cuts : {std::vector<int64_t>{0, 17}, {0, 5, 6, 14, 17}, {0, 1, 2, 3, 12, 16, 17}}) {
+      for (int64_t slab_slices : {int64_t(1), int64_t(4), int64_t(100)}) {
+        EvalSums all;
+        for (size_t i = 0; i + 1 < cuts.size(); ++i)
+          all.add(evaluate_box_slices(*net, file, box, cuts[i], cuts[i + 1], with_ssim, slab_slices * 17 * 17));
+        const EvalResult r = all.result(v.hi - v.lo);
+        EXPECT_EQ(all.voxels, int64_t(box.voxels()));
+        EXPECT_NEAR(r.psnr, full.psnr, 1e-9 * std::fabs(full.psnr));
+        EXPECT_EQ(r.max_abs_error, full.max_abs_error);
+        EXPECT_EQ(r.max_abs_error_original, full.max_abs_error_original);
+        EXPECT_NEAR(r.ssim, full.ssim, with_ssim ? 1e-12 : 0.0);
+        if (with_ssim) EXPECT_EQ(all.ssim_windows, int64_t(11 * 11 * 11));
+      }
+    }
+  }
+  EXPECT_THROW(evaluate_box_slices(*net, file, Box3{{0, 0, 0}, {23, 19, 26}}, 0, 26, false), Error);  // past the volume
+  EXPECT_THROW(evaluate_box_slices(*net, file, box, 3, 18, false), Error);                           // past the box
+}
+
 TEST(StreamEval, StreamedEvaluationOfAnIntegerVolumeWithScannedRange) {
   // uint8 without a sidecar range: the range comes from scan_value_range, the values from slabs.
   TmpDir dir;

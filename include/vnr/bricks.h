@@ -10,11 +10,16 @@
 #include "vnr/model.h"
 #include "vnr/renderer.h"
 #include "vnr/train/bricks.h"
+#include "vnr/train/evaluate.h"
 
 namespace vnr {
 
 // The bricked part of a model opened by load_model (null for a single-network model).
 inline const BrickedModel* bricked(const Model& m) { return m.bricks.get(); }
+
+// Distributed evaluation: evaluate_box_slices(model, file, the whole volume's box, z0, z1, ...) is one rank's
+// share (its slices, and with SSIM the windows starting in them); the ranks' EvalSums add up to the
+// single-process evaluation. The rank needs the bricks touching slices [z0 - 1, z1 + 7) loaded.
 
 // Sort-last rendering (ray marching without shadows): brick `index`'s part of every ray of the renderer's
 // current settings (frame 0), as premultiplied RGBA without background, and per pixel the ray

@@ -19,13 +19,10 @@ namespace vnr::cli {
 
 namespace {
 
-// Steps of each brick as `vnr train` counts them: --steps, else 1000, or no limit (-1) with --seconds.
-int64_t brick_steps(const TrainArgs& a) { return a.steps >= 0 ? a.steps : (a.seconds > 0 ? -1 : 1000); }
-
 // The setup `vnr train` builds (setup_of), checked, with the bricks' refusals; the fill bars of
 // out-of-core bricks stay off (ranks would interleave them).
 TrainingSetup mpi_setup_of(const TrainArgs& a) {
-  check_brick_args(a, true);
+  check_brick_args(a);
   TrainingSetup s = setup_of(a, false);
   s.data.show_progress = false;
   check_training_setup(s);

@@ -97,13 +97,15 @@ void add_train_bricks_options(CLI::App* c, TrainArgs& a) {
 }
 
 void run_train_bricks(const TrainArgs& a) {
-  check_brick_args(a, false);
+  check_brick_args(a);
   TrainingSetup setup = setup_of(a, false);
   if (a.eval_samples < 0) fail("--eval-samples must be non-negative, got {}", a.eval_samples);
   const Int3 grid = parse_brick_grid(a.bricks);
   BricksRunOptions o;
   o.resume = a.resume;
-  o.brick.steps = a.steps >= 0 ? a.steps : 1000;
+  o.brick.steps = brick_steps(a);  // --steps and --seconds apply per brick
+  o.brick.seconds = a.seconds;
+  const bool by_time = o.brick.steps < 0;
   o.brick.with_ssim = false;
   o.brick.stop = &g_stop_bricks;
   std::optional<Progress> bar;
@@ -111,9 +113,11 @@ void run_train_bricks(const TrainArgs& a) {
     if (!a.quiet && line.rfind("note:", 0) == 0) std::fprintf(stderr, "%s\n", line.c_str());
   };
   o.on_brick_start = [&](const BrickSpec& b, int k, int n) {
-    bar.emplace(fmt::format("brick {} ({}/{})", b.index, k + 1, n), double(o.brick.steps), a.quiet);
+    bar.emplace(fmt::format("brick {} ({}/{})", b.index, k + 1, n), by_time ? a.seconds : double(o.brick.steps), a.quiet);
   };
-  o.brick.on_step = [&](const TrainingProgress& p) { bar->update(double(p.step), fmt::format("loss {:.5f}", p.loss)); };
+  o.brick.on_step = [&](const TrainingProgress& p) {
+    bar->update(by_time ? p.elapsed : double(p.step), fmt::format("step {} loss {:.5f}", p.step, p.loss));
+  };
   o.on_brick_done = [&](const BrickResult& r) {
     bar->finish(fmt::format("({} steps, loss {:.5f}, PSNR {:.2f} dB on its region)", r.steps, r.final_loss, r.psnr));
   };

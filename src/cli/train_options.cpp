@@ -40,11 +40,12 @@ TrainingSetup setup_of(const TrainArgs& a, bool preview) {
   return s;
 }
 
-void check_brick_args(const TrainArgs& a, bool allow_seconds) {
+int64_t brick_steps(const TrainArgs& a) { return a.steps >= 0 ? a.steps : (a.seconds > 0 ? -1 : 1000); }
+
+void check_brick_args(const TrainArgs& a) {
   if (a.bricks.empty()) fail("--resume needs --bricks (the same as the run it continues)");
   if (a.preview.enabled()) fail("--preview-* options are not supported with --bricks");
   if (a.checkpoint_every) fail("--checkpoint-every is not supported with --bricks (each finished brick is kept; --resume continues)");
-  if (a.seconds > 0 && !allow_seconds) fail("--seconds is not supported with --bricks; give --steps (per brick)");
   if (a.max_error > 0 || a.max_rel_error > 0)
     fail("--max-error/--max-rel-error are not supported with --bricks yet (residuals are per single model)");
   if (a.target_psnr > 0) fail("--target-psnr is not supported with --bricks yet; give --target-ratio or a config");

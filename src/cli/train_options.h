@@ -13,6 +13,8 @@ namespace vnr::cli {
 void add_training_options(CLI::App* c, TrainArgs& a);
 // Options that cannot apply per brick, each refused with one line (both commands). allow_seconds: the
 // caller stops each brick after --seconds.
-void check_brick_args(const TrainArgs& a, bool allow_seconds);
+void check_brick_args(const TrainArgs& a);
+// Steps of each brick as `vnr train` counts them: --steps, else 1000, or no limit (-1) with --seconds.
+int64_t brick_steps(const TrainArgs& a);
 
 }  // namespace vnr::cli

@@ -5,7 +5,7 @@
 # Checks: the model trained on 1 and N ranks and by one process is the same (brick losses, bit-identical
 # decodes); the
 # N-rank decode is bit-identical to the one-process `vnr decode` (raw and NRRD); the N-rank eval's PSNR
-# equals the one-process `vnr eval`'s; a rank that fails names itself and its brick while the other
+# and SSIM equal the one-process `vnr eval`'s; a rank that fails names itself and its brick while the other
 # bricks are kept; a rank killed mid-training leaves its finished bricks and --resume completes the
 # model, identical to the uninterrupted one.
 set -u
@@ -45,12 +45,16 @@ check "resampled NRRD decode on $N ranks = one process" cmp -s one.nrrd many.nrr
 check "sidecar as one process writes it" [ "$(sed 's/many.raw/one.raw/' many.json)" == "$(cat one.json)" ]
 check "no temporary left" [ -z "$(ls | grep tmp-mpi)" ]
 
-# Eval: the same PSNR (sums in another order: 1e-9 dB).
-"$V" eval m1 vol.json --no-ssim --precision fp32 --report e1.json -q > /dev/null
+# Eval: the same PSNR, max error and SSIM (sums in another order: 1e-9). 32 slices on N ranks: SSIM windows
+# cross every rank boundary.
+"$V" eval m1 vol.json --precision fp32 --report e1.json -q > /dev/null
 run "$N" "$V" eval m1 vol.json --precision fp32 --report eN.json > /dev/null
-check "eval PSNR on $N ranks = one process" $PY -c "
-import json; a=json.load(open('e1.json')); b=json.load(open('eN.json'))
-assert abs(a['psnr']-b['psnr']) < 1e-9 and a['max_abs_error'] == b['max_abs_error'], (a['psnr'], b['psnr'])"
+run "$N" "$V" eval m1 vol.json --precision fp32 --no-ssim --report eNs.json > /dev/null
+check "eval PSNR and SSIM on $N ranks = one process" $PY -c "
+import json; a=json.load(open('e1.json')); b=json.load(open('eN.json')); c=json.load(open('eNs.json'))
+assert abs(a['psnr']-b['psnr']) < 1e-9 and a['max_abs_error'] == b['max_abs_error'], (a['psnr'], b['psnr'])
+assert 0 < a['ssim'] < 1 and abs(a['ssim']-b['ssim']) < 1e-9, (a['ssim'], b['ssim'])
+assert c['ssim'] is None and c['psnr'] == b['psnr'], c"
 
 # Render: the N-rank sort-last composite is the 1-rank one bit for bit (same segments, same order, same
 # arithmetic), and the one-process frame up to early ray termination: a segment behind a pixel already

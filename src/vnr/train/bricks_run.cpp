@@ -94,7 +94,7 @@ BricksRunResult train_bricks(const TrainingSetup& setup, Int3 grid, int ghost, c
     seconds += b.seconds;
   }
   const Json training = {{"bricks_done", all.size()}, {"bricks", r.plan.bricks.size()}, {"complete", r.complete},
-                         {"steps_per_brick", o.brick.steps}, {"brick_steps", steps}, {"brick_seconds", seconds},
+                         {"steps_per_brick", o.brick.steps >= 0 ? Json(o.brick.steps) : Json(nullptr)}, {"brick_steps", steps}, {"brick_seconds", seconds},
                          {"batch", setup.batch}, {"seed", setup.seed}, {"target_ratio", setup.target_ratio}};
   write_manifest(out_dir, r.plan, desc.dtype, r.range, config, all, training);
   return r;

@@ -75,25 +75,6 @@ std::shared_ptr<Volume> read_brick_volume(const VolumeDesc& desc, const Training
   return v;
 }
 
-// PSNR of net over box of the file, read and decoded in z-slabs of about slab_bytes (two float copies, at
-// least one slice): what evaluate() gives on the box loaded, without holding it.
-double streamed_box_psnr(const Network& net, const RawVolumeFile& file, const Box3& box, uint64_t slab_bytes) {
-  const Int3 d = box.size();
-  const int64_t slice = d.x * d.y;
-  const int64_t slab = std::clamp<int64_t>(int64_t(slab_bytes / (2 * sizeof(float) * uint64_t(slice))), 1, d.z);
-  std::vector<float> ref(size_t(slab * slice)), dec(size_t(slab * slice));
-  std::vector<unsigned char> scratch(file.scratch_bytes(Int3{d.x, d.y, slab}));
-  double se = 0;
-  for (int64_t z0 = 0; z0 < d.z; z0 += slab) {
-    const int64_t k = std::min(slab, d.z - z0);
-    file.read_box(Int3{box.lo.x, box.lo.y, box.lo.z + z0}, Int3{d.x, d.y, k}, ref.data(), scratch.data());
-    decode_slices(net, d, z0, z0 + k, dec.data());
-    se += error_stats(ref.data(), dec.data(), Int3{d.x, d.y, k}).mse * double(k * slice);
-  }
-  const double mse = se / double(d.count());
-  return mse > 0 ? 10 * std::log10(1 / mse) : 999.0;  // error_stats' convention
-}
-
 // The brick's session: on its box in memory, or out of core on its box of the file.
 std::unique_ptr<TrainingSession> open_brick_session(const TrainingSetup& s, const VolumeDesc& desc, const BrickSpec& b,
                                                     const ValueRange& range, bool out_of_core, uint64_t budget,
@@ -150,9 +131,15 @@ BrickResult train_brick(const TrainingSetup& setup, const BrickPlan& plan, int i
   r.interrupted = session->stop_requested();
   session->record();
   Model& m = session->model();
-  // Out of core the brick is never held: its PSNR is streamed in slabs of an eighth of the budget.
-  r.psnr = out_of_core ? streamed_box_psnr(*m.net, brick_file(desc, setup, range), b.trained, budget / 8)
-                       : evaluate(*m.net, *session->data()->vol, o.with_ssim, Device::Cpu).psnr;
+  // Out of core the brick is never held: it is evaluated in slabs of a sixteenth of the budget (two or
+  // three float copies of a slab, plus the decoder's).
+  if (out_of_core) {
+    const RawVolumeFile file = brick_file(desc, setup, range);
+    const int64_t slab_voxels = std::max<int64_t>(1, int64_t(budget / 16 / sizeof(float)));
+    r.psnr = evaluate_box_slices(*m.net, file, b.trained, 0, b.trained.size().z, o.with_ssim, slab_voxels).result(1).psnr;
+  } else {
+    r.psnr = evaluate(*m.net, *session->data()->vol, o.with_ssim, Device::Cpu).psnr;
+  }
   r.n_params = m.net->n_params();
   Json rec = brick_record(b);
   rec["complete"] = !r.interrupted;

@@ -31,32 +31,40 @@ EvalResult evaluate_with(Decoder& decoder, const Volume& vol, bool with_ssim) {
 }
 
 double psnr_of_mse(double mse) { return mse > 0 ? 10 * std::log10(1 / mse) : 999.0; }  // error_stats' convention
-EvalResult streamed_with(Decoder& decoder, const VolumeDesc& desc, double lo, double hi, const LoadOptions& opts,
-                         bool with_ssim, const std::function<void(double)>& progress, int64_t slab_voxels) {
-  const Int3 d = desc.dims;
-  if (d.x <= 0 || d.y <= 0 || d.z <= 0) fail("'{}': invalid dims", desc.path);
-  const int64_t slice = d.x * d.y, nz = d.z;
+
+// fn(z0, k, values): consecutive slabs of the reference slices [z_first, z_last), at most slab_slices each.
+using SlabFn = std::function<void(int64_t z0, int64_t k, const float* values)>;
+using SlabSource = std::function<void(int64_t z_first, int64_t z_last, int64_t slab_slices, const SlabFn& fn)>;
+
+// The sums of the output slices [z_begin, z_end) of grid d: errors of those slices, and with SSIM the
+// 7x7x7 windows whose first slice is among them (reading up to wz - 1 slices past z_end). The last
+// wz - 1 slices of a slab stay in front of the next, so that windows crossing a slab boundary are
+// counted once and see the same voxels as in the whole volume.
+// `what` names the data in messages.
+EvalSums sums_with(Decoder& decoder, Int3 d, int64_t z_begin, int64_t z_end, bool with_ssim, int64_t slab_voxels,
+                   const SlabSource& source, const std::function<void(double)>& progress, const std::string& what) {
+  if (d.x <= 0 || d.y <= 0 || d.z <= 0) fail("evaluation of an empty {}x{}x{} grid", d.x, d.y, d.z);
+  if (z_begin < 0 || z_end > d.z || z_begin > z_end) fail("slices [{}, {}) are not in 0..{}", z_begin, z_end, d.z);
+  EvalSums r;
+  if (z_begin == z_end) return r;
+  const int64_t slice = d.x * d.y;
   if (slab_voxels <= 0) slab_voxels = int64_t(1) << 24;
-  const int64_t slab_slices = std::clamp<int64_t>(slab_voxels / slice, 1, nz);
   // ssim3d's window: 7 voxels per axis, or the whole axis when shorter.
-  const int64_t wx = std::min<int64_t>(7, d.x), wy = std::min<int64_t>(7, d.y), wz = std::min<int64_t>(7, nz);
+  const int64_t wx = std::min<int64_t>(7, d.x), wy = std::min<int64_t>(7, d.y), wz = std::min<int64_t>(7, d.z);
   const double windows_per_slice = double((d.x - wx + 1) * (d.y - wy + 1));
-  // With SSIM, the last wz - 1 slices stay in front of the next slab, so that windows crossing the
-  // slab boundary are counted once and see the same voxels as in the whole volume.
+  const int64_t z_last = with_ssim ? std::min(d.z, z_end + wz - 1) : z_end;  // slices read: [z_begin, z_last)
+  const int64_t slab_slices = std::clamp<int64_t>(slab_voxels / slice, 1, z_last - z_begin);
   const int64_t keep = with_ssim ? wz - 1 : 0;
   std::vector<float> ref, dec;
   try {
     if (with_ssim) ref.resize(size_t((keep + slab_slices) * slice));
     dec.resize(size_t((keep + slab_slices) * slice));
   } catch (const std::bad_alloc&) {
-    fail("cannot allocate {:.1f} MiB of slab buffers to evaluate '{}'",
-         double((keep + slab_slices) * slice) * 8 / (1 << 20), desc.path);
+    fail("cannot allocate {:.1f} MiB of slab buffers to evaluate {}", double((keep + slab_slices) * slice) * 8 / (1 << 20),
+         what);
   }
-
-  EvalResult r;
-  double se = 0, ssim_sum = 0;
   int64_t held = 0;  // slices in ref/dec (SSIM only keeps slices across slabs)
-  for_each_slab(desc, lo, hi, opts, slab_slices * slice, [&](int64_t z0, int64_t k, const float* values) {
+  source(z_begin, z_last, slab_slices, [&](int64_t z0, int64_t k, const float* values) {
     float* rs = nullptr;
     if (with_ssim) {
       rs = ref.data() + held * slice;
@@ -67,25 +75,62 @@ EvalResult streamed_with(Decoder& decoder, const VolumeDesc& desc, double lo, do
     auto t0 = std::chrono::steady_clock::now();
     decoder.slices(d, z0, z0 + k, decoded);
     r.decode_seconds += seconds_since(t0);
-    ErrorStats e = error_stats(reference, decoded, Int3{d.x, d.y, k});
-    se += e.mse * double(k * slice);
-    r.max_abs_error = std::max(r.max_abs_error, e.max_abs_error);
+    const int64_t k_own = std::clamp<int64_t>(z_end - z0, 0, k);  // slices past z_end serve SSIM windows only
+    if (k_own > 0) {
+      const ErrorStats e = error_stats(reference, decoded, Int3{d.x, d.y, k_own});
+      r.sse += e.mse * double(k_own * slice);
+      r.voxels += k_own * slice;
+      r.max_abs_error = std::max(r.max_abs_error, e.max_abs_error);
+    }
     if (with_ssim) {
       held += k;
       if (held >= wz) {  // windows starting at buffer slices 0 .. held - wz are complete
-        ssim_sum += ssim3d(ref.data(), dec.data(), Int3{d.x, d.y, held}) * windows_per_slice * double(held - wz + 1);
+        const double n = windows_per_slice * double(held - wz + 1);
+        r.ssim_sum += ssim3d(ref.data(), dec.data(), Int3{d.x, d.y, held}) * n;
+        r.ssim_windows += int64_t(n);
         std::copy(ref.begin() + (held - keep) * slice, ref.begin() + held * slice, ref.begin());
         std::copy(dec.begin() + (held - keep) * slice, dec.begin() + held * slice, dec.begin());
         held = keep;
       }
     }
-    if (progress) progress(double(z0 + k) / double(nz));
+    if (progress) progress(double(z0 + k - z_begin) / double(z_last - z_begin));
   });
-  r.mse = se / double(d.count());
-  r.psnr = psnr_of_mse(r.mse);
-  r.max_abs_error_original = r.max_abs_error * (hi - lo);
-  if (with_ssim) r.ssim = ssim_sum / (windows_per_slice * double(nz - wz + 1));
   return r;
+}
+
+// Slabs of the box of `file`, read with pread.
+SlabSource box_slabs(const RawVolumeFile& file, const Box3& box) {
+  return [&file, box](int64_t z_first, int64_t z_last, int64_t slab_slices, const SlabFn& fn) {
+    const Int3 d = box.size();
+    std::vector<float> values(size_t(d.x * d.y * slab_slices));
+    std::vector<unsigned char> scratch(file.scratch_bytes(Int3{d.x, d.y, slab_slices}));
+    for (int64_t z0 = z_first; z0 < z_last; z0 += slab_slices) {
+      const int64_t k = std::min(slab_slices, z_last - z0);
+      file.read_box(Int3{box.lo.x, box.lo.y, box.lo.z + z0}, Int3{d.x, d.y, k}, values.data(), scratch.data());
+      fn(z0, k, values.data());
+    }
+  };
+}
+
+EvalSums box_sums_with(Decoder& decoder, const RawVolumeFile& truth, const Box3& box, int64_t z_begin, int64_t z_end,
+                       bool with_ssim, int64_t slab_voxels) {
+  if (box.empty() || !(intersect(box, Box3{{0, 0, 0}, truth.dims()}) == box))
+    fail("evaluation box [{}, {}) x [{}, {}) x [{}, {}) is empty or not inside the {}x{}x{} volume", box.lo.x, box.hi.x,
+         box.lo.y, box.hi.y, box.lo.z, box.hi.z, truth.dims().x, truth.dims().y, truth.dims().z);
+  return sums_with(decoder, box.size(), z_begin, z_end, with_ssim, slab_voxels, box_slabs(truth, box), {},
+                   fmt::format("a box of '{}'", truth.desc().path));
+}
+
+EvalResult streamed_with(Decoder& decoder, const VolumeDesc& desc, double lo, double hi, const LoadOptions& opts,
+                         bool with_ssim, const std::function<void(double)>& progress, int64_t slab_voxels) {
+  const Int3 d = desc.dims;
+  if (d.x <= 0 || d.y <= 0 || d.z <= 0) fail("'{}': invalid dims", desc.path);
+  // for_each_slab streams the whole file (compressed too) from its first slice.
+  const SlabSource whole_file = [&](int64_t, int64_t, int64_t slab_slices, const SlabFn& fn) {
+    for_each_slab(desc, lo, hi, opts, slab_slices * d.x * d.y, fn);
+  };
+  return sums_with(decoder, d, 0, d.z, with_ssim, slab_voxels, whole_file, progress, fmt::format("'{}'", desc.path))
+      .result(hi - lo);
 }
 
 SampledEval sampled_with(Decoder& decoder, const VolumeDesc& desc, double lo, double hi, int64_t n_samples,
@@ -155,6 +200,37 @@ EvalResult evaluate_streamed(const Model& model, const VolumeDesc& desc, double 
   Decoder d(model, device);
   return streamed_with(d, desc, lo, hi, opts, with_ssim, progress, slab_voxels);
 }
+EvalSums evaluate_box_slices(const Network& net, const RawVolumeFile& truth, const Box3& box, int64_t z_begin,
+                             int64_t z_end, bool with_ssim, int64_t slab_voxels, Device device) {
+  Decoder d(net, device);
+  return box_sums_with(d, truth, box, z_begin, z_end, with_ssim, slab_voxels);
+}
+EvalSums evaluate_box_slices(const Model& model, const RawVolumeFile& truth, const Box3& box, int64_t z_begin,
+                             int64_t z_end, bool with_ssim, int64_t slab_voxels, Device device) {
+  Decoder d(model, device);
+  return box_sums_with(d, truth, box, z_begin, z_end, with_ssim, slab_voxels);
+}
+
+void EvalSums::add(const EvalSums& o) {
+  sse += o.sse;
+  voxels += o.voxels;
+  max_abs_error = std::max(max_abs_error, o.max_abs_error);
+  ssim_sum += o.ssim_sum;
+  ssim_windows += o.ssim_windows;
+  decode_seconds += o.decode_seconds;
+}
+
+EvalResult EvalSums::result(double value_range) const {
+  EvalResult r;
+  r.mse = voxels > 0 ? sse / double(voxels) : 0.0;
+  r.psnr = psnr_of_mse(r.mse);
+  r.max_abs_error = max_abs_error;
+  r.max_abs_error_original = max_abs_error * value_range;
+  r.ssim = ssim_windows > 0 ? ssim_sum / double(ssim_windows) : 0.0;
+  r.decode_seconds = decode_seconds;
+  return r;
+}
+
 SampledEval evaluate_sampled(const Network& net, const VolumeDesc& desc, double lo, double hi, int64_t n_samples,
                              uint64_t seed, const LoadOptions& opts, Device device, const Residuals* residuals) {
   Decoder d(net, device, residuals);

@@ -2,6 +2,7 @@
 // Evaluation of a network against its volume: in memory, streamed in slabs, or sampled.
 #include <cstdint>
 #include <functional>
+#include "vnr/core/brick_box.h"
 #include "vnr/core/device.h"
 #include "vnr/nn/network.h"
 #include "vnr/train/residuals.h"
@@ -10,6 +11,7 @@
 namespace vnr {
 
 struct Model;  // train/model.h: the overloads taking a Model decode a multi-brick model blended (train/bricks.h)
+class RawVolumeFile;  // volume/raw_access.h
 
 // Evaluation against the ground truth at voxel centres (docs/semantics.md B.4).
 struct EvalResult {
@@ -39,6 +41,29 @@ EvalResult evaluate_streamed(const Model& model, const VolumeDesc& desc, double 
                              const LoadOptions& opts, bool with_ssim = true,
                              const std::function<void(double fraction)>& progress = {}, int64_t slab_voxels = 0,
                              Device device = Device::Cpu);
+
+// The sums behind an evaluation of part of a volume: parts evaluated apart (MPI ranks' slices) add up
+// to the evaluation of the whole.
+struct EvalSums {
+  double sse = 0;            // squared errors summed, normalised units
+  int64_t voxels = 0;        // voxels summed
+  double max_abs_error = 0;  // normalised units
+  double ssim_sum = 0;       // SSIM of every 7x7x7 window summed (ssim3d's windows), and their number
+  int64_t ssim_windows = 0;
+  double decode_seconds = 0;
+  void add(const EvalSums& other);
+  // PSNR, MSE, max error (also times value_range, in original units), SSIM (0 without windows).
+  EvalResult result(double value_range) const;
+};
+// The network (or model) decoded on a grid of box.size() voxels, its output slices [z_begin, z_end),
+// against the voxels of box in truth, read in z-slabs of about slab_voxels (0: 16 M) as
+// evaluate_streamed reads. Errors are those slices'; with SSIM, the windows whose first slice is among
+// them (the 6 slices past z_end are read and decoded for them). Over all slices of the box, the result
+// is evaluate() on the box loaded, up to the order of the sums.
+EvalSums evaluate_box_slices(const Network& net, const RawVolumeFile& truth, const Box3& box, int64_t z_begin,
+                             int64_t z_end, bool with_ssim, int64_t slab_voxels = 0, Device device = Device::Cpu);
+EvalSums evaluate_box_slices(const Model& model, const RawVolumeFile& truth, const Box3& box, int64_t z_begin,
+                             int64_t z_end, bool with_ssim, int64_t slab_voxels = 0, Device device = Device::Cpu);
 
 // PSNR estimated from n_samples voxels drawn uniformly (with replacement; deterministic for a
 // seed), read with RawVolumeFile (uncompressed data only) and decoded as evaluate() decodes them.

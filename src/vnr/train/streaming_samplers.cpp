@@ -169,24 +169,10 @@ void OutOfCoreSampler::reader_loop(int thread) {
 }
 
 void OutOfCoreSampler::read_block(Int3 origin, float* out, int thread) {
-  unsigned char* scratch = scratch_[size_t(thread)].data();
-  if (!in_region_) return file_->read_box(origin, stored_, out, scratch);  // the file's clamp is the region's
-  // Only the part inside the region is read (packed at the start of out); ghosts beyond its faces repeat
-  // its edge voxels. Expanded in place from the last voxel back: every voxel's source index is at most its
-  // own (the part is no larger and starts no later on any axis), so no source is overwritten before use.
-  const Box3 want{origin, Int3{origin.x + stored_.x, origin.y + stored_.y, origin.z + stored_.z}};
-  const Box3 in = intersect(want, Box3{{0, 0, 0}, dims_});
-  const Int3 n = in.size();
-  file_->read_box(Int3{origin_.x + in.lo.x, origin_.y + in.lo.y, origin_.z + in.lo.z}, n, out, scratch);
-  auto at = [](int64_t v, int64_t lo, int64_t hi) { return std::clamp<int64_t>(v, lo, hi - 1) - lo; };
-  for (int64_t k = stored_.z - 1; k >= 0; --k) {
-    const int64_t z = at(origin.z + k, in.lo.z, in.hi.z);
-    for (int64_t j = stored_.y - 1; j >= 0; --j) {
-      const int64_t src_row = (z * n.y + at(origin.y + j, in.lo.y, in.hi.y)) * n.x;
-      float* row = out + (k * stored_.y + j) * stored_.x;
-      for (int64_t i = stored_.x - 1; i >= 0; --i) row[i] = out[src_row + at(origin.x + i, in.lo.x, in.hi.x)];
-    }
-  }
+  // Ghosts beyond the region's faces repeat its edge voxels, as the in-core lookup on the region's volume does.
+  const Box3 region{origin_, Int3{origin_.x + dims_.x, origin_.y + dims_.y, origin_.z + dims_.z}};
+  file_->read_box(Int3{origin_.x + origin.x, origin_.y + origin.y, origin_.z + origin.z}, stored_, out,
+                  scratch_[size_t(thread)].data(), region);
 }
 
 void OutOfCoreSampler::run_jobs(std::vector<Job>& jobs) {

@@ -86,7 +86,7 @@ private:
   uint64_t seed_;
   Int3 dims_, bd_, stored_, grid_;  // region, block interior, block with ghosts, blocks per axis
   Int3 origin_{0, 0, 0};            // of the region in the file
-  bool in_region_ = false;          // reads are clipped to the region (not only to the file)
+  bool in_region_ = false;          // a region smaller than the file: block sizes shrink to fit it
   int64_t n_blocks_ = 0, R_ = 0, S_ = 0, block_floats_ = 0;
   big_vector<float> storage_;              // (R + S) stored blocks
   std::vector<Int3> storage_origin_;       // interior origin of the block in each storage

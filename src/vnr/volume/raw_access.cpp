@@ -215,13 +215,13 @@ size_t RawVolumeFile::scratch_bytes(Int3 box) const {
   return size_t((rows_per_read(box.y) - 1) * int64_t(desc_.dims.x) + in_row) * esize_;
 }
 
-// A dataset's box: the part inside the volume as one hyperslab, then clamp-to-edge outside it.
-void RawVolumeFile::read_dataset_box(Int3 origin, Int3 size, float* out) const {
+// A dataset's box: the part inside clamp_to as one hyperslab, then clamp-to-edge outside it.
+void RawVolumeFile::read_dataset_box(Int3 origin, Int3 size, float* out, const Box3& c) const {
   const Int3 d = desc_.dims;
   Int3 lo, in;
   for (int a = 0; a < 3; ++a) {
-    lo[a] = std::clamp<int64_t>(origin[a], 0, d[a] - 1);
-    in[a] = std::clamp<int64_t>(origin[a] + size[a], lo[a] + 1, d[a]) - lo[a];  // >= 1: a box outside reads the edge
+    lo[a] = std::clamp<int64_t>(origin[a], c.lo[a], c.hi[a] - 1);
+    in[a] = std::clamp<int64_t>(origin[a] + size[a], lo[a] + 1, c.hi[a]) - lo[a];  // >= 1: a box outside reads the edge
   }
   std::vector<unsigned char> buf(size_t(in.count() * esize_));
   dataset_->read_box(lo, in, buf.data());
@@ -248,13 +248,21 @@ void RawVolumeFile::read_dataset_box(Int3 origin, Int3 size, float* out) const {
 }
 
 void RawVolumeFile::read_box(Int3 origin, Int3 size, float* out, unsigned char* scratch) const {
-  if (dataset_) return read_dataset_box(origin, size, out);
+  read_box(origin, size, out, scratch, Box3{{0, 0, 0}, desc_.dims});
+}
+
+void RawVolumeFile::read_box(Int3 origin, Int3 size, float* out, unsigned char* scratch, const Box3& c) const {
   const Int3 d = desc_.dims;
-  auto clamp = [](int64_t v, int64_t n) { return v < 0 ? 0 : (v >= n ? n - 1 : v); };
-  // The part of each row inside the volume; columns outside copy the edge voxel.
-  const int64_t x_lo = std::max<int64_t>(origin.x, 0), x_hi = std::min<int64_t>(origin.x + size.x, d.x);
+  for (int a = 0; a < 3; ++a)
+    if (c.lo[a] < 0 || c.hi[a] > d[a] || c.hi[a] <= c.lo[a])
+      fail("read_box: clamp box [{}, {}) x [{}, {}) x [{}, {}) is empty or outside the {}x{}x{} volume", c.lo.x,
+           c.hi.x, c.lo.y, c.hi.y, c.lo.z, c.hi.z, d.x, d.y, d.z);
+  if (dataset_) return read_dataset_box(origin, size, out, c);
+  auto clamp = [](int64_t v, int64_t lo, int64_t hi) { return v < lo ? lo : (v >= hi ? hi - 1 : v); };
+  // The part of each row inside the clamp box; columns outside copy its edge voxel.
+  const int64_t x_lo = std::max<int64_t>(origin.x, c.lo.x), x_hi = std::min<int64_t>(origin.x + size.x, c.hi.x);
   const int64_t in_row = x_hi - x_lo;
-  if (in_row <= 0) fail("read_box: box x range [{}, {}) misses the volume", origin.x, origin.x + size.x);
+  if (in_row <= 0) fail("read_box: box x range [{}, {}) misses [{}, {})", origin.x, origin.x + size.x, c.lo.x, c.hi.x);
   const int64_t lead = x_lo - origin.x;
   const bool strict = policy_ == NonFinitePolicy::Error;
   const int64_t max_rows = rows_per_read(size.y), file_row = int64_t(d.x) * int64_t(esize_);
@@ -263,23 +271,23 @@ void RawVolumeFile::read_box(Int3 origin, Int3 size, float* out, unsigned char* 
   with_sample_type(desc_.dtype, [&](auto tag) {
     using T = typename decltype(tag)::type;
     for (int64_t k = 0; k < size.z; ++k) {
-      const int64_t z = clamp(origin.z + k, d.z);
+      const int64_t z = clamp(origin.z + k, c.lo.z, c.hi.z);
       float* slice = out + k * slice_floats;
       // Slices repeated by the clamp (ghost layers on the border) are copied, not read again.
-      if (k > 0 && z == clamp(origin.z + k - 1, d.z)) {
+      if (k > 0 && z == clamp(origin.z + k - 1, c.lo.z, c.hi.z)) {
         std::memcpy(slice, slice - slice_floats, sizeof(float) * size_t(slice_floats));
         continue;
       }
       for (int64_t j = 0; j < size.y;) {
-        const int64_t y = clamp(origin.y + j, d.y);
-        if (j > 0 && y == clamp(origin.y + j - 1, d.y)) {  // a repeated row: copy it
+        const int64_t y = clamp(origin.y + j, c.lo.y, c.hi.y);
+        if (j > 0 && y == clamp(origin.y + j - 1, c.lo.y, c.hi.y)) {  // a repeated row: copy it
           std::memcpy(slice + j * size.x, slice + (j - 1) * size.x, sizeof(float) * size_t(size.x));
           ++j;
           continue;
         }
         // A run of consecutive file rows y, y+1, ... read with one pread.
         int64_t rows = 1;
-        while (rows < max_rows && j + rows < size.y && clamp(origin.y + j + rows, d.y) == y + rows) ++rows;
+        while (rows < max_rows && j + rows < size.y && clamp(origin.y + j + rows, c.lo.y, c.hi.y) == y + rows) ++rows;
         const int64_t first = (z * d.y + y) * d.x + x_lo;  // voxel index of the run's first sample
         read_bytes(scratch, size_t((rows - 1) * file_row) + size_t(in_row) * esize_,
                    desc_.offset + uint64_t(first) * esize_);

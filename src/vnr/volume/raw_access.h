@@ -9,6 +9,7 @@
 #include <memory>
 #include <string>
 #include <sys/types.h>
+#include "vnr/core/brick_box.h"
 #include "vnr/volume/sample_io.h"
 #include "vnr/volume/volume.h"
 
@@ -47,6 +48,9 @@ public:
   // scratch_bytes(size) bytes. NaN/Inf under NonFinitePolicy::Error: an error naming the voxel.
   // Consecutive rows of a z-slice are read together when the file's rows are short (rows_per_read).
   void read_box(Int3 origin, Int3 size, float* out, unsigned char* scratch) const;
+  // The same with the clamp at the faces of `clamp_to` (a non-empty box inside the volume) instead of
+  // the volume's: only voxels inside it are read, as if it were the whole volume (a brick's region).
+  void read_box(Int3 origin, Int3 size, float* out, unsigned char* scratch, const Box3& clamp_to) const;
   size_t scratch_bytes(Int3 box) const;
   int64_t rows_per_read(int64_t box_ny) const;
 
@@ -68,7 +72,7 @@ public:
 private:
   void read_bytes(unsigned char* dst, size_t bytes, uint64_t file_offset) const;
   void open_dataset(double lo, double hi);
-  void read_dataset_box(Int3 origin, Int3 size, float* out) const;
+  void read_dataset_box(Int3 origin, Int3 size, float* out, const Box3& clamp_to) const;
   void count_read(size_t bytes, uint64_t file_offset) const;
   VolumeDesc desc_;
   std::unique_ptr<detail::DatasetReader> dataset_;  // HDF5/NetCDF sources
