@@ -43,14 +43,25 @@ ModelFile file_of(const Model& model, const std::vector<float>& master, const st
 }
 
 // The largest g (coarsest steps) whose probe PSNR still reaches `psnr`; the finest plan when none does.
+// The largest g whose quantization keeps `psnr` on the probe. Bisection assumes the PSNR falls as g
+// grows, which holds for a trained network but not after quantization-aware steps: those tune the
+// network to the steps of g_known (0: none), where it may then beat finer steps and even the master
+// copy itself. So the search starts from g_known when that reaches the target; when nothing does, the
+// better of g_known and the finest scale.
 double fit_psnr(Network& net, const std::vector<float>& master, const QuantPlan& plan, const ProbeSet& probe,
-                double psnr) {
-  auto ok = [&](double g) {
+                double psnr, double g_known) {
+  auto psnr_at = [&](double g) {
     apply_quantization(net, master, plan.at(g));
-    return psnr_of_mse(probe.mse(net)) >= psnr;
+    return psnr_of_mse(probe.mse(net));
   };
-  double lo = 1e-6, hi = 1e-6;  // g such that ok(lo) and !ok(hi)
-  if (!ok(lo)) return lo;
+  auto ok = [&](double g) { return psnr_at(g) >= psnr; };
+  double lo = 1e-6;  // g such that ok(lo) and !ok(hi)
+  if (g_known > 0 && ok(g_known)) {
+    lo = g_known;
+  } else if (!ok(lo)) {
+    return g_known > 0 && psnr_at(g_known) > psnr_at(lo) ? g_known : lo;
+  }
+  double hi = lo;
   while (ok(hi) && hi < 1e6) lo = hi, hi *= 4;
   for (int i = 0; i < 14; ++i) {
     const double mid = std::sqrt(lo * hi);
@@ -61,11 +72,12 @@ double fit_psnr(Network& net, const std::vector<float>& master, const QuantPlan&
 
 // The scale g that meets o's targets for `master`; *bytes gets that file's size. The model's header
 // (training record included) must already be as it will be saved.
+// g_known: the scale quantization-aware steps trained for (0: none).
 double choose_scale(const Model& model, Network& net, const std::vector<float>& master, const QuantPlan& plan,
-                    const ProbeSet& probe, const CompactOptions& o, uint64_t* bytes) {
+                    const ProbeSet& probe, const CompactOptions& o, uint64_t* bytes, double g_known = 0) {
   // Aim a little under the budget: the final evaluation's numbers may lengthen the header.
   const uint64_t aim = o.target_bytes - std::min<uint64_t>(o.target_bytes / 50, 256);
-  double g = o.target_psnr > 0 ? fit_psnr(net, master, plan, probe, o.target_psnr) : 0;
+  double g = o.target_psnr > 0 ? fit_psnr(net, master, plan, probe, o.target_psnr, g_known) : 0;
   if (o.target_bytes > 0) g = std::max(g, fit_bytes(model, master, plan, aim, bytes));
   *bytes = vnr_file_bytes(file_of(model, master, plan.at(g)));
   return g;
@@ -170,7 +182,9 @@ double ProbeSet::mse(const Network& net) const {
 
 std::vector<ParamSegment> QuantPlan::at(double g) const {
   std::vector<ParamSegment> s = segments;
-  for (size_t i = 0; i < s.size(); ++i) s[i].step = float(std::max(g * shape[i], floor[i]));
+  // A step under the floor needs more than 10-bit indices: that segment is stored as its fp16 values
+  // (step 0, exact) rather than at the floor's step, so finer scales never lose quality.
+  for (size_t i = 0; i < s.size(); ++i) s[i].step = g * shape[i] >= floor[i] ? float(g * shape[i]) : 0.0f;
   return s;
 }
 
@@ -182,6 +196,7 @@ QuantPlan plan_quantization(Network& net, const ProbeSet& probe) {
   apply_quantization(net, master, plan.segments);  // steps 0: the fp16 values, unused ones zeroed
   const double base = probe.mse(net);
   Pcg32 rng(0x5eed);
+  std::vector<float> noise;
   uint64_t off = 0;
   for (const ParamSegment& s : plan.segments) {
     double sq = 0, max_abs = 0;
@@ -190,11 +205,20 @@ QuantPlan plan_quantization(Network& net, const ProbeSet& probe) {
       max_abs = std::max(max_abs, double(std::fabs(master[i])));
     }
     const double rms = std::sqrt(sq / double(std::max<uint64_t>(s.count, 1)));
-    // Uniform noise of width delta has the variance of quantization with step delta.
+    // Uniform noise of width delta has the variance of quantization with step delta. The draw comes
+    // with its negative (an antithetic pair), whose mean growth of the MSE is the curvature term alone:
+    // one draw's first-order term can be of either sign, and on a small segment (the output layer: 16
+    // live weights) it can hide the curvature and make the segment look free to quantize coarsely.
     const double delta = std::max(0.5 * rms, 1e-6);
-    for (uint64_t i = off; i < off + s.count; ++i) net.params[i] = master[i] + float(delta * (rng.next_float() - 0.5));
-    net.sync_half_table();
-    const double grown = std::max(probe.mse(net) - base, 1e-4 * base + 1e-14);
+    noise.resize(s.count);
+    for (float& e : noise) e = float(delta * (rng.next_float() - 0.5));
+    double mse_pair = 0;
+    for (const float sign : {1.0f, -1.0f}) {
+      for (uint64_t i = off; i < off + s.count; ++i) net.params[i] = master[i] + sign * noise[i - off];
+      net.sync_half_table();
+      mse_pair += 0.5 * probe.mse(net);
+    }
+    const double grown = std::max(mse_pair - base, 1e-4 * base + 1e-14);
     for (uint64_t i = off; i < off + s.count; ++i) net.params[i] = master[i];
     const double a = grown / (delta * delta);
     plan.shape.push_back(std::sqrt(double(s.count) / a));
@@ -283,12 +307,12 @@ Json compact_session(TrainingSession& session, const CompactOptions& o, int64_t 
   Quantization q = start_quantization(net, probe);
   // The header will hold the training record with the final evaluation: size the file with one.
   uint64_t bytes = 0;
-  auto choose = [&] {
+  auto choose = [&](double g_known) {
     session.record();
     reserve_evaluation_record(model);
-    return choose_scale(model, net, q.master, q.plan, probe, o, &bytes);
+    return choose_scale(model, net, q.master, q.plan, probe, o, &bytes, g_known);
   };
-  double g = choose();
+  double g = choose(0);
 
   int64_t qat_steps = 0;
   if (qat) {
@@ -313,7 +337,7 @@ Json compact_session(TrainingSession& session, const CompactOptions& o, int64_t 
     session.set_step_hooks({}, {});
     qat_steps = session.steps_done() - before;
     zero_unused(net.mlp(), q.master);
-    g = choose();  // the weights moved a little: meet the target again
+    g = choose(g);  // the weights moved a little: meet the target again
   }
   const Json summary = finish_quantization(model, q, g, bytes, probe, qat_steps);
   session.freeze_parameters();

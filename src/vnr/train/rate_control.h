@@ -41,7 +41,8 @@ double psnr_of_mse(double mse);
 
 // Per-segment steps step_i = g * shape_i. With a_i the growth of the probe MSE per squared step of
 // segment i, equal slopes of distortion against rate give shape_i = sqrt(n_i / a_i) (high-rate model:
-// D_i = a_i step^2, R_i = n_i (h_i - log2 step)); floor_i keeps |q| <= 1023.
+// D_i = a_i step^2, R_i = n_i (h_i - log2 step)); floor_i keeps |q| <= 1023: a segment whose step
+// would fall under it is stored as plain fp16 (step 0).
 struct QuantPlan {
   std::vector<ParamSegment> segments;  // counts (steps unset)
   std::vector<double> shape, floor;
