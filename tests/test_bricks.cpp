@@ -2,6 +2,8 @@
 // assignment checked by brute force, the blend against closed forms, seeds independent of the order
 // bricks are trained in, --resume, quality against a single model of the same size (faces as accurate
 // as the interior, no seams), and every front end opening the directory like one model.
+#include <algorithm>
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <numeric>
@@ -79,6 +81,81 @@ TEST(BrickPlan, AssignmentCoversEveryBrickOnceAndBalancesVoxels) {
     if (ranks <= int(p.bricks.size())) EXPECT_LE(hi - lo, largest) << ranks << " ranks";  // greedy LPT bound
     EXPECT_EQ(assign_bricks(p, ranks), a);
   }
+}
+
+// Decoding's share: runs of consecutive bricks, every brick once, each rank within one brick of its
+// even share of the voxels.
+TEST(BrickPlan, ContiguousSharesCoverEveryBrickOnceInRuns) {
+  const BrickPlan p = plan_bricks(Int3{70, 50, 30}, Int3{5, 3, 2}, 3, 1);
+  uint64_t total = 0, largest = 0;
+  for (const BrickSpec& b : p.bricks) total += b.owned.voxels(), largest = std::max(largest, b.owned.voxels());
+  for (int ranks : {1, 2, 3, 4, 7, 40}) {
+    std::vector<int> all;
+    for (int r = 0; r < ranks; ++r) {
+      const std::vector<int> mine = contiguous_bricks(p, r, ranks);
+      uint64_t voxels = 0;
+      for (size_t k = 0; k < mine.size(); ++k) {
+        if (k > 0) EXPECT_EQ(mine[k], mine[k - 1] + 1) << "rank " << r << " of " << ranks;
+        voxels += p.bricks[size_t(mine[k])].owned.voxels();
+      }
+      EXPECT_LE(std::fabs(double(voxels) - double(total) / ranks), double(largest)) << "rank " << r << " of " << ranks;
+      all.insert(all.end(), mine.begin(), mine.end());
+    }
+    std::vector<int> want(p.bricks.size());
+    std::iota(want.begin(), want.end(), 0);
+    EXPECT_EQ(all, want) << ranks << " ranks";
+  }
+  EXPECT_THROW(contiguous_bricks(p, 3, 3), Error);
+}
+
+// The bricks' output regions tile any output grid, each voxel going to the brick whose owned box holds
+// its centre (checked in exact rational arithmetic: centre (2i + 1) / (2 out) of the axis).
+TEST(BrickPlan, OutputRegionsTileAnyGridByVoxelCentres) {
+  const BrickPlan p = plan_bricks(Int3{40, 36, 32}, Int3{3, 2, 4}, 2, 1);
+  for (const Int3 out : {Int3{40, 36, 32}, Int3{33, 20, 17}, Int3{80, 72, 64}, Int3{7, 5, 3}, Int3{1, 1, 1}, Int3{123, 37, 31}}) {
+    std::vector<int> owner(out.count(), -1);
+    for (const BrickSpec& b : p.bricks) {
+      const Box3 r = brick_output_region(p, b.index, out);
+      for (int64_t z = r.lo.z; z < r.hi.z; ++z)
+        for (int64_t y = r.lo.y; y < r.hi.y; ++y)
+          for (int64_t x = r.lo.x; x < r.hi.x; ++x) {
+            int& o = owner[size_t((z * out.y + y) * out.x + x)];
+            EXPECT_EQ(o, -1) << "voxel " << x << "," << y << "," << z << " taken twice";
+            o = b.index;
+            const Int3 i{x, y, z};
+            for (int a = 0; a < 3; ++a) {  // lo <= (2i + 1) dims / (2 out) < hi
+              EXPECT_LE(2 * b.owned.lo[a] * out[a], (2 * i[a] + 1) * p.dims[a]);
+              EXPECT_LT((2 * i[a] + 1) * p.dims[a], 2 * b.owned.hi[a] * out[a]);
+            }
+          }
+    }
+    EXPECT_EQ(std::count(owner.begin(), owner.end(), -1), 0) << out.x << "x" << out.y << "x" << out.z;
+  }
+}
+
+// At the scale of the paper's DNS (7200 bricks of 256^3) on 1024 ranks, a rank decoding its run of
+// bricks loads them and their neighbours; an even split of z-slices would load whole brick layers.
+TEST(BrickPlan, ContiguousSharesLoadFarFewerBricksThanSlabsAtScale) {
+  const BrickPlan p = plan_bricks(Int3{10240, 7680, 1536}, Int3{40, 30, 6}, 4, 1);
+  ASSERT_EQ(p.bricks.size(), 7200u);
+  const int ranks = 1024;
+  size_t most_by_bricks = 0, least_by_slabs = SIZE_MAX;
+  for (int r = 0; r < ranks; r += 61) {
+    std::vector<int> need;
+    for (int b : contiguous_bricks(p, r, ranks)) {
+      Box3 reach = p.bricks[size_t(b)].owned;
+      for (int a = 0; a < 3; ++a)
+        reach.lo[a] = std::max<int64_t>(0, reach.lo[a] - 1), reach.hi[a] = std::min(p.dims[a], reach.hi[a] + 1);
+      for (int n : bricks_touching(p, reach)) need.push_back(n);
+    }
+    std::sort(need.begin(), need.end());
+    need.erase(std::unique(need.begin(), need.end()), need.end());
+    most_by_bricks = std::max(most_by_bricks, need.size());
+    const int64_t z0 = p.dims.z * r / ranks, z1 = p.dims.z * (r + 1) / ranks;
+    least_by_slabs = std::min(least_by_slabs, bricks_touching(p, Box3{{0, 0, z0}, {p.dims.x, p.dims.y, z1}}).size());
+  }
+  EXPECT_LE(most_by_bricks, 100u);
+  EXPECT_GE(least_by_slabs, 1200u);
 }
 
 TEST(BrickPlan, SeedsDependOnSeedAndBrickOnly) {

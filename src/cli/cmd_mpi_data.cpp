@@ -1,6 +1,7 @@
-// `mpirun -n N vnr decode|eval MODEL_DIR ...` of a multi-brick model: each rank takes an even share of
-// the z-slices, loads only the bricks those slices touch, and decodes them; decode writes its slabs
-// into one output file at their offsets (committed atomically), eval adds up the ranks' error and SSIM sums.
+// `mpirun -n N vnr decode|eval MODEL_DIR ...` of a multi-brick model. Decode: each rank takes a run of
+// consecutive bricks (balanced by voxels), loads them and their neighbours, and writes the voxels they
+// own into one output file at their offsets (committed atomically). Eval: each rank takes an even share
+// of the z-slices, loads the bricks they touch, and the ranks' error and SSIM sums are added up.
 #ifdef VNR_HAVE_MPI
 #include <algorithm>
 #include <chrono>
@@ -51,17 +52,40 @@ std::shared_ptr<BrickedModel> open_my_bricks(const std::string& dir, Int3 out_di
   return m;
 }
 
-// Slabs of about 16 M voxels of [z0, z1): fn(za, zb, values in original units).
-template <typename Fn>
-void for_each_decoded_slab(const BrickedModel& m, Int3 dims, int64_t z0, int64_t z1, Fn fn) {
-  const int64_t slab = std::max<int64_t>(1, (int64_t(1) << 24) / std::max<int64_t>(1, dims.x * dims.y));
-  std::vector<float> buf;
-  for (int64_t za = z0; za < z1; za += slab) {
-    const int64_t zb = std::min(z1, za + slab);
-    buf.resize(size_t(dims.x * dims.y * (zb - za)));
-    decode_bricked_region(m, dims, Box3{{0, 0, za}, {dims.x, dims.y, zb}}, buf.data());
-    fn(za, zb, buf);
+// This rank's bricks for decoding at `dims` (contiguous_bricks), their output regions, and the model with
+// those bricks and their neighbours loaded.
+struct DecodeShare {
+  std::shared_ptr<BrickedModel> model;
+  std::vector<Box3> regions;
+  size_t loaded = 0;  // bricks loaded
+};
+DecodeShare open_decode_share(const std::string& dir, Int3 dims, const std::string& precision) {
+  if (!is_bricked_model_dir(dir))
+    fail("'{}' is not a multi-brick model directory (manifest.json): under mpirun, decode, eval and render run "
+         "over the bricks of a model trained with --bricks; run a single model without mpirun", dir);
+  const std::vector<int> none;
+  const BrickPlan plan = load_bricked_model(dir, &none)->plan;
+  DecodeShare share;
+  std::vector<int> only;
+  for (int b : contiguous_bricks(plan, mpi::rank(), mpi::size())) {
+    const Box3 region = brick_output_region(plan, b, dims);
+    if (region.empty()) continue;
+    share.regions.push_back(region);
+    // The bricks blended in its owned box, one voxel wider for the trilinear reach of resampling.
+    Box3 reach = plan.bricks[size_t(b)].owned;
+    for (int a = 0; a < 3; ++a) {
+      reach.lo[a] = std::max<int64_t>(0, reach.lo[a] - 1);
+      reach.hi[a] = std::min<int64_t>(plan.dims[a], reach.hi[a] + 1);
+    }
+    for (int n : bricks_touching(plan, reach)) only.push_back(n);
   }
+  std::sort(only.begin(), only.end());
+  only.erase(std::unique(only.begin(), only.end()), only.end());
+  share.loaded = only.size();
+  share.model = load_bricked_model(dir, &only);
+  for (std::optional<Model>& b : share.model->bricks)
+    if (b) b->net->set_inference_precision(parse_precision(precision));
+  return share;
 }
 
 struct DecodeMpiArgs {
@@ -70,48 +94,69 @@ struct DecodeMpiArgs {
   bool quiet = false, force = false;
 };
 
+// Decodes region of the dims grid in z-chunks of about 16 M voxels and writes it into file at its
+// offsets: a z-slice's rows together when the region spans the grid's width, else row by row.
+void write_region(mpi::ParallelFile& file, uint64_t data_offset, const BrickedModel& m, Int3 dims, const Box3& region,
+                  DType out_t) {
+  const Int3 r = region.size();
+  const size_t esize = dtype_size(out_t);
+  const int64_t chunk = std::max<int64_t>(1, (int64_t(1) << 24) / (r.x * r.y));
+  const bool whole_rows = r.x == dims.x;
+  std::vector<float> values;
+  std::vector<unsigned char> bytes;
+  for (int64_t za = region.lo.z; za < region.hi.z; za += chunk) {
+    const Box3 part{{region.lo.x, region.lo.y, za}, {region.hi.x, region.hi.y, std::min(region.hi.z, za + chunk)}};
+    values.resize(part.voxels());
+    decode_bricked_region(m, dims, part, values.data());
+    for (float& v : values) v = float(m.lo + double(v) * (m.hi - m.lo));  // to_original_units
+    bytes.resize(values.size() * esize);
+    store_values(out_t, values.data(), int64_t(values.size()), bytes.data());
+    const Int3 ps = part.size();
+    for (int64_t z = 0; z < ps.z; ++z)
+      for (int64_t y = 0; y < ps.y; y += whole_rows ? ps.y : 1) {
+        const int64_t rows = whole_rows ? ps.y : 1;
+        const uint64_t voxel = uint64_t(((part.lo.z + z) * dims.y + part.lo.y + y) * dims.x + part.lo.x);
+        file.write_at(data_offset + voxel * esize, bytes.data() + size_t((z * ps.y + y) * ps.x) * esize,
+                      size_t(rows * ps.x) * esize);
+      }
+  }
+}
+
 void run_decode_mpi(const DecodeMpiArgs& a) {
-  std::shared_ptr<BrickedModel> m;
+  DecodeShare share;
   Int3 dims;
   DType out_t = DType::Float32;
-  int64_t z0 = 0, z1 = 0;
   mpi::agree("to open the model", [&] {
     check_no_overwrite(volume_output_files(a.output), a.force);
     const std::vector<int> none;
     const std::shared_ptr<BrickedModel> header = is_bricked_model_dir(a.model) ? load_bricked_model(a.model, &none) : nullptr;
     dims = a.dims.empty() && header ? header->plan.dims : a.dims.empty() ? Int3{1, 1, 1} : parse_dims(a.dims);
-    std::tie(z0, z1) = my_slices(dims.z);
-    m = open_my_bricks(a.model, dims, z0, z1, a.precision);
-    out_t = a.dtype == "source" ? m->source_dtype : parse_dtype(a.dtype);
+    share = open_decode_share(a.model, dims, a.precision);
+    out_t = a.dtype == "source" ? share.model->source_dtype : parse_dtype(a.dtype);
   });
+  const BrickedModel& m = *share.model;
   const auto t0 = std::chrono::steady_clock::now();
   // As `vnr decode` writes it: voxel size relative to the model's grid, the model's value range.
-  const Vec3f spacing{float(double(m->plan.dims.x) / dims.x), float(double(m->plan.dims.y) / dims.y),
-                      float(double(m->plan.dims.z) / dims.z)};
+  const Vec3f spacing{float(double(m.plan.dims.x) / dims.x), float(double(m.plan.dims.y) / dims.y),
+                      float(double(m.plan.dims.z) / dims.z)};
   const std::string header = volume_file_header(a.output, dims, out_t, spacing);
-  const uint64_t slice_bytes = uint64_t(dims.x * dims.y) * dtype_size(out_t);
-  mpi::ParallelFile file(a.output, header.size() + slice_bytes * uint64_t(dims.z));
+  mpi::ParallelFile file(a.output, header.size() + uint64_t(dims.count()) * dtype_size(out_t));
   mpi::agree("decoding", [&] {
     if (mpi::rank() == 0 && !header.empty()) file.write_at(0, header.data(), header.size());
-    std::vector<unsigned char> bytes;
-    for_each_decoded_slab(*m, dims, z0, z1, [&](int64_t za, int64_t zb, std::vector<float>& values) {
-      for (float& v : values) v = float(m->lo + double(v) * (m->hi - m->lo));  // to_original_units
-      bytes.resize(values.size() * dtype_size(out_t));
-      store_values(out_t, values.data(), int64_t(values.size()), bytes.data());
-      file.write_at(header.size() + slice_bytes * uint64_t(za), bytes.data(), bytes.size());
-      (void)zb;
-    });
+    for (const Box3& region : share.regions) write_region(file, header.size(), m, dims, region, out_t);
   });
   file.commit();
   mpi::agree("to write the sidecar", [&] {
     const std::vector<std::string> files = volume_output_files(a.output);
     if (mpi::rank() == 0 && files.size() > 1)
-      write_file_atomic(files[1], raw_sidecar_text(a.output, dims, out_t, spacing, std::make_pair(m->lo, m->hi)));
+      write_file_atomic(files[1], raw_sidecar_text(a.output, dims, out_t, spacing, std::make_pair(m.lo, m.hi)));
   });
   const double seconds = mpi::max(seconds_since(t0));
+  const double most_loaded = mpi::max(double(share.loaded));
   if (mpi::rank() == 0)
-    std::printf("decoded %lldx%lldx%lld %s to %s in %.2fs (%d ranks)\n", (long long)dims.x, (long long)dims.y,
-                (long long)dims.z, dtype_name(out_t), a.output.c_str(), seconds, mpi::size());
+    std::printf("decoded %lldx%lldx%lld %s to %s in %.2fs (%d ranks; a rank loaded at most %.0f of %zu bricks)\n",
+                (long long)dims.x, (long long)dims.y, (long long)dims.z, dtype_name(out_t), a.output.c_str(), seconds,
+                mpi::size(), most_loaded, m.plan.bricks.size());
 }
 
 struct EvalMpiArgs {

@@ -121,6 +121,41 @@ std::vector<std::vector<int>> assign_bricks(const BrickPlan& plan, int n_ranks) 
   return out;
 }
 
+std::vector<int> contiguous_bricks(const BrickPlan& plan, int rank, int n_ranks) {
+  if (n_ranks < 1 || rank < 0 || rank >= n_ranks) fail("contiguous_bricks: rank {} of {}", rank, n_ranks);
+  uint64_t total = 0;
+  for (const BrickSpec& b : plan.bricks) total += b.owned.voxels();
+  // A brick goes to the rank whose share of the voxels holds the brick's middle voxel.
+  std::vector<int> out;
+  uint64_t before = 0;
+  for (const BrickSpec& b : plan.bricks) {
+    const uint64_t middle = before + b.owned.voxels() / 2;
+    before += b.owned.voxels();
+    const uint64_t owner = total ? std::min<uint64_t>(middle * uint64_t(n_ranks) / total, uint64_t(n_ranks - 1)) : 0;
+    if (owner == uint64_t(rank)) out.push_back(b.index);
+  }
+  return out;
+}
+
+Box3 brick_output_region(const BrickPlan& plan, int index, Int3 out_dims) {
+  if (index < 0 || size_t(index) >= plan.bricks.size()) fail("brick {} is not in the plan", index);
+  const Box3& owned = plan.bricks[size_t(index)].owned;
+  Box3 r;
+  for (int a = 0; a < 3; ++a) {
+    if (out_dims[a] < 1) fail("output dims must be positive, got {}", out_dims[a]);
+    // Voxel i's centre (i + 1/2) * dims / out lies at or past p exactly when
+    // (2i + 1) * dims >= 2 p * out, i.e. i >= ceil((2 p out - dims) / (2 dims)).
+    auto first_at_or_past = [&](int64_t p) {
+      const int64_t num = 2 * p * out_dims[a] - plan.dims[a], den = 2 * plan.dims[a];
+      const int64_t q = num >= 0 ? (num + den - 1) / den : -((-num) / den);
+      return std::clamp<int64_t>(q, 0, out_dims[a]);
+    };
+    r.lo[a] = first_at_or_past(owned.lo[a]);
+    r.hi[a] = std::max(r.lo[a], first_at_or_past(owned.hi[a]));
+  }
+  return r;
+}
+
 std::vector<int> bricks_touching(const BrickPlan& plan, const Box3& region) {
   std::vector<int> out;
   for (const BrickSpec& b : plan.bricks)

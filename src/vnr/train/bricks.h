@@ -54,6 +54,14 @@ uint32_t brick_seed(uint32_t seed, int index);
 // Bricks of each of n_ranks ranks, balanced by trained voxels (greedy largest-first onto the least
 // loaded rank, ties by lower rank): result[rank] = brick indices, ascending. Deterministic.
 std::vector<std::vector<int>> assign_bricks(const BrickPlan& plan, int n_ranks);
+// Rank `rank` of n_ranks's share of the bricks for decoding: a run of consecutive indices (x fastest,
+// so neighbours in x, then rows and layers), the runs balanced by owned voxels. A rank then needs
+// only its bricks and their neighbours, where an even split of z-slices needs whole brick layers.
+std::vector<int> contiguous_bricks(const BrickPlan& plan, int rank, int n_ranks);
+// The voxels of an out_dims grid (a resampling of the model's, or the model's own) that brick `index`
+// answers for: those whose centre lies in its owned box. The bricks' regions tile the grid exactly
+// (integer arithmetic: no voxel on a face is lost or taken twice); a region may be empty.
+Box3 brick_output_region(const BrickPlan& plan, int index, Int3 out_dims);
 
 // What a brick's training does beyond the setup (setup.steps, seed, config, target_ratio apply per brick;
 // setup.session.output is ignored: the brick's file is out_dir/spec.file).
