@@ -13,6 +13,7 @@
 #include "vnr/core/metrics.h"
 #include "vnr/fields/bricked_field.h"
 #include "vnr/viewer.h"
+#include "vnr/volume/raw_access.h"
 
 namespace vnr {
 namespace {
@@ -335,6 +336,43 @@ TEST(BrickTraining, QualityMatchesOneModelOfTheSameSizeWithAccurateFacesAndNoSea
               psnr_multi, at_face, inside, face_jump, interior_jump, face_jump_g0, psnr_one);
   EXPECT_LE(face_jump, interior_jump);
   EXPECT_LT(face_jump, 0.5 * face_jump_g0);
+}
+
+// The regions of an MPI eval (any boxes tiling the volume: here the bricks' owned boxes and an uneven
+// split, also with a region thinner than the SSIM window) add up to evaluate() of the whole decode: the
+// same PSNR, max error and SSIM, whose windows cross every region's faces.
+TEST(BrickModel, RegionEvaluationsAddUpToTheWholeEvaluation) {
+  TmpDir tmp;
+  const Int3 dims{23, 19, 17};
+  const std::string vol = tmp / "v.json";
+  synth_volume("marschner-lobb", dims, vol);
+  train_bricks(test::small_brick_setup(vol), Int3{3, 2, 2}, 2, tmp / "m", test::brick_steps(20));
+  const Model m = load_model(tmp / "m");
+  const Volume truth = open_volume(vol);
+  const EvalResult full = evaluate(m, truth, true);
+  const RawVolumeFile file(describe_volume(vol), truth.lo, truth.hi, NonFinitePolicy::Error);
+  std::vector<Box3> owned;
+  for (const BrickSpec& b : m.bricks->plan.bricks) owned.push_back(b.owned);
+  // [20, 23) in x: no window starts there (its grid is narrower than a window).
+  const std::vector<Box3> uneven = {Box3{{0, 0, 0}, {4, 19, 17}},   Box3{{4, 0, 0}, {20, 3, 17}},
+                                    Box3{{20, 0, 0}, {23, 3, 17}}, Box3{{4, 3, 0}, {23, 19, 9}},
+                                    Box3{{4, 3, 9}, {23, 19, 17}}};
+  for (const std::vector<Box3>& tiling : {owned, uneven}) {
+    for (bool with_ssim : {true, false}) {
+      EvalSums all;
+      for (const Box3& r : tiling) all.add(evaluate_region(m, file, r, with_ssim, 3 * 23 * 19));
+      const EvalResult got = all.result(truth.hi - truth.lo);
+      EXPECT_EQ(all.voxels, int64_t(dims.count()));
+      EXPECT_NEAR(got.psnr, full.psnr, 1e-9 * full.psnr);
+      EXPECT_EQ(got.max_abs_error, full.max_abs_error);
+      if (with_ssim) {
+        EXPECT_EQ(all.ssim_windows, int64_t(17 * 13 * 11));
+        EXPECT_NEAR(got.ssim, full.ssim, 1e-12);
+      } else {
+        EXPECT_EQ(all.ssim_windows, 0);
+      }
+    }
+  }
 }
 
 TEST(BrickModel, EveryPathOpensTheDirectoryLikeOneModel) {

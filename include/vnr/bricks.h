@@ -17,9 +17,10 @@ namespace vnr {
 // The bricked part of a model opened by load_model (null for a single-network model).
 inline const BrickedModel* bricked(const Model& m) { return m.bricks.get(); }
 
-// Distributed evaluation: evaluate_box_slices(model, file, the whole volume's box, z0, z1, ...) is one rank's
-// share (its slices, and with SSIM the windows starting in them); the ranks' EvalSums add up to the
-// single-process evaluation. The rank needs the bricks touching slices [z0 - 1, z1 + 7) loaded.
+// Distributed decode and evaluation: a rank takes contiguous_bricks(plan, rank, n), decodes
+// brick_output_region of each, and evaluate_region(model, file, that region) gives its share of the
+// evaluation (errors, and with SSIM the windows starting in it); the ranks' EvalSums add up to the
+// single-process evaluation. The rank needs its bricks and those within 7 voxels loaded.
 
 // Sort-last rendering (ray marching without shadows): brick `index`'s part of every ray of the renderer's
 // current settings (frame 0), as premultiplied RGBA without background, and per pixel the ray

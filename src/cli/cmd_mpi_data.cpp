@@ -1,7 +1,7 @@
-// `mpirun -n N vnr decode|eval MODEL_DIR ...` of a multi-brick model. Decode: each rank takes a run of
-// consecutive bricks (balanced by voxels), loads them and their neighbours, and writes the voxels they
-// own into one output file at their offsets (committed atomically). Eval: each rank takes an even share
-// of the z-slices, loads the bricks they touch, and the ranks' error and SSIM sums are added up.
+// `mpirun -n N vnr decode|eval MODEL_DIR ...` of a multi-brick model: each rank takes a run of consecutive
+// bricks (balanced by voxels) and loads them and their neighbours. Decode writes the voxels they own
+// into one output file at their offsets (committed atomically); eval evaluates them (errors, and the
+// SSIM windows starting in them) and the ranks' sums are added up.
 #ifdef VNR_HAVE_MPI
 #include <algorithm>
 #include <chrono>
@@ -27,61 +27,36 @@ double seconds_since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
 
-// The z-slices [z0, z1) of `depth` that rank r of n takes.
-std::pair<int64_t, int64_t> my_slices(int64_t depth) {
-  const int64_t r = mpi::rank(), n = mpi::size();
-  return {depth * r / n, depth * (r + 1) / n};
-}
-
-// The plan of MODEL_DIR and this rank's bricks for output slices [z0, z1) of an out_dims grid.
-std::shared_ptr<BrickedModel> open_my_bricks(const std::string& dir, Int3 out_dims, int64_t z0, int64_t z1,
-                                             const std::string& precision) {
-  if (!is_bricked_model_dir(dir))
-    fail("'{}' is not a multi-brick model directory (manifest.json): under mpirun, decode, eval and render run "
-         "over the bricks of a model trained with --bricks; run a single model without mpirun", dir);
-  const std::vector<int> none;
-  const BrickPlan plan = load_bricked_model(dir, &none)->plan;
-  // The slices' extent in the model's grid, one voxel wider for the trilinear reach of resampling.
-  const double scale = double(plan.dims.z) / double(out_dims.z);
-  Box3 region{{0, 0, std::max<int64_t>(0, int64_t(std::floor(z0 * scale)) - 1)},
-              {plan.dims.x, plan.dims.y, std::min<int64_t>(plan.dims.z, int64_t(std::ceil(z1 * scale)) + 1)}};
-  const std::vector<int> only = z1 > z0 ? bricks_touching(plan, region) : none;
-  std::shared_ptr<BrickedModel> m = load_bricked_model(dir, &only);
-  for (std::optional<Model>& b : m->bricks)
-    if (b) b->net->set_inference_precision(parse_precision(precision));
-  return m;
-}
-
-// This rank's bricks for decoding at `dims` (contiguous_bricks), their output regions, and the model with
-// those bricks and their neighbours loaded.
-struct DecodeShare {
+// This rank's bricks (contiguous_bricks), their output regions at `dims`, and the model with those bricks
+// and the bricks within `reach` voxels of them loaded.
+struct RankShare {
   std::shared_ptr<BrickedModel> model;
   std::vector<Box3> regions;
   size_t loaded = 0;  // bricks loaded
 };
-DecodeShare open_decode_share(const std::string& dir, Int3 dims, const std::string& precision) {
+RankShare open_rank_share(const std::string& dir, Int3 dims, int reach, const std::string& precision) {
   if (!is_bricked_model_dir(dir))
     fail("'{}' is not a multi-brick model directory (manifest.json): under mpirun, decode, eval and render run "
          "over the bricks of a model trained with --bricks; run a single model without mpirun", dir);
   const std::vector<int> none;
   const BrickPlan plan = load_bricked_model(dir, &none)->plan;
-  DecodeShare share;
+  RankShare share;
   std::vector<int> only;
   for (int b : contiguous_bricks(plan, mpi::rank(), mpi::size())) {
     const Box3 region = brick_output_region(plan, b, dims);
     if (region.empty()) continue;
     share.regions.push_back(region);
-    // The bricks blended in its owned box, one voxel wider for the trilinear reach of resampling.
-    Box3 reach = plan.bricks[size_t(b)].owned;
+    Box3 grown = plan.bricks[size_t(b)].owned;
     for (int a = 0; a < 3; ++a) {
-      reach.lo[a] = std::max<int64_t>(0, reach.lo[a] - 1);
-      reach.hi[a] = std::min<int64_t>(plan.dims[a], reach.hi[a] + 1);
+      grown.lo[a] = std::max<int64_t>(0, grown.lo[a] - reach);
+      grown.hi[a] = std::min<int64_t>(plan.dims[a], grown.hi[a] + reach);
     }
-    for (int n : bricks_touching(plan, reach)) only.push_back(n);
+    for (int n : bricks_touching(plan, grown)) only.push_back(n);
   }
   std::sort(only.begin(), only.end());
   only.erase(std::unique(only.begin(), only.end()), only.end());
   share.loaded = only.size();
+  if (only.empty()) only.push_back(0);  // a rank without bricks (more ranks than bricks): the model's description
   share.model = load_bricked_model(dir, &only);
   for (std::optional<Model>& b : share.model->bricks)
     if (b) b->net->set_inference_precision(parse_precision(precision));
@@ -123,7 +98,7 @@ void write_region(mpi::ParallelFile& file, uint64_t data_offset, const BrickedMo
 }
 
 void run_decode_mpi(const DecodeMpiArgs& a) {
-  DecodeShare share;
+  RankShare share;
   Int3 dims;
   DType out_t = DType::Float32;
   mpi::agree("to open the model", [&] {
@@ -131,7 +106,7 @@ void run_decode_mpi(const DecodeMpiArgs& a) {
     const std::vector<int> none;
     const std::shared_ptr<BrickedModel> header = is_bricked_model_dir(a.model) ? load_bricked_model(a.model, &none) : nullptr;
     dims = a.dims.empty() && header ? header->plan.dims : a.dims.empty() ? Int3{1, 1, 1} : parse_dims(a.dims);
-    share = open_decode_share(a.model, dims, a.precision);
+    share = open_rank_share(a.model, dims, 1, a.precision);  // 1: the trilinear reach of resampling
     out_t = a.dtype == "source" ? share.model->source_dtype : parse_dtype(a.dtype);
   });
   const BrickedModel& m = *share.model;
@@ -167,25 +142,24 @@ struct EvalMpiArgs {
 };
 
 void run_eval_mpi(const EvalMpiArgs& a) {
-  std::shared_ptr<BrickedModel> m;
+  RankShare share;
   VolumeDesc desc;
   ValueRange range;
   std::string range_source;
-  int64_t z0 = 0, z1 = 0;
   mpi::agree("to open the model and the volume", [&] {
     desc = describe_volume(a.volume, a.vol.raw());
-    std::tie(z0, z1) = my_slices(desc.dims.z);
-    // SSIM windows starting in the last slices reach 6 slices further.
-    m = open_my_bricks(a.model, desc.dims, z0, a.no_ssim || z1 == z0 ? z1 : std::min(desc.dims.z, z1 + 6), a.precision);
-    if (!(desc.dims == m->plan.dims))
-      fail("'{}' has {}x{}x{} voxels but the model {}x{}x{}", a.volume, desc.dims.x, desc.dims.y, desc.dims.z,
-           m->plan.dims.x, m->plan.dims.y, m->plan.dims.z);
+    // SSIM windows starting in a brick reach 6 voxels past it.
+    share = open_rank_share(a.model, desc.dims, a.no_ssim ? 1 : 7, a.precision);
+    const Int3 md = share.model->plan.dims;
+    if (!(desc.dims == md))
+      fail("'{}' has {}x{}x{} voxels but the model {}x{}x{}", a.volume, desc.dims.x, desc.dims.y, desc.dims.z, md.x, md.y,
+           md.z);
   });
   // The range `vnr eval` normalises the volume with (its sidecar's, else one scan, on rank 0).
   mpi::agree("to find the volume's value range", [&] {
     if (mpi::rank() != 0) return;
     const FileEvalPlan plan = plan_file_evaluation(desc, 0, false);
-    range = file_evaluation_range(plan, model_of_bricks(m), false, a.vol.load(), &range_source);
+    range = file_evaluation_range(plan, model_of_bricks(share.model), false, a.vol.load(), &range_source);
   });
   const std::string bytes = mpi::broadcast(std::string(reinterpret_cast<const char*>(&range), sizeof range));
   std::memcpy(&range, bytes.data(), sizeof range);
@@ -194,7 +168,8 @@ void run_eval_mpi(const EvalMpiArgs& a) {
   mpi::agree("evaluating", [&] {
     RawVolumeFile file(desc, range.lo, range.hi, a.vol.load().non_finite, "distributed evaluation",
                        "convert the volume to raw or NRRD (uncompressed)");
-    mine = evaluate_box_slices(model_of_bricks(m), file, Box3{{0, 0, 0}, desc.dims}, z0, z1, !a.no_ssim);
+    const Model model = model_of_bricks(share.model);
+    for (const Box3& region : share.regions) mine.add(evaluate_region(model, file, region, !a.no_ssim));
   });
   EvalSums all;
   all.sse = mpi::sum(mine.sse);
@@ -203,12 +178,14 @@ void run_eval_mpi(const EvalMpiArgs& a) {
   all.ssim_sum = mpi::sum(mine.ssim_sum);
   all.ssim_windows = mpi::sum(mine.ssim_windows);
   const EvalResult ev = all.result(range.hi - range.lo);
-  const double seconds = mpi::max(seconds_since(t0));
+  const double seconds = mpi::max(seconds_since(t0)), most_loaded = mpi::max(double(share.loaded));
   if (mpi::rank() != 0) return;
   std::printf("PSNR %.2f dB", ev.psnr);
   if (!a.no_ssim) std::printf(", SSIM %.4f", ev.ssim);
-  std::printf(", max |error| %.4g (%.4g in data units), evaluated in %.2fs on %d ranks\n", ev.max_abs_error,
-              ev.max_abs_error_original, seconds, mpi::size());
+  std::printf(", max |error| %.4g (%.4g in data units), evaluated in %.2fs on %d ranks (a rank loaded at most %.0f of "
+              "%zu bricks)\n",
+              ev.max_abs_error, ev.max_abs_error_original, seconds, mpi::size(), most_loaded,
+              share.model->plan.bricks.size());
   write_report(a.report, Json{{"psnr", ev.psnr}, {"mse", ev.mse}, {"max_abs_error", ev.max_abs_error},
                               {"max_abs_error_original", ev.max_abs_error_original}, {"samples", desc.dims.count()},
                               {"decode_seconds", seconds}, {"ranks", mpi::size()}, {"value_range", {range.lo, range.hi}},

@@ -1,5 +1,6 @@
 #include "vnr/train/evaluate.h"
 #include "vnr/train/decoder.h"
+#include "vnr/train/bricks.h"
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -30,30 +31,61 @@ EvalResult evaluate_with(Decoder& decoder, const Volume& vol, bool with_ssim) {
   return r;
 }
 
-double psnr_of_mse(double mse) { return mse > 0 ? 10 * std::log10(1 / mse) : 999.0; }  // error_stats' convention
-
 // fn(z0, k, values): consecutive slabs of the reference slices [z_first, z_last), at most slab_slices each.
 using SlabFn = std::function<void(int64_t z0, int64_t k, const float* values)>;
 using SlabSource = std::function<void(int64_t z_first, int64_t z_last, int64_t slab_slices, const SlabFn& fn)>;
+// decode(z0, k, out): the evaluated field at slices [z0, z0 + k) of the slab grid.
+using SlabDecode = std::function<void(int64_t z0, int64_t k, float* out)>;
 
-// The sums of the output slices [z_begin, z_end) of grid d: errors of those slices, and with SSIM the
-// 7x7x7 windows whose first slice is among them (reading up to wz - 1 slices past z_end). The last
-// wz - 1 slices of a slab stay in front of the next, so that windows crossing a slab boundary are
-// counted once and see the same voxels as in the whole volume.
-// `what` names the data in messages.
-EvalSums sums_with(Decoder& decoder, Int3 d, int64_t z_begin, int64_t z_end, bool with_ssim, int64_t slab_voxels,
+// What sums_with evaluates: slabs of a grid g (whole x-y slices), of which the voxels [0, own.x) x
+// [0, own.y) x [z_begin, z_end) count. With SSIM, the windows (of w voxels, the whole volume's
+// window) whose first voxel is among them: g reaches w - 1 voxels past own in x and y (or ends with the
+// volume), and up to w.z - 1 slices past z_end are read for them.
+struct SlabGrid {
+  Int3 g, own, w;
+  int64_t z_begin = 0, z_end = 0;
+};
+// ssim3d's window on a volume of dims d: 7 voxels per axis, or the whole axis when shorter.
+Int3 ssim_window(Int3 d) { return Int3{std::min<int64_t>(7, d.x), std::min<int64_t>(7, d.y), std::min<int64_t>(7, d.z)}; }
+
+// Squared errors and the largest error over the first own_x x own_y voxels of k slices of a gx x gy grid.
+void add_errors(const float* ref, const float* dec, int64_t gx, int64_t gy, int64_t k, int64_t own_x, int64_t own_y,
+                EvalSums& r) {
+  if (own_x == gx && own_y == gy) {
+    const ErrorStats e = error_stats(ref, dec, Int3{gx, gy, k});
+    r.sse += e.mse * double(gx * gy * k);
+    r.max_abs_error = std::max(r.max_abs_error, e.max_abs_error);
+  } else {
+    for (int64_t z = 0; z < k; ++z)
+      for (int64_t y = 0; y < own_y; ++y) {
+        const int64_t row = (z * gy + y) * gx;
+        for (int64_t x = 0; x < own_x; ++x) {
+          const double d = double(dec[row + x]) - double(ref[row + x]);
+          r.sse += d * d;
+          r.max_abs_error = std::max(r.max_abs_error, std::fabs(d));
+        }
+      }
+  }
+  r.voxels += own_x * own_y * k;
+}
+
+// The last w.z - 1 slices of a slab stay in front of the next, so that windows crossing a slab boundary
+// are counted once and see the same voxels as in the whole volume. `what` names the data in messages.
+EvalSums sums_with(const SlabGrid& s, const SlabDecode& decode, bool with_ssim, int64_t slab_voxels,
                    const SlabSource& source, const std::function<void(double)>& progress, const std::string& what) {
-  if (d.x <= 0 || d.y <= 0 || d.z <= 0) fail("evaluation of an empty {}x{}x{} grid", d.x, d.y, d.z);
-  if (z_begin < 0 || z_end > d.z || z_begin > z_end) fail("slices [{}, {}) are not in 0..{}", z_begin, z_end, d.z);
+  const Int3 g = s.g;
+  if (g.x <= 0 || g.y <= 0 || g.z <= 0) fail("evaluation of an empty {}x{}x{} grid", g.x, g.y, g.z);
+  if (s.z_begin < 0 || s.z_end > g.z || s.z_begin > s.z_end) fail("slices [{}, {}) are not in 0..{}", s.z_begin, s.z_end, g.z);
   EvalSums r;
-  if (z_begin == z_end) return r;
-  const int64_t slice = d.x * d.y;
+  if (s.z_begin == s.z_end || s.own.x <= 0 || s.own.y <= 0) return r;
+  const int64_t slice = g.x * g.y;
   if (slab_voxels <= 0) slab_voxels = int64_t(1) << 24;
-  // ssim3d's window: 7 voxels per axis, or the whole axis when shorter.
-  const int64_t wx = std::min<int64_t>(7, d.x), wy = std::min<int64_t>(7, d.y), wz = std::min<int64_t>(7, d.z);
-  const double windows_per_slice = double((d.x - wx + 1) * (d.y - wy + 1));
-  const int64_t z_last = with_ssim ? std::min(d.z, z_end + wz - 1) : z_end;  // slices read: [z_begin, z_last)
-  const int64_t slab_slices = std::clamp<int64_t>(slab_voxels / slice, 1, z_last - z_begin);
+  // No window starts in the owned part when the grid ends less than a window past its start.
+  with_ssim = with_ssim && g.x >= s.w.x && g.y >= s.w.y;
+  const int64_t wz = s.w.z;
+  const double windows_per_slice = double((g.x - s.w.x + 1) * (g.y - s.w.y + 1));
+  const int64_t z_last = with_ssim ? std::min(g.z, s.z_end + wz - 1) : s.z_end;  // slices read: [z_begin, z_last)
+  const int64_t slab_slices = std::clamp<int64_t>(slab_voxels / slice, 1, z_last - s.z_begin);
   const int64_t keep = with_ssim ? wz - 1 : 0;
   std::vector<float> ref, dec;
   try {
@@ -64,7 +96,7 @@ EvalSums sums_with(Decoder& decoder, Int3 d, int64_t z_begin, int64_t z_end, boo
          what);
   }
   int64_t held = 0;  // slices in ref/dec (SSIM only keeps slices across slabs)
-  source(z_begin, z_last, slab_slices, [&](int64_t z0, int64_t k, const float* values) {
+  source(s.z_begin, z_last, slab_slices, [&](int64_t z0, int64_t k, const float* values) {
     float* rs = nullptr;
     if (with_ssim) {
       rs = ref.data() + held * slice;
@@ -73,29 +105,29 @@ EvalSums sums_with(Decoder& decoder, Int3 d, int64_t z_begin, int64_t z_end, boo
     const float* reference = with_ssim ? rs : values;
     float* decoded = dec.data() + held * slice;
     auto t0 = std::chrono::steady_clock::now();
-    decoder.slices(d, z0, z0 + k, decoded);
+    decode(z0, k, decoded);
     r.decode_seconds += seconds_since(t0);
-    const int64_t k_own = std::clamp<int64_t>(z_end - z0, 0, k);  // slices past z_end serve SSIM windows only
-    if (k_own > 0) {
-      const ErrorStats e = error_stats(reference, decoded, Int3{d.x, d.y, k_own});
-      r.sse += e.mse * double(k_own * slice);
-      r.voxels += k_own * slice;
-      r.max_abs_error = std::max(r.max_abs_error, e.max_abs_error);
-    }
+    const int64_t k_own = std::clamp<int64_t>(s.z_end - z0, 0, k);  // slices past z_end serve SSIM windows only
+    if (k_own > 0) add_errors(reference, decoded, g.x, g.y, k_own, s.own.x, s.own.y, r);
     if (with_ssim) {
       held += k;
       if (held >= wz) {  // windows starting at buffer slices 0 .. held - wz are complete
         const double n = windows_per_slice * double(held - wz + 1);
-        r.ssim_sum += ssim3d(ref.data(), dec.data(), Int3{d.x, d.y, held}) * n;
+        r.ssim_sum += ssim3d(ref.data(), dec.data(), Int3{g.x, g.y, held}) * n;
         r.ssim_windows += int64_t(n);
         std::copy(ref.begin() + (held - keep) * slice, ref.begin() + held * slice, ref.begin());
         std::copy(dec.begin() + (held - keep) * slice, dec.begin() + held * slice, dec.begin());
         held = keep;
       }
     }
-    if (progress) progress(double(z0 + k - z_begin) / double(z_last - z_begin));
+    if (progress) progress(double(z0 + k - s.z_begin) / double(z_last - s.z_begin));
   });
   return r;
+}
+
+// Slices [z0, z0 + k) of a whole-grid decode by `decoder`.
+SlabDecode slices_of(Decoder& decoder, Int3 d) {
+  return [&decoder, d](int64_t z0, int64_t k, float* out) { decoder.slices(d, z0, z0 + k, out); };
 }
 
 // Slabs of the box of `file`, read with pread.
@@ -112,12 +144,18 @@ SlabSource box_slabs(const RawVolumeFile& file, const Box3& box) {
   };
 }
 
-EvalSums box_sums_with(Decoder& decoder, const RawVolumeFile& truth, const Box3& box, int64_t z_begin, int64_t z_end,
-                       bool with_ssim, int64_t slab_voxels) {
+void check_box_in(const RawVolumeFile& truth, const Box3& box) {
   if (box.empty() || !(intersect(box, Box3{{0, 0, 0}, truth.dims()}) == box))
     fail("evaluation box [{}, {}) x [{}, {}) x [{}, {}) is empty or not inside the {}x{}x{} volume", box.lo.x, box.hi.x,
          box.lo.y, box.hi.y, box.lo.z, box.hi.z, truth.dims().x, truth.dims().y, truth.dims().z);
-  return sums_with(decoder, box.size(), z_begin, z_end, with_ssim, slab_voxels, box_slabs(truth, box), {},
+}
+
+EvalSums box_sums_with(Decoder& decoder, const RawVolumeFile& truth, const Box3& box, int64_t z_begin, int64_t z_end,
+                       bool with_ssim, int64_t slab_voxels) {
+  check_box_in(truth, box);
+  const Int3 g = box.size();
+  const SlabGrid s{g, g, ssim_window(g), z_begin, z_end};
+  return sums_with(s, slices_of(decoder, g), with_ssim, slab_voxels, box_slabs(truth, box), {},
                    fmt::format("a box of '{}'", truth.desc().path));
 }
 
@@ -129,7 +167,9 @@ EvalResult streamed_with(Decoder& decoder, const VolumeDesc& desc, double lo, do
   const SlabSource whole_file = [&](int64_t, int64_t, int64_t slab_slices, const SlabFn& fn) {
     for_each_slab(desc, lo, hi, opts, slab_slices * d.x * d.y, fn);
   };
-  return sums_with(decoder, d, 0, d.z, with_ssim, slab_voxels, whole_file, progress, fmt::format("'{}'", desc.path))
+  const SlabGrid s{d, d, ssim_window(d), 0, d.z};
+  return sums_with(s, slices_of(decoder, d), with_ssim, slab_voxels, whole_file, progress,
+                   fmt::format("'{}'", desc.path))
       .result(hi - lo);
 }
 
@@ -200,15 +240,34 @@ EvalResult evaluate_streamed(const Model& model, const VolumeDesc& desc, double 
   Decoder d(model, device);
   return streamed_with(d, desc, lo, hi, opts, with_ssim, progress, slab_voxels);
 }
+double psnr_of_mse(double mse) { return mse > 0 ? 10 * std::log10(1 / mse) : 999.0; }  // error_stats' convention
+
 EvalSums evaluate_box_slices(const Network& net, const RawVolumeFile& truth, const Box3& box, int64_t z_begin,
                              int64_t z_end, bool with_ssim, int64_t slab_voxels, Device device) {
   Decoder d(net, device);
   return box_sums_with(d, truth, box, z_begin, z_end, with_ssim, slab_voxels);
 }
-EvalSums evaluate_box_slices(const Model& model, const RawVolumeFile& truth, const Box3& box, int64_t z_begin,
-                             int64_t z_end, bool with_ssim, int64_t slab_voxels, Device device) {
-  Decoder d(model, device);
-  return box_sums_with(d, truth, box, z_begin, z_end, with_ssim, slab_voxels);
+
+EvalSums evaluate_region(const Model& model, const RawVolumeFile& truth, const Box3& region, bool with_ssim,
+                         int64_t slab_voxels) {
+  if (!model.bricks) fail("evaluate_region needs a multi-brick model");
+  check_box_in(truth, region);
+  const Int3 d = truth.dims(), w = ssim_window(d);
+  if (!(model.bricks->plan.dims == d))
+    fail("'{}' has {}x{}x{} voxels but the model {}x{}x{}", truth.desc().path, d.x, d.y, d.z, model.bricks->plan.dims.x,
+         model.bricks->plan.dims.y, model.bricks->plan.dims.z);
+  // The grid reaches w - 1 voxels past the region in x and y for the windows starting in it.
+  Box3 ext = region;
+  for (int a = 0; a < 2; ++a) ext.hi[a] = with_ssim ? std::min(d[a], region.hi[a] + w[a] - 1) : region.hi[a];
+  ext.hi.z = d.z;  // sums_with reads past z_end only what SSIM needs
+  const Int3 g = ext.size();
+  const BrickedModel& m = *model.bricks;
+  const SlabDecode decode = [&](int64_t z0, int64_t k, float* out) {
+    decode_bricked_region(m, d, Box3{{ext.lo.x, ext.lo.y, ext.lo.z + z0}, {ext.hi.x, ext.hi.y, ext.lo.z + z0 + k}}, out);
+  };
+  const SlabGrid s{g, region.size(), w, 0, region.size().z};
+  return sums_with(s, decode, with_ssim, slab_voxels, box_slabs(truth, ext), {},
+                   fmt::format("a region of '{}'", truth.desc().path));
 }
 
 void EvalSums::add(const EvalSums& o) {

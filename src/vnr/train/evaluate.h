@@ -42,6 +42,9 @@ EvalResult evaluate_streamed(const Model& model, const VolumeDesc& desc, double 
                              const std::function<void(double fraction)>& progress = {}, int64_t slab_voxels = 0,
                              Device device = Device::Cpu);
 
+// PSNR of an MSE of normalised values (range 1): 10 log10(1 / mse), 999 for mse <= 0 (error_stats').
+double psnr_of_mse(double mse);
+
 // The sums behind an evaluation of part of a volume: parts evaluated apart (MPI ranks' slices) add up
 // to the evaluation of the whole.
 struct EvalSums {
@@ -55,15 +58,20 @@ struct EvalSums {
   // PSNR, MSE, max error (also times value_range, in original units), SSIM (0 without windows).
   EvalResult result(double value_range) const;
 };
-// The network (or model) decoded on a grid of box.size() voxels, its output slices [z_begin, z_end),
+// The network decoded on a grid of box.size() voxels (a brick's network on its box), its output slices [z_begin, z_end),
 // against the voxels of box in truth, read in z-slabs of about slab_voxels (0: 16 M) as
 // evaluate_streamed reads. Errors are those slices'; with SSIM, the windows whose first slice is among
 // them (the 6 slices past z_end are read and decoded for them). Over all slices of the box, the result
 // is evaluate() on the box loaded, up to the order of the sums.
 EvalSums evaluate_box_slices(const Network& net, const RawVolumeFile& truth, const Box3& box, int64_t z_begin,
                              int64_t z_end, bool with_ssim, int64_t slab_voxels = 0, Device device = Device::Cpu);
-EvalSums evaluate_box_slices(const Model& model, const RawVolumeFile& truth, const Box3& box, int64_t z_begin,
-                             int64_t z_end, bool with_ssim, int64_t slab_voxels = 0, Device device = Device::Cpu);
+
+// A multi-brick model's part of its evaluation against truth (the volume at the model's grid): the errors
+// of the voxels in region and, with SSIM, the windows whose first voxel is in it (reading and decoding up
+// to 6 voxels past it). Regions that tile the volume (the bricks' owned boxes: MPI ranks) add up to
+// the whole evaluation; the model needs the bricks touching region grown by 7 voxels loaded.
+EvalSums evaluate_region(const Model& model, const RawVolumeFile& truth, const Box3& region, bool with_ssim,
+                         int64_t slab_voxels = 0);
 
 // PSNR estimated from n_samples voxels drawn uniformly (with replacement; deterministic for a
 // seed), read with RawVolumeFile (uncompressed data only) and decoded as evaluate() decodes them.

@@ -125,8 +125,6 @@ Json finish_quantization(Model& model, const Quantization& q, double g, uint64_t
 
 uint64_t probe_seed(uint64_t training_seed) { return training_seed ^ 0x9e3779b9u; }
 
-double psnr_of_mse(double mse) { return mse > 0 ? -10.0 * std::log10(mse) : 999.0; }
-
 ProbeSet draw_probe(const Sampler& sampler, int64_t n, uint64_t seed) {
   ProbeSet p;
   p.x.resize(size_t(n));

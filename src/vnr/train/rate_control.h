@@ -11,6 +11,7 @@
 #include "vnr/core/json.h"
 #include "vnr/nn/network.h"
 #include "vnr/nn/param_codec.h"
+#include "vnr/train/evaluate.h"
 #include "vnr/train/model.h"
 #include "vnr/train/sampler.h"
 
@@ -37,7 +38,6 @@ uint64_t probe_seed(uint64_t training_seed);
 // Random voxels of a volume in memory at their centres, with their exact values: what the final
 // evaluation measures (sampler targets are interpolated between voxels and read ~1 dB optimistic).
 ProbeSet draw_voxel_probe(const Volume& vol, int64_t n, uint64_t seed);
-double psnr_of_mse(double mse);
 
 // Per-segment steps step_i = g * shape_i. With a_i the growth of the probe MSE per squared step of
 // segment i, equal slopes of distortion against rate give shape_i = sqrt(n_i / a_i) (high-rate model:
