@@ -71,14 +71,8 @@ void write_manifest_now(const TrainArgs& a, const TrainingSetup& setup, const Br
   const std::vector<BrickResult> all = brick_results_on_disk(a.output, plan, done);
   const Json config = setup.config_json ? *setup.config_json : Json(setup.config);
   if (!final) return write_manifest(a.output, plan, dtype, range, config, all);
-  int64_t steps = 0;
-  double seconds = 0;
-  for (const BrickResult& b : all) steps += b.steps, seconds += b.seconds;
-  const Json steps_per_brick = brick_steps(a) >= 0 ? Json(brick_steps(a)) : Json(nullptr);  // null: by --seconds
-  const Json training = {{"bricks_done", all.size()}, {"bricks", plan.bricks.size()},
-                         {"complete", all.size() == plan.bricks.size()}, {"steps_per_brick", steps_per_brick},
-                         {"brick_steps", steps}, {"brick_seconds", seconds}, {"batch", setup.batch},
-                         {"seed", setup.seed}, {"target_ratio", setup.target_ratio}, {"ranks", mpi::size()}};
+  Json training = bricks_training_summary(setup, plan, all, brick_steps(a));
+  training["ranks"] = mpi::size();
   write_manifest(a.output, plan, dtype, range, config, all, training);
 }
 

@@ -99,6 +99,12 @@ void prepare_brick_dir(const std::string& out_dir, const BrickPlan& plan, bool r
 std::vector<BrickResult> brick_results_on_disk(const std::string& out_dir, const BrickPlan& plan,
                                                const std::vector<bool>& done);
 
+// The manifest's "training" summary (write_manifest) of the bricks done, from their results on disk:
+// bricks done of all, complete, steps per brick (null when negative: --seconds limited each brick),
+// the bricks' summed steps and seconds, batch, seed and target_ratio.
+Json bricks_training_summary(const TrainingSetup& setup, const BrickPlan& plan, const std::vector<BrickResult>& done,
+                             int64_t steps_per_brick);
+
 // The single-process run of `vnr train --bricks`: prepare the directory, write the manifest, train every
 // brick not done (in index order, or those in `only`), rewrite the manifest with every finished brick.
 struct BricksRunOptions {

@@ -50,6 +50,22 @@ std::vector<BrickResult> brick_results_on_disk(const std::string& dir, const Bri
   return out;
 }
 
+Json bricks_training_summary(const TrainingSetup& setup, const BrickPlan& plan, const std::vector<BrickResult>& done,
+                             int64_t steps_per_brick) {
+  int64_t steps = 0;
+  double seconds = 0;
+  for (const BrickResult& b : done) steps += b.steps, seconds += b.seconds;
+  return Json{{"bricks_done", done.size()},
+              {"bricks", plan.bricks.size()},
+              {"complete", done.size() == plan.bricks.size()},
+              {"steps_per_brick", steps_per_brick >= 0 ? Json(steps_per_brick) : Json(nullptr)},
+              {"brick_steps", steps},
+              {"brick_seconds", seconds},
+              {"batch", setup.batch},
+              {"seed", setup.seed},
+              {"target_ratio", setup.target_ratio}};
+}
+
 BricksRunResult train_bricks(const TrainingSetup& setup, Int3 grid, int ghost, const std::string& out_dir,
                              const BricksRunOptions& o) {
   check_training_setup(setup);
@@ -86,16 +102,8 @@ BricksRunResult train_bricks(const TrainingSetup& setup, Int3 grid, int ghost, c
   for (bool d : done) r.done += d;
   r.complete = r.done == int(done.size());
   r.seconds = seconds_since(t0);
-  int64_t steps = 0;
-  double seconds = 0;
   const std::vector<BrickResult> all = brick_results_on_disk(out_dir, r.plan, done);
-  for (const BrickResult& b : all) {
-    steps += b.steps;
-    seconds += b.seconds;
-  }
-  const Json training = {{"bricks_done", all.size()}, {"bricks", r.plan.bricks.size()}, {"complete", r.complete},
-                         {"steps_per_brick", o.brick.steps >= 0 ? Json(o.brick.steps) : Json(nullptr)}, {"brick_steps", steps}, {"brick_seconds", seconds},
-                         {"batch", setup.batch}, {"seed", setup.seed}, {"target_ratio", setup.target_ratio}};
+  const Json training = bricks_training_summary(setup, r.plan, all, o.brick.steps);
   write_manifest(out_dir, r.plan, desc.dtype, r.range, config, all, training);
   return r;
 }

@@ -1,13 +1,10 @@
 // Training one brick of a multi-brick model from its region of the volume (train/bricks.h).
 #include <algorithm>
 #include <chrono>
-#include <cmath>
 #include "vnr/core/error.h"
 #include "vnr/core/fileio.h"
-#include "vnr/core/metrics.h"
 #include "vnr/core/units.h"
 #include "vnr/train/bricks.h"
-#include "vnr/train/decoder.h"
 #include "vnr/train/evaluate.h"
 #include "vnr/volume/raw_access.h"
 

@@ -74,7 +74,7 @@ void add_errors(const float* ref, const float* dec, int64_t gx, int64_t gy, int6
 EvalSums sums_with(const SlabGrid& s, const SlabDecode& decode, bool with_ssim, int64_t slab_voxels,
                    const SlabSource& source, const std::function<void(double)>& progress, const std::string& what) {
   const Int3 g = s.g;
-  if (g.x <= 0 || g.y <= 0 || g.z <= 0) fail("evaluation of an empty {}x{}x{} grid", g.x, g.y, g.z);
+  if (g.x <= 0 || g.y <= 0 || g.z <= 0) fail("{}: cannot evaluate an empty {}x{}x{} grid", what, g.x, g.y, g.z);
   if (s.z_begin < 0 || s.z_end > g.z || s.z_begin > s.z_end) fail("slices [{}, {}) are not in 0..{}", s.z_begin, s.z_end, g.z);
   EvalSums r;
   if (s.z_begin == s.z_end || s.own.x <= 0 || s.own.y <= 0) return r;
@@ -162,7 +162,6 @@ EvalSums box_sums_with(Decoder& decoder, const RawVolumeFile& truth, const Box3&
 EvalResult streamed_with(Decoder& decoder, const VolumeDesc& desc, double lo, double hi, const LoadOptions& opts,
                          bool with_ssim, const std::function<void(double)>& progress, int64_t slab_voxels) {
   const Int3 d = desc.dims;
-  if (d.x <= 0 || d.y <= 0 || d.z <= 0) fail("'{}': invalid dims", desc.path);
   // for_each_slab streams the whole file (compressed too) from its first slice.
   const SlabSource whole_file = [&](int64_t, int64_t, int64_t slab_slices, const SlabFn& fn) {
     for_each_slab(desc, lo, hi, opts, slab_slices * d.x * d.y, fn);

@@ -42,7 +42,6 @@ ModelFile file_of(const Model& model, const std::vector<float>& master, const st
   return f;
 }
 
-// The largest g (coarsest steps) whose probe PSNR still reaches `psnr`; the finest plan when none does.
 // The largest g whose quantization keeps `psnr` on the probe. Bisection assumes the PSNR falls as g
 // grows, which holds for a trained network but not after quantization-aware steps: those tune the
 // network to the steps of g_known (0: none), where it may then beat finer steps and even the master
@@ -56,12 +55,14 @@ double fit_psnr(Network& net, const std::vector<float>& master, const QuantPlan&
   };
   auto ok = [&](double g) { return psnr_at(g) >= psnr; };
   double lo = 1e-6;  // g such that ok(lo) and !ok(hi)
-  if (g_known > 0 && ok(g_known)) {
+  const double psnr_known = g_known > 0 ? psnr_at(g_known) : 0;
+  if (g_known > 0 && psnr_known >= psnr) {
     lo = g_known;
-  } else if (!ok(lo)) {
-    return g_known > 0 && psnr_at(g_known) > psnr_at(lo) ? g_known : lo;
+  } else {
+    const double psnr_finest = psnr_at(lo);
+    if (psnr_finest < psnr) return g_known > 0 && psnr_known > psnr_finest ? g_known : lo;
   }
-  double hi = lo;
+  double hi = lo * 4;  // ok(lo) holds
   while (ok(hi) && hi < 1e6) lo = hi, hi *= 4;
   for (int i = 0; i < 14; ++i) {
     const double mid = std::sqrt(lo * hi);

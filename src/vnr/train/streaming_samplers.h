@@ -53,7 +53,6 @@ public:
 
   int64_t blocks() const { return R_; }
   Int3 dims() const { return dims_; }          // of the sampled region
-  Int3 region_origin() const { return origin_; }  // of the sampled region in the file
   int64_t volume_blocks() const { return n_blocks_; }  // blocks the volume is divided into
   // Fraction of the volume's voxels the buffer holds at a time (block interiors, within the volume).
   double resident_fraction() const;
