@@ -14,7 +14,6 @@
 #include "vnr/core/units.h"
 #include "vnr/online/preview.h"
 #include "vnr/train/psnr_search.h"
-#include "vnr/train/rate_control.h"
 #include "vnr/train/session.h"
 
 namespace vnr::cli {
@@ -110,30 +109,22 @@ void run_train(const TrainArgs& a) {
       s.add_side_work([&](const TrainingProgress& p) { preview->after_step(p.step); });
     }
   };
-  std::unique_ptr<TrainingSession> session;
-  std::optional<PsnrSearch> search;
+  if (preview_opts && setup.target_psnr > 0 && setup.target_ratio <= 0)
+    fail("--preview-* options are not supported with --target-psnr alone (it trains several models)");
+  TargetTraining trained;
   try {
-    if (setup.target_psnr > 0 && setup.target_ratio <= 0) {
-      if (preview_opts) fail("--preview-* options are not supported with --target-psnr alone (it trains several models)");
-      auto open = [&](const TrainingSetup& s) { return open_training_session(s, say); };
-      search.emplace(search_size_for_psnr(setup, by_time ? -1 : steps, a.seconds, open, say, before_training));
-      session = std::move(search->session);
-    } else {
-      session = open_training_session(setup, say);
-      before_training(*session);
-      if (session->options().compact.enabled()) {
-        const Json c = train_compact(*session, by_time ? -1 : steps, a.seconds, session->options().compact, say);
-        if (setup.target_psnr > 0 && c["heldback_psnr"].get<double>() < setup.target_psnr)
-          say(fmt::format("warning: --target-psnr {}: this model reaches only {:.2f} dB on held-back samples; train "
-                          "longer or with a larger model (a lower --target-ratio)",
-                          setup.target_psnr, c["heldback_psnr"].get<double>()));
-      } else
-        session->run(steps, a.seconds);
-    }
+    auto open = [&](const TrainingSetup& s) { return open_training_session(s, say); };
+    trained = train_for_targets(setup, by_time ? -1 : steps, a.seconds, open, say, before_training);
   } catch (const std::exception&) {
     if (bar) bar->finish();
     throw;
   }
+  std::unique_ptr<TrainingSession>& session = trained.session;
+  const std::optional<PsnrSearch>& search = trained.search;
+  if (!trained.compact.is_null() && setup.target_psnr > 0 && trained.compact["heldback_psnr"].get<double>() < setup.target_psnr)
+    say(fmt::format("warning: --target-psnr {}: this model reaches only {:.2f} dB on held-back samples; train "
+                    "longer or with a larger model (a lower --target-ratio)",
+                    setup.target_psnr, trained.compact["heldback_psnr"].get<double>()));
   guard.reset();
   if (preview) session->run_side_work([&] { preview->finish(session->steps_done()); });  // the final state
   bar->finish(fmt::format("({} steps, loss {:.5f})", session->steps_done(), session->last_loss()));

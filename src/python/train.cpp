@@ -5,7 +5,6 @@
 #include "vnr/core/error.h"
 #include "vnr/core/parallel.h"
 #include "vnr/train/psnr_search.h"
-#include "vnr/train/rate_control.h"
 
 namespace vnr::py {
 
@@ -116,19 +115,9 @@ ModelPtr train(const TrainArgs& a) {
   bool psnr_short = false;  // target_psnr alone, and no size reached it
   {
     pyb::gil_scoped_release release;
-    if (setup.target_psnr > 0 && setup.target_ratio <= 0) {
-      check_training_setup(setup);
-      PsnrSearch found = search_size_for_psnr(setup, by_time ? -1 : steps, a.seconds.value_or(0), open, say, attach);
-      psnr_short = !found.reached && !found.interrupted;
-      session = std::move(found.session);
-    } else {
-      session = open(setup);
-      attach(*session);
-      if (session->options().compact.enabled())
-        train_compact(*session, by_time ? -1 : steps, a.seconds.value_or(0), session->options().compact, say);
-      else
-        session->run(steps, a.seconds.value_or(0));
-    }
+    TargetTraining trained = train_for_targets(setup, by_time ? -1 : steps, a.seconds.value_or(0), open, say, attach);
+    psnr_short = trained.search && !trained.search->reached && !trained.search->interrupted;
+    session = std::move(trained.session);
     session->finalize_model();  // quantized (compact), residuals attached (error bound)
   }
   if (a.verbose)

@@ -78,4 +78,22 @@ PsnrSearch search_size_for_psnr(const TrainingSetup& setup, int64_t steps, doubl
   return out;
 }
 
+TargetTraining train_for_targets(const TrainingSetup& setup, int64_t steps, double seconds, const SessionOpener& open,
+                                 const MessageFn& message, const std::function<void(TrainingSession&)>& before_training) {
+  TargetTraining t;
+  if (setup.target_psnr > 0 && setup.target_ratio <= 0) {
+    check_training_setup(setup);
+    t.search.emplace(search_size_for_psnr(setup, steps, seconds, open, message, before_training));
+    t.session = std::move(t.search->session);
+    return t;
+  }
+  t.session = open(setup);
+  if (before_training) before_training(*t.session);
+  if (t.session->options().compact.enabled())
+    t.compact = train_compact(*t.session, steps, seconds, t.session->options().compact, message);
+  else
+    t.session->run(steps, seconds);
+  return t;
+}
+
 }  // namespace vnr

@@ -5,6 +5,7 @@
 // about log2(9) ≈ 4 trainings, each of the full `steps` (or `seconds`).
 #include <functional>
 #include <memory>
+#include <optional>
 #include "vnr/core/json.h"
 #include "vnr/train/session.h"
 
@@ -30,5 +31,19 @@ using SessionOpener = std::function<std::unique_ptr<TrainingSession>(const Train
 PsnrSearch search_size_for_psnr(const TrainingSetup& setup, int64_t steps, double seconds, const SessionOpener& open,
                                 const MessageFn& message = {},
                                 const std::function<void(TrainingSession&)>& before_training = {});
+
+// A setup trained as `vnr train` and vnr.train train it: target_psnr alone searches sizes
+// (search_size_for_psnr); otherwise one session from `open`, trained compact (train_compact: quantized,
+// its last qat_fraction quantization-aware) when the setup asks for a compact model, else run().
+// steps < 0: until `seconds`. before_training(session) runs before each session trains. The caller then
+// finish()es the session (or finalize_model()s it).
+struct TargetTraining {
+  std::unique_ptr<TrainingSession> session;
+  std::optional<PsnrSearch> search;  // target_psnr alone: the search (its session moved to `session`)
+  Json compact;                      // one compact session: train_compact's summary (null otherwise)
+};
+TargetTraining train_for_targets(const TrainingSetup& setup, int64_t steps, double seconds, const SessionOpener& open,
+                                 const MessageFn& message = {},
+                                 const std::function<void(TrainingSession&)>& before_training = {});
 
 }  // namespace vnr
