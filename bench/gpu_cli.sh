@@ -1,0 +1,104 @@
+#!/bin/sh
+# The CLI's --device cuda paths end to end against --device cpu, as a user runs them: train, eval, decode
+# and render (every integrator and strategy) of one model, quantized training (--target-ratio) and the
+# error bound (--max-rel-error) on the GPU trainer, multi-brick models, and the paths that must refuse
+# cuda with one clear line (time series, the out-of-core sampler). Writes OUT/cli/*.log, the reports and
+# OUT/cli_table.md; exits non-zero when a check fails.
+#
+#   sh bench/gpu_cli.sh VNR OUT     (bench/gpu.sh runs it as its `cli` stage)
+set -u
+VNR=$1
+W=$2/cli
+mkdir -p "$W"
+failed=0
+# check NAME CMD...: runs CMD, logs it, says ok/FAIL with the last lines of a failure.
+check() {
+  name=$1
+  shift
+  if timeout 120 "$@" > "$W/$name.log" 2>&1; then
+    echo "ok    $name"
+  else
+    echo "FAIL  $name (exit $?): $(tail -2 "$W/$name.log" | tr '\n' ' ')"
+    failed=1
+  fi
+}
+# refuses NAME CMD...: CMD must exit non-zero with one line on stderr that names cuda.
+refuses() {
+  name=$1
+  shift
+  if timeout 60 "$@" > "$W/$name.log" 2>&1; then
+    echo "FAIL  $name: accepted"
+    failed=1
+  elif grep -qi cuda "$W/$name.log"; then
+    echo "ok    $name (refused: $(grep -i cuda "$W/$name.log" | head -1))"
+  else
+    echo "FAIL  $name: no line naming cuda: $(tail -2 "$W/$name.log" | tr '\n' ' ')"
+    failed=1
+  fi
+}
+
+$VNR synth marschner-lobb --dims 96,80,64 -o "$W/ml.json" > /dev/null
+M=$W/m.vnr
+check train_cuda $VNR train "$W/ml.json" -o "$M" --config small --steps 1000 --device cuda --report "$W/train_cuda.json"
+check train_cpu $VNR train "$W/ml.json" -o "$W/m_cpu.vnr" --config small --steps 1000 --device cpu \
+  --report "$W/train_cpu.json"
+check eval_cuda $VNR eval "$M" "$W/ml.json" --device cuda --report "$W/eval_cuda.json"
+check eval_cpu $VNR eval "$M" "$W/ml.json" --device cpu --report "$W/eval_cpu.json"
+check decode_cuda $VNR decode "$M" -o "$W/dec_cuda.raw" --dims 50,40,30 --device cuda
+check decode_cpu $VNR decode "$M" -o "$W/dec_cpu.raw" --dims 50,40,30 --device cpu
+for mode in raymarch shadow pathtrace; do
+  check "render_cpu_$mode" $VNR render "$M" -o "$W/r_cpu_$mode.pfm" --mode $mode --size 256x192 --spp 8 --device cpu
+  for strategy in streaming inshader; do
+    check "render_cuda_${mode}_$strategy" $VNR render "$M" -o "$W/r_cuda_${mode}_$strategy.pfm" --mode $mode \
+      --strategy $strategy --size 256x192 --spp 8 --device cuda --reference "$W/r_cpu_$mode.pfm" \
+      --report "$W/render_cuda_${mode}_$strategy.json"
+  done
+done
+check ratio_cuda $VNR train "$W/ml.json" -o "$W/r64.vnr" --config small --steps 1000 --target-ratio 64 --device cuda \
+  --report "$W/ratio_cuda.json"
+check bound_cuda $VNR train "$W/ml.json" -o "$W/bound.vnr" --config small --steps 1000 --max-rel-error 0.01 \
+  --device cuda --report "$W/bound_cuda.json"
+check bound_eval $VNR eval "$W/bound.vnr" "$W/ml.json" --device cuda --report "$W/bound_eval.json"
+check bricks_cuda $VNR train "$W/ml.json" -o "$W/bricks" --bricks 2,2,1 --config small --steps 500 --device cuda \
+  --report "$W/bricks_cuda.json"
+check bricks_decode_cuda $VNR decode "$W/bricks" -o "$W/bdec_cuda.raw" --device cuda
+check bricks_decode_cpu $VNR decode "$W/bricks" -o "$W/bdec_cpu.raw" --device cpu
+check bricks_render_cuda $VNR render "$W/bricks" -o "$W/b_cuda.pfm" --size 256x192 --spp 4 --device cuda
+check bricks_eval_cuda $VNR eval "$W/bricks" "$W/ml.json" --device cuda --report "$W/bricks_eval.json"
+refuses series_cuda $VNR train "$W/ml.json" -o "$W/s.vnr" --timesteps 0-1 --config small --steps 50 --device cuda
+refuses outofcore_cuda $VNR train "$W/ml.json" -o "$W/o.vnr" --sampler outofcore --config small --steps 50 \
+  --device cuda
+
+python3 - "$W" <<'PY' | tee "$2/cli_table.md"
+import json, os, sys
+import numpy as np
+w = sys.argv[1]
+def rep(name):
+    p = os.path.join(w, name + ".json")
+    return json.load(open(p)) if os.path.exists(p) else {}
+def raw(name):
+    p = os.path.join(w, name)
+    return np.fromfile(p, np.float32) if os.path.exists(p) else None
+print("| check | cuda | cpu | |")
+print("|---|---|---|---|")
+tc, tp = rep("train_cuda"), rep("train_cpu")
+print(f"| small config, 1000 steps: PSNR | {tc.get('psnr', 'n/a')} | {tp.get('psnr', 'n/a')} | "
+      f"{tc.get('samples_per_second', 0) / 1e6:.1f} vs {tp.get('samples_per_second', 0) / 1e6:.1f} M samples/s |")
+ec, ep = rep("eval_cuda"), rep("eval_cpu")
+print(f"| eval of the GPU-trained model: PSNR / SSIM | {ec.get('psnr')} / {ec.get('ssim')} | "
+      f"{ep.get('psnr')} / {ep.get('ssim')} | |")
+for pre in ("dec", "bdec"):
+    a, b = raw(f"{pre}_cuda.raw"), raw(f"{pre}_cpu.raw")
+    if a is not None and b is not None and a.shape == b.shape:
+        span = float(b.max() - b.min()) or 1.0
+        print(f"| decode {pre}: max abs difference / range | {float(np.abs(a - b).max()) / span:.2e} | | |")
+for mode in ("raymarch", "shadow", "pathtrace"):
+    for s in ("streaming", "inshader"):
+        r = rep(f"render_cuda_{mode}_{s}")
+        print(f"| render {mode} {s}: image PSNR vs the CPU | {r.get('image_psnr', 'n/a')} | | |")
+for name in ("ratio_cuda", "bound_cuda", "bound_eval", "bricks_cuda", "bricks_eval"):
+    r = rep(name)
+    keys = {k: r[k] for k in ("psnr", "ratio", "compression_ratio", "max_error", "error_bound", "file_bytes") if k in r}
+    print(f"| {name} | {json.dumps(keys)} | | |")
+PY
+exit $failed
