@@ -29,6 +29,8 @@
 #   VNR_SECONDS  seconds per benchmark (default 5); VNR_MLPS the MLP paths timed (default "fused cublas");
 #                VNR_CPU_BASELINE=0 skips the host CPU's training figure, VNR_TORCH_COMPILE=0 the
 #                compiled PyTorch peer, VNR_TUNE_K=0 the K sweep of the render stage
+#   VNR_SANITIZE_TOOLS / VNR_SANITIZE_TESTS  compute-sanitizer tools and test executables of the sanitize
+#                stage (default: memcheck and racecheck over every test_gpu*)
 #   VNR_RENDER_NAMES volumes of the rendering table (default "bonsai engine chris_t1", those present);
 #                VNR_RENDER_STEPS training steps of their models (default 20000), VNR_RENDER_FRAMES timed
 #                frames per cell (default 12)
@@ -267,12 +269,13 @@ if want sanitize; then
   # split-K GEMM kernels (nvjet_*, the weight gradients) report shared-memory hazards of their own; they are
   # listed in the log but only a hazard in vnr's kernels fails the stage. (Excluding them with
   # --kernel-name-exclude made the tool fail with an internal error on CUDA 13.0.)
-  for tool in memcheck racecheck; do
-    for t in test_gpu test_gpu_render test_gpu_frontends; do
+  for tool in ${VNR_SANITIZE_TOOLS:-memcheck racecheck}; do
+    for t in ${VNR_SANITIZE_TESTS:-test_gpu test_gpu_render test_gpu_frontends test_gpu_paths}; do
       log="$OUT/sanitizer_${tool}_$t.log"
       filter=""
       [ $tool = racecheck ] && [ $t = test_gpu ] && filter="--gtest_filter=-GpuTrainer.*"
       [ $tool = racecheck ] && [ $t = test_gpu_frontends ] && filter="--gtest_filter=-GpuViewer.Training*"
+      [ $tool = racecheck ] && [ $t = test_gpu_paths ] && filter="--gtest_filter=GpuBricks.*"
       timeout 120 compute-sanitizer --tool $tool "$BIN/$t" $filter > "$log" 2>&1 || status=1
       ours=$(grep -E '(Invalid|Race reported|Error:)' "$log" | grep -vc 'nvjet' || true)
       theirs=$(grep -c 'Race reported.*nvjet' "$log" || true)

@@ -28,7 +28,8 @@ command -v ccache > /dev/null 2>&1 && LAUNCHER="-DCMAKE_CXX_COMPILER_LAUNCHER=cc
 cmake -S . -B $B -G Ninja -DCMAKE_BUILD_TYPE=Release -DVNR_CUDA=ON -DCMAKE_CUDA_ARCHITECTURES=90 \
   -DVNR_BUILD_BENCH=OFF -DVNR_PYTHON=OFF -DVNR_MPI=OFF -DVNR_HDF5=OFF -DVNR_NETCDF=OFF \
   -DCMAKE_POSITION_INDEPENDENT_CODE=ON -DCMAKE_CXX_FLAGS=-fno-semantic-interposition $LAUNCHER > /dev/null
-cmake --build $B -j "$(nproc)" --target vnr_cli test_gpu test_gpu_render test_gpu_frontends
+# shellcheck disable=SC2046
+cmake --build $B -j "$(nproc)" --target vnr_cli $(for f in tests/test_gpu*.cpp; do basename "$f" .cpp; done)
 
 rm -rf .gpu
 mkdir -p .gpu/bin .gpu/lib .gpu/a .gpu/include

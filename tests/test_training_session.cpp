@@ -3,6 +3,7 @@
 // steps that load back to the same parameters; the error policy; the report's keys; CPU results equal
 // to driving CpuTrainer by hand, bit for bit; the same Trainer interface on the GPU.
 #include <gtest/gtest.h>
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <cstring>
@@ -55,7 +56,65 @@ private:
   uint64_t fail_at_;
 };
 
+// A CPU trainer that says it is asynchronous (as the GPU's is), so the session groups its steps; it
+// records the size of every group.
+class GroupingTrainer final : public Trainer {
+public:
+  explicit GroupingTrainer(std::unique_ptr<Trainer> inner) : inner_(std::move(inner)) {}
+  std::vector<int64_t> groups;
+  Device device() const override { return inner_->device(); }
+  bool asynchronous() const override { return true; }
+  void run(int64_t n) override {
+    groups.push_back(n);
+    inner_->run(n);
+  }
+  float last_loss() const override { return inner_->last_loss(); }
+  std::vector<float> losses() const override { return inner_->losses(); }
+  uint64_t steps_done() const override { return inner_->steps_done(); }
+  float current_learning_rate() const override { return inner_->current_learning_rate(); }
+  void enable_online_ranges(Int3 dims, int cell) override { inner_->enable_online_ranges(dims, cell); }
+  bool has_online_ranges() const override { return inner_->has_online_ranges(); }
+  ValueRangeGrid online_ranges() const override { return inner_->online_ranges(); }
+  void download() override { inner_->download(); }
+  Network& network() override { return inner_->network(); }
+  int64_t batch() const override { return inner_->batch(); }
+  uint32_t seed() const override { return inner_->seed(); }
+  std::optional<Precision> mlp_precision() const override { return inner_->mlp_precision(); }
+  std::vector<PhaseTime> last_step_phases() const override { return inner_->last_step_phases(); }
+
+private:
+  std::unique_ptr<Trainer> inner_;
+};
+
 }  // namespace
+
+// An asynchronous trainer's groups of steps grow, but never cross a multiple of sync_every steps of the
+// run (nor a checkpoint), so side work sees each of those steps (what time series' probes rely on).
+TEST(TrainingSession, GroupsOfStepsEndAtEverySyncStep) {
+  Volume vol = synth(Int3{16, 12, 10});
+  Model model = create_model(ModelConfig::from_json(small_config()), vol.dims, DType::Float32, 0, 1, 5);
+  auto inner = make_trainer(Device::Cpu, *model.net, std::make_shared<InCoreSampler>(vol), &vol, TrainOptions{1024, 7});
+  auto grouping = std::make_unique<GroupingTrainer>(std::move(inner));
+  GroupingTrainer* g = grouping.get();
+  SessionOptions so;
+  so.sync_every = 5;
+  TrainingSession session(model, std::move(grouping), so);
+  std::vector<int64_t> seen;
+  session.add_side_work([&](const TrainingProgress& p) { seen.push_back(p.step); });
+  session.run(3);  // the second run counts from its own start
+  seen.clear();
+  g->groups.clear();
+  EXPECT_EQ(session.run(23), 23);
+  int64_t done = 0;
+  for (int64_t k : g->groups) {
+    EXPECT_EQ(done / 5, (done + k - 1) / 5) << "group of " << k << " from " << done;
+    done += k;
+  }
+  EXPECT_EQ(done, 23);
+  for (int64_t s : {5, 10, 15, 20, 23}) EXPECT_NE(std::find(seen.begin(), seen.end(), 3 + s), seen.end()) << s;
+  EXPECT_GT(*std::max_element(g->groups.begin(), g->groups.end()), 1);  // it did group
+  EXPECT_EQ(session.steps_done(), 26);
+}
 
 TEST(TrainingSession, RunsNStepsAndStops) {
   Fixture f;

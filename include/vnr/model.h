@@ -39,6 +39,8 @@ inline float to_original_units(const Model& m, float u) { return float(m.lo + do
 // slices voxels) fit the memory available: what a decode checks before allocating its output.
 void check_decode_fits_memory(Int3 dims, int64_t slices);
 
+class BrickGpuNetworks;
+
 class ModelQuery {
 public:
   ModelQuery(const Model& model, Device device, cuda::MlpPath mlp = cuda::MlpPath::Auto);
@@ -66,6 +68,7 @@ private:
   const Model& model_;
   Device device_;
   std::unique_ptr<cuda::GpuNetwork> gpu_;
+  std::unique_ptr<BrickGpuNetworks> brick_gpus_;  // a multi-brick model's networks on the GPU
 };
 
 // PSNR, SSIM (3-D, optional) and max error of the model decoded at the volume's voxel centres against

@@ -74,7 +74,6 @@ void run_train(const TrainArgs& a) {
   if (!a.timesteps.empty()) {
     if (a.preview.enabled()) fail("--preview-* options are not supported with --timesteps");
     if (a.target_psnr > 0) fail("--target-psnr is not supported with --timesteps yet");
-    if (a.device == "cuda") fail("--timesteps trains on the CPU; --device cuda is not supported for time series yet");
     return run_train_series(a);
   }
   if (!a.bricks.empty() || a.resume) return run_train_bricks(a);

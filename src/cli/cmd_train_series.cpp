@@ -18,6 +18,7 @@
 #include "vnr/core/parallel.h"
 #include "vnr/core/progress.h"
 #include "vnr/nn/config.h"
+#include "vnr/train/make_trainer.h"
 #include "vnr/train/model_io.h"
 #include "vnr/train/series.h"
 #include "vnr/train/session.h"
@@ -98,6 +99,7 @@ struct SeriesRun {
   std::string report_path;
   uint64_t frame_bytes = 0;
   Precision precision = Precision::FP32;
+  Device device = Device::Cpu;
   std::chrono::steady_clock::time_point t_all;
   std::unique_ptr<Progress> bar;
   int saved = 0;
@@ -157,6 +159,8 @@ void train_per_timestep(SeriesRun& run) {
   const bool by_time = a.seconds > 0 && a.steps < 0;
   SeriesOptions so;
   so.train = run.train_options();
+  so.device = run.device;
+  so.mlp = cuda::parse_mlp_path(run.a.mlp);
   so.steps = a.steps >= 0 ? a.steps : (a.seconds > 0 ? -1 : 1000);
   so.seconds = a.seconds;
   so.macrocell_size = a.macrocell_size;
@@ -240,6 +244,8 @@ void train_continuously(SeriesRun& run) {
   const TrainArgs& a = run.a;
   ContinuousOptions co;
   co.train = run.train_options();
+  co.device = run.device;
+  co.mlp = cuda::parse_mlp_path(run.a.mlp);
   co.switch_every = a.switch_every;
   co.macrocell_size = a.macrocell_size;
   co.ssim = !a.no_ssim;
@@ -336,6 +342,13 @@ void run_train_series(const TrainArgs& a) {
                 {"seed", a.seed},
                 {"threads", num_threads()},
                 {"volume_bytes", frame_bytes}};
+  // Per timestep, each frame is copied to the GPU; continuously, the current frame's host sampler feeds it.
+  const DeviceChoice device = choose_training_device(a.device, *run.model.net, desc0.dims, !a.continuous, a.batch);
+  run.device = device.device;
+  run.report["device"] = device_name(run.device);
+  if (!a.quiet && !device.note.empty()) std::fprintf(stderr, "note: %s\n", device.note.c_str());
+  if (!a.quiet && run.device == Device::Cuda)
+    std::fprintf(stderr, "training on %s\n", cuda::devices().at(0).name.c_str());
   run.t_all = std::chrono::steady_clock::now();
   run.precision = resolve_training_precision(a.precision, *run.model.net);
   try {

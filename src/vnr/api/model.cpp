@@ -19,10 +19,10 @@ double compression_ratio(const Model& m, uint64_t model_bytes) {
 
 ModelQuery::ModelQuery(const Model& model, Device device, cuda::MlpPath mlp) : model_(model), device_(device) {
   if (!model.net) fail("the model has no network");
-  if (model.bricks) {
-    device_ = Device::Cpu;  // multi-brick models are queried on the CPU (docs/MODEL_FORMAT.md)
+  if (model.bricks) {  // each brick's network on the device, blended on the host
     for (auto& b : model.bricks->bricks)
       if (b) b->net->set_inference_precision(model.net->inference_precision());
+    if (device == Device::Cuda) brick_gpus_ = std::make_unique<BrickGpuNetworks>(*model.bricks, mlp);
     return;
   }
   if (device == Device::Cuda) gpu_ = std::make_unique<cuda::GpuNetwork>(*model.net, mlp);
@@ -42,7 +42,7 @@ void check_grid(Int3 dims, int64_t z0, int64_t z1) {
 
 void ModelQuery::points(const float* xyz, int64_t n, float* out, ValueUnits units) {
   if (n <= 0) return;
-  if (model_.bricks) bricked_points(*model_.bricks, xyz, n, out);
+  if (model_.bricks) bricked_points(*model_.bricks, xyz, n, out, brick_gpus_ ? brick_gpus_->fn() : BrickInfer{});
   else if (gpu_) gpu_->infer(xyz, n, out);
   else model_.net->infer(xyz, n, out);
   convert_units(model_, units, out, n);
@@ -51,7 +51,9 @@ void ModelQuery::points(const float* xyz, int64_t n, float* out, ValueUnits unit
 void ModelQuery::slab(Int3 dims, int64_t z0, int64_t z1, float* out, ValueUnits units) {
   check_grid(dims, z0, z1);
   if (z1 == z0) return;
-  if (model_.bricks) decode_bricked_region(*model_.bricks, dims, Box3{{0, 0, z0}, {dims.x, dims.y, z1}}, out);
+  if (model_.bricks)
+    decode_bricked_region(*model_.bricks, dims, Box3{{0, 0, z0}, {dims.x, dims.y, z1}}, out,
+                          brick_gpus_ ? brick_gpus_->fn() : BrickInfer{});
   else if (model_.residuals && model_.residuals->dims == dims)  // the bound holds on every device: CPU reference
     Decoder(*model_.net, Device::Cpu, &*model_.residuals).slices(dims, z0, z1, out);
   else if (gpu_) gpu_->decode_slices(dims, z0, z1, out);  // the Decoder's two paths

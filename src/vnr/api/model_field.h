@@ -3,12 +3,57 @@
 #include <memory>
 #include "vnr/fields/bricked_field.h"
 #include "vnr/fields/fields.h"
+#include "vnr/core/error.h"
+#include "vnr/core/units.h"
 #include "vnr/train/bricks.h"
+#include "vnr/train/decoder.h"
 
 namespace vnr {
 
-inline std::unique_ptr<RenderableField> make_model_field(const Model& model) {
+// Why a multi-brick model cannot render on the GPU, empty when it can: it is drawn from its decode at its
+// own dims (as float32), which must fit a quarter of the GPU's free memory and the host's memory.
+inline std::string bricked_gpu_render_reason(const Model& model) {
+  const double bytes = double(model.dims.count()) * sizeof(float);
+  if (bytes > double(cuda::free_memory_bytes()) / 4)
+    return fmt::format("a multi-brick model renders on the GPU from its decode ({}), more than a quarter of the "
+                       "GPU's free memory ({})", human_bytes(bytes), human_bytes(double(cuda::free_memory_bytes())));
+  if (bytes > double(available_memory_bytes()))
+    return fmt::format("a multi-brick model renders on the GPU from its decode ({}), more than the memory available",
+                       human_bytes(bytes));
+  return {};
+}
+
+// A multi-brick model drawn on the GPU: decoded once at its dims, each brick's network on the GPU and
+// blended as on the CPU (Decoder), then ray marched as a grid: trilinear between voxel centres where the
+// CPU's BrickedField queries the networks (docs/MODEL_FORMAT.md states the difference).
+class DecodedBricksField final : public RenderableField {
+public:
+  explicit DecodedBricksField(const Model& model) : grid_(GridView{}) {
+    cuda::require_device();
+    if (const std::string why = bricked_gpu_render_reason(model); !why.empty()) fail("{}", why);
+    decoded_.dims = model.dims;
+    decoded_.data.resize(model.dims.count());
+    Decoder(model, Device::Cuda).slices(model.dims, 0, model.dims.z, decoded_.data.data());
+    grid_ = GridField(view_of(decoded_));
+  }
+  Int3 dims() const override { return grid_.dims(); }
+  const char* kind() const override { return "network"; }
+  void query(const float* x, const float* y, const float* z, int64_t n, float* out) const override {
+    grid_.query(x, y, z, n, out);
+  }
+  int64_t render_inshader(const InshaderJob& job) const override { return grid_.render_inshader(job); }
+  GpuFieldSource gpu_source() const override { return grid_.gpu_source(); }
+
+private:
+  Volume decoded_;
+  GridField grid_;
+};
+
+// The field of a model for a renderer on `device`: its network, or a multi-brick model's blended bricks
+// (on the GPU: their decode).
+inline std::unique_ptr<RenderableField> make_model_field(const Model& model, Device device) {
   if (!model.bricks) return std::make_unique<NetworkField>(*model.net, model.dims);
+  if (device == Device::Cuda) return std::make_unique<DecodedBricksField>(model);
   std::vector<const Network*> nets;
   for (auto& b : model.bricks->bricks) {
     if (b) b->net->set_inference_precision(model.net->inference_precision());  // Model::net carries it

@@ -67,7 +67,7 @@ Device choose_render_device(const std::string& name, const Model* model, std::st
   const Device asked = cuda::resolve_device(name);
   if (asked == Device::Cpu) return Device::Cpu;
   const std::string why_not =
-      !model ? "" : (model->bricks ? "multi-brick models render on the CPU" : cuda::unsupported_reason(*model->net));
+      !model ? "" : (model->bricks ? bricked_gpu_render_reason(*model) : cuda::unsupported_reason(*model->net));
   if (why_not.empty()) return Device::Cuda;
   if (name == "cuda") fail("{}; use --device cpu", why_not);
   if (note) *note = "rendering on the CPU: " + why_not;
@@ -91,8 +91,7 @@ Renderer::Renderer(const Model* model, const Volume* volume, Device device)
     if (volume && !(volume->dims == dims))
       fail("the model represents {}x{}x{} voxels but its ground-truth volume has {}x{}x{}", dims.x, dims.y, dims.z,
            volume->dims.x, volume->dims.y, volume->dims.z);
-    field_ = make_model_field(*model);
-    if (model->bricks) device_ = Device::Cpu;  // choose_render_device says so
+    field_ = make_model_field(*model, device_);
   } else {
     dims = volume->dims;
     field_ = std::make_unique<GridField>(view_of(*volume));

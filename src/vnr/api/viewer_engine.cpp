@@ -78,7 +78,7 @@ void ViewerEngine::Impl::open(const ViewerSetup& s) {
   info.save_dir = s.save_dir;
   online_available = info.can_train || model->macrocells.has_value();
   if (info.can_train) {
-    train_device = choose_training_device(s.device, *model->net, dims, true, "incore", s.batch).device;
+    train_device = choose_training_device(s.device, *model->net, dims, true, s.batch).device;
     create_session();
   }
 

@@ -55,7 +55,7 @@ struct ViewPass {
 
 // The training run (engine thread).
 struct ViewerRun {
-  std::shared_ptr<SwitchableSampler> sampler;  // CPU: switching the timestep keeps the optimizer
+  std::shared_ptr<SwitchableSampler> sampler;  // a series: switching the timestep keeps the optimizer
   std::unique_ptr<TrainingSession> session;
   std::atomic<TrainingSession*> active{nullptr};  // for stop() from other threads
   int64_t step_base = 0;        // steps of earlier sessions (GPU: a new trainer per timestep)

@@ -27,19 +27,19 @@ constexpr double kRateWindowSeconds = 1.0;
 
 }  // namespace
 
-// A trainer over the current volume: on the CPU through a SwitchableSampler (a new timestep keeps the
-// optimizer); on the GPU the trainer samples its own copy of the volume, so a new timestep gets a new
-// trainer (and a fresh Adam) there.
+// A trainer over the current volume. A series trains through a SwitchableSampler, so a new timestep
+// keeps the optimizer (on the GPU that host sampler feeds the GPU trainer); one volume on the GPU is
+// sampled from the GPU's own copy.
 void ViewerEngine::Impl::create_session() {
   Network& net = *model->net;
   TrainOptions to{setup.batch, setup.seed};
   std::unique_ptr<Trainer> trainer;
-  if (train_device == Device::Cuda) {
+  if (train_device == Device::Cuda && info.n_timesteps < 2) {
     trainer = make_trainer(Device::Cuda, net, std::make_shared<InCoreSampler>(*volume), volume.get(), to);
   } else {
-    to.precision = resolve_training_precision("auto", net);
+    if (train_device == Device::Cpu) to.precision = resolve_training_precision("auto", net);
     run.sampler = std::make_shared<SwitchableSampler>(view_of(*volume));
-    trainer = make_trainer(Device::Cpu, net, run.sampler, nullptr, to);
+    trainer = make_trainer(train_device, net, run.sampler, nullptr, to);
   }
   trainer->enable_online_ranges(volume->dims, kOnlineCellSize);
   run.active = nullptr;

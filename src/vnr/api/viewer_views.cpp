@@ -144,7 +144,7 @@ void ViewerEngine::Impl::update_network_content(MacroCellMode mode) {
   if (c.field && c.version == model_version && c.mode == mode) return;
   net_pass.backend.reset();  // it refers to the old field and cells
   if (run.session) run.session->trainer().download();
-  c.field = make_model_field(*model);
+  c.field = make_model_field(*model, render_device);
   const bool trained = run.session && run.session->steps_done() > 0;
   if (mode == MacroCellMode::Online && trained)
     c.mc = std::make_unique<MacroCells>(run.session->trainer().online_ranges(), box);

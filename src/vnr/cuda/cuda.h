@@ -62,11 +62,24 @@ struct GpuTrainOptions {
   MlpPath mlp = MlpPath::Auto;
 };
 
-// Trains a Network on the GPU from a normalised volume held in GPU memory (the in-core sampler of
-// docs/semantics.md B.3, bit-identical coordinates and targets to the CPU's for the same seed and chunk).
+// A step's training samples drawn on the host, for a GpuTrainer that does not hold the volume (the
+// out-of-core sampler, a time series' switching target): fill() writes the batch of step `step`
+// (coordinates SoA and normalised targets, `batch` values each). It runs on the thread that calls
+// run(), while the GPU still works on the previous step.
+class HostBatchSource {
+public:
+  virtual ~HostBatchSource() = default;
+  virtual void fill(uint64_t step, int64_t batch, float* x, float* y, float* z, float* target) = 0;
+};
+
+// Trains a Network on the GPU: from a normalised volume held in GPU memory (the in-core sampler of
+// docs/semantics.md B.3, bit-identical coordinates and targets to the CPU's for the same seed and chunk),
+// or from batches a HostBatchSource draws on the host (copied through two pinned staging buffers, so
+// drawing step k+1 overlaps the GPU's step k).
 class GpuTrainer {
 public:
   GpuTrainer(Network& net, GridView volume, GpuTrainOptions opts);
+  GpuTrainer(Network& net, std::shared_ptr<HostBatchSource> source, GpuTrainOptions opts);
   ~GpuTrainer();
   // GPU memory a trainer needs for this network, volume and batch (the constructor refuses to start
   // with less free): the volume, the per-sample buffers of a step, the per-parameter optimizer state.

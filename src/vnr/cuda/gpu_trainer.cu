@@ -38,8 +38,34 @@ struct GpuTrainer::Impl {
   cudaEvent_t events[5] = {};
   ValueRangeGrid ranges;  // shape of the online ranges (their values live in range_lo/hi; none: off)
   DeviceBuffer<float> range_lo, range_hi;
+  // Host-drawn batches: two pinned staging buffers of x|y|z|target, each free again once its copy
+  // (recorded by its event) is done.
+  std::shared_ptr<HostBatchSource> source;
+  float* staging[2] = {};
+  cudaEvent_t staged[2] = {};
 
   Impl(Network& n, GridView vol, GpuTrainOptions o) : net(n), opts(o) {
+    check_options();
+    const uint64_t voxels = uint64_t(vol.nx) * vol.ny * vol.nz;
+    allocate(voxels);
+    volume.resize(voxels);
+    volume.upload(vol.data, voxels);
+    dvol = GridView{volume.data(), vol.nx, vol.ny, vol.nz};
+    VNR_CUDA_CHECK(cudaStreamSynchronize(sb.stream));
+  }
+
+  Impl(Network& n, std::shared_ptr<HostBatchSource> src, GpuTrainOptions o) : net(n), opts(o), source(std::move(src)) {
+    if (!source) cuda_fail_message("the GPU trainer needs a volume or a source of batches");
+    check_options();
+    allocate(0);
+    for (int k = 0; k < 2; ++k) {
+      VNR_CUDA_CHECK(cudaMallocHost(&staging[k], size_t(4 * opts.batch) * sizeof(float)));
+      VNR_CUDA_CHECK(cudaEventCreateWithFlags(&staged[k], cudaEventDisableTiming));
+    }
+    VNR_CUDA_CHECK(cudaStreamSynchronize(sb.stream));
+  }
+
+  void check_options() {
     check_supported(net);
     if (opts.batch <= 0 || opts.batch % kChunk != 0)
       cuda_fail_message("batch size must be a positive multiple of " + std::to_string(kChunk) + ", got " +
@@ -47,14 +73,14 @@ struct GpuTrainer::Impl {
     if (opts.chunk <= 0 || opts.batch % opts.chunk != 0) cuda_fail_message("the sampling chunk must divide the batch");
     d = mlp_dims(net.mlp());
     path = resolve_mlp_path(net, opts.mlp);
-    const uint64_t voxels = uint64_t(vol.nx) * vol.ny * vol.nz;
+  }
+
+  // The optimizer state and a step's buffers, after checking that they and `voxels` fit.
+  void allocate(uint64_t voxels) {
     const uint64_t need = GpuTrainer::bytes_needed(net, voxels, opts.batch), free_b = free_memory_bytes();
     if (need > free_b)
       cuda_fail_message("training this volume on the GPU needs about " + std::to_string(need >> 20) + " MiB, " +
                         std::to_string(free_b >> 20) + " MiB are free: use --device cpu");
-    volume.resize(voxels);
-    volume.upload(vol.data, voxels);
-    dvol = GridView{volume.data(), vol.nx, vol.ny, vol.nz};
     const uint64_t P = net.n_params();
     master.resize(P);
     master.upload(net.params.data(), P);
@@ -72,7 +98,6 @@ struct GpuTrainer::Impl {
     target.resize(B);
     pass.allocate(d, B, true, path);
     grow_tables(1 << 14);
-    VNR_CUDA_CHECK(cudaStreamSynchronize(sb.stream));
   }
 
   // Bias corrections by per-parameter step count (the CPU Adam's tables, same host arithmetic) and one
@@ -95,8 +120,30 @@ struct GpuTrainer::Impl {
   }
 
   ~Impl() {
+    cudaStreamSynchronize(sb.stream);  // no copy may still read a staging buffer
     for (cudaEvent_t e : events)
       if (e) cudaEventDestroy(e);
+    for (int k = 0; k < 2; ++k) {
+      if (staged[k]) cudaEventDestroy(staged[k]);
+      if (staging[k]) cudaFreeHost(staging[k]);
+    }
+  }
+
+  // This step's samples: drawn on the GPU from the resident volume, or on the host and copied.
+  void draw_samples(cudaStream_t st) {
+    if (!source) {
+      sample_in_core(dvol, opts.seed, step, opts.chunk, opts.batch, xs.data(), ys.data(), zs.data(), target.data(), st);
+      return;
+    }
+    const int k = int(step % 2);
+    VNR_CUDA_CHECK(cudaEventSynchronize(staged[k]));  // the copy of step - 2 from this buffer is done
+    const int64_t B = opts.batch;
+    float* h = staging[k];
+    source->fill(step, B, h, h + B, h + 2 * B, h + 3 * B);
+    DeviceBuffer<float>* dst[4] = {&xs, &ys, &zs, &target};
+    for (int j = 0; j < 4; ++j)
+      VNR_CUDA_CHECK(cudaMemcpyAsync(dst[j]->data(), h + j * B, size_t(B) * sizeof(float), cudaMemcpyHostToDevice, st));
+    VNR_CUDA_CHECK(cudaEventRecord(staged[k], st));
   }
   void mark(int i) {
     if (profiling) VNR_CUDA_CHECK(cudaEventRecord(events[i], sb.stream));
@@ -108,7 +155,7 @@ struct GpuTrainer::Impl {
     const AdamConfig& a = net.config().adam;
     const AdamStepScalars sc = adam_step_scalars(a, net.config().decay, step, &factor);
     grow_tables(step + 2);
-    sample_in_core(dvol, opts.seed, step, opts.chunk, opts.batch, xs.data(), ys.data(), zs.data(), target.data(), st);
+    draw_samples(st);
     if (range_lo.size())
       ranges_add_samples(range_grid_dims(ranges), xs.data(), ys.data(), zs.data(), target.data(), opts.batch, range_lo.data(),
                          range_hi.data(), st);
@@ -137,6 +184,8 @@ struct GpuTrainer::Impl {
 
 GpuTrainer::GpuTrainer(Network& net, GridView volume, GpuTrainOptions opts)
     : impl_(std::make_unique<Impl>(net, volume, opts)) {}
+GpuTrainer::GpuTrainer(Network& net, std::shared_ptr<HostBatchSource> source, GpuTrainOptions opts)
+    : impl_(std::make_unique<Impl>(net, std::move(source), opts)) {}
 GpuTrainer::~GpuTrainer() = default;
 
 void GpuTrainer::run(int n_steps) {

@@ -19,6 +19,7 @@ uint64_t free_memory_bytes() { return 0; }
 
 struct GpuTrainer::Impl {};
 GpuTrainer::GpuTrainer(Network&, GridView, GpuTrainOptions) { not_built(); }
+GpuTrainer::GpuTrainer(Network&, std::shared_ptr<HostBatchSource>, GpuTrainOptions) { not_built(); }
 GpuTrainer::~GpuTrainer() = default;
 void GpuTrainer::run(int) { not_built(); }
 void GpuTrainer::synchronize() { not_built(); }

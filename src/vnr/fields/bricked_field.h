@@ -1,7 +1,8 @@
 #pragma once
 // A multi-brick model as a field (train/bricks.h; docs/MODEL_FORMAT.md "Multi-brick models"): each
 // sample blends the networks of the bricks whose trained box holds it, with core/brick_box.h's weights,
-// so rays cross bricks without seams. CPU only (gpu_source() says so: the renderer is chosen on the CPU).
+// so rays cross bricks without seams. CPU only: the GPU draws a multi-brick model from its decode
+// (api/model_field.h).
 #include <memory>
 #include <vector>
 #include "vnr/core/brick_box.h"

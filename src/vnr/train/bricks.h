@@ -16,6 +16,7 @@
 #include <vector>
 #include "vnr/core/brick_box.h"
 #include "vnr/core/json.h"
+#include "vnr/cuda/cuda.h"
 #include "vnr/train/model_io.h"
 #include "vnr/train/session.h"
 #include "vnr/volume/stream.h"
@@ -163,12 +164,37 @@ uint64_t model_n_params(const Model& m);
 // Bricks whose trained box meets `region` (voxels of the model's grid): what must be loaded to answer it.
 std::vector<int> bricks_touching(const BrickPlan& plan, const Box3& region);
 
+// Brick b's network at n points of its own normalised coordinates (xyz interleaved) -> out: what the
+// blends below call; empty: the brick's Network on the CPU. BrickGpuNetworks::infer runs them on the GPU.
+using BrickInfer = std::function<void(int b, const float* xyz, int64_t n, float* out)>;
 // Blended values (normalised) at n points given in normalised coordinates of the whole volume (xyz
 // interleaved): each point's bricks (those whose trained box contains it) weighted by brick_blend_weight.
-void bricked_points(const BrickedModel& m, const float* xyz, int64_t n, float* out);
+void bricked_points(const BrickedModel& m, const float* xyz, int64_t n, float* out, const BrickInfer& infer = {});
 // Voxel centres of `region` of an out_dims grid (x fastest within the region) -> out: the values of
 // bricked_points at those centres. decode_bricked_region(m, dims, {{0,0,z0},{dims.x,dims.y,z1}}) is a z-slab.
-void decode_bricked_region(const BrickedModel& m, Int3 out_dims, const Box3& region, float* out);
+void decode_bricked_region(const BrickedModel& m, Int3 out_dims, const Box3& region, float* out,
+                           const BrickInfer& infer = {});
+
+// The bricks' networks on the GPU for the blends above: each copied on first use, the least recently
+// used released when more would not fit a quarter of the GPU's free memory (at least one stays).
+class BrickGpuNetworks {
+public:
+  explicit BrickGpuNetworks(const BrickedModel& m, cuda::MlpPath mlp = cuda::MlpPath::Auto);
+  ~BrickGpuNetworks();
+  void infer(int b, const float* xyz, int64_t n, float* out);
+  BrickInfer fn() {
+    return [this](int b, const float* xyz, int64_t n, float* out) { infer(b, xyz, n, out); };
+  }
+  size_t capacity() const { return capacity_; }  // networks held at once
+
+private:
+  const BrickedModel& m_;
+  cuda::MlpPath mlp_;
+  std::vector<std::unique_ptr<cuda::GpuNetwork>> nets_;
+  std::vector<uint64_t> last_use_;
+  uint64_t clock_ = 0;
+  size_t capacity_ = 1, live_ = 0;
+};
 
 // The model's value ranges for rendering: the bricks' online macro-cells merged into one grid over the
 // whole volume (a brick's cells mapped conservatively into the global cells they overlap), or none.

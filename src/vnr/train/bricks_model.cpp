@@ -88,7 +88,7 @@ BrickLayout layout_of(const BrickPlan& plan) {
   return l;
 }
 
-void bricked_points(const BrickedModel& m, const float* xyz, int64_t n, float* out) {
+void bricked_points(const BrickedModel& m, const float* xyz, int64_t n, float* out, const BrickInfer& infer) {
   m.layout.blend_batch(
       n,
       [&](int64_t i, float* x, float* y, float* z) {
@@ -99,11 +99,13 @@ void bricked_points(const BrickedModel& m, const float* xyz, int64_t n, float* o
       out,
       [&](int b, const float* local, int64_t count, float* vals) {
         if (!m.bricks[size_t(b)]) fail("brick {} of '{}' is needed here but not loaded", b, m.dir);
-        m.bricks[size_t(b)]->net->infer(local, count, vals);
+        if (infer) infer(b, local, count, vals);
+        else m.bricks[size_t(b)]->net->infer(local, count, vals);
       });
 }
 
-void decode_bricked_region(const BrickedModel& m, Int3 out_dims, const Box3& region, float* out) {
+void decode_bricked_region(const BrickedModel& m, Int3 out_dims, const Box3& region, float* out,
+                           const BrickInfer& infer) {
   for (int a = 0; a < 3; ++a)
     if (out_dims[a] < 1 || region.lo[a] < 0 || region.hi[a] > out_dims[a] || region.lo[a] > region.hi[a])
       fail("decode region [{}, {}) x [{}, {}) x [{}, {}) is outside the {}x{}x{} grid", region.lo.x, region.hi.x,
@@ -122,8 +124,47 @@ void decode_bricked_region(const BrickedModel& m, Int3 out_dims, const Box3& reg
       xyz[size_t(3 * k + 1)] = (float(iy) + 0.5f) / float(out_dims.y);
       xyz[size_t(3 * k + 2)] = (float(iz) + 0.5f) / float(out_dims.z);
     }
-    bricked_points(m, xyz.data(), count, out + first);
+    bricked_points(m, xyz.data(), count, out + first, infer);
   }
+}
+
+namespace {
+// Device bytes of one brick's GpuNetwork: half parameters and the buffers of the largest call of the
+// blends (a decode's chunk of 2^20 points): coordinates, the padded encoding (half) and the outputs.
+uint64_t brick_gpu_bytes(const Network& net) {
+  const uint64_t points = uint64_t(1) << 20;
+  return uint64_t(net.n_params()) * 2 + points * (3 * 4 + uint64_t(net.mlp().in_pad) * 2 + 4 * net.mlp().n_out);
+}
+}  // namespace
+
+BrickGpuNetworks::BrickGpuNetworks(const BrickedModel& m, cuda::MlpPath mlp) : m_(m), mlp_(mlp) {
+  nets_.resize(m.bricks.size());
+  last_use_.assign(m.bricks.size(), 0);
+  uint64_t each = 1;
+  for (const auto& b : m.bricks)
+    if (b) {
+      cuda::check_supported(*b->net);
+      each = std::max(each, brick_gpu_bytes(*b->net));
+    }
+  capacity_ = size_t(std::clamp<uint64_t>(cuda::free_memory_bytes() / 4 / each, 1, std::max<size_t>(m.bricks.size(), 1)));
+}
+BrickGpuNetworks::~BrickGpuNetworks() = default;
+
+void BrickGpuNetworks::infer(int b, const float* xyz, int64_t n, float* out) {
+  const size_t i = size_t(b);
+  if (!nets_[i]) {
+    if (live_ >= capacity_) {  // release the least recently used
+      size_t lru = nets_.size();
+      for (size_t j = 0; j < nets_.size(); ++j)
+        if (nets_[j] && (lru == nets_.size() || last_use_[j] < last_use_[lru])) lru = j;
+      nets_[lru].reset();
+      --live_;
+    }
+    nets_[i] = std::make_unique<cuda::GpuNetwork>(*m_.bricks[i]->net, mlp_);
+    ++live_;
+  }
+  last_use_[i] = ++clock_;
+  nets_[i]->infer(xyz, n, out);
 }
 
 std::optional<ValueRangeGrid> merged_macrocells(const BrickedModel& m) {

@@ -12,14 +12,19 @@ Decoder::Decoder(const Network& net, Device device, const Residuals* residuals)
 Decoder::Decoder(const Model& model, Device device)
     : net_(*model.net),
       residuals_(model.residuals ? &*model.residuals : nullptr),
-      device_(model.bricks ? Device::Cpu : device),
+      device_(device),
       bricks_(model.bricks.get()) {
-  if (device_ == Device::Cuda) gpu_ = std::make_unique<cuda::GpuNetwork>(net_);
+  if (device_ != Device::Cuda) return;
+  if (bricks_) brick_gpus_ = std::make_unique<BrickGpuNetworks>(*bricks_);
+  else gpu_ = std::make_unique<cuda::GpuNetwork>(net_);
 }
 Decoder::~Decoder() = default;
 
+BrickInfer Decoder::brick_infer() { return brick_gpus_ ? brick_gpus_->fn() : BrickInfer{}; }
+
 void Decoder::slices(Int3 dims, int64_t z0, int64_t z1, float* out) {
-  if (bricks_) return decode_bricked_region(*bricks_, dims, Box3{{0, 0, z0}, {dims.x, dims.y, z1}}, out);
+  if (bricks_)
+    return decode_bricked_region(*bricks_, dims, Box3{{0, 0, z0}, {dims.x, dims.y, z1}}, out, brick_infer());
   if (bounded_at(dims)) {
     reference_slices(net_, dims, z0, z1, out);
     return apply_residuals(*residuals_, z0, z1, out);
@@ -40,7 +45,7 @@ void Decoder::voxels(Int3 dims, const int64_t* voxel_index, int64_t n, float* ou
   if (gpu_ || bricks_) {
     std::vector<float> xyz(size_t(3 * n));
     for (int64_t i = 0; i < n; ++i) voxel_centre(dims, voxel_index[i], &xyz[3 * i], &xyz[3 * i + 1], &xyz[3 * i + 2]);
-    return bricks_ ? bricked_points(*bricks_, xyz.data(), n, out) : gpu_->infer(xyz.data(), n, out);
+    return bricks_ ? bricked_points(*bricks_, xyz.data(), n, out, brick_infer()) : gpu_->infer(xyz.data(), n, out);
   }
   net_.infer_fn(
       n, [&](int64_t i, float* x, float* y, float* z) { voxel_centre(dims, voxel_index[i], x, y, z); }, out);

@@ -1,6 +1,7 @@
 #pragma once
 // Decoding a network at voxel centres on the CPU or the GPU.
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include "vnr/core/device.h"
 #include "vnr/core/math.h"
@@ -11,6 +12,7 @@
 namespace vnr {
 
 struct BrickedModel;  // train/bricks.h
+class BrickGpuNetworks;
 struct Model;
 
 // Decodes a network at voxel centres ((i + 0.5) / n per axis) on one backend; a GPU decoder keeps its
@@ -24,7 +26,7 @@ class Decoder {
 public:
   Decoder(const Network& net, Device device, const Residuals* residuals = nullptr);
   // A model's decoder: its residuals apply (error-bound models); a multi-brick model (Model::bricks)
-  // decodes its bricks blended, on the CPU.
+  // decodes its bricks blended, each brick's network on the device (BrickGpuNetworks on the GPU).
   Decoder(const Model& model, Device device);
   ~Decoder();
   // z-slices [z0, z1) of `dims` into out (normalised units), x fastest.
@@ -36,11 +38,13 @@ public:
   bool bounded_at(Int3 dims) const { return residuals_ && residuals_->dims == dims; }
 
 private:
+  std::function<void(int, const float*, int64_t, float*)> brick_infer();  // BrickInfer: each brick on the device
   const Network& net_;
   const Residuals* residuals_;
   Device device_;
   std::unique_ptr<cuda::GpuNetwork> gpu_;
   const BrickedModel* bricks_ = nullptr;
+  std::unique_ptr<BrickGpuNetworks> brick_gpus_;
 };
 
 // Decoder(net, Device::Cpu).slices / .voxels.

@@ -2,19 +2,42 @@
 #include <algorithm>
 #include <cmath>
 #include "vnr/core/error.h"
+#include "vnr/core/parallel.h"
 #include "vnr/train/training_data.h"
 #include "vnr/core/units.h"
 
 namespace vnr {
 namespace {
 
-// The GPU backend: cuda::GpuTrainer (plain C++ API; without CUDA its constructor fails with one line).
+// A Sampler's batches for the GPU trainer, drawn as CpuTrainer draws them: begin_step, then every chunk
+// of kChunk samples from (seed, step, chunk), chunks in parallel; so the GPU trains on the CPU's samples.
+class SamplerBatchSource final : public cuda::HostBatchSource {
+public:
+  SamplerBatchSource(std::shared_ptr<Sampler> sampler, uint32_t seed) : sampler_(std::move(sampler)), seed_(seed) {}
+  void fill(uint64_t step, int64_t batch, float* x, float* y, float* z, float* target) override {
+    sampler_->begin_step(step);
+    parallel_for(batch / kChunk, [&](int64_t c) {
+      const int64_t o = c * kChunk;
+      sampler_->sample(seed_, step, uint64_t(c), kChunk, x + o, y + o, z + o, target + o);
+    });
+  }
+
+private:
+  std::shared_ptr<Sampler> sampler_;
+  uint32_t seed_;
+};
+
+// The GPU backend: cuda::GpuTrainer (plain C++ API; without CUDA its constructor fails with one line),
+// sampling a volume it holds, or fed by a host sampler.
 class CudaTrainer final : public Trainer {
 public:
-  CudaTrainer(Network& net, const Volume& vol, const TrainOptions& opts, cuda::MlpPath mlp)
-      : net_(net), batch_(opts.batch), seed_(opts.seed),
-        gpu_(std::make_unique<cuda::GpuTrainer>(net, view_of(vol),
-                                                cuda::GpuTrainOptions{opts.batch, opts.seed, kChunk, mlp})) {}
+  CudaTrainer(Network& net, const Volume* vol, std::shared_ptr<Sampler> sampler, const TrainOptions& opts,
+              cuda::MlpPath mlp)
+      : net_(net), batch_(opts.batch), seed_(opts.seed) {
+    const cuda::GpuTrainOptions o{opts.batch, opts.seed, kChunk, mlp};
+    if (vol) gpu_ = std::make_unique<cuda::GpuTrainer>(net, view_of(*vol), o);
+    else gpu_ = std::make_unique<cuda::GpuTrainer>(net, std::make_shared<SamplerBatchSource>(std::move(sampler), opts.seed), o);
+  }
   Device device() const override { return Device::Cuda; }
   bool asynchronous() const override { return true; }
   void run(int64_t n_steps) override {
@@ -69,22 +92,21 @@ private:
 std::unique_ptr<Trainer> make_trainer(Device device, Network& net, std::shared_ptr<Sampler> sampler,
                                       const Volume* in_memory, const TrainOptions& opts, cuda::MlpPath mlp) {
   if (device == Device::Cuda) {
-    if (!in_memory) fail("the GPU trainer trains volumes held in memory");
-    return std::make_unique<CudaTrainer>(net, *in_memory, opts, mlp);
+    if (!in_memory && !sampler) fail("the GPU trainer needs a volume in memory or a sampler");
+    return std::make_unique<CudaTrainer>(net, in_memory, std::move(sampler), opts, mlp);
   }
   if (!sampler) fail("the CPU trainer needs a sampler");
   return std::make_unique<CpuTrainer>(net, std::move(sampler), opts);
 }
 
 DeviceChoice choose_training_device(const std::string& asked_name, const Network& net, Int3 dims, bool in_memory,
-                                    const std::string& sampler_name, int64_t batch,
+                                    int64_t batch,
                                     const std::string& cpu_only_reason) {
   const Device asked = cuda::resolve_device(asked_name);
   if (asked == Device::Cpu) return {};
-  std::string why_not;
-  if (!in_memory) why_not = "--device cuda trains volumes held in memory (--sampler incore); this run samples " + sampler_name;
-  if (!cpu_only_reason.empty()) why_not = cpu_only_reason;
-  const uint64_t need = cuda::GpuTrainer::bytes_needed(net, dims.count(), batch);
+  std::string why_not = cpu_only_reason;
+  // A volume out of memory stays on the host: its sampler feeds the GPU's steps.
+  const uint64_t need = cuda::GpuTrainer::bytes_needed(net, in_memory ? dims.count() : 0, batch);
   if (why_not.empty() && cuda::free_memory_bytes() < need)
     why_not = fmt::format("the GPU has {} free, training needs about {} for this volume and batch",
                           human_bytes(double(cuda::free_memory_bytes())), human_bytes(double(need)));

@@ -133,8 +133,8 @@ std::vector<TimestepResult> train_series(Model& model, const std::vector<int>& t
       return fmt::format("training diverged at step {} of timestep {} (loss {}); try a smaller learning rate", step,
                          t, loss);
     };
-    TrainingSession session(model, make_trainer(Device::Cpu, net, std::make_shared<InCoreSampler>(vol), &vol, to),
-                            so);
+    TrainingSession session(
+        model, make_trainer(opts.device, net, std::make_shared<InCoreSampler>(vol), &vol, to, opts.mlp), so);
     Trainer& trainer = session.trainer();
     if (opts.macrocell_size > 0) trainer.enable_online_ranges(vol.dims, opts.macrocell_size);
     const int64_t budget = r.warm_started && opts.warm_steps >= 0 ? opts.warm_steps : opts.steps;
@@ -147,6 +147,7 @@ std::vector<TimestepResult> train_series(Model& model, const std::vector<int>& t
     r.seconds = session.training_seconds();
     r.final_loss = session.last_loss();
     r.loss_history = trainer.losses();
+    trainer.download();  // the GPU's parameters into net (a no-op on the CPU)
 
     describe_model(model, vol);
     model.training = {{"steps", r.steps},         {"seconds", r.seconds},         {"interrupted", r.interrupted},
@@ -308,7 +309,8 @@ ContinuousResult train_continuous(Model& model, const std::vector<int>& timestep
     return fmt::format("training diverged at step {} (timestep {}, loss {}); try a smaller learning rate", step,
                        current_timestep, loss);
   };
-  TrainingSession session(model, make_trainer(Device::Cpu, net, sampler, nullptr, opts.train), so);
+  so.sync_every = opts.probe_every;  // a GPU's groups of steps end at every probe
+  TrainingSession session(model, make_trainer(opts.device, net, sampler, nullptr, opts.train, opts.mlp), so);
   Trainer& trainer = session.trainer();
   int64_t global = 0;
   double last_probe = 0;  // probe PSNR after the latest step, on the current target
@@ -340,12 +342,11 @@ ContinuousResult train_continuous(Model& model, const std::vector<int>& timestep
     session.add_side_work([&](const TrainingProgress& p) {
       const int64_t s = p.step - w.first_step;
       w.seconds = p.elapsed;
-      res.loss_history.push_back(p.loss);
-      res.learning_rate_history.push_back(trainer.current_learning_rate());
       if (!std::isfinite(p.loss)) return;  // the session fails with the divergence message
       if (hooks.on_step) hooks.on_step(w.timestep, s, p.loss);
       w.interrupted = hooks.stop && hooks.stop();
       if (s % opts.probe_every == 0 || s == opts.switch_every || w.interrupted) {
+        trainer.download();
         res.probes.push_back({p.step, w.timestep, probe.psnr(net, cur)});
         seconds_at.push_back(w.seconds);
       }
@@ -354,6 +355,10 @@ ContinuousResult train_continuous(Model& model, const std::vector<int>& timestep
     w.steps = session.run(opts.switch_every);
     session.clear_side_work();
     global = session.steps_done();
+    // Every step's loss (a GPU runs steps in groups between the side work's calls); the rate is fixed.
+    const std::vector<float> losses = trainer.losses();
+    res.loss_history.insert(res.loss_history.end(), losses.begin() + std::ptrdiff_t(w.first_step), losses.end());
+    res.learning_rate_history.insert(res.learning_rate_history.end(), size_t(w.steps), trainer.current_learning_rate());
     const float loss = session.last_loss();
     last_probe = res.probes.back().psnr;
     w.psnr_end = last_probe;
@@ -361,6 +366,7 @@ ContinuousResult train_continuous(Model& model, const std::vector<int>& timestep
     if (w.has_switch)
       measure_recovery(w, std::vector<ProbePoint>(res.probes.begin() + std::ptrdiff_t(probes_before), res.probes.end()),
                        seconds_at, opts.recovery_tolerance_db);
+    trainer.download();
     w.eval = evaluate(net, cur, opts.ssim);
     describe_window(model, cur, w, k, opts, res.learning_rate, trainer);
     res.windows.push_back(w);

@@ -33,7 +33,9 @@
 #include <functional>
 #include <string>
 #include <vector>
+#include "vnr/core/device.h"
 #include "vnr/core/json.h"
+#include "vnr/cuda/cuda.h"
 #include "vnr/train/model_io.h"
 #include "vnr/train/rate_control.h"
 #include "vnr/train/residuals.h"
@@ -68,6 +70,8 @@ struct SeriesHooks {
 
 struct SeriesOptions {
   TrainOptions train;        // batch; the i-th timestep of the selection samples with seed train.seed + i
+  Device device = Device::Cpu;  // the trainer's (Cuda: each timestep's volume is copied to the GPU)
+  cuda::MlpPath mlp = cuda::MlpPath::Auto;
   int64_t steps = 1000;      // per timestep; < 0 = no step limit (then `seconds` must be > 0)
   int64_t warm_steps = -1;   // per warm-started timestep (-1: `steps`)
   double seconds = 0;        // wall-clock training limit per timestep (0: none)
@@ -141,6 +145,8 @@ ModelConfig fixed_learning_rate_config(ModelConfig config, float learning_rate =
 
 struct ContinuousOptions {
   TrainOptions train;                 // batch and sampling seed (one stream over the whole run)
+  Device device = Device::Cpu;        // the trainer's (Cuda: the host sampler of the current timestep feeds it)
+  cuda::MlpPath mlp = cuda::MlpPath::Auto;
   int64_t switch_every = 0;           // steps per timestep (> 0)
   float learning_rate = 0;            // 0: the config's (Adam's base) learning rate; never decayed
   int64_t probe_voxels = 1 << 16;     // |P|

@@ -108,6 +108,7 @@ void TrainingSession::run_steps(int64_t steps, double seconds, int64_t* done) {
     const auto t_step = Clock::now();
     int64_t k = async ? std::min(group, steps - *done) : 1;
     if (every > 0) k = std::min(k, every - steps_ % every);
+    if (opts_.sync_every > 0) k = std::min(k, opts_.sync_every - *done % opts_.sync_every);
     if (before_step_) before_step_();
     trainer_->run(k);
     if (after_step_) after_step_();

@@ -42,6 +42,9 @@ using StepCallback = std::function<void(const TrainingProgress&)>;
 struct SessionOptions {
   std::string output;            // model file for checkpoints, an error save and finish(); "" = none
   int64_t checkpoint_every = 0;  // steps between atomic model writes (0: only at the end); needs output
+  // GPU: a group of steps enqueued between synchronisations never crosses a multiple of this many steps
+  // of a run (0: none), so side work and callbacks see every such step (time series' probes).
+  int64_t sync_every = 0;
   std::string sampler_name = "incore";  // the training record's "sampler"
   // The error message of a non-finite loss; default: "training diverged at step S (loss L); try a
   // smaller learning rate".

@@ -77,8 +77,8 @@ std::unique_ptr<TrainingSession> session_on_data(const TrainingSetup& s, ModelCo
     say(fmt::format("note: the model ({}) is larger than the volume ({}); use --target-ratio R to compress",
                     human_bytes(double(model.param_bytes())), human_bytes(double(data->source_bytes()))));
 
-  const DeviceChoice device = choose_training_device(s.device, net, data->dims, data->vol != nullptr, data->kind,
-                                                     s.batch, s.cpu_only_reason);
+  const DeviceChoice device = choose_training_device(s.device, net, data->dims, data->vol != nullptr, s.batch,
+                                                     s.cpu_only_reason);
   if (!device.note.empty()) say("note: " + device.note);
   TrainOptions to{s.batch, s.seed};
   std::unique_ptr<Trainer> trainer;
@@ -86,7 +86,8 @@ std::unique_ptr<TrainingSession> session_on_data(const TrainingSetup& s, ModelCo
     if (s.precision != "auto")
       say(fmt::format("note: --precision {} applies to CPU training; the GPU trainer keeps its own arithmetic",
                       s.precision));
-    trainer = make_trainer(Device::Cuda, net, data->sampler, &*data->vol, to, cuda::parse_mlp_path(s.mlp));
+    trainer = make_trainer(Device::Cuda, net, data->sampler, data->vol ? &*data->vol : nullptr, to,
+                           cuda::parse_mlp_path(s.mlp));
   } else {
     to.precision = resolve_training_precision(s.precision, net);
     trainer = make_trainer(Device::Cpu, net, data->sampler, nullptr, to);
