@@ -1,5 +1,6 @@
 #!/usr/bin/python3
-"""PSNR against compression ratio from a `vnr bench rd --report` file, with peers' figures beside it.
+"""PSNR against compression ratio from a `vnr bench rd --report` file, with peers' figures beside it, and
+PSNR against training time beside that when the report has `--times` points (codec vnr-time).
 
 usage: /usr/bin/python3 bench/plot_rd.py REPORT.json -o RD.png [--peers bench/peers_rd.json] [--volume NAME]
 The peers' curves are those of NAME (default: the report volume's file stem, e.g. bonsai).
@@ -26,7 +27,12 @@ def main():
     a = ap.parse_args()
     rep = json.load(open(a.report))
     name = a.volume or os.path.splitext(os.path.basename(rep["volume"].split(":")[0]))[0]
-    fig, ax = plt.subplots(figsize=(7, 4.5))
+    timed = sorted((p["parameter"], p["psnr"], p["extra"].get("wall_seconds", p["parameter"]))
+                   for p in rep["points"] if p["codec"] == "vnr-time")
+    if timed:
+        fig, (ax, tx) = plt.subplots(1, 2, figsize=(12, 4.5), gridspec_kw={"width_ratios": [3, 2]})
+    else:
+        fig, ax = plt.subplots(figsize=(7, 4.5))
     for codec, (fmt, color) in STYLE.items():
         pts = sorted((p["ratio"], p["psnr"], p["parameter"]) for p in rep["points"] if p["codec"] == codec)
         if not pts:
@@ -58,6 +64,16 @@ def main():
     ax.set_title(f"rate-distortion: {name} {'x'.join(str(d) for d in rep['dims'])}")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
+    if timed:
+        ratio = next(p["extra"]["target_ratio"] for p in rep["points"] if p["codec"] == "vnr-time")
+        tx.plot([t[0] for t in timed], [t[1] for t in timed], "o-", color="C3", label="training budget")
+        tx.plot([t[2] for t in timed], [t[1] for t in timed], "o:", color="C7", label="wall clock, every phase")
+        tx.set_xscale("log")
+        tx.set_xlabel("seconds")
+        tx.set_ylabel("PSNR (dB)")
+        tx.set_title(f"vnr at {ratio:g}x against time")
+        tx.grid(True, which="both", alpha=0.3)
+        tx.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(a.output, dpi=110)
 

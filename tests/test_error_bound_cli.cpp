@@ -90,3 +90,23 @@ TEST(ErrorBoundCli, Uint8DecodedToSourceTypeStaysWithinTheBound) {
   Result e = run("eval " + d + "/u8.vnr " + d + "/u8.json");
   EXPECT_HAS(e.out, "error bound 2.5 (data units): holds at every voxel");
 }
+
+// A bound given alone (the command an SZ3 or SPERR user types): the default config's network is sized
+// for it (a share of what the bound costs without a network), so the file is a fraction of the volume
+// and the bound still holds; a named config is used as given.
+TEST(ErrorBoundCli, BoundAloneSizesTheNetworkBelowTheVolume) {
+  const std::string d = temp_dir("vnr_bound_alone");
+  ASSERT_EQ(run("synth marschner-lobb --dims 80,72,64 -o " + d + "/ml.json").code, 0);
+  const uint64_t volume_bytes = uint64_t(80) * 72 * 64 * 4;
+  Result t = run("train " + d + "/ml.json -o " + d + "/a.vnr --steps 40 --batch 4096 --max-rel-error 1e-2 --report " +
+                 d + "/a.json");
+  ASSERT_EQ(t.code, 0) << t.err;
+  EXPECT_HAS(t.err + t.out, "error bound alone");
+  const Json rep = parse_json_file(d + "/a.json");
+  EXPECT_TRUE(rep["error_bound"]["holds"].get<bool>());
+  EXPECT_LT(file_size(d + "/a.vnr"), volume_bytes / 2);
+  // The paper network named explicitly: as given, larger than the volume (what a plain bound used to write).
+  Result p = run("train " + d + "/ml.json -o " + d + "/p.vnr --config paper --steps 2 --batch 4096 -q --max-rel-error 1e-2");
+  ASSERT_EQ(p.code, 0) << p.err;
+  EXPECT_GT(file_size(d + "/p.vnr"), volume_bytes);
+}

@@ -70,3 +70,41 @@ TEST(RateDistortion, ZfpFixedAccuracyMatchesADirectRoundTripAndItsTolerance) {
   }
   EXPECT_THROW(zfp_fixed_accuracy(v, -1), Error);
 }
+
+// The vnr side end to end on a small volume: a compact model at the ratio, the bound met on it (every
+// network tried listed), and PSNR against training time at --time-ratio, each budget its own model.
+TEST(RateDistortion, VnrPointsBoundAndTimeAxis) {
+  const Volume vol = test_volume(Int3{40, 36, 32});
+  RdOptions o;
+  o.ratios = {16};
+  o.rel_bounds = {1e-2};
+  o.zfp_rates = {};
+  o.steps = 60;
+  o.config = "small";
+  o.device = "cpu";
+  o.times = {0.3, 1.5};
+  o.time_ratio = 16;
+  const RdReport r = run_rate_distortion("vol", vol, o);
+  const RdPoint *net = nullptr, *bound = nullptr;
+  std::vector<const RdPoint*> timed;
+  for (const RdPoint& p : r.points) {
+    if (p.codec == "vnr") net = &p;
+    if (p.codec == "vnr-bound") bound = &p;
+    if (p.codec == "vnr-time") timed.push_back(&p);
+  }
+  ASSERT_TRUE(net && bound);
+  EXPECT_NEAR(net->ratio, 16, 16 * 0.05);
+  EXPECT_EQ(net->extra["steps"].get<int64_t>(), 60);
+  EXPECT_TRUE(bound->extra["bound_holds"].get<bool>());
+  ASSERT_EQ(bound->extra["networks_tried"].size(), 1u);
+  EXPECT_EQ(bound->extra["networks_tried"][0]["bytes"].get<uint64_t>(), bound->bytes);
+  ASSERT_EQ(timed.size(), 2u);
+  EXPECT_EQ(timed[0]->parameter, 0.3);
+  EXPECT_EQ(timed[1]->parameter, 1.5);
+  for (const RdPoint* p : timed) {
+    EXPECT_NEAR(p->ratio, 16, 16 * 0.05);
+    EXPECT_GE(p->extra["wall_seconds"].get<double>(), p->seconds);  // every phase, training included
+    EXPECT_GT(p->extra["steps"].get<int64_t>(), 0);
+  }
+  EXPECT_GT(timed[1]->extra["steps"].get<int64_t>(), timed[0]->extra["steps"].get<int64_t>());
+}

@@ -194,3 +194,53 @@ TEST(Residuals, ContextCoderRoundTripsEveryMagnitudeAndDetectsTruncation) {
   for (size_t i = 0; i < sparse.size(); i += 17) sparse[i] = i % 2 ? 1 : -1;
   EXPECT_LT(context_encode(sparse.data(), kDims).size(), sparse.size() / 8);
 }
+
+// What a bound costs without a network: the voxels themselves quantised with the residuals' step and
+// coded as residuals are; a constant field is nearly free, smoother fields and looser bounds cost less.
+TEST(Residuals, PredictorlessBytesCodeTheQuantisedVoxels) {
+  const Volume vol = synth(kDims);
+  const double bound = 1e-2;
+  Residuals r;
+  r.dims = kDims;
+  r.bound = bound;
+  r.step = 2 * (bound - residual_margin(bound));
+  for (float v : vol.data) r.q.push_back(int32_t(std::nearbyint(double(v) / r.step)));
+  EXPECT_EQ(predictorless_bytes(vol.data.data(), kDims, bound), encode_residuals(r).bytes.size());
+  const std::vector<float> flat(kDims.count(), 0.37f);
+  EXPECT_LT(predictorless_bytes(flat.data(), kDims, bound), 64u);
+  const Volume noise = noise_volume();
+  EXPECT_GT(predictorless_bytes(noise.data.data(), kDims, bound), predictorless_bytes(vol.data.data(), kDims, bound));
+  EXPECT_LT(predictorless_bytes(vol.data.data(), kDims, 1e-1), predictorless_bytes(vol.data.data(), kDims, 1e-3));
+}
+
+// Absolute residuals (the voxels quantised without the network, kept where they code smaller): decode
+// to q * step whatever the network, hold the bound, round-trip through both codecs under their own
+// predictor names, and the smaller of the two references is what a model keeps.
+TEST(Residuals, AbsoluteResidualsIgnoreTheNetworkAndTheSmallerIsKept) {
+  for (const NamedVolume& nv : volumes()) {
+    const Volume& vol = nv.vol;
+    const double bound = 1e-3;
+    Residuals a = quantised_values(vol.data.data(), vol.dims, bound);
+    EXPECT_TRUE(a.absolute);
+    std::vector<float> out(vol.data.size(), 123.0f);
+    apply_residuals(a, 0, vol.dims.z, out.data());
+    EXPECT_LE(max_error(out, vol.data), bound) << nv.name;
+    const EncodedResiduals e = encode_residuals(a);
+    const std::string pred = e.meta["predictor"].get<std::string>();
+    EXPECT_TRUE(pred == "values" || pred == "values-lorenzo") << pred;
+    const Residuals back = decode_residuals(e.meta, e.bytes, vol.dims, "test");
+    EXPECT_TRUE(back.absolute);
+    EXPECT_EQ(back.q, a.q);
+    // A model decodes them without evaluating its network (any network gives the same voxels).
+    Model m = model_for(vol.dims), other = model_for(vol.dims, 9);
+    m.residuals = a;
+    other.residuals = a;
+    EXPECT_EQ(decode_in_slabs(m, 3), decode_in_slabs(other, 5)) << nv.name;
+    EXPECT_LE(max_error(decode_in_slabs(m, 4), vol.data), bound) << nv.name;
+    // The choice: both sizes recorded, the smaller kept.
+    const Residuals best = smallest_residuals(*m.net, vol.data.data(), vol.dims, bound);
+    const Json sizes = best.encoded->meta["reference_bytes"];
+    EXPECT_EQ(best.encoded->bytes.size(), std::min(sizes["network"].get<uint64_t>(), sizes["none"].get<uint64_t>()));
+    EXPECT_EQ(best.absolute, sizes["none"].get<uint64_t>() < sizes["network"].get<uint64_t>());
+  }
+}

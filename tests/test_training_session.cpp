@@ -72,6 +72,7 @@ public:
   std::vector<float> losses() const override { return inner_->losses(); }
   uint64_t steps_done() const override { return inner_->steps_done(); }
   float current_learning_rate() const override { return inner_->current_learning_rate(); }
+  void set_learning_rate_multiplier(float m) override { inner_->set_learning_rate_multiplier(m); }
   void enable_online_ranges(Int3 dims, int cell) override { inner_->enable_online_ranges(dims, cell); }
   bool has_online_ranges() const override { return inner_->has_online_ranges(); }
   ValueRangeGrid online_ranges() const override { return inner_->online_ranges(); }
@@ -114,6 +115,36 @@ TEST(TrainingSession, GroupsOfStepsEndAtEverySyncStep) {
   for (int64_t s : {5, 10, 15, 20, 23}) EXPECT_NE(std::find(seen.begin(), seen.end(), 3 + s), seen.end()) << s;
   EXPECT_GT(*std::max_element(g->groups.begin(), g->groups.end()), 1);  // it did group
   EXPECT_EQ(session.steps_done(), 26);
+}
+
+// The cool-down: over the last 20 % of a declared budget the rate falls linearly, min(1, (1 - p) / 0.2)
+// at progress p = steps done / budget before the step, across run() calls; with cooldown 0, or once
+// the budget is spent, the config's rate.
+TEST(TrainingSession, CooldownLowersTheRateLinearlyAtTheBudgetsEnd) {
+  for (double cooldown : {0.2, 0.0}) {
+    SessionOptions so;
+    so.cooldown = cooldown;
+    Fixture f(so);
+    const float base = f.session->trainer().current_learning_rate();
+    std::vector<float> lr;
+    f.session->add_step_callback([&](const TrainingProgress&) { lr.push_back(f.session->trainer().current_learning_rate()); });
+    f.session->set_budget(100, 0);
+    f.session->run(60);
+    f.session->run(40);  // the same budget, a second call (compact training's two phases)
+    ASSERT_EQ(lr.size(), 100u);
+    for (int i = 0; i < 100; ++i) {
+      const double want = cooldown > 0 ? std::min(1.0, (1.0 - i / 100.0) / cooldown) : 1.0;
+      EXPECT_NEAR(lr[size_t(i)], base * want, 1e-6 * base) << "step " << i;
+    }
+    f.session->run(3);  // past the budget
+    EXPECT_FLOAT_EQ(lr.back(), base);
+  }
+  // Without a budget (the viewer's slices, continuous series) nothing changes.
+  Fixture f;
+  std::vector<float> lr;
+  f.session->add_step_callback([&](const TrainingProgress&) { lr.push_back(f.session->trainer().current_learning_rate()); });
+  f.session->run(10);
+  for (float v : lr) EXPECT_EQ(v, lr.front());
 }
 
 TEST(TrainingSession, RunsNStepsAndStops) {

@@ -13,8 +13,8 @@
 namespace vnr {
 
 struct RdPoint {
-  std::string codec;     // "vnr", "vnr-bound", "zfp-rate", "zfp-accuracy"
-  double parameter = 0;  // target ratio, relative bound, bits per value, or tolerance (data units)
+  std::string codec;     // "vnr", "vnr-bound", "vnr-time", "zfp-rate", "zfp-accuracy"
+  double parameter = 0;  // target ratio, relative bound, training budget (s), bits per value, or tolerance
   uint64_t bytes = 0;    // compressed size
   double ratio = 0, psnr = 0;
   double max_abs_error = 0;  // data units
@@ -33,6 +33,10 @@ struct RdOptions {
   std::vector<double> rel_bounds{1e-2, 1e-3};                 // vnr-bound and zfp-accuracy points
   std::vector<double> zfp_rates{0.5, 1, 2, 4, 8};              // bits per value
   double seconds = 60;                                          // training time per vnr model
+  // PSNR against training time: models at time_ratio trained for each of these budgets (seconds), from
+  // scratch each (the cool-down follows the budget); none by default.
+  std::vector<double> times;
+  double time_ratio = 64;
   int64_t steps = -1;                                           // > 0: steps instead of seconds
   std::string config = "paper";
   std::string device = "auto";

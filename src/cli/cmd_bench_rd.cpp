@@ -19,8 +19,8 @@ namespace vnr::cli {
 namespace {
 
 struct RdArgs {
-  std::string volume, report, plot, peers, ratios, bounds, zfp_rates, config = "paper", device = "auto";
-  double seconds = 60;
+  std::string volume, report, plot, peers, ratios, bounds, zfp_rates, times, config = "paper", device = "auto";
+  double seconds = 60, time_ratio = 64;
   int64_t steps = -1;
   int threads = 0;
   VolumeArgs vol;
@@ -78,6 +78,9 @@ void run_rd(const RdArgs& a) {
   if (!a.ratios.empty()) o.ratios = parse_list(a.ratios, "--ratios");
   if (!a.bounds.empty()) o.rel_bounds = parse_list(a.bounds, "--bounds");
   if (!a.zfp_rates.empty()) o.zfp_rates = parse_list(a.zfp_rates, "--zfp-rates");
+  if (!a.times.empty()) o.times = parse_list(a.times, "--times");
+  if (!(a.time_ratio > 0)) fail("--time-ratio must be positive, got {}", a.time_ratio);
+  o.time_ratio = a.time_ratio;
   for (double b : o.rel_bounds)
     if (b >= 1) fail("--bounds are fractions of the value range (below 1), got {}", b);
   if (!(a.seconds > 0) && a.steps <= 0) fail("--seconds must be positive");
@@ -108,6 +111,10 @@ void add_bench_rd(CLI::App& bench) {
   c->add_option("volume", a->volume, "volume")->required();
   c->add_option("--seconds", a->seconds, "training time per vnr model")->capture_default_str();
   c->add_option("--steps", a->steps, "training steps per vnr model (instead of --seconds)");
+  c->add_option("--times", a->times,
+                "PSNR against training time: models at --time-ratio trained for each of these budgets in seconds "
+                "(e.g. 20,60,120)");
+  c->add_option("--time-ratio", a->time_ratio, "target ratio of the --times models")->capture_default_str();
   c->add_option("--ratios", a->ratios, "vnr target ratios (default 8,16,32,64,128,256,512)");
   c->add_option("--bounds", a->bounds, "error bounds as fractions of the range (default 1e-2,1e-3)");
   c->add_option("--zfp-rates", a->zfp_rates, "ZFP fixed rates in bits per value (default 0.5,1,2,4,8)");

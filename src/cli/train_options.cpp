@@ -36,6 +36,7 @@ TrainingSetup setup_of(const TrainArgs& a, bool preview) {
     fail("--memory-budget must be positive");
   s.session.output = a.output;
   s.session.checkpoint_every = a.checkpoint_every;
+  s.session.cooldown = a.cooldown;
   s.session.error_bound = {a.max_error, a.max_rel_error};
   return s;
 }
@@ -54,7 +55,10 @@ void check_brick_args(const TrainArgs& a) {
 }
 
 void add_training_options(CLI::App* c, TrainArgs& a) {
-  c->add_option("--config", a.config, "preset (paper, small) or tiny-cuda-nn JSON config file")->capture_default_str();
+  c->add_option("--config", a.config,
+                "auto (the paper's network; with --max-error/--max-rel-error alone, sized for the bound), a preset "
+                "(paper, small) or a tiny-cuda-nn JSON config file")
+      ->capture_default_str();
   c->add_option("--max-error", a.max_error,
                  "guarantee |decoded - original| <= E (data units) at every voxel: quantised residuals of the "
                  "network are stored in the model (docs/COMPRESSION.md)");
@@ -72,6 +76,11 @@ void add_training_options(CLI::App* c, TrainArgs& a) {
                  "compact models: the last part of the steps trained on quantized parameters (CPU trainer)")
       ->capture_default_str();
   c->add_option("--steps", a.steps, "training steps (default 1000, or unlimited with --seconds)");
+  c->add_option("--cooldown", a.cooldown,
+                "last fraction of --steps/--seconds over which the learning rate falls linearly to 0 (0: tcnn's "
+                "schedule exactly)")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 1.0));
   c->add_option("--seconds", a.seconds, "stop after this many seconds of training");
   c->add_option("--batch", a.batch, "samples per step (multiple of 256)")->capture_default_str();
   c->add_option("--seed", a.seed, "seed for initialisation and sampling")->capture_default_str();

@@ -20,7 +20,7 @@ struct TrainArgs {
   int macrocell_size = 16;
   std::optional<int> threads;
   bool verbose = false;
-  std::optional<double> target_psnr, bits_per_param, qat_fraction, max_error, max_rel_error;
+  std::optional<double> target_psnr, bits_per_param, qat_fraction, max_error, max_rel_error, cooldown;
 };
 
 // What happened in the step callback that the session must not see as its own error.
@@ -62,6 +62,10 @@ TrainingSetup setup_of(const TrainArgs& a) {
   s.target_psnr = a.target_psnr.value_or(0);
   if (a.bits_per_param) s.bits_per_param = *a.bits_per_param;
   if (a.qat_fraction) s.qat_fraction = *a.qat_fraction;
+  if (a.cooldown) {
+    if (!(*a.cooldown >= 0 && *a.cooldown <= 1)) fail("cooldown must be in [0, 1], got {}", *a.cooldown);
+    s.session.cooldown = *a.cooldown;
+  }
   s.session.error_bound = {a.max_error.value_or(0), a.max_rel_error.value_or(0)};
   s.data.sampler = a.sampler;
   if (a.seconds && *a.seconds <= 0) fail("seconds must be positive, got {}", *a.seconds);
@@ -150,7 +154,8 @@ path of any volume the CLI reads. Given an array, vnr's normalised float32 copy 
 runs (a vnr.Volume keeps its own until it is released). The session is `vnr train`'s: the same config, seed, batch and
 thread count give the same model as `vnr train ... --seed S --threads T`; its parameters are rounded
 to fp16 as the model file stores them (so decode() equals `vnr decode` of that file).
-config: a preset ("paper", "small"), a tiny-cuda-nn config dict, or a JSON file path.
+config: "auto" (the paper's network; with max_error/max_rel_error alone, sized for the bound), a preset
+("paper", "small"), a tiny-cuda-nn config dict, or a JSON file path.
 steps / seconds: stop after this many steps or seconds of training (default: 1000 steps).
 seed: 0 by default (note: the CLI's --seed defaults to 1337).
 device: "auto" (a visible GPU, else the CPU), "cpu" or "cuda".
@@ -162,6 +167,8 @@ target_psnr: the smallest compact model whose PSNR on held-back voxels reaches t
 sizes are trained (each for steps/seconds); with target_ratio, one model quantized as coarsely as
 keeps it. max_error / max_rel_error: every voxel of decode() within this of the original (data units /
 fraction of the value range): residuals of the network are kept in the model (docs/COMPRESSION.md).
+cooldown: the last fraction of steps/seconds over which the learning rate falls linearly to 0 (default
+0.2, as the CLI's --cooldown; 0 keeps tiny-cuda-nn's schedule exactly).
 callback(step, loss, samples_per_second): called after each step (GPU: each step group); returning
 False stops training. Ctrl-C stops training cleanly and returns the model trained so far (with a
 RuntimeWarning). threads: CPU threads (vnr.set_num_threads); verbose: print the CLI's notes to stderr.)";
@@ -176,19 +183,20 @@ void bind_train(pyb::module_& m) {
          pyb::object callback, int64_t batch, const std::string& precision, int macrocell_size,
          std::optional<int> threads, bool verbose, std::optional<double> target_psnr,
          std::optional<double> bits_per_param, std::optional<double> qat_fraction, std::optional<double> max_error,
-         std::optional<double> max_rel_error) {
+         std::optional<double> max_rel_error, std::optional<double> cooldown) {
         TrainArgs a{volume,   config,         callback,     steps,     seconds,      target_ratio,  seed,
                     device,   sampler,        precision,    batch,     macrocell_size, threads,      verbose,
-                    target_psnr, bits_per_param, qat_fraction, max_error, max_rel_error};
+                    target_psnr, bits_per_param, qat_fraction, max_error, max_rel_error, cooldown};
         return train(a);
       },
-      pyb::arg("volume"), pyb::arg("config") = "paper", pyb::arg("steps") = pyb::none(),
+      pyb::arg("volume"), pyb::arg("config") = "auto", pyb::arg("steps") = pyb::none(),
       pyb::arg("seconds") = pyb::none(), pyb::arg("seed") = 0, pyb::arg("device") = "auto",
       pyb::arg("sampler") = "incore", pyb::arg("target_ratio") = pyb::none(), pyb::arg("callback") = pyb::none(),
       pyb::kw_only(), pyb::arg("batch") = 65536, pyb::arg("precision") = "auto", pyb::arg("macrocell_size") = 16,
       pyb::arg("threads") = pyb::none(), pyb::arg("verbose") = false, pyb::arg("target_psnr") = pyb::none(),
       pyb::arg("bits_per_param") = pyb::none(), pyb::arg("qat_fraction") = pyb::none(),
-      pyb::arg("max_error") = pyb::none(), pyb::arg("max_rel_error") = pyb::none(), kTrainDoc);
+      pyb::arg("max_error") = pyb::none(), pyb::arg("max_rel_error") = pyb::none(),
+      pyb::arg("cooldown") = pyb::none(), kTrainDoc);
 }
 
 }  // namespace vnr::py

@@ -113,14 +113,15 @@ class Model:
         """The training record."""
 
 
-def train(volume: Union[npt.ArrayLike, Volume, PathLike], config: Union[str, dict[str, Any], PathLike] = "paper",
+def train(volume: Union[npt.ArrayLike, Volume, PathLike], config: Union[str, dict[str, Any], PathLike] = "auto",
           steps: Optional[int] = None, seconds: Optional[float] = None, seed: int = 0, device: DeviceName = "auto",
           sampler: Literal["incore", "outofcore", "mmap"] = "incore", target_ratio: Optional[float] = None,
           callback: Optional[Callable[[int, float, float], Optional[bool]]] = None, *, batch: int = 65536,
           precision: Literal["auto", "fp32", "bf16"] = "auto", macrocell_size: int = 16,
           threads: Optional[int] = None, verbose: bool = False, target_psnr: Optional[float] = None,
           bits_per_param: Optional[float] = None, qat_fraction: Optional[float] = None,
-          max_error: Optional[float] = None, max_rel_error: Optional[float] = None) -> Model:
+          max_error: Optional[float] = None, max_rel_error: Optional[float] = None,
+          cooldown: Optional[float] = None) -> Model:
     """Trains a model of the volume (`vnr train`'s session); returns it. Ctrl-C returns the model so far."""
 
 

@@ -96,6 +96,7 @@ namespace {
 // One vnr model at a target ratio, trained in a session over the shared volume, saved to `path`.
 RdPoint train_point(const std::shared_ptr<const Volume>& vol, const std::string& name, double ratio,
                     const RdOptions& o, const std::string& path, Model* trained) {
+  const auto t0 = std::chrono::steady_clock::now();
   TrainingSetup s;
   s.volume = name;
   s.config = o.config;
@@ -108,8 +109,10 @@ RdPoint train_point(const std::shared_ptr<const Volume>& vol, const std::string&
   // --target-ratio's path: compact (quantized, entropy-coded) models of the exact size.
   if (session->options().compact.enabled())
     train_compact(*session, o.steps > 0 ? o.steps : -1, o.steps > 0 ? 0 : o.seconds, session->options().compact);
-  else
+  else {
+    session->set_budget(o.steps > 0 ? o.steps : -1, o.steps > 0 ? 0 : o.seconds);
     session->run(o.steps > 0 ? o.steps : INT64_MAX, o.steps > 0 ? 0 : o.seconds);
+  }
   const TrainingResult r = session->finish(false, 0);
   RdPoint p;
   p.codec = "vnr";
@@ -119,7 +122,7 @@ RdPoint train_point(const std::shared_ptr<const Volume>& vol, const std::string&
   p.psnr = r.psnr;
   p.max_abs_error = r.max_abs_error_original;
   p.seconds = r.seconds;
-  p.extra = {{"steps", r.steps}, {"n_params", r.report["n_params"]}};
+  p.extra = {{"steps", r.steps}, {"n_params", r.report["n_params"]}, {"wall_seconds", seconds_since(t0)}};
   *trained = std::move(session->model());
   return p;
 }
@@ -128,8 +131,8 @@ RdPoint train_point(const std::shared_ptr<const Volume>& vol, const std::string&
 RdPoint bound_point(const Volume& vol, const Model& m, uint64_t model_file_bytes, double rel_bound, double net_ratio) {
   const auto t0 = std::chrono::steady_clock::now();
   const double b = normalised_error_bound({0, rel_bound}, vol.lo, vol.hi, vol.source_dtype);
-  Residuals res = compute_residuals(*m.net, vol.data.data(), vol.dims, b);
-  const EncodedResiduals enc = encode_residuals(res);
+  Residuals res = smallest_residuals(*m.net, vol.data.data(), vol.dims, b);
+  const EncodedResiduals& enc = *res.encoded;
   RdPoint p;
   p.codec = "vnr-bound";
   p.parameter = rel_bound;
@@ -146,6 +149,8 @@ RdPoint bound_point(const Volume& vol, const Model& m, uint64_t model_file_bytes
              {"residual_bits_per_voxel", 8.0 * double(enc.bytes.size()) / double(vol.dims.count())},
              {"codec", enc.meta["codec"]},
              {"predictor", enc.meta["predictor"]},
+             {"reference", res.absolute ? "none" : "network"},
+             {"reference_bytes", enc.meta["reference_bytes"]},
              {"candidate_bytes", enc.meta["candidate_bytes"]},
              {"bound_holds", p.max_abs_error <= b * (vol.hi - vol.lo)}};
   return p;
@@ -173,6 +178,7 @@ RdReport run_rate_distortion(const std::string& volume_path, const Volume& volum
   const std::string dir = (std::filesystem::temp_directory_path() / fmt::format("vnr_rd_{}", ::getpid())).string();
   std::filesystem::create_directories(dir);
   std::vector<std::optional<RdPoint>> best(o.rel_bounds.size());
+  std::vector<Json> tried(o.rel_bounds.size(), Json::array());  // every network's total, per bound
   try {
     for (double ratio : o.ratios) {
       Model trained;
@@ -186,17 +192,37 @@ RdReport run_rate_distortion(const std::string& volume_path, const Volume& volum
       const Model m = load_model(path);  // the network as stored, as a decoder sees it
       for (size_t k = 0; k < o.rel_bounds.size(); ++k) {
         RdPoint p = bound_point(volume, m, file_size(path), o.rel_bounds[k], ratio);
+        tried[k].push_back({{"network_ratio", ratio}, {"bytes", p.bytes}, {"ratio", p.ratio}});
         if (!best[k] || p.bytes < best[k]->bytes) best[k] = std::move(p);
       }
       std::filesystem::remove(path);
+    }
+    // PSNR against training time at one ratio: a model per budget.
+    for (double t : o.times) {
+      RdOptions ot = o;
+      ot.seconds = t;
+      ot.steps = -1;
+      Model trained;
+      try {
+        RdPoint p = train_point(shared, volume_path, o.time_ratio, ot, dir + fmt::format("/t{}.vnr", t), &trained);
+        p.codec = "vnr-time";
+        p.parameter = t;
+        p.extra["target_ratio"] = o.time_ratio;
+        add(std::move(p));
+      } catch (const BudgetBelowSmallestFile& e) {
+        if (o.message) o.message(fmt::format("vnr-time      {:<8g} skipped: {}", t, e.what()));
+      }
     }
   } catch (...) {
     std::filesystem::remove_all(dir);
     throw;
   }
   std::filesystem::remove_all(dir);
-  for (auto& p : best)
-    if (p) add(std::move(*p));
+  for (size_t k = 0; k < best.size(); ++k)
+    if (best[k]) {
+      best[k]->extra["networks_tried"] = tried[k];
+      add(std::move(*best[k]));
+    }
   return rep;
 }
 

@@ -95,6 +95,7 @@ public:
   float last_loss();
   uint64_t steps_done() const;
   float current_learning_rate() const;
+  void set_learning_rate_multiplier(float m);  // scales the following steps' learning rate
   // Online macro-cells (paper "Macro-Cell Optimization"): from now on every batch widens the value
   // ranges of the cells around its samples, on the GPU (the CpuTrainer's cells, exactly).
   void enable_online_ranges(Int3 dims, int cell_size = 16);

@@ -33,7 +33,8 @@ struct GpuTrainer::Impl {
   DeviceBuffer<float> loss_slots, bias_sqrt, bias_den;
   std::vector<float> h_bias_sqrt, h_bias_den;
   uint64_t step = 0;
-  float factor = 1.0f;  // ExponentialDecay's
+  float factor = 1.0f;   // ExponentialDecay's
+  float lr_mult = 1.0f;  // set_learning_rate_multiplier's
   bool profiling = false;
   cudaEvent_t events[5] = {};
   ValueRangeGrid ranges;  // shape of the online ranges (their values live in range_lo/hi; none: off)
@@ -153,7 +154,8 @@ struct GpuTrainer::Impl {
     const cudaStream_t st = sb.stream;
     mark(0);
     const AdamConfig& a = net.config().adam;
-    const AdamStepScalars sc = adam_step_scalars(a, net.config().decay, step, &factor);
+    AdamStepScalars sc = adam_step_scalars(a, net.config().decay, step, &factor);
+    sc.lr *= lr_mult;
     grow_tables(step + 2);
     draw_samples(st);
     if (range_lo.size())
@@ -208,8 +210,9 @@ float GpuTrainer::last_loss() {
   return l;
 }
 float GpuTrainer::current_learning_rate() const {
-  return impl_->net.config().adam.learning_rate * impl_->factor;
+  return impl_->net.config().adam.learning_rate * impl_->factor * impl_->lr_mult;
 }
+void GpuTrainer::set_learning_rate_multiplier(float m) { impl_->lr_mult = m; }
 
 void GpuTrainer::enable_online_ranges(Int3 dims, int cell_size) {
   Impl& I = *impl_;

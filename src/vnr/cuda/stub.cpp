@@ -27,6 +27,7 @@ std::vector<float> GpuTrainer::losses() { not_built(); }
 float GpuTrainer::last_loss() { not_built(); }
 uint64_t GpuTrainer::steps_done() const { not_built(); }
 float GpuTrainer::current_learning_rate() const { not_built(); }
+void GpuTrainer::set_learning_rate_multiplier(float) { not_built(); }
 void GpuTrainer::enable_online_ranges(Int3, int) { not_built(); }
 bool GpuTrainer::has_online_ranges() const { not_built(); }
 ValueRangeGrid GpuTrainer::online_ranges() { not_built(); }

@@ -167,17 +167,17 @@ Json paper_optimizer() {
 
 bool is_preset(const std::string& name) {
   std::string l = to_lower(name);
-  return l == "paper" || l == "small" || l == "tiny";
+  return l == "auto" || l == "paper" || l == "small" || l == "tiny";
 }
 
-const char* preset_names() { return "paper, small"; }
+const char* preset_names() { return "auto, paper, small"; }
 
 Json preset_config(const std::string& name) {
   std::string l = to_lower(name);
   Json c;
   c["optimizer"] = paper_optimizer();
   c["loss"] = {{"otype", "L1"}};
-  if (l == "paper") {
+  if (l == "paper" || l == "auto") {  // auto: the paper's network, which front ends may size (session.h)
     c["encoding"] = {{"otype", "HashGrid"}, {"n_levels", 8}, {"n_features_per_level", 8},
                      {"log2_hashmap_size", 19}, {"base_resolution", 4}, {"per_level_scale", 2.0}};
     c["network"] = {{"otype", "FullyFusedMLP"}, {"activation", "ReLU"}, {"output_activation", "None"},

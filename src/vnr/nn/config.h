@@ -83,7 +83,7 @@ struct ModelConfig {
 // features, 2^16 table, base 4, 16 x 2 MLP) and "tiny" (for tests).
 Json preset_config(const std::string& name);
 bool is_preset(const std::string& name);
-const char* preset_names();  // "paper, small"
+const char* preset_names();  // "auto, paper, small"
 
 // The typed config of a preset name or a JSON file path: parsed once here; everything downstream
 // (--target-ratio sizing, learning-rate scaling, Network) works on the ModelConfig.

@@ -43,7 +43,8 @@ void extend_adam_bias_tables(const AdamConfig& a, size_t n, std::vector<float>& 
 }
 
 void Adam::step(float* params, float* grads, uint16_t* non_matrix_half) {
-  const AdamStepScalars sc = adam_step_scalars(cfg_, decay_, step_, &factor_);
+  AdamStepScalars sc = adam_step_scalars(cfg_, decay_, step_, &factor_);
+  sc.lr *= multiplier_;
   ++step_;
   // Bias corrections up to c = step_ (a parameter's count never exceeds the global step).
   extend_adam_bias_tables(cfg_, step_ + 1, bias_sqrt_, bias_den_);

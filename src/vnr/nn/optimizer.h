@@ -29,7 +29,9 @@ public:
   // When non_matrix_half is given it receives fp16(params) of the non-matrix (grid) parameters.
   void step(float* params, float* grads, uint16_t* non_matrix_half = nullptr);
   uint64_t steps_done() const { return step_; }
-  float current_learning_rate() const { return base_lr_ * factor_; }
+  float current_learning_rate() const { return base_lr_ * factor_ * multiplier_; }
+  // Scales every following step's learning rate (a session's cool-down: train/session.h); 1 = none.
+  void set_lr_multiplier(float m) { multiplier_ = m; }
   // Learning rate used by step t (t = steps completed before it), closed form for reports.
   static float learning_rate_at(const AdamConfig& a, const DecayConfig& d, uint64_t t);
 
@@ -41,7 +43,7 @@ private:
   DecayConfig decay_;
   uint64_t n_params_, n_matrix_;
   uint64_t step_ = 0;
-  float base_lr_, factor_ = 1.0f;
+  float base_lr_, factor_ = 1.0f, multiplier_ = 1.0f;
   std::vector<float> bias_sqrt_, bias_den_;  // sqrtf(1 - b2^c) and (1 - b1^c), indexed by c
 };
 

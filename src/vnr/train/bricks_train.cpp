@@ -118,6 +118,7 @@ BrickResult train_brick(const TrainingSetup& setup, const BrickPlan& plan, int i
     session->add_step_callback([&](const TrainingProgress&) {
       if (o.stop->load()) session->request_stop();
     });
+  session->set_budget(o.steps, o.seconds);
   session->run(o.steps, o.seconds);
 
   BrickResult r;

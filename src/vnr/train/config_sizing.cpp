@@ -1,7 +1,9 @@
 #include "vnr/train/config_sizing.h"
+#include <algorithm>
 #include <cmath>
 #include "vnr/core/error.h"
 #include "vnr/nn/mlp_layout.h"
+#include "vnr/train/residuals.h"
 
 namespace vnr {
 
@@ -30,6 +32,21 @@ ModelConfig size_config_for_bytes(const ModelConfig& base, uint64_t target_bytes
                         best.encoding.n_levels, best.encoding.log2_hashmap_size, best_params, target_bytes,
                         double(target_bytes) * 8.0 / double(best_params));
   return best;
+}
+
+double bounded_network_ratio(const Volume& vol, uint64_t source_bytes, double bound, std::string* note) {
+  const uint64_t without = predictorless_bytes(vol.data.data(), vol.dims, bound);
+  const double budget = std::max(kBoundNetworkShare * double(without), 32768.0);
+  const double ratio = std::min(double(source_bytes) / budget, 1024.0);
+  if (ratio <= 1) {
+    if (note) *note = "error bound alone: the volume is too small to size a network for it; the config's network is used";
+    return 0;
+  }
+  if (note)
+    *note = fmt::format("error bound alone: without a network it costs {} bytes ({:.2f}x); the network gets {:.0f} % "
+                        "of that: --target-ratio {:.3g}", without, double(source_bytes) / double(std::max<uint64_t>(without, 1)),
+                        100 * kBoundNetworkShare, ratio);
+  return ratio;
 }
 
 }  // namespace vnr

@@ -3,6 +3,7 @@
 #include <cstdint>
 #include <string>
 #include "vnr/nn/config.h"
+#include "vnr/volume/volume.h"
 
 namespace vnr {
 
@@ -12,5 +13,13 @@ namespace vnr {
 constexpr double kDefaultBitsPerParam = 4.0;
 ModelConfig size_config_for_bytes(const ModelConfig& config, uint64_t target_bytes, double bits_per_param,
                                   std::string* note);
+
+// The network of an error bound given alone (--max-error/--max-rel-error without --target-ratio): its
+// file takes kBoundNetworkShare of the bytes the bound costs without a network (predictorless_bytes:
+// the voxels quantised and coded as residuals are), at least 32 KiB (a compact file of the paper's MLP
+// fits), as a target ratio of source_bytes, at most 1024; 0 (no sizing) when that leaves no ratio above
+// 1. docs/COMPRESSION.md has the runs that fitted the share. `bound` is normalised.
+constexpr double kBoundNetworkShare = 0.1;
+double bounded_network_ratio(const Volume& vol, uint64_t source_bytes, double bound, std::string* note);
 
 }  // namespace vnr

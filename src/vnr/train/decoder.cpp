@@ -26,7 +26,7 @@ void Decoder::slices(Int3 dims, int64_t z0, int64_t z1, float* out) {
   if (bricks_)
     return decode_bricked_region(*bricks_, dims, Box3{{0, 0, z0}, {dims.x, dims.y, z1}}, out, brick_infer());
   if (bounded_at(dims)) {
-    reference_slices(net_, dims, z0, z1, out);
+    if (!residuals_->absolute) reference_slices(net_, dims, z0, z1, out);  // absolute: q * step alone
     return apply_residuals(*residuals_, z0, z1, out);
   }
   if (gpu_) return gpu_->decode_slices(dims, z0, z1, out);  // voxel_centre() in kernels.cu
@@ -38,8 +38,13 @@ void Decoder::slices(Int3 dims, int64_t z0, int64_t z1, float* out) {
 
 void Decoder::voxels(Int3 dims, const int64_t* voxel_index, int64_t n, float* out) {
   if (bounded_at(dims)) {
-    reference_voxels(net_, dims, voxel_index, n, out);
-    for (int64_t i = 0; i < n; ++i) out[i] += float(double(residuals_->q[size_t(voxel_index[i])]) * residuals_->step);
+    const Residuals& r = *residuals_;
+    if (r.absolute)
+      for (int64_t i = 0; i < n; ++i) out[i] = float(double(r.q[size_t(voxel_index[i])]) * r.step);
+    else {
+      reference_voxels(net_, dims, voxel_index, n, out);
+      for (int64_t i = 0; i < n; ++i) out[i] += float(double(r.q[size_t(voxel_index[i])]) * r.step);
+    }
     return;
   }
   if (gpu_ || bricks_) {

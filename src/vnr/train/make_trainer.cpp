@@ -52,6 +52,7 @@ public:
   std::vector<float> losses() const override { return gpu_->losses(); }
   uint64_t steps_done() const override { return gpu_->steps_done(); }
   float current_learning_rate() const override { return gpu_->current_learning_rate(); }
+  void set_learning_rate_multiplier(float m) override { gpu_->set_learning_rate_multiplier(m); }
   void enable_online_ranges(Int3 dims, int cell_size) override { gpu_->enable_online_ranges(dims, cell_size); }
   bool has_online_ranges() const override { return gpu_->has_online_ranges(); }
   ValueRangeGrid online_ranges() const override { return gpu_->online_ranges(); }

@@ -89,10 +89,12 @@ TargetTraining train_for_targets(const TrainingSetup& setup, int64_t steps, doub
   }
   t.session = open(setup);
   if (before_training) before_training(*t.session);
-  if (t.session->options().compact.enabled())
+  if (t.session->options().compact.enabled()) {
     t.compact = train_compact(*t.session, steps, seconds, t.session->options().compact, message);
-  else
+  } else {
+    t.session->set_budget(steps, seconds);
     t.session->run(steps, seconds);
+  }
   return t;
 }
 

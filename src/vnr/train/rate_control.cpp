@@ -88,6 +88,9 @@ double choose_scale(const Model& model, Network& net, const std::vector<float>& 
 void reserve_evaluation_record(Model& model) {
   model.training["psnr"] = 12.345678901234567;
   model.training["ssim"] = 0.12345678901234567;
+  // The training time as its longest text, so the planned size never depends on the clock (two runs of
+  // the same steps then quantize alike).
+  model.training["seconds"] = 1.2345678901234567e-300;
 }
 
 // The network's trained parameters ready to quantize: the plan, the master copy (unused entries
@@ -285,6 +288,7 @@ Json train_compact(TrainingSession& session, int64_t steps, double seconds, cons
   if (!session.data() || !session.data()->sampler) fail("compact storage needs a session opened on training data");
   const double f = can_train_quantized(session) ? std::clamp(o.qat_fraction, 0.0, 1.0) : 0.0;
   const bool by_time = steps < 0 && seconds > 0;
+  session.set_budget(steps, seconds);  // both phases: the cool-down ends with the quantization-aware steps
   const int64_t steps1 = by_time ? -1 : int64_t(std::llround(double(steps) * (1 - f)));
   session.run(steps1, by_time ? seconds * (1 - f) : 0);
   if (f > 0 && !session.stop_requested())

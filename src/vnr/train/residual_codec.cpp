@@ -94,6 +94,16 @@ std::vector<uint8_t> zstd_compress(const std::vector<uint8_t>& raw) {
 
 }  // namespace
 
+namespace {
+// What predicts a voxel: the network (none), the network and Lorenzo over its residuals (lorenzo), nothing
+// (values: absolute residuals), or Lorenzo over the quantised values (values-lorenzo). vnr before the
+// absolute residuals rejects the last two as a coding it does not know.
+const char* predictor_name(const Residuals& r, bool lorenzo) {
+  if (r.absolute) return lorenzo ? "values-lorenzo" : "values";
+  return lorenzo ? "lorenzo" : "none";
+}
+}  // namespace
+
 EncodedResiduals encode_residuals(const Residuals& r) {
   if (r.q.size() != r.dims.count()) fail("residual field of {} values for {} voxels", r.q.size(), r.dims.count());
   EncodedResiduals best;
@@ -102,12 +112,12 @@ EncodedResiduals encode_residuals(const Residuals& r) {
     uint64_t escapes = 0;
     const std::vector<uint8_t> raw = byte_layout(r, predict, &escapes);
     std::vector<uint8_t> packed = zstd_compress(raw);
-    sizes[predict ? "zstd-lorenzo" : "zstd"] = packed.size();
+    sizes[std::string("zstd-") + predictor_name(r, predict)] = packed.size();
     if (!best.bytes.empty() && packed.size() >= best.bytes.size()) continue;
     best.bytes = std::move(packed);
     best.meta = {{"codec", "zstd"},
                  {"layout", "zigzag-bytes"},
-                 {"predictor", predict ? "lorenzo" : "none"},
+                 {"predictor", predictor_name(r, predict)},
                  {"dims", {r.dims.x, r.dims.y, r.dims.z}},
                  {"bound", r.bound},
                  {"step", r.step},
@@ -117,11 +127,11 @@ EncodedResiduals encode_residuals(const Residuals& r) {
   }
   for (bool predict : {false, true}) {
     std::vector<uint8_t> ac = context_encode(predict ? lorenzo_differences(r).data() : r.q.data(), r.dims);
-    sizes[predict ? "context-lorenzo" : "context"] = ac.size();
+    sizes[std::string("context-") + predictor_name(r, predict)] = ac.size();
     if (ac.size() >= best.bytes.size()) continue;
     best.meta = {{"codec", "context"},
                  {"layout", "binary-ac"},
-                 {"predictor", predict ? "lorenzo" : "none"},
+                 {"predictor", predictor_name(r, predict)},
                  {"dims", {r.dims.x, r.dims.y, r.dims.z}},
                  {"bound", r.bound},
                  {"step", r.step},
@@ -150,14 +160,17 @@ T meta_get(const Json& meta, const char* key, const std::string& what) {
 Residuals decode_residuals(const Json& meta, const std::vector<uint8_t>& bytes, Int3 dims, const std::string& what) {
   const auto codec = meta_get<std::string>(meta, "codec", what), layout = meta_get<std::string>(meta, "layout", what);
   const auto predictor = meta_get<std::string>(meta, "predictor", what);
-  const bool context = codec == "context" && layout == "binary-ac" && (predictor == "none" || predictor == "lorenzo");
-  if (!context && (codec != "zstd" || layout != "zigzag-bytes" || (predictor != "none" && predictor != "lorenzo")))
+  const bool known = predictor == "none" || predictor == "lorenzo" || predictor == "values" || predictor == "values-lorenzo";
+  const bool context = codec == "context" && layout == "binary-ac" && known;
+  if (!context && (codec != "zstd" || layout != "zigzag-bytes" || !known))
     fail("{}: unknown residual coding {}/{}/{} (written by a newer vnr?)", what, codec, layout, predictor);
+  const bool lorenzo_coded = predictor == "lorenzo" || predictor == "values-lorenzo";
   const auto md = meta_get<std::vector<int64_t>>(meta, "dims", what);
   if (md.size() != 3 || !(Int3{md[0], md[1], md[2]} == dims))
     fail("{}: the residual block does not match the model's dims", what);
   Residuals r;
   r.dims = dims;
+  r.absolute = predictor == "values" || predictor == "values-lorenzo";
   r.bound = meta_get<double>(meta, "bound", what);
   r.step = meta_get<double>(meta, "step", what);
   if (!(r.bound > 0) || !(r.step > 0) || !(r.step <= 2 * r.bound) || !std::isfinite(r.bound))
@@ -167,7 +180,7 @@ Residuals decode_residuals(const Json& meta, const std::vector<uint8_t>& bytes, 
     const auto crc = meta_get<uint64_t>(meta, "crc32", what);
     r.q.resize(size_t(n));
     context_decode(bytes.data(), bytes.size(), dims, r.q.data(), what);
-    if (predictor == "lorenzo") {  // differences back to values, in coding order
+    if (lorenzo_coded) {  // differences back to values, in coding order
       int64_t v = 0;
       for (int64_t k = 0; k < dims.z; ++k)
         for (int64_t j = 0; j < dims.y; ++j)
@@ -192,7 +205,7 @@ Residuals decode_residuals(const Json& meta, const std::vector<uint8_t>& bytes, 
   if (uint64_t(std::count(raw.begin(), raw.begin() + n, kEscape)) != escapes)
     fail("{}: the residual block is corrupted (escape count)", what);
   r.q.resize(size_t(n));
-  const bool predict = predictor == "lorenzo";
+  const bool predict = lorenzo_coded;
   const uint8_t* esc = raw.data() + n;
   int64_t v = 0;
   for (int64_t k = 0; k < dims.z; ++k)

@@ -67,6 +67,50 @@ namespace {
 float correction(const Residuals& r, int32_t q) { return float(double(q) * r.step); }
 }  // namespace
 
+Residuals quantised_values(const float* original, Int3 dims, double bound) {
+  if (!(bound > 0) || !std::isfinite(bound)) fail("the error bound must be positive, got {}", bound);
+  Residuals r;
+  r.dims = dims;
+  r.bound = bound;
+  r.step = 2 * (bound - residual_margin(bound));
+  r.absolute = true;
+  r.q.resize(size_t(dims.count()));
+  std::atomic<int64_t> violations{0};
+  parallel_for_range(dims.count(), 1 << 16, [&](int64_t i0, int64_t i1) {
+    int64_t bad = 0;
+    for (int64_t i = i0; i < i1; ++i) {
+      const double d = std::nearbyint(double(original[i]) / r.step);
+      if (!(std::fabs(d) < double(1 << 27))) {
+        ++bad;
+        continue;
+      }
+      r.q[size_t(i)] = int32_t(d);
+      if (!(std::fabs(double(correction(r, r.q[size_t(i)])) - double(original[i])) <= bound)) ++bad;
+    }
+    violations += bad;
+  });
+  if (violations > 0)
+    fail("cannot meet the error bound {:.3g} (normalised) at {} voxels without a network", bound, violations.load());
+  return r;
+}
+
+uint64_t predictorless_bytes(const float* values, Int3 dims, double bound) {
+  return encode_residuals(quantised_values(values, dims, bound)).bytes.size();
+}
+
+Residuals smallest_residuals(const Network& net, const float* original, Int3 dims, double bound) {
+  Residuals net_res = compute_residuals(net, original, dims, bound);
+  Residuals abs_res = quantised_values(original, dims, bound);
+  auto net_enc = std::make_shared<EncodedResiduals>(encode_residuals(net_res));
+  auto abs_enc = std::make_shared<EncodedResiduals>(encode_residuals(abs_res));
+  const Json sizes = {{"network", net_enc->bytes.size()}, {"none", abs_enc->bytes.size()}};
+  net_enc->meta["reference_bytes"] = sizes;
+  abs_enc->meta["reference_bytes"] = sizes;
+  net_res.encoded = std::move(net_enc);
+  abs_res.encoded = std::move(abs_enc);
+  return abs_res.encoded->bytes.size() < net_res.encoded->bytes.size() ? std::move(abs_res) : std::move(net_res);
+}
+
 Residuals compute_residuals(const Network& net, const float* original, Int3 dims, double bound) {
   if (!(bound > 0) || !std::isfinite(bound)) fail("the error bound must be positive, got {}", bound);
   Residuals r;
@@ -104,8 +148,11 @@ void apply_residuals(const Residuals& r, int64_t z0, int64_t z1, float* values) 
   if (z0 < 0 || z1 > r.dims.z || z0 > z1) fail("residual slab [{}, {}) is outside 0..{}", z0, z1, r.dims.z);
   const int32_t* q = r.q.data() + first;
   parallel_for_range(n, 1 << 16, [&](int64_t i0, int64_t i1) {
-    for (int64_t i = i0; i < i1; ++i)
-      if (q[i] != 0) values[i] += correction(r, q[i]);
+    if (r.absolute)
+      for (int64_t i = i0; i < i1; ++i) values[i] = correction(r, q[i]);
+    else
+      for (int64_t i = i0; i < i1; ++i)
+        if (q[i] != 0) values[i] += correction(r, q[i]);
   });
 }
 

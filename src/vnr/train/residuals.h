@@ -34,11 +34,14 @@ double residual_margin(double bound);
 
 struct EncodedResiduals;
 
-// The quantised residual field: decoded = reference + q * step at voxel i (x fastest) of dims.
+// The quantised residual field: decoded = reference + q * step at voxel i (x fastest) of dims, or, for
+// `absolute` residuals, decoded = q * step: the voxels quantised without the network (where that codes
+// smaller at a tight bound; the network then only renders and answers point queries).
 struct Residuals {
   Int3 dims;
   double bound = 0;  // guaranteed max |decoded - original|, normalised units
   double step = 0;   // 2 (bound - residual_margin(bound))
+  bool absolute = false;
   std::vector<int32_t> q;
   // The coded block, when known (after encoding or loading): saving reuses it instead of coding again.
   std::shared_ptr<const EncodedResiduals> encoded;
@@ -58,7 +61,18 @@ void reference_voxels(const Network& net, Int3 dims, const int64_t* voxel_index,
 // (normalised). Checks that the bound holds at every voxel.
 Residuals compute_residuals(const Network& net, const float* original, Int3 dims, double bound);
 
-// values (z-slices [z0, z1) of the reference) += q * step.
+// The bound met without a network: every voxel of `original` quantised with the residuals' step
+// (absolute residuals). Coded (3-D Lorenzo over the quantised values, or none, whichever is smaller)
+// it is a classical codec's file at this bound (SZ's Lorenzo path).
+Residuals quantised_values(const float* original, Int3 dims, double bound);
+// Its coded bytes: what sizes the network of a bound given alone (train/config_sizing.h).
+uint64_t predictorless_bytes(const float* values, Int3 dims, double bound);
+// The residuals a model keeps for `bound`: against the network (compute_residuals) or absolute
+// (quantised_values), whichever codes smaller; coded (`encoded` set, its meta listing both sizes under
+// "reference_bytes").
+Residuals smallest_residuals(const Network& net, const float* original, Int3 dims, double bound);
+
+// values (z-slices [z0, z1) of the reference) += q * step; absolute residuals replace them by q * step.
 void apply_residuals(const Residuals& r, int64_t z0, int64_t z1, float* values);
 
 // The residual block of a model file: a JSON description and the entropy-coded bytes. The integer

@@ -129,6 +129,7 @@ std::vector<TimestepResult> train_series(Model& model, const std::vector<int>& t
     TrainOptions to = opts.train;
     to.seed = opts.train.seed + uint32_t(i);
     SessionOptions so;
+    so.cooldown = opts.cooldown;
     so.divergence_message = [t](int64_t step, float loss) {
       return fmt::format("training diverged at step {} of timestep {} (loss {}); try a smaller learning rate", step,
                          t, loss);
@@ -142,6 +143,7 @@ std::vector<TimestepResult> train_series(Model& model, const std::vector<int>& t
       if (hooks.on_step) hooks.on_step(t, p.step, p.loss);
       if (hooks.stop && hooks.stop()) session.request_stop();
     });
+    session.set_budget(budget, opts.seconds);
     r.steps = session.run(budget, opts.seconds);
     r.interrupted = session.stop_requested();
     r.seconds = session.training_seconds();

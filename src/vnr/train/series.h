@@ -40,6 +40,7 @@
 #include "vnr/train/rate_control.h"
 #include "vnr/train/residuals.h"
 #include "vnr/train/sampler.h"
+#include "vnr/train/session.h"
 #include "vnr/train/trainer.h"
 #include "vnr/volume/volume.h"
 
@@ -81,6 +82,7 @@ struct SeriesOptions {
   bool ssim = false;         // also compute the 3-D SSIM at the end of each timestep
   CompactOptions compact;    // each timestep's model quantized for these targets (after training, no QAT)
   ErrorBoundRequest error_bound;  // each timestep's model carries the residuals that guarantee it
+  double cooldown = SessionOptions{}.cooldown;  // of each timestep's budget (train/session.h)
 };
 
 struct TimestepResult {

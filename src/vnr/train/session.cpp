@@ -88,6 +88,27 @@ int64_t TrainingSession::run(int64_t steps, double seconds) {
   return done;
 }
 
+void TrainingSession::set_budget(int64_t steps, double seconds) {
+  budget_steps_ = steps;
+  budget_seconds_ = seconds;
+  budgeted_ = true;
+  budget_first_step_ = steps_;
+  budget_first_second_ = train_seconds_ + run_seconds_;
+}
+
+float TrainingSession::cooldown_multiplier() const {
+  const double f = opts_.cooldown;
+  if (!(f > 0)) return 1.0f;
+  double p = 0;  // progress through the budget before the next step
+  if (budget_steps_ > 0) p = double(steps_ - budget_first_step_) / double(budget_steps_);
+  if (budget_seconds_ > 0) {
+    const double t = train_seconds_ + seconds_since(run_t0_) - run_excluded_ - budget_first_second_;
+    p = std::max(p, t / budget_seconds_);
+  }
+  if (p >= 1) return 1.0f;  // the budget is spent: later runs train at the config's rate
+  return float(std::min(1.0, (1.0 - p) / f));
+}
+
 // The loop: step (GPU: a group) -> side work -> divergence check -> callbacks -> checkpoint -> limits.
 void TrainingSession::run_steps(int64_t steps, double seconds, int64_t* done) {
   run_t0_ = Clock::now();
@@ -108,6 +129,11 @@ void TrainingSession::run_steps(int64_t steps, double seconds, int64_t* done) {
     const auto t_step = Clock::now();
     int64_t k = async ? std::min(group, steps - *done) : 1;
     if (every > 0) k = std::min(k, every - steps_ % every);
+    const float lr_mult = cooldown_multiplier();
+    trainer_->set_learning_rate_multiplier(lr_mult);
+    // A GPU's groups stay short in the cool-down, so its rate falls in small steps too.
+    if (lr_mult < 1 && budget_steps_ > 0)
+      k = std::min(k, std::max<int64_t>(1, int64_t(opts_.cooldown * double(budget_steps_) / 32)));
     if (opts_.sync_every > 0) k = std::min(k, opts_.sync_every - *done % opts_.sync_every);
     if (before_step_) before_step_();
     trainer_->run(k);
@@ -153,6 +179,7 @@ void TrainingSession::record() {
                       {"sampler", data_ ? data_->kind : opts_.sampler_name},
                       {"device", device_name(trainer_->device())},
                       {"precision", precision ? Json(precision_name(*precision)) : Json(nullptr)}};
+  if (budgeted_ && opts_.cooldown > 0) model_->training["cooldown"] = opts_.cooldown;
   if (!params_frozen_) trainer_->download();  // the model file is written from net.params
   if (trainer_->has_online_ranges()) model_->macrocells = trainer_->online_ranges();
 }
@@ -171,8 +198,7 @@ Json attach_error_bound(Model& model, const Volume& volume, const ErrorBoundRequ
   // Residuals are taken against the network as the file stores it (fp16 parameters), not the fp32
   // master copy, so that a loaded model decodes to the same predictions.
   model.net->set_params_half(model.net->params_half());
-  Residuals res = compute_residuals(*model.net, volume.data.data(), volume.dims, b);
-  res.encoded = std::make_shared<const EncodedResiduals>(encode_residuals(res));
+  Residuals res = smallest_residuals(*model.net, volume.data.data(), volume.dims, b);
   const int64_t nz = res.nonzero();
   const uint64_t bytes = res.encoded->bytes.size();
   const double voxels = double(volume.dims.count());
@@ -185,6 +211,8 @@ Json attach_error_bound(Model& model, const Volume& volume, const ErrorBoundRequ
             {"residual_bits_per_voxel", 8.0 * double(bytes) / voxels},
             {"codec", res.encoded->meta["codec"]},
             {"predictor", res.encoded->meta["predictor"]},
+            {"reference", res.absolute ? "none" : "network"},
+            {"reference_bytes", res.encoded->meta["reference_bytes"]},
             {"candidate_bytes", res.encoded->meta["candidate_bytes"]}};
   model.residuals = std::move(res);
   return j;

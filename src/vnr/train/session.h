@@ -45,6 +45,11 @@ struct SessionOptions {
   // GPU: a group of steps enqueued between synchronisations never crosses a multiple of this many steps
   // of a run (0: none), so side work and callbacks see every such step (time series' probes).
   int64_t sync_every = 0;
+  // The last fraction of a declared budget (set_budget) over which the learning rate falls linearly
+  // toward 0: the saved parameters are then not one noisy Adam iterate (at a constant rate the PSNR of
+  // the last step of a run moves by up to 0.9 dB from one step to the next; docs/COMPRESSION.md).
+  // vnr's addition to tcnn's schedule; 0 keeps that schedule exactly. No effect without a budget.
+  double cooldown = 0.2;
   std::string sampler_name = "incore";  // the training record's "sampler"
   // The error message of a non-finite loss; default: "training diverged at step S (loss L); try a
   // smaller learning rate".
@@ -83,6 +88,10 @@ public:
   // Runs until `steps` more steps are done (< 0: no limit), `seconds` of training time have passed
   // (0: no limit) or a stop is requested. Returns the steps this call ran. One run() at a time.
   int64_t run(int64_t steps, double seconds = 0);
+  // Declares the training this session is to get from now on, over any number of run() calls (< 0 /
+  // 0: no limit of that kind): what options().cooldown counts its last fraction of. Once it is spent,
+  // further steps train at the config's rate again.
+  void set_budget(int64_t steps, double seconds);
   float step();  // run(1); the step's loss
 
   void request_stop() { stop_.store(true, std::memory_order_relaxed); }
@@ -137,6 +146,10 @@ public:
 private:
   void check() const;
   void run_steps(int64_t steps, double seconds, int64_t* done);
+  float cooldown_multiplier() const;  // of the next step, from the progress through the budget
+  int64_t budget_steps_ = -1, budget_first_step_ = 0;
+  double budget_seconds_ = 0, budget_first_second_ = 0;
+  bool budgeted_ = false;
   void wait_while_paused();
   Json report_json(const TrainingResult& r, const Json& evaluation) const;
   Json attach_residuals();
@@ -171,7 +184,9 @@ struct TrainingSetup {
   std::string volume;  // path (also its name in messages)
   RawOptions raw;
   LoadOptions load;
-  std::string config = "paper";  // preset or tiny-cuda-nn JSON file
+  // "auto" (the default: the paper's network, sized for an error bound given alone), a preset (paper,
+  // small) or a tiny-cuda-nn JSON file; a named preset or file is used as given.
+  std::string config = "auto";
   std::optional<Json> config_json;  // a tiny-cuda-nn config given as JSON (the Python module): wins over config
   double target_ratio = 0;       // > 0: a compact model file of volume bytes / R (within 5 %)
   double target_psnr = 0;        // > 0: the coarsest quantization reaching this PSNR (held-back estimate)

@@ -59,10 +59,18 @@ std::unique_ptr<TrainingSession> session_on_data(const TrainingSetup& s, ModelCo
   }
   std::string note;
   SessionOptions session_opts = s.session;
-  if (s.target_ratio > 0) {
-    const uint64_t target = uint64_t(double(data->source_bytes()) / s.target_ratio);
+  double target_ratio = s.target_ratio;
+  if (target_ratio <= 0 && s.target_psnr <= 0 && s.session.error_bound.active() && !s.config_json &&
+      s.config == "auto") {
+    target_ratio = bounded_network_ratio(*data->vol, data->source_bytes(),
+                                         normalised_error_bound(s.session.error_bound, data->lo, data->hi, data->dtype),
+                                         &note);
+    say(note);
+  }
+  if (target_ratio > 0) {
+    const uint64_t target = uint64_t(double(data->source_bytes()) / target_ratio);
     config = size_config_for_bytes(config, target, s.bits_per_param, &note);
-    say(fmt::format("--target-ratio {}: {}", s.target_ratio, note));
+    say(fmt::format("--target-ratio {:g}: {}", target_ratio, note));
     session_opts.compact.target_bytes = target;
   }
   session_opts.compact.target_psnr = s.target_psnr;
@@ -73,7 +81,7 @@ std::unique_ptr<TrainingSession> session_on_data(const TrainingSetup& s, ModelCo
   }
   Model model = create_model(config, data->dims, data->dtype, data->lo, data->hi, s.seed);
   Network& net = *model.net;
-  if (s.target_ratio <= 0 && model.param_bytes() > data->source_bytes())
+  if (target_ratio <= 0 && model.param_bytes() > data->source_bytes())
     say(fmt::format("note: the model ({}) is larger than the volume ({}); use --target-ratio R to compress",
                     human_bytes(double(model.param_bytes())), human_bytes(double(data->source_bytes()))));
 

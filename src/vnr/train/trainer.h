@@ -57,6 +57,7 @@ public:
   float step();  // one training step; returns the mean loss of its batch
   uint64_t steps_done() const override { return adam_.steps_done(); }
   float current_learning_rate() const override { return adam_.current_learning_rate(); }
+  void set_learning_rate_multiplier(float m) override { adam_.set_lr_multiplier(m); }
   const std::vector<float>& loss_history() const { return loss_history_; }
   Network& network() override { return net_; }
   const TrainOptions& options() const { return opts_; }

@@ -29,7 +29,9 @@ public:
   virtual float last_loss() const = 0;
   virtual std::vector<float> losses() const = 0;
   virtual uint64_t steps_done() const = 0;
-  virtual float current_learning_rate() const = 0;
+  virtual float current_learning_rate() const = 0;  // this step's, the multiplier included
+  // Scales the learning rate of the following steps (TrainingSession's cool-down); 1 = the config's.
+  virtual void set_learning_rate_multiplier(float m) = 0;
   // Online macro-cells (paper "Macro-Cell Optimization"): from now on every training sample widens the
   // value range of its macro-cells; (re)starts empty.
   virtual void enable_online_ranges(Int3 dims, int cell_size = 16) = 0;
