@@ -4,12 +4,15 @@
 #include <gtest/gtest.h>
 #include <hwy/targets.h>
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <functional>
 #include "vnr/core/error.h"
+#include "vnr/core/parallel.h"
 #include "vnr/core/rng.h"
 #include "vnr/core/value_range_grid.h"
 #include "vnr/render/renderer.h"
+#include "vnr/render/tiles.h"
 #include "vnr/train/model_io.h"
 #include "vnr/train/sampler.h"
 #include "vnr/train/trainer.h"
@@ -233,6 +236,52 @@ TEST(Strategies, StreamingAndInShaderGiveTheSameImageOnTheGrid) {
       EXPECT_GT(sum, 10.0) << "the image is not empty";
     }
   }
+}
+
+// Tiles claimed from a shared counter: two cursors (threads) interleaving their claims visit every pixel
+// of an image that is not a multiple of the tile size exactly once.
+TEST(Tiles, ClaimedTilesCoverEveryPixelOnce) {
+  const int W = 37, H = 21;
+  std::atomic<int64_t> next{0};
+  TileCursor a{W, H, 8, 0, 1, &next}, b{W, H, 8, 0, 1, &next};
+  std::vector<int> seen(size_t(W) * H, 0);
+  bool more_a = true, more_b = true;
+  for (int turn = 0; more_a || more_b; ++turn) {
+    int x, y;
+    TileCursor& c = turn % 3 == 0 ? b : a;  // uneven turns: b claims fewer tiles
+    bool& more = turn % 3 == 0 ? more_b : more_a;
+    if (more && (more = c.next(&x, &y))) ++seen[size_t(y) * W + x];
+  }
+  for (int v : seen) ASSERT_EQ(v, 1);
+}
+
+// Work is claimed by whichever thread is free, so the image must not depend on the thread count:
+// in-shader (per ray and SIMD packets) and streaming, bit for bit on 1, 2 and 3 threads.
+TEST(Strategies, ImagesDoNotDependOnTheThreadCount) {
+  const GridScene scene;
+  for (RenderStrategy strategy : {RenderStrategy::InShader, RenderStrategy::Streaming})
+    for (bool packets : {false, true}) {
+      if (packets && strategy != RenderStrategy::InShader) continue;
+      std::vector<Image> images;
+      for (int threads : {1, 2, 3}) {
+        set_num_threads(threads);
+        RenderOptions o;
+        o.strategy = strategy;
+        o.ray_packets = packets;
+        o.width = 45;
+        o.height = 37;
+        o.seed = 2;
+        CpuRenderer r(scene.field, box_of(scene.vol), scene.mc, scene.tf, scene.cam, o);
+        images.push_back(r.render(2));
+      }
+      set_num_threads(0);
+      for (size_t k = 1; k < images.size(); ++k)
+        for (size_t i = 0; i < images[0].pixels.size(); ++i) {
+          const Vec4f &a = images[0].pixels[i], &b = images[k].pixels[i];
+          ASSERT_TRUE(a.x == b.x && a.y == b.y && a.z == b.z && a.w == b.w)
+              << render_strategy_name(strategy) << (packets ? " packets" : "") << " pixel " << i;
+        }
+    }
 }
 
 // The SIMD ray packets of in-shader grid ray marching (grid_packets.h) against the per-ray loop they

@@ -1,4 +1,5 @@
 #pragma once
+#include <algorithm>
 #include <atomic>
 #include <cstdint>
 #include <omp.h>
@@ -46,6 +47,23 @@ template <typename F>
 void parallel_threads(F&& f) {
 #pragma omp parallel
   { f(omp_get_thread_num(), omp_get_num_threads()); }
+}
+
+// parallel_for_range's ranges, each claimed by whichever thread is free (for_each_claimed): only for
+// work whose results do not depend on the thread (rendering), so a core slowed by another job takes
+// fewer ranges instead of holding up the rest.
+template <typename F>
+void parallel_for_claimed(int64_t n, int64_t grain, F&& f) {
+  if (grain < 1) grain = 1;
+  const int64_t chunks = (n + grain - 1) / grain;
+  if (chunks <= 1) {
+    if (n > 0) f(int64_t(0), n);
+    return;
+  }
+  std::atomic<int64_t> next{0};
+  parallel_threads([&](int, int) {
+    for_each_claimed(next, chunks, [&](int64_t c) { f(c * grain, std::min(n, (c + 1) * grain)); });
+  });
 }
 
 }  // namespace vnr

@@ -10,9 +10,10 @@ namespace vnr {
 int64_t run_inshader_grid(const InshaderJob& job, const GridView& g) {
   const RenderParams& p = *job.params;
   if (job.ray_packets && job.mode == RenderMode::RayMarch && grid_packets_apply(p, g)) {
-    std::atomic<int64_t> samples{0};
-    parallel_threads([&](int t, int nt) {
-      samples += march_grid_packets(p, g, TileCursor{p.cam.width, p.cam.height, kInshaderTile, t, nt}, job.pixels);
+    std::atomic<int64_t> samples{0}, next_tile{0};
+    parallel_threads([&](int, int) {
+      const TileCursor tiles{p.cam.width, p.cam.height, kInshaderTile, 0, 1, &next_tile};
+      samples += march_grid_packets(p, g, tiles, job.pixels);
     });
     return samples.load();
   }
@@ -20,7 +21,7 @@ int64_t run_inshader_grid(const InshaderJob& job, const GridView& g) {
 }
 
 void GridField::query(const float* x, const float* y, const float* z, int64_t n, float* out) const {
-  parallel_for_range(n, 4096, [&](int64_t b, int64_t e) { grid_lookup_batch(g_, x + b, y + b, z + b, e - b, out + b); });
+  parallel_for_claimed(n, 4096, [&](int64_t b, int64_t e) { grid_lookup_batch(g_, x + b, y + b, z + b, e - b, out + b); });
 }
 
 int64_t GridField::render_inshader(const InshaderJob& job) const { return run_inshader_grid(job, g_); }

@@ -36,11 +36,11 @@ template <class PointFn>
 int64_t run_inshader(const InshaderJob& job, const PointFn& f) {
   const RenderParams& p = *job.params;
   const int W = p.cam.width, H = p.cam.height;
-  std::atomic<int64_t> samples{0};
-  parallel_threads([&](int t, int nt) {
+  std::atomic<int64_t> samples{0}, next_tile{0};
+  parallel_threads([&](int, int) {
     const SingleRayEval<PointFn> eval{f};
     int64_t my_samples = 0;
-    TileCursor pixels{W, H, kInshaderTile, t, nt};
+    TileCursor pixels{W, H, kInshaderTile, 0, 1, &next_tile};
     for (int ix, iy; pixels.next(&ix, &iy);)
       job.pixels[int64_t(iy) * W + ix] = inshader_pixel(p, job.mode, eval, ix, iy, &my_samples);
     samples += my_samples;

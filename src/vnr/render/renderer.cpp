@@ -110,7 +110,7 @@ struct CpuStreamBackend {
 
   template <class Stage>
   void run(int64_t n, const Stage& stage) {
-    parallel_for_range(n, kGrain, [&](int64_t b, int64_t e) {
+    parallel_for_claimed(n, kGrain, [&](int64_t b, int64_t e) {
       for (int64_t r = b; r < e; ++r) stage(r);
     });
   }
