@@ -119,3 +119,10 @@ TEST_F(Golden, TimeSeriesWarmAndContinuous) {
 }
 
 }  // namespace
+
+// A compact model written before context coding (codec quant-zstd: the ratio model of the test above,
+// as the build of 2026-11-27 wrote it) decodes to exactly what that build decoded.
+TEST_F(Golden, QuantZstdModelsOfEarlierBuildsDecodeAsBefore) {
+  vnr_ok("decode " + std::string(VNR_TEST_DATA_DIR) + "/compact_quant_zstd.vnr -o " + d + "/old.raw --force -q" + fixed);
+  check("decode_compact_quant_zstd", d + "/old.raw");
+}

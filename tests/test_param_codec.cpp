@@ -1,4 +1,4 @@
-// .vnr format version 2: compressed (quantized, zstd-coded) parameters and the residual block.
+// .vnr format version 2: compressed (quantized, zstd- or context-coded) parameters and the residual block.
 #include <gtest/gtest.h>
 #include <cmath>
 #include <cstring>
@@ -263,7 +263,7 @@ TEST(ParamCodec, DamagedFilesAreClearErrors) {
   expect_error([](Json& h) { h["params_encoding"]["codec"] = "lzma"; }, "unsupported params_encoding");
   expect_error([](Json& h) { h["params_encoding"]["segments"][0]["n"] = 3; }, "n_params is");
   expect_error([](Json& h) { h["params_encoding"]["segments"][0]["bytes"] = 3; }, "do not add up");
-  expect_error([](Json& h) { h["params_encoding"]["segments"][1]["width"] = 3; }, "width 3");
+  expect_error([](Json& h) { h["params_encoding"]["segments"][0]["width"] = 3; }, "width 3");  // zstd (step 0.01)
   expect_error([](Json& h) { h["params_encoding"]["segments"][1]["step"] = -1; }, "quantization step");
   expect_error([](Json& h) { h["params_encoding"]["segments"][1].erase("step"); }, "needs n, step");
   expect_error([](Json& h) { h["params_encoding"]["bytes"] = 1u << 30; }, "header describes");
@@ -334,4 +334,88 @@ TEST(CompactMacrocells, WidenOutwardsAndKeepEmptyCells) {
   write_vnr(path, m);
   EXPECT_EQ(version_of(read_file(path)), 1u);
   EXPECT_EQ(read_vnr(path).macrocell_ranges, m.macrocell_ranges);
+}
+
+// The context coder alone, on adversarial inputs: every layout it conditions on, and streams that are
+// cut short are refused, never read past their end.
+TEST(ParamContextCoder, RoundTripsAdversarialInputsExactly) {
+  std::mt19937 rng(5);
+  std::vector<std::vector<int32_t>> inputs;
+  inputs.push_back(std::vector<int32_t>(5000, 0));  // all zeros
+  std::vector<int32_t> distinct(2 * kMaxQuantIndex + 1);
+  for (size_t i = 0; i < distinct.size(); ++i) distinct[i] = int32_t(i) - kMaxQuantIndex;
+  std::shuffle(distinct.begin(), distinct.end(), rng);
+  inputs.push_back(distinct);  // all distinct
+  std::vector<int32_t> extreme(4096);
+  for (size_t i = 0; i < extreme.size(); ++i) extreme[i] = (i % 3 == 0 ? -1 : 1) * kMaxQuantIndex;
+  inputs.push_back(extreme);  // maximum range, alternating signs
+  std::vector<int32_t> wide(3000);
+  for (auto& v : wide) v = int32_t(rng() % 2000001) - 1000000;  // far beyond the unary part
+  inputs.push_back(wide);
+  std::vector<int32_t> sparse(8 * 8 * 8 * 4);
+  for (auto& v : sparse) v = rng() % 7 == 0 ? int32_t(rng() % 9) - 4 : 0;
+  inputs.push_back(sparse);
+  inputs.push_back({});
+  inputs.push_back({-1});
+  for (const IndexLayout layout : {IndexLayout{1, 0}, IndexLayout{2, 0}, IndexLayout{4, 8}, IndexLayout{8, 3}}) {
+    for (const auto& q : inputs) {
+      const std::vector<uint8_t> bytes = encode_param_indices(q.data(), q.size(), layout);
+      std::vector<int32_t> back(q.size(), 77);
+      ASSERT_TRUE(decode_param_indices(bytes.data(), bytes.size(), q.size(), layout, back.data()));
+      EXPECT_EQ(back, q) << "entry " << layout.entry << " res " << layout.res << " n " << q.size();
+      if (q.size() >= 2048)
+        EXPECT_FALSE(decode_param_indices(bytes.data(), bytes.size() / 2, q.size(), layout, back.data()));
+    }
+  }
+  // All zeros cost next to nothing; the extremes cost about their 11 bits.
+  EXPECT_LT(encode_param_indices(inputs[0].data(), 5000, {}).size(), 40u);
+  EXPECT_LT(encode_param_indices(distinct.data(), distinct.size(), {}).size(), distinct.size() * 13 / 8);
+}
+
+// A grid level whose entries are mostly zero and smooth where not (what training leaves of a hashed
+// level) is context coded, smaller than zstd; the file says so and round-trips exactly, and writing
+// what was read gives the same bytes. Raw (step 0) segments keep zstd.
+TEST(ParamCodec, ContextCodedSegmentsRoundTrip) {
+  TmpDir tmp;
+  const std::string a = tmp.str() + "/a.vnr", b = tmp.str() + "/b.vnr";
+  ModelFile m = make_model(9);
+  m.param_segments = segments_with_step(m, 0.0f, 0.004f);
+  const uint64_t n_mlp = m.param_segments[0].count + m.param_segments[1].count;
+  std::mt19937 rng(9);
+  std::normal_distribution<float> nd(0, 1);
+  for (size_t i = n_mlp; i < m.params.size(); ++i) {
+    const bool touched = (i / 2) % 16 < 3;  // runs of used entries, both features alike
+    m.params[i] = float_to_half(touched ? 0.02f * (1 + nd(rng) * 0.2f) : 0.0f);
+  }
+  quantize_params(m.params, m.param_segments);
+  write_vnr(a, m);
+  const std::string bytes = read_file(a);
+  uint64_t hlen;
+  std::memcpy(&hlen, bytes.data() + 16, 8);
+  const Json h = Json::parse(bytes.substr(24, hlen));
+  EXPECT_EQ(h["params_encoding"]["codec"], kParamsContextCodec);
+  const Json& segs = h["params_encoding"]["segments"];
+  EXPECT_FALSE(segs[0].contains("coder"));
+  EXPECT_EQ(segs[2]["coder"], "context");
+  EXPECT_EQ(segs[2]["entry"], 2);
+  EXPECT_EQ(segs[2]["res"], 4);  // level 0: 4^3 vertices, dense
+  ModelFile r = read_vnr(a);
+  EXPECT_EQ(r.params, m.params);
+  EXPECT_EQ(r.param_segments[2].layout.res, 4u);
+  write_vnr(b, r);
+  EXPECT_EQ(read_file(b), bytes);
+  // A context-coded segment's header is checked like a zstd one's.
+  auto expect_error = [&](const std::function<void(Json&)>& edit, const std::string& needle) {
+    write_bytes(b, with_header(bytes, edit));
+    const std::string msg = one_line_error_of([&] { read_vnr(b); });
+    EXPECT_NE(msg.find(needle), std::string::npos) << msg;
+  };
+  expect_error([](Json& h) { h["params_encoding"]["segments"][2]["coder"] = "lzma"; }, "coder must be");
+  expect_error([](Json& h) { h["params_encoding"]["segments"][2]["entry"] = 0; }, "context-coded segment");
+  expect_error([](Json& h) { h["params_encoding"]["segments"][2].erase("res"); }, "coder must be");
+  expect_error([](Json& h) {  // a stream cut short under a consistent header
+    auto& s = h["params_encoding"]["segments"];
+    s[2]["bytes"] = s[2]["bytes"].get<uint64_t>() - 2;
+    s[3]["bytes"] = s[3]["bytes"].get<uint64_t>() + 2;
+  }, "corrupted");
 }

@@ -20,7 +20,6 @@ constexpr char kMagic[8] = {'V', 'N', 'R', 'M', 'O', 'D', 'E', 'L'};
 constexpr char kEndMagic[8] = {'V', 'N', 'R', 'E', 'N', 'D', '\0', '\0'};
 constexpr uint32_t kFormatVersion = 2;     // the newest this vnr reads
 constexpr uint32_t kPlainFormatVersion = 1;  // written when a model needs nothing of version 2
-constexpr const char* kParamsCodec = "quant-zstd";
 constexpr const char* kMacrocellCodec = "u8-zstd";
 constexpr uint64_t kPreambleBytes = 24;  // magic, version, flags, header length
 constexpr uint64_t kTrailerBytes = 12;   // CRC-32 + end magic
@@ -252,9 +251,10 @@ V2Blocks parse_v2_keys(const std::string& path, const Json& h, uint32_t version)
   V2Blocks v;
   if (version < 2) return v;  // version-1 readers ignored unknown keys: so does this one for v1 files
   if (auto pe = h.find("params_encoding"); pe != h.end() && !pe->is_null()) {
-    if (!pe->is_object() || !pe->contains("codec") || (*pe)["codec"] != kParamsCodec)
-      fail("'{}' has an unsupported params_encoding {} (this vnr reads codec \"{}\")", path, one_line(pe->dump()),
-           kParamsCodec);
+    if (!pe->is_object() || !pe->contains("codec") ||
+        ((*pe)["codec"] != kParamsZstdCodec && (*pe)["codec"] != kParamsContextCodec))
+      fail("'{}' has an unsupported params_encoding {} (this vnr reads codecs \"{}\" and \"{}\")", path,
+           one_line(pe->dump()), kParamsZstdCodec, kParamsContextCodec);
     v.compressed = true;
     v.params_bytes = header_count(*pe, "bytes", path, "params_encoding.bytes");
     v.segments = pe->contains("segments") ? (*pe)["segments"] : Json();
@@ -324,6 +324,7 @@ ModelFile parse_vnr(const std::string& path, const std::string& buf) {
     if (v2.compressed) {
       m.params = decode_params(path, buf.data() + size_t(params_off), v2.params_bytes, v2.segments, n_params,
                                m.param_segments);
+      restore_segment_layouts(m.config, m.param_segments);
     } else {
       m.params.resize(size_t(n_params));
       if (n_params) std::memcpy(m.params.data(), buf.data() + size_t(params_off), size_t(2 * n_params));
@@ -498,8 +499,9 @@ static std::string encode_vnr(const std::string& path, const ModelFile& m) {
   std::string params_block;
   if (compressed) {
     Json segments;
-    params_block = encode_params(m.params, m.param_segments, segments);
-    h["params_encoding"] = {{"codec", kParamsCodec}, {"bytes", uint64_t(params_block.size())},
+    std::string codec;
+    params_block = encode_params(m.params, m.param_segments, segments, &codec);
+    h["params_encoding"] = {{"codec", codec}, {"bytes", uint64_t(params_block.size())},
                             {"segments", std::move(segments)}};
   } else {
     params_block.assign(reinterpret_cast<const char*>(m.params.data()), m.params.size() * 2);
