@@ -5,9 +5,12 @@
 #include <cstring>
 #include <fmt/format.h>
 #include "vnr/core/fileio.h"
+#include "vnr/core/half.h"
 #include "vnr/core/parallel.h"
+#include "vnr/nn/mlp_layout.h"
 #include "vnr/train/psnr_search.h"
 #include "vnr/train/rate_control.h"
+#include "vnr/train/rate_term.h"
 #include "vnr/train/session.h"
 #include "test_support.h"
 
@@ -254,4 +257,102 @@ TEST(RateControl, TargetPsnrSearchOutOfReachKeepsTheLargestModel) {
   EXPECT_EQ(found.session->options().compact.target_bytes, uint64_t(32 * 32 * 32 * 4 / 4));
   EXPECT_EQ(found.tried.size(), 4u);
   EXPECT_EQ(ratio_of(found.tried, true, true), 0);
+}
+
+// The rate term: bits of a Laplace bin around theta against an independent integration of the
+// density, its gradient against central finite differences, and the masses of all bins summing to 1.
+TEST(RateTerm, LaplaceBinBitsMatchTheDensityAndItsGradientFiniteDifferences) {
+  for (double step : {0.01, 0.1, 1.0}) {
+    for (double scale : {0.003, 0.05, 2.0}) {
+      auto density = [&](double x) { return std::exp(-std::fabs(x) / scale) / (2 * scale); };
+      for (double theta : {0.0, 0.2 * step, -0.3 * step, 0.49 * step, -0.51 * step, 0.7 * step, 3.2 * step,
+                           -5.6 * step}) {
+        SCOPED_TRACE(fmt::format("step {} scale {} theta {}", step, scale, theta));
+        double d = 0;
+        const double bits = laplace_bin_bits(theta, step, scale, &d);
+        double mass = 0;  // Simpson's rule over the bin (kinks at 0 aside: the bin is split there)
+        auto simpson = [&](double a, double b) {  // h at most scale / 40: the density's curvature
+          const int n = 2 * int(std::min(200000.0, std::max(1000.0, 20 * (b - a) / scale)));
+          const double h = (b - a) / n;
+          double s = density(a) + density(b);
+          for (int i = 1; i < n; ++i) s += density(a + i * h) * (i % 2 ? 4 : 2);
+          return s * h / 3;
+        };
+        const double a = theta - step / 2, b = theta + step / 2;
+        mass = a < 0 && b > 0 ? simpson(a, 0) + simpson(0, b) : simpson(a, b);
+        if (mass > 1e-250) EXPECT_NEAR(bits, -std::log2(mass), 1e-6 * std::max(1.0, bits));  // else underflows
+        const double h = 1e-6 * step;
+        double dp, dm;
+        const double fd = (laplace_bin_bits(theta + h, step, scale, &dp) - laplace_bin_bits(theta - h, step, scale, &dm)) /
+                          (2 * h);
+        EXPECT_NEAR(d, fd, 1e-4 * std::max(1.0, std::fabs(fd)));
+      }
+      double total = 0;  // the bins at k * step partition the line
+      for (int k = -20000; k <= 20000; ++k) {
+        double d;
+        total += std::exp2(-laplace_bin_bits(k * step, step, scale, &d));
+      }
+      EXPECT_NEAR(total, 1.0, 1e-9);
+    }
+  }
+}
+
+// add_rate_gradient adds weight * d bits / d theta to the segments with a step from first_segment on,
+// with each segment's scale its mean |theta|, and returns their total bits.
+TEST(RateTerm, GradientLandsOnTheQuantizedGridSegmentsOnly) {
+  std::vector<ParamSegment> segs = {{5, 0.1f, {}}, {40000, 0.02f, {}}, {7, 0.0f, {}}, {30, 0.5f, {}}};
+  std::vector<float> master(5 + 40000 + 7 + 30);
+  for (size_t i = 0; i < master.size(); ++i) master[i] = float(std::sin(0.37 * double(i))) * (i < 40005 ? 0.05f : 1.f);
+  std::vector<float> grads(master.size(), 1.0f);
+  const double weight = 0.25;
+  const double bits = add_rate_gradient(master, segs, 1, weight, grads.data());
+  double expect_bits = 0;
+  uint64_t off = 0;
+  for (size_t k = 0; k < segs.size(); ++k) {
+    double mean_abs = 0;
+    for (uint64_t i = off; i < off + segs[k].count; ++i) mean_abs += std::fabs(master[i]) / double(segs[k].count);
+    for (uint64_t i = off; i < off + segs[k].count; ++i) {
+      double d = 0;
+      if (k >= 1 && segs[k].step > 0) {
+        expect_bits += laplace_bin_bits(master[i], segs[k].step, mean_abs, &d);
+        ASSERT_NEAR(grads[i], 1.0 + weight * d, 1e-5 * (1 + std::fabs(weight * d))) << i;
+      } else {
+        ASSERT_EQ(grads[i], 1.0f) << i;  // the MLP (before first_segment) and raw segments are left alone
+      }
+    }
+    off += segs[k].count;
+  }
+  EXPECT_NEAR(bits, expect_bits, 1e-9 * expect_bits);
+}
+
+// Rate-aware quantization-aware steps: the same run with the rate term leaves more of the grid's
+// indices at zero (the term pulls parameters that do not pay for their bits into the zero bin), and the
+// report says it ran.
+TEST(RateTerm, RateAwareStepsZeroMoreOfTheGrid) {
+  const std::string d = temp_dir("rate_aware");
+  const Int3 dims{40, 40, 40};
+  const std::string volume = write_volume(d, dims, "uint8");
+  auto zero_share = [&](double weight) {
+    TrainingSetup s = setup_for(d, volume, dims, "uint8");
+    s.target_ratio = 8;
+    s.qat_fraction = 0.5;
+    s.rate_weight = weight;
+    auto session = open_training_session(s);
+    const Json summary = train_compact(*session, 40, 0, session->options().compact);
+    EXPECT_EQ(summary["rate_weight"].get<double>(), weight);
+    session->finish(false, 0);
+    const Model m = load_model(s.session.output);
+    const size_t first_grid = make_mlp_layout(m.net->config()).n_matrices;
+    uint64_t off = 0, zeros = 0, n = 0;
+    const std::vector<uint16_t> p = m.net->params_half();
+    for (size_t k = 0; k < m.param_segments.size(); ++k) {
+      const ParamSegment& seg = m.param_segments[k];
+      if (k >= first_grid && seg.step > 0)
+        for (uint64_t i = off; i < off + seg.count; ++i, ++n) zeros += half_to_float(p[i]) == 0.0f;
+      off += seg.count;
+    }
+    return double(zeros) / double(n);
+  };
+  const double plain = zero_share(0), rate_aware = zero_share(3);
+  EXPECT_GT(rate_aware, plain + 0.05) << plain << " " << rate_aware;
 }

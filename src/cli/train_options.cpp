@@ -18,6 +18,7 @@ TrainingSetup setup_of(const TrainArgs& a, bool preview) {
   s.target_psnr = a.target_psnr;
   s.bits_per_param = a.bits_per_param;
   s.qat_fraction = a.qat_fraction;
+  s.rate_weight = a.rate_weight;
   s.batch = a.batch;
   s.seed = a.seed;
   s.device = a.device;
@@ -74,6 +75,10 @@ void add_training_options(CLI::App* c, TrainArgs& a) {
       ->capture_default_str();
   c->add_option("--qat-fraction", a.qat_fraction,
                  "compact models: the last part of the steps trained on quantized parameters (CPU trainer)")
+      ->capture_default_str();
+  c->add_option("--rate-weight", a.rate_weight,
+                 "compact models: weight of the grid's bits in the loss over the quantization-aware steps "
+                 "(rate-aware training, CPU trainer; 0: distortion alone)")
       ->capture_default_str();
   c->add_option("--steps", a.steps, "training steps (default 1000, or unlimited with --seconds)");
   c->add_option("--cooldown", a.cooldown,

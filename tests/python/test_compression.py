@@ -53,6 +53,18 @@ def test_target_ratio_file_equals_the_cli(tmp_path, cli):
     np.testing.assert_array_equal(model.decode(device="cpu"), read_raw_json(str(tmp_path / "cli.json")))
 
 
+def test_rate_weight_equals_the_cli(tmp_path, cli):
+    array = smooth_volume(SHAPE, "float32", seed=9)
+    side = write_raw(array, str(tmp_path / "v.json"))
+    cli("train", side, "-o", tmp_path / "cli.vnr", "--config", "small", "--steps", 60, "--seed", 3, "--threads", 2,
+        "--device", "cpu", "--target-ratio", 16, "--rate-weight", 1, "-q")
+    model = vnr.train(side, target_ratio=16, rate_weight=1.0, **TRAIN)
+    plain = vnr.train(side, target_ratio=16, **TRAIN)
+    cli("decode", tmp_path / "cli.vnr", "-o", tmp_path / "cli.raw", "--device", "cpu", "--threads", 2, "-q")
+    np.testing.assert_array_equal(model.decode(device="cpu"), read_raw_json(str(tmp_path / "cli.json")))
+    assert not np.array_equal(model.decode(device="cpu"), plain.decode(device="cpu"))  # the term changed the run
+
+
 def test_target_psnr_search_reaches_the_target(tmp_path):
     array = smooth_volume(SHAPE, "float32", seed=7)
     model = vnr.train(array, target_psnr=26, **dict(TRAIN, steps=150))
@@ -78,3 +90,5 @@ def test_bad_compression_options_raise():
         vnr.train(array, target_psnr=float("nan"), **TRAIN)
     with pytest.raises(ValueError, match="qat-fraction"):
         vnr.train(array, target_ratio=8, qat_fraction=2.0, **TRAIN)
+    with pytest.raises(ValueError, match="rate-weight"):
+        vnr.train(array, target_ratio=8, rate_weight=-1.0, **TRAIN)

@@ -1,9 +1,11 @@
 #include "vnr/train/rate_control.h"
+#include "vnr/train/rate_term.h"
 #include <algorithm>
 #include <cmath>
 #include "vnr/core/error.h"
 #include "vnr/core/half.h"
 #include "vnr/core/rng.h"
+#include "vnr/nn/mlp_layout.h"
 #include "vnr/train/session.h"
 
 namespace vnr {
@@ -283,6 +285,21 @@ bool can_train_quantized(TrainingSession& session) {
   return session.trainer().device() == Device::Cpu && !session.trainer().asynchronous();
 }
 
+// Rate-aware steps: the grid's bits under the quantization `segs` join the loss with the weight
+// `weight` * 2 ln 2 * loss / parameters (the slope of distortion against rate of a uniform quantizer at
+// high rate, from the last step's loss), their gradient taken on the master copy. False when the
+// trainer takes no gradient hook.
+static bool set_rate_hook(TrainingSession& session, const std::vector<float>& master, const std::vector<ParamSegment>& segs,
+                          double weight) {
+  Trainer& trainer = session.trainer();
+  const size_t first_grid = make_mlp_layout(session.network().config()).n_matrices;
+  const double n = double(master.size());
+  return trainer.set_gradient_hook([&trainer, &master, segs, first_grid, weight, n](float* grads) {
+    const double lambda = weight * 2 * std::log(2.0) * double(trainer.last_loss()) / n;
+    add_rate_gradient(master, segs, first_grid, lambda, grads);
+  });
+}
+
 Json train_compact(TrainingSession& session, int64_t steps, double seconds, const CompactOptions& o,
                    const std::function<void(const std::string&)>& message) {
   if (!session.data() || !session.data()->sampler) fail("compact storage needs a session opened on training data");
@@ -318,6 +335,7 @@ Json compact_session(TrainingSession& session, const CompactOptions& o, int64_t 
   double g = choose(0);
 
   int64_t qat_steps = 0;
+  bool rate_aware = false;
   if (qat) {
     // Straight-through: each step sees the quantized parameters; its update lands on the master copy.
     std::vector<float> shown;
@@ -330,19 +348,23 @@ Json compact_session(TrainingSession& session, const CompactOptions& o, int64_t 
         [&] {
           for (size_t i = 0; i < q.master.size(); ++i) q.master[i] += net.params[i] - shown[i];
         });
+    rate_aware = o.rate_weight > 0 && set_rate_hook(session, q.master, segs, o.rate_weight);
     const int64_t before = session.steps_done();
     try {
       session.run(qat_steps_planned, qat_seconds);
     } catch (...) {
       session.set_step_hooks({}, {});
+      if (rate_aware) session.trainer().set_gradient_hook({});
       throw;
     }
     session.set_step_hooks({}, {});
+    if (rate_aware) session.trainer().set_gradient_hook({});
     qat_steps = session.steps_done() - before;
     zero_unused(net.mlp(), q.master);
     g = choose(g);  // the weights moved a little: meet the target again
   }
-  const Json summary = finish_quantization(model, q, g, bytes, probe, qat_steps);
+  Json summary = finish_quantization(model, q, g, bytes, probe, qat_steps);
+  summary["rate_weight"] = rate_aware ? o.rate_weight : 0.0;
   session.freeze_parameters();
   const double psnr_after = summary["heldback_psnr"].get<double>();
   if (message)

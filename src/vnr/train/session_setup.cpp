@@ -20,6 +20,8 @@ void check_training_setup(const TrainingSetup& s) {
   if (s.target_psnr < 0 || !std::isfinite(s.target_psnr)) fail("--target-psnr must be positive, got {}", s.target_psnr);
   if (!(s.qat_fraction >= 0 && s.qat_fraction <= 1))
     fail("--qat-fraction must be in [0, 1], got {}", s.qat_fraction);
+  if (!(s.rate_weight >= 0 && s.rate_weight <= 100))
+    fail("--rate-weight must be in [0, 100], got {}", s.rate_weight);
   if (!(s.bits_per_param > 0 && s.bits_per_param <= 16))
     fail("bits per parameter must be in (0, 16], got {}", s.bits_per_param);
   if (s.device == "cuda") cuda::require_device();
@@ -75,6 +77,7 @@ std::unique_ptr<TrainingSession> session_on_data(const TrainingSetup& s, ModelCo
   }
   session_opts.compact.target_psnr = s.target_psnr;
   session_opts.compact.qat_fraction = s.qat_fraction;
+  session_opts.compact.rate_weight = s.rate_weight;
   if (data->out_of_core) {
     config = scale_grid_learning_rate(config, s.data.grid_lr_scale, *data->out_of_core, &note);
     if (!note.empty()) say(note);

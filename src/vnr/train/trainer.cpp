@@ -164,6 +164,7 @@ float CpuTrainer::step() {
   if (grid && (!private_grid_grads_ || n_tail_ > 0)) scatter_grid_gradients(n_static);
   auto t2 = std::chrono::steady_clock::now();
   sum_gradients();
+  if (gradient_hook_) gradient_hook_(grads_.data());
   adam_.step(net_.params.data(), grads_.data(), net_.has_grid() ? net_.grid_half_mut() : nullptr);
   auto t3 = std::chrono::steady_clock::now();
   phase_seconds[0] = std::chrono::duration<double>(t1 - t0).count();

@@ -76,6 +76,10 @@ public:
   uint32_t seed() const override { return opts_.seed; }
   std::optional<Precision> mlp_precision() const override { return opts_.precision; }
   std::vector<PhaseTime> last_step_phases() const override;
+  bool set_gradient_hook(std::function<void(float* grads)> hook) override {
+    gradient_hook_ = std::move(hook);
+    return true;
+  }
   // Seconds spent in each phase of the last step, and what each one holds (report key, printed name):
   // sample+encode+MLP, grid backward, optimizer; a grid scattered per chunk (private copies) counts in
   // the first, except the shared chunks' share, which is the second.
@@ -91,6 +95,7 @@ private:
   void sum_gradients();                            // step()'s per-thread gradients into grads_
   Network& net_;
   std::shared_ptr<Sampler> sampler_;
+  std::function<void(float* grads)> gradient_hook_;
   TrainOptions opts_;
   Adam adam_;
   int n_threads_;

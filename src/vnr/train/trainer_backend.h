@@ -4,6 +4,7 @@
 // wrapper of cuda::GpuTrainer) implement it. The calls are per step or per group of steps, never per
 // sample, so a virtual call costs nothing measurable.
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <optional>
 #include <string>
@@ -58,6 +59,10 @@ public:
     double seconds = 0;
   };
   virtual void set_phase_timing(bool on) {}
+  // Called with the summed gradient (one float per parameter) before each optimizer step, so that a
+  // caller can add a term of its own (rate-aware training); an empty function removes it. False when
+  // this trainer cannot (the GPU trainer keeps its gradient on the device).
+  virtual bool set_gradient_hook(std::function<void(float* grads)> hook) { return !hook; }
   virtual std::vector<PhaseTime> last_step_phases() const = 0;
 };
 

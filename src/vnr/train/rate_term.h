@@ -1,0 +1,21 @@
+#pragma once
+// The rate term of rate-aware training (docs/COMPRESSION.md, "Rate-aware training"): the bits a
+// parameter costs when quantized with its segment's step under a zero-mean Laplace prior, relaxed to
+// a differentiable function of the continuous parameter (the probability mass of the quantization bin
+// around it, as training with uniform noise sees it), and its gradient added to the training gradient.
+#include <cstdint>
+#include <vector>
+#include "vnr/nn/param_codec.h"
+
+namespace vnr {
+
+// -log2 of the Laplace(0, scale) mass on [theta - step/2, theta + step/2]; *d receives d/d theta.
+double laplace_bin_bits(double theta, double step, double scale, double* d);
+
+// weight * d(total bits)/d(master) added to grads for the segments with a step (grid levels only,
+// from `first_segment` on); each segment's Laplace scale is its mean |parameter| (the prior's maximum
+// likelihood fit, refitted at every call). Returns the total bits of `master` under that model.
+double add_rate_gradient(const std::vector<float>& master, const std::vector<ParamSegment>& segments,
+                         size_t first_segment, double weight, float* grads);
+
+}  // namespace vnr
