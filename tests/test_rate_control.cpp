@@ -283,8 +283,8 @@ TEST(RateTerm, LaplaceBinBitsMatchTheDensityAndItsGradientFiniteDifferences) {
         if (mass > 1e-250) EXPECT_NEAR(bits, -std::log2(mass), 1e-6 * std::max(1.0, bits));  // else underflows
         const double h = 1e-6 * step;
         double dp, dm;
-        const double fd = (laplace_bin_bits(theta + h, step, scale, &dp) - laplace_bin_bits(theta - h, step, scale, &dm)) /
-                          (2 * h);
+        const double fd =
+            (laplace_bin_bits(theta + h, step, scale, &dp) - laplace_bin_bits(theta - h, step, scale, &dm)) / (2 * h);
         EXPECT_NEAR(d, fd, 1e-4 * std::max(1.0, std::fabs(fd)));
       }
       double total = 0;  // the bins at k * step partition the line

@@ -207,7 +207,8 @@ void decode_indices(const std::string& path, const SegmentMeta& m, const char* d
     if (crc32_of(q.data(), q.size() * sizeof(int32_t)) != m.crc)
       fail("'{}' is corrupted (context-coded parameters fail their checksum)", path);
     for (uint64_t i = 0; i < m.n; ++i) {
-      if (q[i] > kMaxQuantIndex || q[i] < -kMaxQuantIndex) fail("'{}' is corrupted (quantization index {})", path, q[i]);
+      if (q[i] > kMaxQuantIndex || q[i] < -kMaxQuantIndex)
+        fail("'{}' is corrupted (quantization index {})", path, q[i]);
       sym[i] = zigzag(q[i]);
     }
     return;
@@ -217,7 +218,8 @@ void decode_indices(const std::string& path, const SegmentMeta& m, const char* d
     fail("'{}' is corrupted (compressed parameter segment has the wrong size)", path);
   const size_t got = ZSTD_decompress(planes.data(), planes.size(), data, m.bytes);
   if (ZSTD_isError(got) || got != planes.size())
-    fail("'{}' is corrupted (compressed parameters: {})", path, ZSTD_isError(got) ? ZSTD_getErrorName(got) : "short segment");
+    fail("'{}' is corrupted (compressed parameters: {})", path,
+         ZSTD_isError(got) ? ZSTD_getErrorName(got) : "short segment");
   for (uint64_t i = 0; i < m.n; ++i) sym[i] = planes[i] | (m.width == 2 ? uint32_t(planes[m.n + i]) << 8 : 0u);
 }
 

@@ -289,8 +289,8 @@ bool can_train_quantized(TrainingSession& session) {
 // `weight` * 2 ln 2 * loss / parameters (the slope of distortion against rate of a uniform quantizer at
 // high rate, from the last step's loss), their gradient taken on the master copy. False when the
 // trainer takes no gradient hook.
-static bool set_rate_hook(TrainingSession& session, const std::vector<float>& master, const std::vector<ParamSegment>& segs,
-                          double weight) {
+static bool set_rate_hook(TrainingSession& session, const std::vector<float>& master,
+                          const std::vector<ParamSegment>& segs, double weight) {
   Trainer& trainer = session.trainer();
   const size_t first_grid = make_mlp_layout(session.network().config()).n_matrices;
   const double n = double(master.size());
