@@ -337,3 +337,57 @@ TEST(ApiGpu, QueriesAndRendersLikeTheBackendsBuiltByHand) {
       make_renderer(Device::Cuda, s.field, box_of(s.vol), s.mc, s.tf, s.cam, small_options());
   EXPECT_TRUE(same_pixels(r.image(), hand->render(2)));
 }
+
+// The noise estimate against the closed form: frames whose pixels alternate between 0 and 1 (grey)
+// have, after n frames, a sample variance of k(n-k)/(n(n-1)) (k ones) and so a standard error of the
+// mean of sqrt(k(n-k)/(n^2(n-1))) in every pixel.
+TEST(ApiRenderer, NoiseEstimateMatchesTheClosedForm) {
+  Image acc(3, 2), frame(3, 2);
+  std::vector<float> m2;
+  int ones = 0;
+  for (int n = 1; n <= 9; ++n) {
+    const float v = n % 3 == 0 ? 1.0f : 0.0f;
+    ones += n % 3 == 0;
+    for (Vec4f& p : frame.pixels) p = Vec4f{v, v, v, 1};
+    accumulate_frame(acc, frame, n - 1, &m2);
+    if (n < 2) {
+      EXPECT_TRUE(std::isinf(accumulated_noise(m2, n)));
+      continue;
+    }
+    const double expect = std::sqrt(double(ones) * (n - ones) / (double(n) * n * (n - 1)));
+    EXPECT_NEAR(accumulated_noise(m2, n), expect, 1e-6) << n;
+    EXPECT_NEAR(acc.pixels[4].x, double(ones) / n, 1e-6);
+  }
+}
+
+// render_until_converged stops at the first frame whose noise reaches the target (not before
+// min_frames), or at max_frames; the image is the same as that many render_frame calls, and the noise
+// of path tracing falls about as 1/sqrt(frames).
+TEST(ApiRenderer, RendersUntilTheNoiseReachesTheTarget) {
+  GridScene s;
+  auto renderer = [&] {
+    auto r = std::make_unique<Renderer>(s.vol, Device::Cpu);
+    r->set_options(small_options(RenderMode::PathTrace));
+    r->set_camera(s.cam);
+    r->set_macrocells(MacroCellMode::Grid, 8);
+    return r;
+  };
+  auto r = renderer();
+  std::vector<double> noise;
+  const int frames = r->render_until_converged({0.0, 4, 24}, nullptr, [&](int f, double n) {
+    EXPECT_EQ(f, int(noise.size()) + 1);
+    noise.push_back(n);
+  });
+  ASSERT_EQ(frames, 24);  // a target of 0 is never reached
+  EXPECT_NEAR(noise[23] / noise[5], std::sqrt(6.0 / 24.0), 0.25 * std::sqrt(6.0 / 24.0));
+  const double target = noise[11];  // reached first at frame 12, or earlier when the estimate dipped
+  int first = 4;
+  while (noise[first - 1] > target) ++first;
+  auto again = renderer();
+  EXPECT_EQ(again->render_until_converged({target, 4, 24}), first);
+  auto hand = renderer();
+  for (int i = 0; i < first; ++i) hand->render_frame();
+  EXPECT_TRUE(same_pixels(again->image(), hand->image()));
+  EXPECT_THROW(again->render_until_converged({-1, 4, 24}), Error);
+  EXPECT_THROW(again->render_until_converged({0.01, 5, 4}), Error);
+}

@@ -223,7 +223,12 @@ TEST(Cli, RenderModelAndVolumeWithReportsAndReference) {
       Json rep = parse_json_file(d + "/render.json");
       for (const char* k : {"seconds_per_frame", "frames", "rays", "field_samples", "image_psnr", "image_ssim"})
         EXPECT_TRUE(rep.contains(k)) << k;
-      EXPECT_EQ(rep["rays"].get<int64_t>(), 40 * 32);
+      // --spp auto (the default): frames until the noise is one 8-bit step, at least 4, at most 256
+      const int frames = rep["frames"].get<int>();
+      EXPECT_EQ(rep["spp"], "auto");
+      EXPECT_GE(frames, 4);
+      EXPECT_TRUE(frames == 256 || rep["noise"].get<double>() <= 1.0 / 255) << mode << " " << rep["noise"];
+      EXPECT_EQ(rep["rays"].get<int64_t>(), int64_t(40) * 32 * frames);
       EXPECT_GT(rep["field_samples"].get<int64_t>(), 0);
       EXPECT_EQ(rep["macrocells"], "online");
       if (std::string(mode) == "raymarch") EXPECT_GT(rep["image_psnr"].get<double>(), 20.0);
@@ -261,6 +266,9 @@ TEST(Cli, RenderBadInputGivesOneClearErrorLine) {
   expect_error("render " + v + " -o " + d + "/x.png --size 10", "WxH");
   expect_error("render " + v + " -o " + d + "/x.png --step 0", "step");
   expect_error("render " + v + " -o " + d + "/x.png --spp 0", "spp");
+  expect_error("render " + v + " -o " + d + "/x.png --spp many", "--spp must be auto");
+  expect_error("render " + v + " -o " + d + "/x.png --max-spp 2", "--max-spp");
+  expect_error("render " + v + " -o " + d + "/x.png --noise -1", "--noise");
   expect_error("render " + v + " -o " + d + "/x.png --orbit 10,95", "orbit");
   expect_error("render " + v + " -o " + d + "/x.png --eye 1,2,3", "--center");
   expect_error("render " + v + " -o " + d + "/x.png --frobnicate", "frobnicate");

@@ -7,6 +7,7 @@
 //   for (int i = 0; i < 16; ++i) r.render_frame();
 //   r.save("out.png");
 // Backends: the CPU's CpuRenderer and the GPU's GpuRenderer (src/vnr/render*), made by make_renderer.
+#include <functional>
 #include <memory>
 #include <optional>
 #include <string>
@@ -47,6 +48,13 @@ Device choose_render_device(const std::string& name, const Model* model, std::st
 // The default macro-cell mode: online for a model that carries ranges, grid when a volume is at hand,
 // else off.
 MacroCellMode default_macrocell_mode(const Model* model, const Volume* volume);
+
+// When Renderer::render_until_converged stops: once the image's noise (Renderer::noise) is at most
+// `noise`, after at least min_frames frames, or after max_frames.
+struct Convergence {
+  double noise = 1.0 / 255;  // one step of an 8-bit image, RMS
+  int min_frames = 4, max_frames = 256;
+};
 
 class Renderer {
 public:
@@ -105,8 +113,15 @@ public:
   // Renders frame number `frame` and leaves it where it was rendered (GPU memory on the GPU), without
   // accumulating: what benchmarks time.
   void render_frame_resident(uint32_t frame, RenderStats* stats = nullptr);
+  // Renders frames (adding to the accumulation) until the image has converged as `c` says; progress
+  // (frames, noise) after each frame. Returns the frames accumulated.
+  int render_until_converged(const Convergence& c, RenderStats* stats = nullptr,
+                             const std::function<void(int frames, double noise)>& progress = {});
   const Image& image() const { return accumulated_; }
   int frames() const { return frames_; }  // accumulated since the last change
+  // The RMS over pixels of the accumulated image's standard error, estimated from the spread of the
+  // frames (accumulated_noise; infinite before two frames).
+  double noise() const { return accumulated_noise(m2_, frames_); }
   void save(const std::string& path) const;  // .png (8-bit) or .pfm (float)
 
 private:
@@ -133,6 +148,7 @@ private:
   bool mc_tf_current_ = false;
   std::unique_ptr<FrameRenderer> backend_;
   Image frame_, accumulated_;
+  std::vector<float> m2_;  // per pixel: the frames' squared deviations (accumulate_frame)
   int frames_ = 0;
 };
 

@@ -59,7 +59,8 @@ void RenderArgs::add(CLI::App* c) {
 void add_render(CLI::App& app) {
   struct Args {
     std::string input, output, report, reference;
-    int spp = 1;
+    std::string spp = "auto";
+    Convergence converge;
     bool quiet = false;
     RenderArgs r;
     VolumeArgs vol;
@@ -68,7 +69,13 @@ void add_render(CLI::App& app) {
   CLI::App* c = app.add_subcommand("render", "render a model or a volume to an image (PNG or PFM)");
   c->add_option("input", a->input, "model (.vnr, instantvnr BSON) or volume (sidecar, scene, NRRD, raw)")->required();
   c->add_option("-o,--output", a->output, "image file: .png (8-bit) or .pfm (float)")->required();
-  c->add_option("--spp", a->spp, "frames accumulated (samples per pixel)")->capture_default_str();
+  c->add_option("--spp", a->spp,
+                "frames accumulated (samples per pixel), or auto: until the image's noise (the RMS standard "
+                "error of its pixels, estimated from the frames) is at most --noise")
+      ->capture_default_str();
+  c->add_option("--noise", a->converge.noise, "--spp auto: the noise to reach, in [0, 1] units (one 8-bit step)")
+      ->capture_default_str();
+  c->add_option("--max-spp", a->converge.max_frames, "--spp auto: at most this many frames")->capture_default_str();
   c->add_option("--report", a->report, "write a JSON report");
   c->add_option("--reference", a->reference, "compare with this image (PNG or PFM): PSNR and SSIM");
   c->add_flag("-q,--quiet", a->quiet, "no progress output");
@@ -78,17 +85,38 @@ void add_render(CLI::App& app) {
     set_num_threads(a->r.threads);
     const std::string ext = extension_of(a->output);
     if (ext != ".png" && ext != ".pfm") fail("-o must name a .png or .pfm file, got '{}'", a->output);
-    if (a->spp < 1) fail("--spp must be at least 1, got {}", a->spp);
+    int spp = 0;  // 0: auto
+    if (a->spp != "auto") {
+      size_t used = 0;
+      try {
+        spp = std::stoi(a->spp, &used);
+      } catch (const std::exception&) {
+        used = 0;
+      }
+      if (used != a->spp.size() || spp < 1) fail("--spp must be auto or at least 1, got '{}'", a->spp);
+    }
+    if (!(a->converge.noise >= 0)) fail("--noise must be at least 0, got {}", a->converge.noise);
+    if (a->converge.max_frames < a->converge.min_frames)
+      fail("--max-spp must be at least {}, got {}", a->converge.min_frames, a->converge.max_frames);
     CliRender cr = open_cli_render(a->input, a->r, a->vol);
     Renderer& r = *cr.renderer;
     std::optional<Image> reference;
     if (!a->reference.empty()) reference = read_image(a->reference);
     r.prepare();
+    if (reference && (reference->width != r.options().width || reference->height != r.options().height))
+      fail("the --reference image '{}' has size {}x{}, the render is {}x{}", a->reference, reference->width,
+           reference->height, r.options().width, r.options().height);
     RenderStats st;
-    Progress bar("render", a->spp, a->quiet || a->spp < 2);
-    for (int f = 0; f < a->spp; ++f) {
-      r.render_frame(&st);
-      bar.update(f + 1, fmt::format("{:.3f} s/frame", st.seconds / st.frames));
+    Progress bar("render", spp ? spp : a->converge.max_frames, a->quiet || spp == 1);
+    if (spp) {
+      for (int f = 0; f < spp; ++f) {
+        r.render_frame(&st);
+        bar.update(f + 1, fmt::format("{:.3f} s/frame", st.seconds / st.frames));
+      }
+    } else {
+      r.render_until_converged(a->converge, &st, [&](int f, double noise) {
+        bar.update(f, fmt::format("{:.3f} s/frame, noise {:.5f}", st.seconds / st.frames, noise));
+      });
     }
     bar.finish();
     r.save(a->output);
@@ -107,7 +135,9 @@ void add_render(CLI::App& app) {
                    {"threads", num_threads()},
                    {"device", device_name(r.device())},
                    {"precision", precision_json(r.model() ? r.model()->net.get() : nullptr, r.device())},
-                   {"host_syncs", st.host_syncs}};
+                   {"host_syncs", st.host_syncs},
+                   {"spp", spp ? Json(spp) : Json("auto")},
+                   {"noise", r.frames() > 1 ? Json(r.noise()) : Json(nullptr)}};
     std::string cmp;
     if (reference) {
       ImageMetrics im = compare_images(r.image(), *reference);
@@ -116,9 +146,10 @@ void add_render(CLI::App& app) {
       cmp = fmt::format(", vs reference: PSNR {:.2f} dB, SSIM {:.4f}", im.psnr, im.ssim);
     }
     if (!a->quiet)
-      std::printf("%s: %s %s %s %dx%d, %d frame(s), %.3f s/frame (%.2f frames/s), %.1f M field samples/s%s -> %s\n",
+      std::printf("%s: %s %s %s %dx%d, %d frame(s)%s, %.3f s/frame (%.2f frames/s), %.1f M field samples/s%s -> %s\n",
                   cr.input->description.c_str(), device_name(r.device()), render_mode_name(o.mode),
                   render_strategy_name(o.strategy), o.width, o.height, st.frames,
+                  r.frames() > 1 ? fmt::format(" (noise {:.5f})", r.noise()).c_str() : "",
                   st.seconds / st.frames, st.frames / st.seconds, double(st.field_samples) / st.seconds / 1e6,
                   cmp.c_str(), a->output.c_str());
     write_report(a->report, report);

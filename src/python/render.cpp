@@ -19,7 +19,9 @@ struct RenderArgs {
   std::string tf, mode, strategy, device;
   std::optional<std::string> macrocells;
   std::pair<int, int> size{512, 512};
-  int spp = 1;
+  int spp = 1;  // 0: until converged (noise, max_spp)
+  double noise = 1.0 / 255;
+  int max_spp = 256;
   float step = 1;
   uint32_t seed = 0;
   bool shade = false;
@@ -61,7 +63,10 @@ Camera camera_of(const RenderArgs& a, Vec3f box) {
 pyb::array_t<float> render(const Model* model, const Volume* volume, const RenderArgs& a, std::mutex* model_mutex) {
   const auto [w, h] = a.size;
   if (w < 1 || h < 1 || w > 32768 || h > 32768) fail("size expects (width, height), positive, at most 32768, got ({}, {})", w, h);
-  if (a.spp < 1) fail("spp must be at least 1, got {}", a.spp);
+  if (a.spp < 0) fail("spp must be 'auto' or at least 1, got {}", a.spp);
+  const Convergence converge{a.noise, 4, a.max_spp};
+  if (!(converge.noise >= 0) || converge.max_frames < converge.min_frames)
+    fail("noise must be at least 0 and max_spp at least {}, got {} and {}", converge.min_frames, a.noise, a.max_spp);
   if (a.device != "auto" && a.device != "cpu" && a.device != "cuda")
     fail("unknown device '{}' (allowed: auto, cpu, cuda)", a.device);
   RenderOptions o;
@@ -89,6 +94,7 @@ pyb::array_t<float> render(const Model* model, const Volume* volume, const Rende
   r->set_options(o);
   r->set_macrocells(mc, 16);
   r->prepare();
+  if (a.spp == 0) r->render_until_converged(converge);
   for (int f = 0; f < a.spp; ++f) r->render_frame();
   const Image& img = r->image();
   std::memcpy(dst, img.pixels.data(), img.pixels.size() * sizeof(Vec4f));
@@ -102,11 +108,12 @@ void bind_render(pyb::module_& m) {
       "_render",
       [](pyb::object target, std::optional<Vec3> eye, std::optional<Vec3> center, Vec3 up, float fovy,
          std::optional<std::pair<float, float>> orbit, const std::string& tf, const std::string& mode,
-         std::pair<int, int> size, int spp, const std::string& device, const std::string& strategy,
+         std::pair<int, int> size, int spp, double noise, int max_spp, const std::string& device,
+         const std::string& strategy,
          std::optional<std::string> macrocells, float step, uint32_t seed, bool shade, std::optional<Vec3> background,
          std::optional<Vec3> light) {
-        RenderArgs a{eye, center, up, fovy, orbit, tf, mode, strategy, device, macrocells, size, spp, step, seed,
-                     shade, background, light};
+        RenderArgs a{eye, center, up, fovy, orbit, tf, mode, strategy, device, macrocells, size, spp, noise, max_spp,
+                     step, seed, shade, background, light};
         if (pyb::isinstance<ModelHolder>(target)) {
           ModelPtr h = target.cast<ModelPtr>();
           return render(&h->model, nullptr, a, &h->mutex);
@@ -115,7 +122,8 @@ void bind_render(pyb::module_& m) {
         fail("render expects a vnr.Model or a vnr.Volume");
       },
       pyb::arg("target"), pyb::arg("eye"), pyb::arg("center"), pyb::arg("up"), pyb::arg("fovy"), pyb::arg("orbit"),
-      pyb::arg("tf"), pyb::arg("mode"), pyb::arg("size"), pyb::arg("spp"), pyb::arg("device"), pyb::arg("strategy"),
+      pyb::arg("tf"), pyb::arg("mode"), pyb::arg("size"), pyb::arg("spp"), pyb::arg("noise"), pyb::arg("max_spp"),
+      pyb::arg("device"), pyb::arg("strategy"),
       pyb::arg("macrocells"), pyb::arg("step"), pyb::arg("seed"), pyb::arg("shade"), pyb::arg("background"),
       pyb::arg("light"), "The renderer behind vnr.render (which documents the arguments).");
 }

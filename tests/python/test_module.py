@@ -175,6 +175,10 @@ def test_bad_input_raises(trained, tmp_path):
         vnr.render(model, mode="xray", size=(8, 8))
     with pytest.raises(ValueError, match="camera"):
         vnr.render(model, camera={"eye": (1, 2, 3), "zoom": 2}, size=(8, 8))
+    with pytest.raises(ValueError, match="spp"):
+        vnr.render(model, spp="many", size=(8, 8))
+    with pytest.raises(ValueError, match="max_spp"):
+        vnr.render(model, size=(8, 8), max_spp=2)
     with pytest.raises(ValueError, match="shape"):
         vnr.metrics.psnr(np.zeros((3, 3, 3)), np.zeros((3, 3, 4)))
     for missing in (lambda: vnr.Model.load(str(tmp_path / "none.vnr")),

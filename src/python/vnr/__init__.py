@@ -107,10 +107,10 @@ def _tf_arg(tf: Union[None, str, dict, TransferFunction, os.PathLike]) -> str:
 
 def render(target: Union[Model, Volume], camera: Union[None, Camera, dict, Tuple[float, float]] = None,
            tf: Union[None, str, dict, TransferFunction, os.PathLike] = None, mode: str = "raymarch",
-           size: Tuple[int, int] = (512, 512), spp: int = 1, device: str = "auto", *,
+           size: Tuple[int, int] = (512, 512), spp: Union[int, str] = "auto", device: str = "auto", *,
            strategy: str = "streaming", macrocells: Optional[str] = None, step: float = 1.0, seed: int = 0,
            shade: bool = False, background: Optional[Sequence[float]] = None,
-           light: Optional[Sequence[float]] = None) -> Any:
+           light: Optional[Sequence[float]] = None, noise: float = 1 / 255, max_spp: int = 256) -> Any:
     """Renders a vnr.Model (or a vnr.Volume, the ground truth) and returns the image as a float32 array
     of shape (height, width, 4): straight RGB and alpha, row 0 at the top.
 
@@ -119,12 +119,17 @@ def render(target: Union[Model, Volume], camera: Union[None, Camera, dict, Tuple
     {azimuth, elevation, fovy}, or an (azimuth, elevation) pair (the CLI's --orbit);
     tf: a preset name (e.g. "ramp", "cool-warm"), transfer-function JSON as text or a dict (what
     `vnr render --tf FILE` reads), a path, or a vnr.TransferFunction;
-    mode: "raymarch", "shadow" or "pathtrace"; size: (width, height); spp: frames accumulated;
+    mode: "raymarch", "shadow" or "pathtrace"; size: (width, height); spp: frames accumulated, or "auto"
+    (the default, as the CLI's): until the image's noise (RMS standard error of its pixels) is at most
+    `noise`, at most max_spp frames;
     device: "auto", "cpu" or "cuda"; strategy: "streaming" or "inshader"; macrocells: "grid", "online"
     or "off" (default as the CLI's); step, seed, shade, background, light: the CLI's options.
     """
     w, h = (int(v) for v in size)
-    return _render(target, tf=_tf_arg(tf), mode=mode, size=(w, h), spp=int(spp), device=device,
+    if isinstance(spp, str) and spp != "auto":
+        raise ValueError(f"spp must be 'auto' or at least 1, got '{spp}'")
+    return _render(target, tf=_tf_arg(tf), mode=mode, size=(w, h), spp=0 if spp == "auto" else int(spp),
+                   noise=float(noise), max_spp=int(max_spp), device=device,
                    strategy=strategy, macrocells=macrocells, step=float(step), seed=int(seed), shade=bool(shade),
                    background=None if background is None else tuple(float(x) for x in background),
                    light=None if light is None else tuple(float(x) for x in light), **_camera_args(camera))

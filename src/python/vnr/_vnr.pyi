@@ -127,7 +127,8 @@ def train(volume: Union[npt.ArrayLike, Volume, PathLike], config: Union[str, dic
 
 def _render(target: Union[Model, Volume], eye: Optional[Sequence[float]], center: Optional[Sequence[float]],
             up: Sequence[float], fovy: float, orbit: Optional[Tuple[float, float]], tf: str, mode: str,
-            size: Tuple[int, int], spp: int, device: str, strategy: str, macrocells: Optional[str], step: float,
+            size: Tuple[int, int], spp: int, noise: float, max_spp: int, device: str, strategy: str,
+            macrocells: Optional[str], step: float,
             seed: int, shade: bool, background: Optional[Sequence[float]],
             light: Optional[Sequence[float]]) -> npt.NDArray[np.float32]: ...
 

@@ -207,9 +207,22 @@ const Image& Renderer::render_frame(RenderStats* stats) {
   FrameRenderer& r = backend();
   if (frames_ == 0) accumulated_ = Image(options_.width, options_.height);
   r.render_frame(uint32_t(frames_), frame_, stats);
-  accumulate_frame(accumulated_, frame_, frames_);
+  accumulate_frame(accumulated_, frame_, frames_, &m2_);
   ++frames_;
   return accumulated_;
+}
+
+int Renderer::render_until_converged(const Convergence& c, RenderStats* stats,
+                                     const std::function<void(int, double)>& progress) {
+  if (!(c.noise >= 0) || c.min_frames < 1 || c.max_frames < c.min_frames)
+    fail("convergence needs a noise of at least 0 and 1 <= min_frames <= max_frames, got {}, {}, {}", c.noise,
+         c.min_frames, c.max_frames);
+  while (frames_ < c.max_frames) {
+    render_frame(stats);
+    if (progress) progress(frames_, noise());
+    if (frames_ >= c.min_frames && noise() <= c.noise) break;
+  }
+  return frames_;
 }
 
 void Renderer::render_frame_resident(uint32_t frame, RenderStats* stats) {

@@ -1,6 +1,8 @@
 #include "vnr/render/renderer.h"
 #include <atomic>
 #include <chrono>
+#include <cmath>
+#include <limits>
 #include "vnr/core/error.h"
 #include "vnr/core/json.h"
 #include "vnr/core/parallel.h"
@@ -201,13 +203,27 @@ void CpuRenderer::render_frame(uint32_t frame, Image& img, RenderStats* stats) {
   st.seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
 
-void accumulate_frame(Image& acc, const Image& frame, int index) {
+void accumulate_frame(Image& acc, const Image& frame, int index, std::vector<float>* m2) {
   const float w = 1.0f / float(index + 1);  // running mean
+  if (m2 && index == 0) m2->assign(acc.pixels.size(), 0.0f);
+  float* m2p = m2 ? m2->data() : nullptr;
   parallel_for(int64_t(acc.pixels.size()), [&](int64_t i) {
     Vec4f& a = acc.pixels[i];
     const Vec4f& b = frame.pixels[i];
+    const float old = (a.x + a.y + a.z) * (1.0f / 3);
     a = Vec4f{a.x + (b.x - a.x) * w, a.y + (b.y - a.y) * w, a.z + (b.z - a.z) * w, a.w + (b.w - a.w) * w};
+    if (m2p) {
+      const float x = (b.x + b.y + b.z) * (1.0f / 3), mean = (a.x + a.y + a.z) * (1.0f / 3);
+      m2p[i] += index == 0 ? 0.0f : (x - old) * (x - mean);
+    }
   });
+}
+
+double accumulated_noise(const std::vector<float>& m2, int frames) {
+  if (frames < 2 || m2.empty()) return std::numeric_limits<double>::infinity();
+  double sum = 0;
+  for (float v : m2) sum += double(v);
+  return std::sqrt(sum / double(m2.size()) / (double(frames) * double(frames - 1)));
 }
 
 }  // namespace vnr

@@ -61,7 +61,12 @@ struct RenderStats {
 };
 
 // Progressive accumulation: acc becomes the mean of frames 0..index (acc held the mean of 0..index-1).
-void accumulate_frame(Image& acc, const Image& frame, int index);
+// With m2 (one value per pixel, reset at index 0), Welford's sum of squared deviations of each pixel's
+// (r + g + b) / 3 over the frames is kept as well, for accumulated_noise.
+void accumulate_frame(Image& acc, const Image& frame, int index, std::vector<float>* m2 = nullptr);
+// The RMS over pixels of the standard error of the accumulated mean after `frames` frames (infinite
+// before two): how far, on average, the image still is from the converged one in [0, 1] units.
+double accumulated_noise(const std::vector<float>& m2, int frames);
 
 // Validates the options and fills the per-ray parameters (pointers into tf and mc: host memory) for a
 // field of `dims` voxels in a box of world size `box`, seen from cam.
