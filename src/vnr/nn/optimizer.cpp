@@ -71,9 +71,10 @@ void Adam::step(float* params, float* grads, uint16_t* non_matrix_half) {
     std::fill(g, g + n_nm, 0.0f);
     return;
   }
-  // Ranges of at most 2^16, and no more than an even share per thread (small grids: one range each).
+  // Ranges of at most 2^16, and no more than an even share per thread (small grids: one range each),
+  // claimed by whichever thread is free (a core shared with another job takes fewer).
   const int64_t share = (n_nm + num_threads() - 1) / num_threads();
-  parallel_for_range(n_nm, std::min<int64_t>(int64_t(1) << 16, (share + 63) / 64 * 64), [&](int64_t b, int64_t e) {
+  parallel_for_claimed(n_nm, std::min<int64_t>(int64_t(1) << 16, (share + 63) / 64 * 64), [&](int64_t b, int64_t e) {
     kernels::adam_range(ks, p + b, g + b, mm + b, vv + b, cc + b, non_matrix_half ? non_matrix_half + b : nullptr, e - b);
   });
 }

@@ -186,10 +186,18 @@ void CpuTrainer::scatter_grid_gradients(int64_t n_static) {
   const int64_t s0 = private_grid_grads_ ? n_static * C : 0;
   const int64_t ns = private_grid_grads_ ? n_tail_ * C : opts_.batch;
   const float* dEnc = private_grid_grads_ ? tail_dEnc_.data() : dEnc_.data();
+  const uint32_t n_levels = net_.grid().n_levels;
+  std::atomic<int64_t> next_level{0};
   parallel_threads([&](int t, int nt) {
     float* ggrid = (private_grid_grads_ ? dW_[t].data() : grads_.data()) + m.n_params;
-    for (uint32_t l = uint32_t(t); l < net_.grid().n_levels; l += uint32_t(nt))
-      net_.grid_backward_level(l, xs_.data() + s0, ys_.data() + s0, zs_.data() + s0, ns, dEnc, int(C), ggrid);
+    auto level = [&](int64_t l) {
+      net_.grid_backward_level(uint32_t(l), xs_.data() + s0, ys_.data() + s0, zs_.data() + s0, ns, dEnc, int(C), ggrid);
+    };
+    // Into the batch gradient each level's writes are its own, whoever makes them: levels go to whichever
+    // thread is free. A private copy per thread must get the same levels at every step (the sum of the
+    // copies would otherwise round differently): round-robin.
+    if (!private_grid_grads_) for_each_claimed(next_level, n_levels, level);
+    else for (uint32_t l = uint32_t(t); l < n_levels; l += uint32_t(nt)) level(l);
   });
 }
 
@@ -199,7 +207,9 @@ void CpuTrainer::sum_gradients() {
   const MlpLayout& m = net_.mlp();
   float* gm = grads_.data();
   const int64_t n_summed = int64_t(dW_[0].size()), n_mlp = int64_t(m.n_params);
-  parallel_for_range(n_summed, (n_summed + n_threads_ - 1) / n_threads_, [&](int64_t b, int64_t e) {
+  // Each element's sum is its own: ranges go to whichever thread is free.
+  const int64_t grain = std::min<int64_t>(int64_t(1) << 16, (n_summed + n_threads_ - 1) / n_threads_);
+  parallel_for_claimed(n_summed, std::max<int64_t>(grain, 1), [&](int64_t b, int64_t e) {
     std::memcpy(gm + b, dW_[0].data() + b, sizeof(float) * size_t(e - b));
     for (int t = 1; t < n_threads_; ++t)
       for (int64_t i = b; i < e; ++i) gm[i] += dW_[t][size_t(i)];

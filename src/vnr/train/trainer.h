@@ -28,7 +28,7 @@ struct TrainOptions {
   // job does not hold the step up (each such chunk keeps its own MLP gradient, and its grid gradient
   // is scattered after the loop, so results still depend only on the thread count). 0: every chunk
   // is dealt round-robin. Not used on one thread.
-  int64_t shared_tail_chunks = 32;
+  int64_t shared_tail_chunks = 64;
 };
 
 // --precision of training: "fp32", "bf16" (an error where Network::bf16_training_supported() is
