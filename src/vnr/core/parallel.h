@@ -50,8 +50,8 @@ void parallel_threads(F&& f) {
 }
 
 // parallel_for_range's ranges, each claimed by whichever thread is free (for_each_claimed): only for
-// work whose results do not depend on the thread (rendering), so a core slowed by another job takes
-// fewer ranges instead of holding up the rest.
+// work whose results do not depend on the thread (rendering, element-wise updates), so a core slowed
+// by another job takes fewer ranges instead of holding up the rest.
 template <typename F>
 void parallel_for_claimed(int64_t n, int64_t grain, F&& f) {
   if (grain < 1) grain = 1;

@@ -46,11 +46,12 @@ Precision resolve_training_precision(const std::string& name, const Network& net
 //     a small grid's gradient is scattered here too, chunk by chunk, into the thread's own copy. The
 //     last TrainOptions::shared_tail_chunks chunks are claimed by whichever thread is free; each keeps
 //     its own MLP gradient and its dL/d(encoding);
-//  2. grid levels are dealt round-robin to threads; each thread scatters the gradient of its levels
+//  2. grid levels are claimed by whichever thread is free (round-robin into private copies); each
+//     thread scatters the gradient of its levels
 //     (for every sample; for a small grid, for the shared chunks only, into the thread's copy), so no
 //     two threads write the same entry (no atomics);
 //  3. the per-thread and per-shared-chunk gradients are summed in a fixed order, then one fused Adam
-//     pass updates all parameters.
+//     pass updates all parameters (both over element ranges claimed by whichever thread is free).
 class CpuTrainer final : public Trainer {
 public:
   CpuTrainer(Network& net, std::shared_ptr<Sampler> sampler, TrainOptions opts);
