@@ -23,7 +23,7 @@ COMMON="-G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DVNR_CUDA=OFF -DVNR_BUILD_BE
 
 # The tests of every loader, parser, limit and fault, the model format, the API objects and the threaded
 # trainer's session: what fits CI's 20 minutes after the main suite (docs/reliability.md, Sanitizers).
-CI_TESTS="test_fuzz_regressions test_limits test_faults test_model_file test_volume test_volume_values
+CI_TESTS="test_fuzz_regressions test_limits test_faults test_model_file test_param_codec test_volume test_volume_values
           test_volume_writer test_transfer_function test_render_io test_image_io test_api_objects test_api_arrays
           test_core test_metrics test_training_session test_file_evaluation"
 # Left out of `address-full` (each trains for seconds even in the optimised build, 3-10x that under ASan;
