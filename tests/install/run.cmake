@@ -19,7 +19,26 @@ set(launcher "")
 if(VNR_CXX_LAUNCHER)
   set(launcher -DCMAKE_CXX_COMPILER_LAUNCHER=${VNR_CXX_LAUNCHER})
 endif()
-run_step(${CMAKE_COMMAND} -S ${VNR_CONSUMER_DIR} -B ${VNR_WORK_DIR}/build -G Ninja -DCMAKE_BUILD_TYPE=Release
+# The consumer, and README.md's "Library API" sample compiled as printed (inside a function of its own).
+set(consumer ${VNR_WORK_DIR}/consumer)
+file(COPY ${VNR_CONSUMER_DIR}/ DESTINATION ${consumer})
+file(READ ${VNR_README} readme)
+string(FIND "${readme}" "## Library API" at)
+if(at GREATER_EQUAL 0)
+  string(SUBSTRING "${readme}" ${at} -1 readme)
+  string(FIND "${readme}" "```cpp\n" begin)
+  string(FIND "${readme}" "\n```\n" end)
+endif()
+if(at LESS 0 OR begin LESS 0 OR end LESS begin)
+  message(FATAL_ERROR "no C++ sample under '## Library API' in ${VNR_README}")
+endif()
+math(EXPR begin "${begin} + 7")
+math(EXPR length "${end} + 1 - ${begin}")
+string(SUBSTRING "${readme}" ${begin} ${length} sample)
+file(WRITE ${consumer}/readme_sample.cpp
+     "// README.md's Library API sample, as printed.\n#include <cstdio>\n#include \"vnr/vnr.h\"\n\n"
+     "void readme_sample() {\n${sample}}\n")
+run_step(${CMAKE_COMMAND} -S ${consumer} -B ${VNR_WORK_DIR}/build -G Ninja -DCMAKE_BUILD_TYPE=Release
          -DCMAKE_CXX_COMPILER=${VNR_CXX_COMPILER} ${launcher} -DCMAKE_PREFIX_PATH=${prefix})
 run_step(${CMAKE_COMMAND} --build ${VNR_WORK_DIR}/build)
 run_step(${VNR_WORK_DIR}/build/consumer)
