@@ -391,3 +391,31 @@ TEST(ApiRenderer, RendersUntilTheNoiseReachesTheTarget) {
   EXPECT_THROW(again->render_until_converged({-1, 4, 24}), Error);
   EXPECT_THROW(again->render_until_converged({0.01, 5, 4}), Error);
 }
+
+// --strategy auto: the measured faster strategy per field kind, device and mode (docs/benchmarks.md),
+// and a renderer asks for the one of its own field, device and mode.
+TEST(ApiRenderer, AutomaticStrategyFollowsTheMeasuredTable) {
+  using S = RenderStrategy;
+  using M = RenderMode;
+  const struct {
+    const char* kind;
+    bool gpu;
+    M mode;
+    S want;
+  } table[] = {{"grid", false, M::RayMarch, S::InShader},     {"grid", false, M::Shadow, S::Streaming},
+               {"grid", false, M::PathTrace, S::InShader},    {"network", false, M::RayMarch, S::Streaming},
+               {"network", false, M::Shadow, S::Streaming},   {"network", false, M::PathTrace, S::Streaming},
+               {"grid", true, M::Shadow, S::InShader},        {"network", true, M::RayMarch, S::InShader},
+               {"network", true, M::Shadow, S::Streaming},    {"network", true, M::PathTrace, S::InShader}};
+  for (const auto& t : table)
+    EXPECT_EQ(fastest_render_strategy(t.kind, t.gpu, t.mode), t.want) << t.kind << t.gpu << render_mode_name(t.mode);
+  GridScene s;
+  Renderer volume(s.vol, Device::Cpu);
+  volume.set_mode(RenderMode::RayMarch);
+  EXPECT_EQ(volume.automatic_strategy(), S::InShader);
+  volume.set_mode(RenderMode::Shadow);
+  EXPECT_EQ(volume.automatic_strategy(), S::Streaming);
+  Model m = tiny_model(s.vol);
+  Renderer network(m, Device::Cpu);
+  EXPECT_EQ(network.automatic_strategy(), S::Streaming);
+}

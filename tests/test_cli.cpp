@@ -273,7 +273,8 @@ TEST(Cli, RenderBadInputGivesOneClearErrorLine) {
   expect_error("render " + v + " -o " + d + "/x.png --eye 1,2,3", "--center");
   expect_error("render " + v + " -o " + d + "/x.png --frobnicate", "frobnicate");
   expect_error("render " + v + " -o " + d + "/x.png --size 8x8 --reference " + d + "/nosuch.png", "nosuch.png");
-  ASSERT_EQ(run("render " + v + " -o " + d + "/small.png --size 4x4 -q").code, 0);
+  ASSERT_EQ(run("render " + v + " -o " + d + "/small.png --size 4x4 -q --report " + d + "/small.json").code, 0);
+  EXPECT_EQ(parse_json_file(d + "/small.json")["strategy"], "inshader");  // --strategy auto: a volume ray marched
   expect_error("render " + v + " -o " + d + "/x.png --size 8x8 --reference " + d + "/small.png", "size");
   expect_error("render " + d + "/nosuch.vnr -o " + d + "/x.png", "nosuch.vnr");
 }

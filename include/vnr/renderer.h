@@ -80,6 +80,11 @@ public:
   void set_scene(const std::string& scene_file);  // instantvnr scene JSON or vnr scene JSON
   void set_mode(RenderMode mode);
   void set_strategy(RenderStrategy strategy);
+  // The faster strategy for this renderer's field, device and mode (fastest_render_strategy): what
+  // --strategy auto sets.
+  RenderStrategy automatic_strategy() const {
+    return fastest_render_strategy(field_->kind(), device_ == Device::Cuda, options_.mode);
+  }
   void set_macrocells(MacroCellMode mode, int cell_size = 16);
   void set_step(float step, float step_max = 0);  // voxels; step_max 0 = 16 x step
   void set_light(const DirectionalLight& light);

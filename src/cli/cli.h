@@ -78,7 +78,7 @@ void add_bench_rd(CLI::App& bench);  // cmd_bench_rd.cpp
 
 // Rendering options shared by `vnr render` and `vnr bench render`.
 struct RenderArgs {
-  std::string scene, tf, mode = "raymarch", strategy = "streaming", macrocells, size = "768x768";
+  std::string scene, tf, mode = "raymarch", strategy = "auto", macrocells, size = "768x768";
   std::string orbit, eye, center, up = "0,1,0", light, background, volume, ray_packets = "on";
   std::string device = "auto", mlp = "auto", precision = "auto";
   float step = 1, step_max = 0, fovy = 30, density = 1;

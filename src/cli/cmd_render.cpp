@@ -23,7 +23,10 @@ void RenderArgs::add(CLI::App* c) {
     return l;
   }() + ") or a JSON file");
   c->add_option("--mode", mode, "raymarch|shadow|pathtrace")->capture_default_str();
-  c->add_option("--strategy", strategy, "streaming|inshader")->capture_default_str();
+  c->add_option("--strategy", strategy,
+                "auto|streaming|inshader (auto: the faster for the input, device and mode; both give the same "
+                "image)")
+      ->capture_default_str();
   c->add_option("--macrocells", macrocells,
                 "grid|online|off (default: online for a vnr-trained model, grid for a volume)");
   c->add_option("--macrocell-size", macrocell_size, "voxels per macro-cell for --macrocells grid")->capture_default_str();

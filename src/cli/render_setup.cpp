@@ -42,7 +42,8 @@ CliRender open_cli_render(const std::string& input, const RenderArgs& a, const V
   c.input = std::make_unique<RenderInput>(open_render_input(input, a.volume, va.open(), parse_precision(a.precision)));
   RenderOptions o;
   o.mode = parse_render_mode(a.mode);
-  o.strategy = parse_render_strategy(a.strategy);
+  const std::optional<RenderStrategy> strategy = parse_render_strategy_choice(a.strategy);
+  if (strategy) o.strategy = *strategy;
   parse_size(a.size, &o.width, &o.height);
   o.step = a.step;
   o.step_max = a.step_max;
@@ -77,6 +78,7 @@ CliRender open_cli_render(const std::string& input, const RenderArgs& a, const V
   if (tf) r.set_transfer_function(*tf);
   if (camera) r.set_camera(*camera);
   r.set_options(o);
+  if (!strategy) r.set_strategy(r.automatic_strategy());
   r.set_macrocells(mc_mode, a.macrocell_size);
   r.set_mlp_path(mlp);
   return c;

@@ -71,7 +71,8 @@ pyb::array_t<float> render(const Model* model, const Volume* volume, const Rende
     fail("unknown device '{}' (allowed: auto, cpu, cuda)", a.device);
   RenderOptions o;
   o.mode = parse_render_mode(a.mode);
-  o.strategy = parse_render_strategy(a.strategy);
+  const std::optional<RenderStrategy> strategy = parse_render_strategy_choice(a.strategy);
+  if (strategy) o.strategy = *strategy;
   o.width = w;
   o.height = h;
   o.step = a.step;
@@ -92,6 +93,7 @@ pyb::array_t<float> render(const Model* model, const Volume* volume, const Rende
   r->set_transfer_function(tf);
   r->set_camera(camera_of(a, r->box()));
   r->set_options(o);
+  if (!strategy) r->set_strategy(r->automatic_strategy());
   r->set_macrocells(mc, 16);
   r->prepare();
   if (a.spp == 0) r->render_until_converged(converge);

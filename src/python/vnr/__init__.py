@@ -108,7 +108,7 @@ def _tf_arg(tf: Union[None, str, dict, TransferFunction, os.PathLike]) -> str:
 def render(target: Union[Model, Volume], camera: Union[None, Camera, dict, Tuple[float, float]] = None,
            tf: Union[None, str, dict, TransferFunction, os.PathLike] = None, mode: str = "raymarch",
            size: Tuple[int, int] = (512, 512), spp: Union[int, str] = "auto", device: str = "auto", *,
-           strategy: str = "streaming", macrocells: Optional[str] = None, step: float = 1.0, seed: int = 0,
+           strategy: str = "auto", macrocells: Optional[str] = None, step: float = 1.0, seed: int = 0,
            shade: bool = False, background: Optional[Sequence[float]] = None,
            light: Optional[Sequence[float]] = None, noise: float = 1 / 255, max_spp: int = 256) -> Any:
     """Renders a vnr.Model (or a vnr.Volume, the ground truth) and returns the image as a float32 array
@@ -122,7 +122,7 @@ def render(target: Union[Model, Volume], camera: Union[None, Camera, dict, Tuple
     mode: "raymarch", "shadow" or "pathtrace"; size: (width, height); spp: frames accumulated, or "auto"
     (the default, as the CLI's): until the image's noise (RMS standard error of its pixels) is at most
     `noise`, at most max_spp frames;
-    device: "auto", "cpu" or "cuda"; strategy: "streaming" or "inshader"; macrocells: "grid", "online"
+    device: "auto", "cpu" or "cuda"; strategy: "auto" (the faster, as the CLI's), "streaming" or "inshader"; macrocells: "grid", "online"
     or "off" (default as the CLI's); step, seed, shade, background, light: the CLI's options.
     """
     w, h = (int(v) for v in size)

@@ -31,6 +31,20 @@ const char* render_mode_name(RenderMode m) {
 }
 const char* render_strategy_name(RenderStrategy s) { return s == RenderStrategy::InShader ? "inshader" : "streaming"; }
 
+std::optional<RenderStrategy> parse_render_strategy_choice(const std::string& s) {
+  const std::string l = to_lower(s);
+  if (l == "auto") return std::nullopt;
+  if (l != "streaming" && l != "inshader")
+    fail("unknown render strategy '{}' (expected auto, streaming or inshader)", s);
+  return parse_render_strategy(l);
+}
+
+RenderStrategy fastest_render_strategy(const std::string& field_kind, bool gpu, RenderMode mode) {
+  const bool grid = field_kind == "grid";
+  if (gpu) return grid || mode != RenderMode::Shadow ? RenderStrategy::InShader : RenderStrategy::Streaming;
+  return grid && mode != RenderMode::Shadow ? RenderStrategy::InShader : RenderStrategy::Streaming;
+}
+
 RenderParams make_render_params(Int3 dims, Vec3f box, const MacroCells& mc, const TransferFunction& tf,
                                 const Camera& cam, const RenderOptions& opt) {
   if (opt.width < 1 || opt.height < 1 || int64_t(opt.width) * opt.height > (int64_t(1) << 30))
