@@ -175,8 +175,9 @@ def test_bad_input_raises(trained, tmp_path):
         vnr.render(model, mode="xray", size=(8, 8))
     with pytest.raises(ValueError, match="camera"):
         vnr.render(model, camera={"eye": (1, 2, 3), "zoom": 2}, size=(8, 8))
-    with pytest.raises(ValueError, match="spp"):
-        vnr.render(model, spp="many", size=(8, 8))
+    for bad_spp in ("many", 0):
+        with pytest.raises(ValueError, match="spp"):
+            vnr.render(model, spp=bad_spp, size=(8, 8))
     with pytest.raises(ValueError, match="max_spp"):
         vnr.render(model, size=(8, 8), max_spp=2)
     with pytest.raises(ValueError, match="shape"):

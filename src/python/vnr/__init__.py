@@ -126,8 +126,8 @@ def render(target: Union[Model, Volume], camera: Union[None, Camera, dict, Tuple
     or "off" (default as the CLI's); step, seed, shade, background, light: the CLI's options.
     """
     w, h = (int(v) for v in size)
-    if isinstance(spp, str) and spp != "auto":
-        raise ValueError(f"spp must be 'auto' or at least 1, got '{spp}'")
+    if (isinstance(spp, str) and spp != "auto") or (not isinstance(spp, str) and int(spp) < 1):
+        raise ValueError(f"spp must be 'auto' or at least 1, got {spp!r}")
     return _render(target, tf=_tf_arg(tf), mode=mode, size=(w, h), spp=0 if spp == "auto" else int(spp),
                    noise=float(noise), max_spp=int(max_spp), device=device,
                    strategy=strategy, macrocells=macrocells, step=float(step), seed=int(seed), shade=bool(shade),
