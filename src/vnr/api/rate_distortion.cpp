@@ -142,17 +142,10 @@ RdPoint bound_point(const Volume& vol, const Model& m, uint64_t model_file_bytes
   Decoder(*m.net, Device::Cpu, &res).slices(vol.dims, 0, vol.dims.z, dec.data());
   for (float& v : dec) v = float(vol.lo + double(v) * (vol.hi - vol.lo));
   score(p, vol, dec);
-  p.extra = {{"network_ratio", net_ratio},
-             {"network_bytes", model_file_bytes},
-             {"residual_bytes", enc.bytes.size()},
-             {"residual_nonzero_fraction", double(res.nonzero()) / double(vol.dims.count())},
-             {"residual_bits_per_voxel", 8.0 * double(enc.bytes.size()) / double(vol.dims.count())},
-             {"codec", enc.meta["codec"]},
-             {"predictor", enc.meta["predictor"]},
-             {"reference", res.absolute ? "none" : "network"},
-             {"reference_bytes", enc.meta["reference_bytes"]},
-             {"candidate_bytes", enc.meta["candidate_bytes"]},
-             {"bound_holds", p.max_abs_error <= b * (vol.hi - vol.lo)}};
+  p.extra = residual_coding_summary(res);
+  p.extra["network_ratio"] = net_ratio;
+  p.extra["network_bytes"] = model_file_bytes;
+  p.extra["bound_holds"] = p.max_abs_error <= b * (vol.hi - vol.lo);
   return p;
 }
 

@@ -198,29 +198,33 @@ SegmentMeta segment_meta(const std::string& path, const Json& s) {
 }
 
 // Quantization indices of one segment; damage is one error naming `path`.
-void decode_indices(const std::string& path, const SegmentMeta& m, const char* data, std::vector<uint32_t>& sym) {
-  sym.assign(m.n, 0);
+// One segment's parameters into p[0, n): raw fp16 bits (step 0) or dequantized indices, from either coder.
+void decode_segment(const std::string& path, const SegmentMeta& m, const char* data, uint16_t* p) {
+  std::vector<int32_t> q(m.n);
   if (m.context) {
-    std::vector<int32_t> q(m.n);
     if (!decode_param_indices(reinterpret_cast<const uint8_t*>(data), m.bytes, m.n, m.layout, q.data()))
       fail("'{}' is corrupted (context-coded parameters are damaged or truncated)", path);
     if (crc32_of(q.data(), q.size() * sizeof(int32_t)) != m.crc)
       fail("'{}' is corrupted (context-coded parameters fail their checksum)", path);
+  } else {
+    std::vector<uint8_t> planes(m.n * m.width);
+    if (ZSTD_getFrameContentSize(data, m.bytes) != planes.size())
+      fail("'{}' is corrupted (compressed parameter segment has the wrong size)", path);
+    const size_t got = ZSTD_decompress(planes.data(), planes.size(), data, m.bytes);
+    if (ZSTD_isError(got) || got != planes.size())
+      fail("'{}' is corrupted (compressed parameters: {})", path,
+           ZSTD_isError(got) ? ZSTD_getErrorName(got) : "short segment");
     for (uint64_t i = 0; i < m.n; ++i) {
-      if (q[i] > kMaxQuantIndex || q[i] < -kMaxQuantIndex)
-        fail("'{}' is corrupted (quantization index {})", path, q[i]);
-      sym[i] = zigzag(q[i]);
+      const uint32_t sym = planes[i] | (m.width == 2 ? uint32_t(planes[m.n + i]) << 8 : 0u);
+      if (m.step == 0) p[i] = uint16_t(sym);
+      else q[i] = unzigzag(sym);
     }
-    return;
+    if (m.step == 0) return;
   }
-  std::vector<uint8_t> planes(m.n * m.width);
-  if (ZSTD_getFrameContentSize(data, m.bytes) != planes.size())
-    fail("'{}' is corrupted (compressed parameter segment has the wrong size)", path);
-  const size_t got = ZSTD_decompress(planes.data(), planes.size(), data, m.bytes);
-  if (ZSTD_isError(got) || got != planes.size())
-    fail("'{}' is corrupted (compressed parameters: {})", path,
-         ZSTD_isError(got) ? ZSTD_getErrorName(got) : "short segment");
-  for (uint64_t i = 0; i < m.n; ++i) sym[i] = planes[i] | (m.width == 2 ? uint32_t(planes[m.n + i]) << 8 : 0u);
+  for (uint64_t i = 0; i < m.n; ++i) {
+    if (q[i] > kMaxQuantIndex || q[i] < -kMaxQuantIndex) fail("'{}' is corrupted (quantization index {})", path, q[i]);
+    p[i] = dequant(q[i], m.step);
+  }
 }
 
 }  // namespace
@@ -254,19 +258,7 @@ std::vector<uint16_t> decode_params(const std::string& path, const char* block, 
 #pragma omp parallel for schedule(dynamic)
   for (int64_t s = 0; s < int64_t(metas.size()); ++s) {
     try {
-      const SegmentMeta& m = metas[s];
-      std::vector<uint32_t> sym;
-      decode_indices(path, m, block + positions[s], sym);
-      uint16_t* p = params.data() + offsets[s];
-      for (uint64_t i = 0; i < m.n; ++i) {
-        if (m.step == 0) {
-          p[i] = uint16_t(sym[i]);
-          continue;
-        }
-        const int32_t q = unzigzag(sym[i]);
-        if (q > kMaxQuantIndex || q < -kMaxQuantIndex) fail("'{}' is corrupted (quantization index {})", path, q);
-        p[i] = dequant(q, m.step);
-      }
+      decode_segment(path, metas[s], block + positions[s], params.data() + offsets[s]);
     } catch (const std::exception& e) {
       errors[s] = e.what();
     }

@@ -224,11 +224,11 @@ void accumulate_frame(Image& acc, const Image& frame, int index, std::vector<flo
   parallel_for(int64_t(acc.pixels.size()), [&](int64_t i) {
     Vec4f& a = acc.pixels[i];
     const Vec4f& b = frame.pixels[i];
-    const float old = (a.x + a.y + a.z) * (1.0f / 3);
+    const float old = m2p ? (a.x + a.y + a.z) * (1.0f / 3) : 0.0f;
     a = Vec4f{a.x + (b.x - a.x) * w, a.y + (b.y - a.y) * w, a.z + (b.z - a.z) * w, a.w + (b.w - a.w) * w};
-    if (m2p) {
+    if (m2p && index > 0) {
       const float x = (b.x + b.y + b.z) * (1.0f / 3), mean = (a.x + a.y + a.z) * (1.0f / 3);
-      m2p[i] += index == 0 ? 0.0f : (x - old) * (x - mean);
+      m2p[i] += (x - old) * (x - mean);
     }
   });
 }

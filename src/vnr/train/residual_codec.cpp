@@ -92,9 +92,6 @@ std::vector<uint8_t> zstd_compress(const std::vector<uint8_t>& raw) {
   return out;
 }
 
-}  // namespace
-
-namespace {
 // What predicts a voxel: the network (none), the network and Lorenzo over its residuals (lorenzo), nothing
 // (values: absolute residuals), or Lorenzo over the quantised values (values-lorenzo). vnr before the
 // absolute residuals rejects the last two as a coding it does not know.

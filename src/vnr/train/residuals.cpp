@@ -65,32 +65,44 @@ void reference_slices(const Network& net, Int3 dims, int64_t z0, int64_t z1, flo
 
 namespace {
 float correction(const Residuals& r, int32_t q) { return float(double(q) * r.step); }
-}  // namespace
 
-Residuals quantised_values(const float* original, Int3 dims, double bound) {
+// Residuals of `original` against `pred` (null: against 0, absolute) at the step of `bound`; the number
+// of voxels where they cannot hold the bound is returned in *violations.
+Residuals quantise(const float* original, const float* pred, Int3 dims, double bound, int64_t* violations) {
   if (!(bound > 0) || !std::isfinite(bound)) fail("the error bound must be positive, got {}", bound);
   Residuals r;
   r.dims = dims;
   r.bound = bound;
   r.step = 2 * (bound - residual_margin(bound));
-  r.absolute = true;
+  r.absolute = pred == nullptr;
   r.q.resize(size_t(dims.count()));
-  std::atomic<int64_t> violations{0};
+  const double limit = double(1 << 27);  // so that Lorenzo sums of seven stay far inside int32
+  std::atomic<int64_t> bad_total{0};
   parallel_for_range(dims.count(), 1 << 16, [&](int64_t i0, int64_t i1) {
     int64_t bad = 0;
     for (int64_t i = i0; i < i1; ++i) {
-      const double d = std::nearbyint(double(original[i]) / r.step);
-      if (!(std::fabs(d) < double(1 << 27))) {
+      const float p = pred ? pred[size_t(i)] : 0.0f;
+      const double d = std::nearbyint((double(original[i]) - double(p)) / r.step);
+      if (!(std::fabs(d) < limit)) {
         ++bad;
         continue;
       }
       r.q[size_t(i)] = int32_t(d);
-      if (!(std::fabs(double(correction(r, r.q[size_t(i)])) - double(original[i])) <= bound)) ++bad;
+      const float decoded = p + correction(r, r.q[size_t(i)]);  // p = 0 adds nothing
+      if (!(std::fabs(double(decoded) - double(original[i])) <= bound)) ++bad;
     }
-    violations += bad;
+    bad_total += bad;
   });
+  *violations = bad_total.load();
+  return r;
+}
+}  // namespace
+
+Residuals quantised_values(const float* original, Int3 dims, double bound) {
+  int64_t violations = 0;
+  Residuals r = quantise(original, nullptr, dims, bound, &violations);
   if (violations > 0)
-    fail("cannot meet the error bound {:.3g} (normalised) at {} voxels without a network", bound, violations.load());
+    fail("cannot meet the error bound {:.3g} (normalised) at {} voxels without a network", bound, violations);
   return r;
 }
 
@@ -111,35 +123,29 @@ Residuals smallest_residuals(const Network& net, const float* original, Int3 dim
   return abs_res.encoded->bytes.size() < net_res.encoded->bytes.size() ? std::move(abs_res) : std::move(net_res);
 }
 
+Json residual_coding_summary(const Residuals& r) {
+  if (!r.encoded) fail("the residuals were not coded");
+  const EncodedResiduals& enc = *r.encoded;
+  const double voxels = double(r.dims.count()), bytes = double(enc.bytes.size());
+  return {{"residual_bytes", enc.bytes.size()},
+          {"residual_nonzero_fraction", double(r.nonzero()) / voxels},
+          {"residual_bits_per_voxel", 8.0 * bytes / voxels},
+          {"codec", enc.meta["codec"]},
+          {"predictor", enc.meta["predictor"]},
+          {"reference", r.absolute ? "none" : "network"},
+          {"reference_bytes", enc.meta["reference_bytes"]},
+          {"candidate_bytes", enc.meta["candidate_bytes"]}};
+}
+
 Residuals compute_residuals(const Network& net, const float* original, Int3 dims, double bound) {
   if (!(bound > 0) || !std::isfinite(bound)) fail("the error bound must be positive, got {}", bound);
-  Residuals r;
-  r.dims = dims;
-  r.bound = bound;
-  r.step = 2 * (bound - residual_margin(bound));
-  const int64_t n = dims.count();
-  std::vector<float> pred(static_cast<size_t>(n));
+  std::vector<float> pred(static_cast<size_t>(dims.count()));
   reference_slices(net, dims, 0, dims.z, pred.data());
-  r.q.resize(size_t(n));
-  const double limit = double(1 << 27);  // so that Lorenzo sums of seven stay far inside int32
-  std::atomic<int64_t> violations{0};
-  parallel_for_range(n, 1 << 16, [&](int64_t i0, int64_t i1) {
-    int64_t bad = 0;
-    for (int64_t i = i0; i < i1; ++i) {
-      const double d = std::nearbyint((double(original[i]) - double(pred[size_t(i)])) / r.step);
-      if (!(std::fabs(d) < limit)) {
-        ++bad;
-        continue;
-      }
-      r.q[size_t(i)] = int32_t(d);
-      const float decoded = pred[size_t(i)] + correction(r, r.q[size_t(i)]);
-      if (!(std::fabs(double(decoded) - double(original[i])) <= bound)) ++bad;
-    }
-    violations += bad;
-  });
+  int64_t violations = 0;
+  Residuals r = quantise(original, pred.data(), dims, bound, &violations);
   if (violations > 0)
     fail("cannot meet the error bound {:.3g} (normalised) at {} voxels: the bound is too small for fp32 values, or "
-         "the network's output is not finite", bound, violations.load());
+         "the network's output is not finite", bound, violations);
   return r;
 }
 

@@ -72,6 +72,11 @@ uint64_t predictorless_bytes(const float* values, Int3 dims, double bound);
 // "reference_bytes").
 Residuals smallest_residuals(const Network& net, const float* original, Int3 dims, double bound);
 
+// How the residuals were coded, for reports: residual_bytes, residual_nonzero_fraction,
+// residual_bits_per_voxel, codec, predictor, reference (network or none), reference_bytes and
+// candidate_bytes. Needs `encoded`.
+Json residual_coding_summary(const Residuals& r);
+
 // values (z-slices [z0, z1) of the reference) += q * step; absolute residuals replace them by q * step.
 void apply_residuals(const Residuals& r, int64_t z0, int64_t z1, float* values);
 

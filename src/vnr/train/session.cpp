@@ -199,21 +199,11 @@ Json attach_error_bound(Model& model, const Volume& volume, const ErrorBoundRequ
   // master copy, so that a loaded model decodes to the same predictions.
   model.net->set_params_half(model.net->params_half());
   Residuals res = smallest_residuals(*model.net, volume.data.data(), volume.dims, b);
-  const int64_t nz = res.nonzero();
-  const uint64_t bytes = res.encoded->bytes.size();
-  const double voxels = double(volume.dims.count());
-  Json j = {{"max_error", b * (volume.hi - volume.lo)},
-            {"max_error_normalised", b},
-            {"step_normalised", res.step},
-            {"residual_nonzero", nz},
-            {"residual_nonzero_fraction", double(nz) / voxels},
-            {"residual_bytes", bytes},
-            {"residual_bits_per_voxel", 8.0 * double(bytes) / voxels},
-            {"codec", res.encoded->meta["codec"]},
-            {"predictor", res.encoded->meta["predictor"]},
-            {"reference", res.absolute ? "none" : "network"},
-            {"reference_bytes", res.encoded->meta["reference_bytes"]},
-            {"candidate_bytes", res.encoded->meta["candidate_bytes"]}};
+  Json j = residual_coding_summary(res);
+  j["max_error"] = b * (volume.hi - volume.lo);
+  j["max_error_normalised"] = b;
+  j["step_normalised"] = res.step;
+  j["residual_nonzero"] = res.nonzero();
   model.residuals = std::move(res);
   return j;
 }
