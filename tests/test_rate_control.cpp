@@ -356,3 +356,50 @@ TEST(RateTerm, RateAwareStepsZeroMoreOfTheGrid) {
   const double plain = zero_share(0), rate_aware = zero_share(3);
   EXPECT_GT(rate_aware, plain + 0.05) << plain << " " << rate_aware;
 }
+
+// --target-ratio alone on a volume where the file has bits to spare (1 bit per voxel): --residuals auto
+// trains a smaller network and spends the rest of the file on residuals, the finest bound that fits.
+// The file still meets the target within 5 %, the bound holds at every voxel, the decode is better than
+// the network alone (which renders) and than a network of the whole file; --residuals off keeps the
+// whole file for the network.
+TEST(RateControl, ResidualsFillTheFileBesideASmallerNetwork) {
+  const std::string d = temp_dir("rate_residuals");
+  const Int3 dims{64, 64, 64};
+  const std::string volume = write_volume(d, dims, "float32");
+  auto train = [&](const std::string& residuals) {
+    TrainingSetup s = setup_for(d, volume, dims, "float32");
+    s.target_ratio = 8;
+    s.residuals = residuals;
+    s.session.output = d + "/" + residuals + ".vnr";
+    auto session = open_training_session(s);
+    train_compact(*session, 20, 0, session->options().compact);
+    return std::make_pair(session->options().compact, session->finish(false, 0));
+  };
+  const uint64_t target = dims.count() * 4 / 8;
+  const auto [with_opts, with] = train("auto");
+  EXPECT_EQ(with_opts.file_bytes, target);
+  EXPECT_LE(double(with_opts.target_bytes), 0.5 * double(target));
+  EXPECT_LE(with.model_bytes, target);
+  EXPECT_GE(double(with.model_bytes), 0.95 * double(target));
+  ASSERT_TRUE(with.report.contains("error_bound")) << with.report.dump();
+  const Json& b = with.report["error_bound"];
+  EXPECT_EQ(b["chosen_by"], "target_ratio");
+  EXPECT_TRUE(b["holds"].get<bool>());
+  EXPECT_LE(with.max_abs_error_original, b["max_error"].get<double>());
+  EXPECT_LT(with.report["network_psnr"].get<double>() + 3, with.psnr);
+  const Model loaded = load_model(d + "/auto.vnr");
+  ASSERT_TRUE(loaded.residuals.has_value());
+  EXPECT_DOUBLE_EQ(loaded.residuals->bound, b["max_error_normalised"].get<double>());
+
+  const auto [off_opts, off] = train("off");
+  EXPECT_EQ(off_opts.file_bytes, 0u);
+  EXPECT_EQ(off_opts.target_bytes, target);
+  EXPECT_FALSE(off.report.contains("error_bound"));
+  EXPECT_LE(off.model_bytes, target);
+  EXPECT_GT(with.psnr, off.psnr + 3) << with.psnr << " " << off.psnr;
+
+  TrainingSetup bad = setup_for(d, volume, dims, "float32");
+  bad.residuals = "some";
+  EXPECT_NE(one_line_error_of([&] { check_training_setup(bad); }).find("--residuals must be auto or off"),
+            std::string::npos);
+}

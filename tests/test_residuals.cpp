@@ -244,3 +244,26 @@ TEST(Residuals, AbsoluteResidualsIgnoreTheNetworkAndTheSmallerIsKept) {
     EXPECT_EQ(best.absolute, sizes["none"].get<uint64_t>() < sizes["network"].get<uint64_t>());
   }
 }
+
+// The residuals that fill a budget: the coded block fits it and comes within 10 % of it (the search aims
+// at 2 %; a bound's rounding moves the size in steps), the bound holds at every voxel, a larger budget
+// buys a finer bound, and a budget not even a bound of half the range fits is one clear error.
+TEST(Residuals, ResidualsForBudgetFillItWithTheFinestBound) {
+  const Volume vol = noise_volume();
+  Model m = model_for(kDims);
+  double last_bound = 1;
+  for (uint64_t budget : {1000u, 2000u, 4000u}) {
+    SCOPED_TRACE(budget);
+    const Residuals r = residuals_for_budget(*m.net, vol.data.data(), kDims, budget);
+    ASSERT_TRUE(r.encoded);
+    EXPECT_LE(r.encoded->bytes.size(), budget);
+    EXPECT_GE(double(r.encoded->bytes.size()), 0.9 * double(budget));
+    EXPECT_LT(r.bound, last_bound);
+    last_bound = r.bound;
+    Model with = model_for(kDims);
+    with.residuals = r;
+    EXPECT_LE(max_error(decode_in_slabs(with, 5), vol.data), r.bound);
+  }
+  const std::string msg = one_line_error_of([&] { residuals_for_budget(*m.net, vol.data.data(), kDims, 3); });
+  EXPECT_NE(msg.find("even a bound of half the range"), std::string::npos) << msg;
+}

@@ -39,6 +39,7 @@ struct RdOptions {
   double time_ratio = 64;
   int64_t steps = -1;                                           // > 0: steps instead of seconds
   std::string config = "paper";
+  std::string residuals = "auto";  // the --target-ratio points' --residuals
   std::string device = "auto";
   uint32_t seed = 1337;
   std::function<void(const std::string& line)> message;        // a line per point as it is measured

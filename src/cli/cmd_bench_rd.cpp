@@ -19,7 +19,8 @@ namespace vnr::cli {
 namespace {
 
 struct RdArgs {
-  std::string volume, report, plot, peers, ratios, bounds, zfp_rates, times, config = "paper", device = "auto";
+  std::string volume, report, plot, peers, ratios, bounds, zfp_rates, times, config = "paper", device = "auto",
+              residuals = "auto";
   double seconds = 60, time_ratio = 64;
   int64_t steps = -1;
   int threads = 0;
@@ -89,6 +90,7 @@ void run_rd(const RdArgs& a) {
   o.seconds = a.seconds;
   o.steps = a.steps;
   o.config = a.config;
+  o.residuals = a.residuals;
   o.device = a.device;
   o.message = [](const std::string& line) {
     std::printf("%s\n", line.c_str());
@@ -119,6 +121,9 @@ void add_bench_rd(CLI::App& bench) {
   c->add_option("--bounds", a->bounds, "error bounds as fractions of the range (default 1e-2,1e-3)");
   c->add_option("--zfp-rates", a->zfp_rates, "ZFP fixed rates in bits per value (default 0.5,1,2,4,8)");
   c->add_option("--config", a->config, "vnr preset or config file")->capture_default_str();
+  c->add_option("--residuals", a->residuals, "the ratio points' --residuals (auto, off)")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"auto", "off"}));
   c->add_option("--threads", a->threads, "CPU threads (default: all cores)");
   c->add_option("--report", a->report, "write the points as JSON");
   c->add_option("--plot", a->plot, "draw PSNR against ratio into a PNG (needs --report and python3-matplotlib)");

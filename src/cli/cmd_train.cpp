@@ -50,6 +50,9 @@ void print_error_bound(const Json& report) {
               b["max_error"].get<double>(), b["holds"].get<bool>() ? "holds at every voxel" : "VIOLATED",
               100 * b["residual_nonzero_fraction"].get<double>(), human_bytes(b["residual_bytes"].get<double>()).c_str(),
               b["residual_bits_per_voxel"].get<double>(), human_bytes(b["network_bytes"].get<double>()).c_str());
+  if (report.contains("network_psnr"))
+    std::printf("the network alone (what renders and answers point queries): PSNR %.2f dB\n",
+                report["network_psnr"].get<double>());
 }
 
 void print_result(const TrainArgs& a, const TrainingSession& session, const TrainingResult& r,

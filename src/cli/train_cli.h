@@ -16,6 +16,7 @@ struct TrainArgs {
   double max_error = 0, max_rel_error = 0;  // error-bound residuals (0: none)
   double target_psnr = 0, bits_per_param = 4.0, qat_fraction = 0.15;  // compact storage (train/rate_control.h)
   double rate_weight = TrainingSetup{}.rate_weight;
+  std::string residuals = TrainingSetup{}.residuals;  // --target-ratio: auto | off
   double cooldown = SessionOptions{}.cooldown;  // fraction of the budget with a falling learning rate
   int64_t steps = -1, batch = 65536;
   uint32_t seed = 1337;

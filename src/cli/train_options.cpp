@@ -19,6 +19,7 @@ TrainingSetup setup_of(const TrainArgs& a, bool preview) {
   s.bits_per_param = a.bits_per_param;
   s.qat_fraction = a.qat_fraction;
   s.rate_weight = a.rate_weight;
+  s.residuals = a.residuals;
   s.batch = a.batch;
   s.seed = a.seed;
   s.device = a.device;
@@ -70,6 +71,12 @@ void add_training_options(CLI::App* c, TrainArgs& a) {
                  "the smallest compact model reaching this PSNR (dB, held-back voxels): bisection over sizes "
                  "1/1024..1/4 of the volume, each trained --steps/--seconds; with --target-ratio, one model of "
                  "that size quantized as coarsely as keeps the PSNR");
+  c->add_option("--residuals", a.residuals,
+                 "--target-ratio alone: auto spends part of the file on residuals (the finest error bound that "
+                 "fits beside a smaller network) where that decodes better, off keeps the whole file for the network; "
+                 "rendering uses the network alone (docs/COMPRESSION.md)")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"auto", "off"}));
   c->add_option("--bits-per-param", a.bits_per_param,
                  "--target-ratio: size the hash grid for this many bits per parameter after coding")
       ->capture_default_str();

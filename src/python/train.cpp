@@ -21,6 +21,7 @@ struct TrainArgs {
   std::optional<int> threads;
   bool verbose = false;
   std::optional<double> target_psnr, bits_per_param, qat_fraction, max_error, max_rel_error, cooldown, rate_weight;
+  std::string residuals = "auto";
 };
 
 // What happened in the step callback that the session must not see as its own error.
@@ -63,6 +64,7 @@ TrainingSetup setup_of(const TrainArgs& a) {
   if (a.bits_per_param) s.bits_per_param = *a.bits_per_param;
   if (a.qat_fraction) s.qat_fraction = *a.qat_fraction;
   if (a.rate_weight) s.rate_weight = *a.rate_weight;
+  s.residuals = a.residuals;
   if (a.cooldown) {
     if (!(*a.cooldown >= 0 && *a.cooldown <= 1)) fail("cooldown must be in [0, 1], got {}", *a.cooldown);
     s.session.cooldown = *a.cooldown;
@@ -163,7 +165,9 @@ device: "auto" (a visible GPU, else the CPU), "cpu" or "cuda".
 sampler: "incore" for arrays and volumes in memory; a path may also use "outofcore" or "mmap".
 target_ratio: a compact model (quantized, entropy-coded parameters) of 1/R of the volume's bytes, as
 `vnr train --target-ratio` writes it (bits_per_param sizes its grid; the last qat_fraction of the steps
-train quantization-aware; rate_weight > 0 adds the grid's bits to their loss, as --rate-weight).
+train quantization-aware; rate_weight > 0 adds the grid's bits to their loss, as --rate-weight;
+residuals="auto" spends part of the file on residuals where that decodes better, as --residuals: decode()
+applies them, sample() and render() see the network alone; "off" keeps the whole file for the network).
 target_psnr: the smallest compact model whose PSNR on held-back voxels reaches this (dB): several
 sizes are trained (each for steps/seconds); with target_ratio, one model quantized as coarsely as
 keeps it. max_error / max_rel_error: every voxel of decode() within this of the original (data units /
@@ -184,10 +188,12 @@ void bind_train(pyb::module_& m) {
          pyb::object callback, int64_t batch, const std::string& precision, int macrocell_size,
          std::optional<int> threads, bool verbose, std::optional<double> target_psnr,
          std::optional<double> bits_per_param, std::optional<double> qat_fraction, std::optional<double> max_error,
-         std::optional<double> max_rel_error, std::optional<double> cooldown, std::optional<double> rate_weight) {
+         std::optional<double> max_rel_error, std::optional<double> cooldown, std::optional<double> rate_weight,
+         const std::string& residuals) {
         TrainArgs a{volume,   config,         callback,     steps,     seconds,      target_ratio,  seed,
                     device,   sampler,        precision,    batch,     macrocell_size, threads,      verbose,
-                    target_psnr, bits_per_param, qat_fraction, max_error, max_rel_error, cooldown, rate_weight};
+                    target_psnr, bits_per_param, qat_fraction, max_error, max_rel_error, cooldown, rate_weight,
+                    residuals};
         return train(a);
       },
       pyb::arg("volume"), pyb::arg("config") = "auto", pyb::arg("steps") = pyb::none(),
@@ -197,7 +203,8 @@ void bind_train(pyb::module_& m) {
       pyb::arg("threads") = pyb::none(), pyb::arg("verbose") = false, pyb::arg("target_psnr") = pyb::none(),
       pyb::arg("bits_per_param") = pyb::none(), pyb::arg("qat_fraction") = pyb::none(),
       pyb::arg("max_error") = pyb::none(), pyb::arg("max_rel_error") = pyb::none(),
-      pyb::arg("cooldown") = pyb::none(), pyb::arg("rate_weight") = pyb::none(), kTrainDoc);
+      pyb::arg("cooldown") = pyb::none(), pyb::arg("rate_weight") = pyb::none(),
+      pyb::arg("residuals") = "auto", kTrainDoc);
 }
 
 }  // namespace vnr::py

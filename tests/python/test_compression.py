@@ -92,3 +92,25 @@ def test_bad_compression_options_raise():
         vnr.train(array, target_ratio=8, qat_fraction=2.0, **TRAIN)
     with pytest.raises(ValueError, match="rate-weight"):
         vnr.train(array, target_ratio=8, rate_weight=-1.0, **TRAIN)
+
+
+def test_residuals_fill_a_target_ratio_as_the_cli(tmp_path, cli):
+    # 1 MiB of float32 at 8x: the file has bits to spare, so residuals="auto" (the default) spends most of it on
+    # residuals beside a smaller network; decode() applies them, and equals the CLI's file; "off" does not.
+    array = smooth_volume((64, 64, 64), "float32", seed=7)
+    side = write_raw(array, str(tmp_path / "v.json"))
+    cli("train", side, "-o", tmp_path / "cli.vnr", "--config", "small", "--steps", 20, "--seed", 3, "--threads", 2,
+        "--device", "cpu", "--target-ratio", 8, "-q")
+    model = vnr.train(side, target_ratio=8, **dict(TRAIN, steps=20))
+    path = str(tmp_path / "py.vnr")
+    model.save(path)
+    target = array.nbytes / 8
+    assert 0.95 * target <= os.path.getsize(path) <= target
+    cli("decode", tmp_path / "cli.vnr", "-o", tmp_path / "cli.raw", "--device", "cpu", "--threads", 2, "-q")
+    decoded = model.decode(device="cpu")
+    np.testing.assert_array_equal(decoded, read_raw_json(str(tmp_path / "cli.json")))
+    off = vnr.train(side, target_ratio=8, residuals="off", **dict(TRAIN, steps=20))
+    err = np.abs(decoded.astype(np.float64) - array).max()
+    assert err < 0.5 * np.abs(off.decode(device="cpu").astype(np.float64) - array).max()
+    with pytest.raises(Exception, match="--residuals must be auto or off"):
+        vnr.train(side, target_ratio=8, residuals="some", **dict(TRAIN, steps=20))

@@ -121,7 +121,8 @@ def train(volume: Union[npt.ArrayLike, Volume, PathLike], config: Union[str, dic
           threads: Optional[int] = None, verbose: bool = False, target_psnr: Optional[float] = None,
           bits_per_param: Optional[float] = None, qat_fraction: Optional[float] = None,
           max_error: Optional[float] = None, max_rel_error: Optional[float] = None,
-          cooldown: Optional[float] = None, rate_weight: Optional[float] = None) -> Model:
+          cooldown: Optional[float] = None, rate_weight: Optional[float] = None,
+          residuals: str = "auto") -> Model:
     """Trains a model of the volume (`vnr train`'s session); returns it. Ctrl-C returns the model so far."""
 
 

@@ -101,6 +101,7 @@ RdPoint train_point(const std::shared_ptr<const Volume>& vol, const std::string&
   s.volume = name;
   s.config = o.config;
   s.target_ratio = ratio;
+  s.residuals = o.residuals;
   s.seed = o.seed;
   s.device = o.device;
   s.steps = o.steps;
@@ -123,6 +124,11 @@ RdPoint train_point(const std::shared_ptr<const Volume>& vol, const std::string&
   p.max_abs_error = r.max_abs_error_original;
   p.seconds = r.seconds;
   p.extra = {{"steps", r.steps}, {"n_params", r.report["n_params"]}, {"wall_seconds", seconds_since(t0)}};
+  if (r.report.contains("error_bound")) {  // --residuals auto spent part of the file on residuals
+    p.extra["network_psnr"] = r.report["network_psnr"];
+    p.extra["residual_bytes"] = r.report["error_bound"]["residual_bytes"];
+    p.extra["max_error"] = r.report["error_bound"]["max_error"];
+  }
   *trained = std::move(session->model());
   return p;
 }

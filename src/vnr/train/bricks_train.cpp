@@ -110,6 +110,7 @@ BrickResult train_brick(const TrainingSetup& setup, const BrickPlan& plan, int i
   s.seed = b.seed;
   s.steps = o.steps;
   s.session.output = join_path(out_dir, b.file);
+  s.residuals = "off";  // a brick file holds no residuals
   // --target-ratio is the whole model's: each brick gets the parameters of its owned voxels.
   if (setup.target_ratio > 0) s.target_ratio = setup.target_ratio * double(b.trained.voxels()) / double(b.owned.voxels());
   std::unique_ptr<TrainingSession> session = open_brick_session(s, desc, b, range, out_of_core, budget, o.message);

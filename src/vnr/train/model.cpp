@@ -39,21 +39,28 @@ ModelFile model_file_without_params(const Model& m) {
   return f;
 }
 
-void save_model(const std::string& path, const Model& m) {
-  if (m.bricks)
-    fail("'{}': a multi-brick model is a directory of brick files written by `vnr train --bricks`; it cannot be "
-         "saved as one model file", path);
+ModelFile model_file(const Model& m) {
   ModelFile f = model_file_without_params(m);
   f.params = m.net->params_half();
   f.param_segments = m.param_segments;  // compressed storage (format 2) when set
   f.compact_macrocells = !m.param_segments.empty();
   if (m.residuals) {
-    if (is_instantvnr_path(path))
-      fail("'{}': instantvnr's format cannot hold error-bound residuals; save the model as .vnr", path);
     const EncodedResiduals e = m.residuals->encoded ? *m.residuals->encoded : encode_residuals(*m.residuals);
     f.residuals_meta = e.meta;
     f.residuals_bytes = e.bytes;
   }
+  return f;
+}
+
+uint64_t model_file_bytes(const Model& m) { return vnr_file_bytes(model_file(m)); }
+
+void save_model(const std::string& path, const Model& m) {
+  if (m.bricks)
+    fail("'{}': a multi-brick model is a directory of brick files written by `vnr train --bricks`; it cannot be "
+         "saved as one model file", path);
+  if (m.residuals && is_instantvnr_path(path))
+    fail("'{}': instantvnr's format cannot hold error-bound residuals; save the model as .vnr", path);
+  const ModelFile f = model_file(m);
   if (is_instantvnr_path(path)) write_instantvnr(path, f);
   else write_vnr(path, f);
 }

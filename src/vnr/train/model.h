@@ -44,6 +44,9 @@ Model create_model(const ModelConfig& config, Int3 dims, DType source_dtype, dou
 // Writes .vnr, or instantvnr's BSON when the path ends in .bson or .json (instantvnr names its
 // BSON files params.json).
 void save_model(const std::string& path, const Model& m);
+// The .vnr file save_model writes for a single-network model, and its size (without writing it).
+ModelFile model_file(const Model& m);
+uint64_t model_file_bytes(const Model& m);
 // The file's description of m (config, dims, dtype, range, training summary, macro-cells) without the
 // parameters, residuals or storage choices: save_model and the rate search fill those in.
 ModelFile model_file_without_params(const Model& m);

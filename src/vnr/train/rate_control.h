@@ -27,6 +27,9 @@ struct CompactOptions {
   // the high-rate slope 2 ln 2 * loss / parameters join the loss (0: distortion alone; CPU trainer only).
   double rate_weight = 0;
   int64_t probe_samples = int64_t(1) << 17;  // held-back samples for the rate-distortion choices
+  // > target_bytes: the file's size when residuals (train/residuals.h) take what the network's file leaves
+  // of it (--residuals auto: a network of target_bytes, the rest spent on a bound; docs/COMPRESSION.md).
+  uint64_t file_bytes = 0;
   bool enabled() const { return target_bytes > 0 || target_psnr > 0; }
 };
 

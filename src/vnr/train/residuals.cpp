@@ -6,6 +6,7 @@
 #include <optional>
 #include "vnr/core/error.h"
 #include "vnr/core/parallel.h"
+#include "vnr/train/residual_context_coder.h"
 #include "vnr/volume/volume.h"
 
 namespace vnr {
@@ -110,9 +111,9 @@ uint64_t predictorless_bytes(const float* values, Int3 dims, double bound) {
   return encode_residuals(quantised_values(values, dims, bound)).bytes.size();
 }
 
-Residuals smallest_residuals(const Network& net, const float* original, Int3 dims, double bound) {
-  Residuals net_res = compute_residuals(net, original, dims, bound);
-  Residuals abs_res = quantised_values(original, dims, bound);
+namespace {
+// Both coded; the smaller kept, its description listing both sizes.
+Residuals smaller_coded(Residuals net_res, Residuals abs_res) {
   auto net_enc = std::make_shared<EncodedResiduals>(encode_residuals(net_res));
   auto abs_enc = std::make_shared<EncodedResiduals>(encode_residuals(abs_res));
   const Json sizes = {{"network", net_enc->bytes.size()}, {"none", abs_enc->bytes.size()}};
@@ -121,6 +122,98 @@ Residuals smallest_residuals(const Network& net, const float* original, Int3 dim
   net_res.encoded = std::move(net_enc);
   abs_res.encoded = std::move(abs_enc);
   return abs_res.encoded->bytes.size() < net_res.encoded->bytes.size() ? std::move(abs_res) : std::move(net_res);
+}
+
+std::vector<float> network_prediction(const Network& net, Int3 dims) {
+  std::vector<float> pred(static_cast<size_t>(dims.count()));
+  reference_slices(net, dims, 0, dims.z, pred.data());
+  return pred;
+}
+
+Residuals against_prediction(const float* original, const float* pred, Int3 dims, double bound) {
+  int64_t violations = 0;
+  Residuals r = quantise(original, pred, dims, bound, &violations);
+  if (violations > 0)
+    fail("cannot meet the error bound {:.3g} (normalised) at {} voxels: the bound is too small for fp32 values, or "
+         "the network's output is not finite", bound, violations);
+  return r;
+}
+}  // namespace
+
+Residuals smallest_residuals(const Network& net, const float* original, Int3 dims, double bound) {
+  return smaller_coded(compute_residuals(net, original, dims, bound), quantised_values(original, dims, bound));
+}
+
+namespace {
+// The finest bound whose size(bound) is at most `goal`, as the search finds it: sizes fall with
+// the bound about as a power of it, so bracket, then regula falsi in log-log with the Illinois rule until
+// within 1 % under the goal. Bounds from 1e-6 (finer is pointless) to 0.5 (half the range).
+double finest_bound_within(const std::function<double(double)>& size, double goal) {
+  double fit = 0.5, fit_bytes = size(fit);
+  if (fit_bytes > goal) return fit;
+  double over = 0.02, over_bytes = size(over);
+  while (over_bytes <= goal && over > 1e-6) {
+    fit = over, fit_bytes = over_bytes;
+    over /= 8, over_bytes = size(over);
+  }
+  if (over_bytes <= goal) return over;
+  double f_over = std::log(over_bytes / goal), f_fit = std::log(fit_bytes / goal);  // > 0, <= 0
+  for (int side = 0, it = 0; fit_bytes < 0.99 * goal && it < 12; ++it) {
+    const double a = std::log(over), b = std::log(fit);
+    double t = b - f_fit * (b - a) / (f_fit - f_over);
+    if (!(t > a && t < b)) t = 0.5 * (a + b);
+    const double e = std::exp(t), bytes = size(e), f = std::log(bytes / goal);
+    if (bytes <= goal) {
+      fit = e, fit_bytes = bytes, f_fit = f;
+      if (side == +1) f_over /= 2;
+      side = +1;
+    } else {
+      over = e, f_over = f;
+      if (side == -1) f_fit /= 2;
+      side = -1;
+    }
+  }
+  return fit;
+}
+}  // namespace
+
+Residuals residuals_for_budget(const Network& net, const float* original, Int3 dims, uint64_t budget,
+                               const std::function<double(double)>& admissible) {
+  const std::vector<float> pred = network_prediction(net, dims);
+  auto quantised = [&](double bound, bool absolute) {
+    const double b = admissible ? admissible(bound) : bound;
+    return absolute ? quantised_values(original, dims, b) : against_prediction(original, pred.data(), dims, b);
+  };
+  auto size_of = [](const Residuals& r, const std::string& only, bool search) {
+    return double(encode_residuals(r, only, search).bytes.size());
+  };
+  const double target = double(budget);
+  // First every coding at the bound where the context coder against the network (one fast pass) fills
+  // the budget; then the search runs on the coding that won, at zstd's fast level scaled to level 19
+  // by their ratio at the last bound, and that coding alone is coded again, until the block fills 98-100 %
+  // of the budget (three rounds at most). Each level-19 coding of a large volume takes seconds.
+  double bound = finest_bound_within([&](double b) { return size_of(quantised(b, false), "context-none", false); }, target);
+  Residuals r = smaller_coded(quantised(bound, false), quantised(bound, true));
+  std::optional<Residuals> best;  // the largest block that fits
+  const bool absolute = r.absolute;
+  const std::string winner = residual_coding_name(r.encoded->meta["codec"], r.encoded->meta["predictor"]);
+  for (int round = 0;; ++round) {
+    const double bytes = double(r.encoded->bytes.size());
+    if (bytes <= target && (!best || bytes > double(best->encoded->bytes.size()))) best = r;
+    if ((bytes <= target && bytes >= 0.98 * target) || round == 2) break;
+    const double scale = bytes / size_of(r, winner, true);
+    bound = finest_bound_within([&](double b) { return scale * size_of(quantised(b, absolute), winner, true); }, target);
+    r = quantised(bound, absolute);
+    auto enc = std::make_shared<EncodedResiduals>(encode_residuals(r, winner));
+    enc->meta["reference_bytes"] = {{absolute ? "none" : "network", enc->bytes.size()}};
+    r.encoded = std::move(enc);
+  }
+  if (best) return std::move(*best);
+  Residuals coarsest = smaller_coded(quantised(0.5, false), quantised(0.5, true));
+  if (double(coarsest.encoded->bytes.size()) > target)
+    fail("residuals: even a bound of half the range takes {} bytes, over the {} left", coarsest.encoded->bytes.size(),
+         budget);
+  return coarsest;
 }
 
 Json residual_coding_summary(const Residuals& r) {
@@ -139,14 +232,8 @@ Json residual_coding_summary(const Residuals& r) {
 
 Residuals compute_residuals(const Network& net, const float* original, Int3 dims, double bound) {
   if (!(bound > 0) || !std::isfinite(bound)) fail("the error bound must be positive, got {}", bound);
-  std::vector<float> pred(static_cast<size_t>(dims.count()));
-  reference_slices(net, dims, 0, dims.z, pred.data());
-  int64_t violations = 0;
-  Residuals r = quantise(original, pred.data(), dims, bound, &violations);
-  if (violations > 0)
-    fail("cannot meet the error bound {:.3g} (normalised) at {} voxels: the bound is too small for fp32 values, or "
-         "the network's output is not finite", bound, violations);
-  return r;
+  const std::vector<float> pred = network_prediction(net, dims);
+  return against_prediction(original, pred.data(), dims, bound);
 }
 
 void apply_residuals(const Residuals& r, int64_t z0, int64_t z1, float* values) {

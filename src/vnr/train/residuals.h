@@ -3,6 +3,7 @@
 // and the quantised difference between the volume and a deterministic evaluation of the network is
 // stored beside it, so that every decoded voxel lies within a bound of the original (SZ3's promise).
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <vector>
 #include "vnr/core/dtype.h"
@@ -72,6 +73,14 @@ uint64_t predictorless_bytes(const float* values, Int3 dims, double bound);
 // "reference_bytes").
 Residuals smallest_residuals(const Network& net, const float* original, Int3 dims, double bound);
 
+// The residuals that fill a byte budget (--target-ratio with residuals, docs/COMPRESSION.md): the finest
+// bound whose coded block takes at most `budget` bytes (98-100 % of it where the search reaches), against
+// the network or absolute, whichever codes smaller there; coded. The network's prediction is computed
+// once. `admissible` maps a candidate bound to the one used (an integer source's rounding rule,
+// normalised_error_bound); none: as is. Fails when even a bound of half the range does not fit.
+Residuals residuals_for_budget(const Network& net, const float* original, Int3 dims, uint64_t budget,
+                               const std::function<double(double)>& admissible = {});
+
 // How the residuals were coded, for reports: residual_bytes, residual_nonzero_fraction,
 // residual_bits_per_voxel, codec, predictor, reference (network or none), reference_bytes and
 // candidate_bytes. Needs `encoded`.
@@ -87,7 +96,10 @@ struct EncodedResiduals {
   Json meta;
   std::vector<uint8_t> bytes;
 };
-EncodedResiduals encode_residuals(const Residuals& r);
+// `only` (a name of residual_coding_name, e.g. "zstd-values"): that coding alone; `search`: zstd at a
+// fast level whose sizes track level 19's in proportion (a budget search's estimates, never saved).
+EncodedResiduals encode_residuals(const Residuals& r, const std::string& only = "", bool search = false);
+std::string residual_coding_name(const std::string& codec, const std::string& predictor);
 // The inverse; any inconsistency between meta, bytes and dims is one clear error naming `what`.
 Residuals decode_residuals(const Json& meta, const std::vector<uint8_t>& bytes, Int3 dims, const std::string& what);
 

@@ -208,9 +208,44 @@ Json attach_error_bound(Model& model, const Volume& volume, const ErrorBoundRequ
   return j;
 }
 
+Json attach_residuals_for_budget(Model& model, const Volume& volume, uint64_t file_bytes) {
+  const auto t0 = std::chrono::steady_clock::now();
+  model.net->set_params_half(model.net->params_half());  // as attach_error_bound
+  model.residuals.reset();
+  const uint64_t network_bytes = model_file_bytes(model);
+  // Aimed under the file's size as the network's quantization is (rate_control.cpp), less the block's
+  // description; what the description turns out to take is given back on a second try.
+  const uint64_t aim = file_bytes - std::min<uint64_t>(file_bytes / 50, 256);
+  uint64_t slack = 1024;
+  auto admissible = [&](double b) {
+    return normalised_error_bound({b * (volume.hi - volume.lo), 0}, volume.lo, volume.hi, model.source_dtype);
+  };
+  for (int attempt = 0; attempt < 3; ++attempt) {
+    if (network_bytes + slack >= aim) return Json();  // nothing left for residuals
+    model.residuals = residuals_for_budget(*model.net, volume.data.data(), volume.dims, aim - network_bytes - slack,
+                                           admissible);
+    const uint64_t total = model_file_bytes(model);
+    if (total <= aim) break;
+    slack += total - aim;
+    model.residuals.reset();
+  }
+  if (!model.residuals) return Json();
+  const Residuals& res = *model.residuals;
+  Json j = residual_coding_summary(res);
+  j["max_error"] = res.bound * (volume.hi - volume.lo);
+  j["max_error_normalised"] = res.bound;
+  j["step_normalised"] = res.step;
+  j["residual_nonzero"] = res.nonzero();
+  j["chosen_by"] = "target_ratio";
+  j["seconds"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  return j;
+}
+
 Json TrainingSession::attach_residuals() {
-  if (!opts_.error_bound.active()) return Json();
-  if (!data_->vol) fail("an error bound needs the volume in memory (in-core sampler)");
+  const bool fill = opts_.compact.file_bytes > opts_.compact.target_bytes && !opts_.error_bound.active();
+  if (!opts_.error_bound.active() && !fill) return Json();
+  if (!data_->vol) fail("residuals (an error bound, or --residuals with --target-ratio) need the volume in memory (in-core sampler)");
+  if (fill) return attach_residuals_for_budget(*model_, *data_->vol, opts_.compact.file_bytes);
   return attach_error_bound(*model_, *data_->vol, opts_.error_bound);
 }
 
@@ -267,6 +302,8 @@ TrainingResult TrainingSession::finish(bool with_ssim, int64_t eval_samples) {
   r.samples_per_second = double(r.steps) * double(trainer_->batch()) / r.seconds;
   r.report = report_json(r, evaluation);
   if (!bound.is_null()) {
+    // What renders: the network alone (rendering and point queries do not apply residuals).
+    if (data.vol) r.report["network_psnr"] = evaluate(net, *data.vol, false, dev).psnr;
     r.report["error_bound"] = bound;
     r.report["error_bound"]["holds"] = r.max_abs_error_original <= bound["max_error"].get<double>();
     r.report["error_bound"]["network_bytes"] = r.model_bytes - bound["residual_bytes"].get<uint64_t>();

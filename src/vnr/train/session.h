@@ -178,6 +178,10 @@ private:
 // memory), attached to the model; the network's parameters are rounded to fp16 first, as a file stores
 // them. Returns the summary that `vnr train --report` shows as "error_bound".
 Json attach_error_bound(Model& model, const Volume& volume, const ErrorBoundRequest& request);
+// The residuals that bring `model`'s file to file_bytes (CompactOptions::file_bytes): the finest bound
+// that fits beside the network (residuals_for_budget), attached; the same summary (its "chosen_by" is
+// "target_ratio"), or null when the network leaves no room.
+Json attach_residuals_for_budget(Model& model, const Volume& volume, uint64_t file_bytes);
 
 // Everything `vnr train VOLUME` needs to set a session up.
 struct TrainingSetup {
@@ -190,6 +194,9 @@ struct TrainingSetup {
   std::optional<Json> config_json;  // a tiny-cuda-nn config given as JSON (the Python module): wins over config
   double target_ratio = 0;       // > 0: a compact model file of volume bytes / R (within 5 %)
   double target_psnr = 0;        // > 0: the coarsest quantization reaching this PSNR (held-back estimate)
+  // With target_ratio alone: "auto" lets residuals take part of the file where they decode better than a
+  // network of the whole budget (config_sizing.h: residual_network_ratio); "off": the network takes it all.
+  std::string residuals = "auto";
   double bits_per_param = kDefaultBitsPerParam;  // --target-ratio: grid sized for this many bits per parameter
   double qat_fraction = 0.15;    // compact models: last part of the steps trained quantization-aware
   double rate_weight = 0;        // compact models: weight of the rate term in that part (rate_control.h)

@@ -4,6 +4,7 @@
 #include "vnr/core/units.h"
 #include "vnr/cuda/cuda.h"
 #include "vnr/nn/config.h"
+#include "vnr/train/config_sizing.h"
 #include "vnr/train/make_trainer.h"
 #include "vnr/train/session.h"
 #include <cmath>
@@ -22,6 +23,7 @@ void check_training_setup(const TrainingSetup& s) {
     fail("--qat-fraction must be in [0, 1], got {}", s.qat_fraction);
   if (!(s.rate_weight >= 0 && s.rate_weight <= 100))
     fail("--rate-weight must be in [0, 100], got {}", s.rate_weight);
+  if (s.residuals != "auto" && s.residuals != "off") fail("--residuals must be auto or off, got '{}'", s.residuals);
   if (!(s.bits_per_param > 0 && s.bits_per_param <= 16))
     fail("bits per parameter must be in (0, 16], got {}", s.bits_per_param);
   if (s.device == "cuda") cuda::require_device();
@@ -69,11 +71,22 @@ std::unique_ptr<TrainingSession> session_on_data(const TrainingSetup& s, ModelCo
                                          &note);
     say(note);
   }
+  uint64_t file_bytes = 0;  // > 0: residuals fill the file to this size beside a smaller network
+  if (s.target_ratio > 0 && s.target_psnr <= 0 && !s.session.error_bound.active() && s.residuals == "auto" &&
+      data->vol && !is_instantvnr_path(s.session.output)) {
+    const double network_ratio = residual_network_ratio(data->source_bytes(), data->dims.count(), s.target_ratio, &note);
+    if (network_ratio > 0) {
+      say(note);
+      file_bytes = uint64_t(double(data->source_bytes()) / s.target_ratio);
+      target_ratio = network_ratio;
+    }
+  }
   if (target_ratio > 0) {
     const uint64_t target = uint64_t(double(data->source_bytes()) / target_ratio);
     config = size_config_for_bytes(config, target, s.bits_per_param, &note);
-    say(fmt::format("--target-ratio {:g}: {}", target_ratio, note));
+    say(fmt::format("{} {:g}: {}", file_bytes ? "the network at ratio" : "--target-ratio", target_ratio, note));
     session_opts.compact.target_bytes = target;
+    session_opts.compact.file_bytes = file_bytes;
   }
   session_opts.compact.target_psnr = s.target_psnr;
   session_opts.compact.qat_fraction = s.qat_fraction;
