@@ -68,13 +68,16 @@ namespace {
 float correction(const Residuals& r, int32_t q) { return float(double(q) * r.step); }
 
 // Residuals of `original` against `pred` (null: against 0, absolute) at the step of `bound`; the number
-// of voxels where they cannot hold the bound is returned in *violations.
-Residuals quantise(const float* original, const float* pred, Int3 dims, double bound, int64_t* violations) {
+// of voxels where they cannot hold the bound is returned in *violations. `zone` >= 0.5: a difference of
+// d steps rounds up from |d| = k + zone, not k + 1/2 (a dead zone: fewer, smaller indices for a larger
+// error, zone steps; 0.5 rounds to nearest); the bound kept is then zone * step + the margin.
+Residuals quantise(const float* original, const float* pred, Int3 dims, double bound, int64_t* violations,
+                   double zone = 0.5) {
   if (!(bound > 0) || !std::isfinite(bound)) fail("the error bound must be positive, got {}", bound);
   Residuals r;
   r.dims = dims;
-  r.bound = bound;
   r.step = 2 * (bound - residual_margin(bound));
+  r.bound = zone == 0.5 ? bound : zone * r.step + residual_margin(bound);
   r.absolute = pred == nullptr;
   r.q.resize(size_t(dims.count()));
   const double limit = double(1 << 27);  // so that Lorenzo sums of seven stay far inside int32
@@ -83,14 +86,15 @@ Residuals quantise(const float* original, const float* pred, Int3 dims, double b
     int64_t bad = 0;
     for (int64_t i = i0; i < i1; ++i) {
       const float p = pred ? pred[size_t(i)] : 0.0f;
-      const double d = std::nearbyint((double(original[i]) - double(p)) / r.step);
+      const double steps = (double(original[i]) - double(p)) / r.step;
+      const double d = zone == 0.5 ? std::nearbyint(steps) : std::copysign(std::floor(std::fabs(steps) + 1 - zone), steps);
       if (!(std::fabs(d) < limit)) {
         ++bad;
         continue;
       }
       r.q[size_t(i)] = int32_t(d);
       const float decoded = p + correction(r, r.q[size_t(i)]);  // p = 0 adds nothing
-      if (!(std::fabs(double(decoded) - double(original[i])) <= bound)) ++bad;
+      if (!(std::fabs(double(decoded) - double(original[i])) <= r.bound)) ++bad;
     }
     bad_total += bad;
   });
@@ -130,9 +134,10 @@ std::vector<float> network_prediction(const Network& net, Int3 dims) {
   return pred;
 }
 
-Residuals against_prediction(const float* original, const float* pred, Int3 dims, double bound) {
+// pred null: absolute residuals.
+Residuals against_prediction(const float* original, const float* pred, Int3 dims, double bound, double zone = 0.5) {
   int64_t violations = 0;
-  Residuals r = quantise(original, pred, dims, bound, &violations);
+  Residuals r = quantise(original, pred, dims, bound, &violations, zone);
   if (violations > 0)
     fail("cannot meet the error bound {:.3g} (normalised) at {} voxels: the bound is too small for fp32 values, or "
          "the network's output is not finite", bound, violations);
@@ -177,43 +182,65 @@ double finest_bound_within(const std::function<double(double)>& size, double goa
 }
 }  // namespace
 
+// The dead zone of residuals that fill a budget (quantise): there the bound is an outcome, not a request,
+// and a wider zero bin buys more PSNR per byte than rounding to nearest (docs/COMPRESSION.md).
+constexpr double kFillZone = 0.65;
+
 Residuals residuals_for_budget(const Network& net, const float* original, Int3 dims, uint64_t budget,
-                               const std::function<double(double)>& admissible) {
+                               const std::function<double(double)>& guaranteed) {
   const std::vector<float> pred = network_prediction(net, dims);
   auto quantised = [&](double bound, bool absolute) {
-    const double b = admissible ? admissible(bound) : bound;
-    return absolute ? quantised_values(original, dims, b) : against_prediction(original, pred.data(), dims, b);
+    return against_prediction(original, absolute ? nullptr : pred.data(), dims, bound, kFillZone);
   };
   auto size_of = [](const Residuals& r, const std::string& only, bool search) {
     return double(encode_residuals(r, only, search).bytes.size());
   };
   const double target = double(budget);
-  // First every coding at the bound where the context coder against the network (one fast pass) fills
-  // the budget; then the search runs on the coding that won, at zstd's fast level scaled to level 19
-  // by their ratio at the last bound, and that coding alone is coded again, until the block fills 98-100 %
-  // of the budget (three rounds at most). Each level-19 coding of a large volume takes seconds.
+  // The bound where the context coder against the network (one fast pass) fills the budget; there every
+  // coding of both references is ranked, zstd at its fast level (taken at 0.9: level 19 codes ~10 %
+  // smaller), and only the first is coded for the file (zstd level 19 takes seconds on a large volume).
+  // A zstd winner is searched again on its fast level, scaled to level 19 by their ratio at the last
+  // bound, until the block fills 98-100 % of the budget (three rounds at most).
   double bound = finest_bound_within([&](double b) { return size_of(quantised(b, false), "context-none", false); }, target);
-  Residuals r = smaller_coded(quantised(bound, false), quantised(bound, true));
+  Json ranked = Json::object();
+  for (bool absolute : {false, true}) {
+    const EncodedResiduals fast = encode_residuals(quantised(bound, absolute), "", true);
+    for (const auto& [name, bytes] : fast.meta["candidate_bytes"].items())
+      ranked[name] = bytes.get<double>() * (name.rfind("zstd", 0) == 0 ? 0.9 : 1.0);
+  }
+  std::string winner;
+  for (const auto& [name, bytes] : ranked.items())
+    if (winner.empty() || bytes.get<double>() < ranked[winner].get<double>()) winner = name;
+  const bool absolute = winner.find("-values") != std::string::npos;
   std::optional<Residuals> best;  // the largest block that fits
-  const bool absolute = r.absolute;
-  const std::string winner = residual_coding_name(r.encoded->meta["codec"], r.encoded->meta["predictor"]);
   for (int round = 0;; ++round) {
-    const double bytes = double(r.encoded->bytes.size());
-    if (bytes <= target && (!best || bytes > double(best->encoded->bytes.size()))) best = r;
-    if ((bytes <= target && bytes >= 0.98 * target) || round == 2) break;
-    const double scale = bytes / size_of(r, winner, true);
-    bound = finest_bound_within([&](double b) { return scale * size_of(quantised(b, absolute), winner, true); }, target);
-    r = quantised(bound, absolute);
+    Residuals r = quantised(bound, absolute);
     auto enc = std::make_shared<EncodedResiduals>(encode_residuals(r, winner));
+    const double bytes = double(enc->bytes.size());
     enc->meta["reference_bytes"] = {{absolute ? "none" : "network", enc->bytes.size()}};
     r.encoded = std::move(enc);
+    const bool fits = bytes <= target;
+    if (fits && (!best || bytes > double(best->encoded->bytes.size()))) best = r;
+    if ((fits && bytes >= 0.98 * target) || winner.rfind("context", 0) == 0 || round == 2) break;
+    const double scale = bytes / size_of(r, winner, true);
+    const double next = finest_bound_within([&](double b) { return scale * size_of(quantised(b, absolute), winner, true); },
+                                            target);
+    if (next == bound) break;
+    bound = next;
   }
-  if (best) return std::move(*best);
-  Residuals coarsest = smaller_coded(quantised(0.5, false), quantised(0.5, true));
-  if (double(coarsest.encoded->bytes.size()) > target)
-    fail("residuals: even a bound of half the range takes {} bytes, over the {} left", coarsest.encoded->bytes.size(),
-         budget);
-  return coarsest;
+  if (!best) {
+    best = smaller_coded(quantised(0.5, false), quantised(0.5, true));
+    if (double(best->encoded->bytes.size()) > target)
+      fail("residuals: even a bound of half the range takes {} bytes, over the {} left", best->encoded->bytes.size(),
+           budget);
+  }
+  if (guaranteed) {  // recorded for the file: the description (coded last) carries it
+    best->bound = guaranteed(best->bound);
+    auto enc = std::make_shared<EncodedResiduals>(*best->encoded);
+    enc->meta["bound"] = best->bound;
+    best->encoded = std::move(enc);
+  }
+  return std::move(*best);
 }
 
 Json residual_coding_summary(const Residuals& r) {

@@ -75,11 +75,12 @@ Residuals smallest_residuals(const Network& net, const float* original, Int3 dim
 
 // The residuals that fill a byte budget (--target-ratio with residuals, docs/COMPRESSION.md): the finest
 // bound whose coded block takes at most `budget` bytes (98-100 % of it where the search reaches), against
-// the network or absolute, whichever codes smaller there; coded. The network's prediction is computed
-// once. `admissible` maps a candidate bound to the one used (an integer source's rounding rule,
-// normalised_error_bound); none: as is. Fails when even a bound of half the range does not fit.
+// the network or absolute and in the coding that ranks first there; coded, with a dead zone (the bound is
+// an outcome here, not a request). `guaranteed` maps the bound that holds for the decoded values to the
+// one recorded (an integer source's rounding, see attach_residuals_for_budget); none: as is. Fails when
+// even a bound of half the range does not fit.
 Residuals residuals_for_budget(const Network& net, const float* original, Int3 dims, uint64_t budget,
-                               const std::function<double(double)>& admissible = {});
+                               const std::function<double(double)>& guaranteed = {});
 
 // How the residuals were coded, for reports: residual_bytes, residual_nonzero_fraction,
 // residual_bits_per_voxel, codec, predictor, reference (network or none), reference_bytes and

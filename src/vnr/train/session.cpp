@@ -217,13 +217,18 @@ Json attach_residuals_for_budget(Model& model, const Volume& volume, uint64_t fi
   // description; what the description turns out to take is given back on a second try.
   const uint64_t aim = file_bytes - std::min<uint64_t>(file_bytes / 50, 256);
   uint64_t slack = 1024;
-  auto admissible = [&](double b) {
-    return normalised_error_bound({b * (volume.hi - volume.lo), 0}, volume.lo, volume.hi, model.source_dtype);
+  // Decoded values within E of an integer source round back within E while frac(E) < 1/2 (or E < 1/2),
+  // else within ceil(E): the bound recorded holds for both decodes.
+  const double range = volume.hi - volume.lo;
+  auto guaranteed = [&](double b) {
+    const double e = b * range;
+    if (!dtype_is_integer(model.source_dtype) || e < 0.5 || e - std::floor(e) < 0.5) return b;
+    return std::ceil(e) / range;
   };
   for (int attempt = 0; attempt < 3; ++attempt) {
     if (network_bytes + slack >= aim) return Json();  // nothing left for residuals
     model.residuals = residuals_for_budget(*model.net, volume.data.data(), volume.dims, aim - network_bytes - slack,
-                                           admissible);
+                                           guaranteed);
     const uint64_t total = model_file_bytes(model);
     if (total <= aim) break;
     slack += total - aim;
@@ -232,7 +237,7 @@ Json attach_residuals_for_budget(Model& model, const Volume& volume, uint64_t fi
   if (!model.residuals) return Json();
   const Residuals& res = *model.residuals;
   Json j = residual_coding_summary(res);
-  j["max_error"] = res.bound * (volume.hi - volume.lo);
+  j["max_error"] = res.bound * range;
   j["max_error_normalised"] = res.bound;
   j["step_normalised"] = res.step;
   j["residual_nonzero"] = res.nonzero();
