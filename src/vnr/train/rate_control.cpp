@@ -1,11 +1,13 @@
 #include "vnr/train/rate_control.h"
 #include "vnr/train/rate_term.h"
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include "vnr/core/error.h"
 #include "vnr/core/half.h"
 #include "vnr/core/rng.h"
 #include "vnr/nn/mlp_layout.h"
+#include "vnr/train/residuals.h"
 #include "vnr/train/session.h"
 
 namespace vnr {
@@ -305,6 +307,10 @@ Json train_compact(TrainingSession& session, int64_t steps, double seconds, cons
   if (!session.data() || !session.data()->sampler) fail("compact storage needs a session opened on training data");
   const double f = can_train_quantized(session) ? std::clamp(o.qat_fraction, 0.0, 1.0) : 0.0;
   const bool by_time = steps < 0 && seconds > 0;
+  // --seconds covers every phase: the residuals that fill the file after training get their estimated
+  // time off the training (compact_session takes the quantization planning's off the last phase).
+  if (by_time && o.file_bytes > 0)
+    seconds = std::max(seconds - residual_fill_seconds(session.data()->dims), 0.5 * seconds);
   session.set_budget(steps, seconds);  // both phases: the cool-down ends with the quantization-aware steps
   const int64_t steps1 = by_time ? -1 : int64_t(std::llround(double(steps) * (1 - f)));
   session.run(steps1, by_time ? seconds * (1 - f) : 0);
@@ -319,6 +325,7 @@ Json compact_session(TrainingSession& session, const CompactOptions& o, int64_t 
   Network& net = session.network();
   Model& model = session.model();
   const bool qat = (qat_steps_planned != 0 || qat_seconds > 0) && can_train_quantized(session);
+  const auto planning_start = std::chrono::steady_clock::now();
   const TrainingData& data = *session.data();
   const uint64_t seed = probe_seed(session.trainer().seed());
   const ProbeSet probe = data.vol ? draw_voxel_probe(*data.vol, o.probe_samples, seed)
@@ -349,6 +356,11 @@ Json compact_session(TrainingSession& session, const CompactOptions& o, int64_t 
           for (size_t i = 0; i < q.master.size(); ++i) q.master[i] += net.params[i] - shown[i];
         });
     rate_aware = o.rate_weight > 0 && set_rate_hook(session, q.master, segs, o.rate_weight);
+    if (qat_seconds > 0) {  // the planning counts against a --seconds budget
+      const double planning = std::chrono::duration<double>(std::chrono::steady_clock::now() - planning_start).count();
+      qat_seconds = std::max(qat_seconds - planning, 0.05 * qat_seconds);
+      session.shorten_budget(planning);
+    }
     const int64_t before = session.steps_done();
     try {
       session.run(qat_steps_planned, qat_seconds);

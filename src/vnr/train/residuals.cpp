@@ -243,6 +243,8 @@ Residuals residuals_for_budget(const Network& net, const float* original, Int3 d
   return std::move(*best);
 }
 
+double residual_fill_seconds(Int3 dims) { return 0.3e-6 * double(dims.count()); }
+
 Json residual_coding_summary(const Residuals& r) {
   if (!r.encoded) fail("the residuals were not coded");
   const EncodedResiduals& enc = *r.encoded;

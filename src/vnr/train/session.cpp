@@ -96,6 +96,10 @@ void TrainingSession::set_budget(int64_t steps, double seconds) {
   budget_first_second_ = train_seconds_ + run_seconds_;
 }
 
+void TrainingSession::shorten_budget(double seconds) {
+  if (budget_seconds_ > 0) budget_seconds_ = std::max(budget_seconds_ - seconds, 1e-3);
+}
+
 float TrainingSession::cooldown_multiplier() const {
   const double f = opts_.cooldown;
   if (!(f > 0)) return 1.0f;

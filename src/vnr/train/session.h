@@ -92,6 +92,9 @@ public:
   // 0: no limit of that kind): what options().cooldown counts its last fraction of. Once it is spent,
   // further steps train at the config's rate again.
   void set_budget(int64_t steps, double seconds);
+  // Takes `seconds` off a declared seconds budget (side work that --seconds counts, e.g. quantization
+  // planning), so that the cool-down still ends with the run.
+  void shorten_budget(double seconds);
   float step();  // run(1); the step's loss
 
   void request_stop() { stop_.store(true, std::memory_order_relaxed); }
