@@ -51,8 +51,8 @@ double bounded_network_ratio(const Volume& vol, uint64_t source_bytes, double bo
 
 double residual_network_ratio(uint64_t source_bytes, uint64_t voxels, double target_ratio, std::string* note) {
   const double budget = double(source_bytes) / target_ratio, bits_per_voxel = 8 * budget / double(voxels);
-  const double network = std::max(kResidualNetworkShare * budget, 32768.0);
-  if (bits_per_voxel < kResidualMinBitsPerVoxel || network >= 0.5 * budget) return 0;
+  const double network = std::max(kResidualNetworkBitsPerVoxel * double(voxels) / 8, 32768.0);
+  if (network > 0.5 * budget) return 0;
   if (note)
     *note = fmt::format("--residuals auto: {:.2f} bits per voxel; the network gets {:.0f} % of the file (ratio {:.3g}), "
                         "residuals the rest", bits_per_voxel, 100 * network / budget, double(source_bytes) / network);

@@ -22,12 +22,11 @@ ModelConfig size_config_for_bytes(const ModelConfig& config, uint64_t target_byt
 constexpr double kBoundNetworkShare = 0.1;
 double bounded_network_ratio(const Volume& vol, uint64_t source_bytes, double bound, std::string* note);
 
-// --target-ratio R alone with --residuals auto: at R's bits per voxel of at least
-// kResidualMinBitsPerVoxel, a network of kResidualNetworkShare of the budget and residuals in the rest
-// (train/residuals.h: the finest bound that fits) decode better than a network of the whole budget; the
-// ratio of that network, or 0 (the network takes the budget). docs/COMPRESSION.md has the runs that fitted both.
-constexpr double kResidualMinBitsPerVoxel = 0.25;
-constexpr double kResidualNetworkShare = 0.2;
+// --target-ratio R alone with --residuals auto: a network of kResidualNetworkBitsPerVoxel (at least 32 KiB)
+// and residuals in the rest of the file (train/residuals.h: the finest bound that fits) decode better
+// than a network of the whole file, where that network takes at most half of it; the ratio of that
+// network, or 0 (the network takes the file). docs/COMPRESSION.md has the runs that fitted it.
+constexpr double kResidualNetworkBitsPerVoxel = 0.1;
 double residual_network_ratio(uint64_t source_bytes, uint64_t voxels, double target_ratio, std::string* note);
 
 }  // namespace vnr
