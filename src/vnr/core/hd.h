@@ -11,3 +11,11 @@
 // AVX-512); an out-of-line call would run baseline code and call libm for fmaf.
 #define VNR_INLINE inline __attribute__((always_inline))
 #endif
+
+// Before a __host__ __device__ template that may be instantiated with a callee of one space only (a
+// device-only evaluator, a host lambda): nvcc then checks the callee's space per instantiation.
+#if defined(__CUDACC__)
+#define VNR_HD_TEMPLATE _Pragma("nv_exec_check_disable")
+#else
+#define VNR_HD_TEMPLATE
+#endif

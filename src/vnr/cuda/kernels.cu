@@ -141,13 +141,10 @@ __global__ void voxel_centres_kernel(Int3 dims, int64_t first, int64_t count, in
 void encode(const GridLayout& g, const __half* table, Coords c, int64_t n, int in_pad, __half* X0, cudaStream_t s) {
   const int64_t total = n * g.n_levels;
   if (total <= 0) return;
-  switch (g.n_features) {
-    case 1: encode_kernel<1><<<blocks_for(total, kThreads), kThreads, 0, s>>>(g, table, c, n, in_pad, X0); break;
-    case 2: encode_kernel<2><<<blocks_for(total, kThreads), kThreads, 0, s>>>(g, table, c, n, in_pad, X0); break;
-    case 4: encode_kernel<4><<<blocks_for(total, kThreads), kThreads, 0, s>>>(g, table, c, n, in_pad, X0); break;
-    case 8: encode_kernel<8><<<blocks_for(total, kThreads), kThreads, 0, s>>>(g, table, c, n, in_pad, X0); break;
-    default: cuda_fail_message("grid encoding: n_features_per_level must be 1, 2, 4 or 8");
-  }
+  if (!with_feature_count(g.n_features, [&](auto F) {
+        encode_kernel<decltype(F)::value><<<blocks_for(total, kThreads), kThreads, 0, s>>>(g, table, c, n, in_pad, X0);
+      }))
+    cuda_fail_message("grid encoding: n_features_per_level must be 1, 2, 4 or 8");
   VNR_CUDA_LAUNCHED();
 }
 
@@ -156,13 +153,11 @@ void grid_backward(const GridLayout& g, Coords c, int64_t n, int in_pad, const _
   const int64_t total = n * g.n_levels;
   if (total <= 0) return;
   const float inv = 1.0f / kLossScale;
-  switch (g.n_features) {
-    case 1: grid_backward_kernel<1><<<blocks_for(total, kThreads), kThreads, 0, s>>>(g, c, n, in_pad, dX0, inv, grad); break;
-    case 2: grid_backward_kernel<2><<<blocks_for(total, kThreads), kThreads, 0, s>>>(g, c, n, in_pad, dX0, inv, grad); break;
-    case 4: grid_backward_kernel<4><<<blocks_for(total, kThreads), kThreads, 0, s>>>(g, c, n, in_pad, dX0, inv, grad); break;
-    case 8: grid_backward_kernel<8><<<blocks_for(total, kThreads), kThreads, 0, s>>>(g, c, n, in_pad, dX0, inv, grad); break;
-    default: cuda_fail_message("grid encoding: n_features_per_level must be 1, 2, 4 or 8");
-  }
+  if (!with_feature_count(g.n_features, [&](auto F) {
+        grid_backward_kernel<decltype(F)::value>
+            <<<blocks_for(total, kThreads), kThreads, 0, s>>>(g, c, n, in_pad, dX0, inv, grad);
+      }))
+    cuda_fail_message("grid encoding: n_features_per_level must be 1, 2, 4 or 8");
   VNR_CUDA_LAUNCHED();
 }
 

@@ -26,12 +26,9 @@ __device__ inline void encode_row(const GridLayout& g, const __half* table, floa
   const int F = int(g.n_features), L = int(g.n_levels);
   for (int l = 0; l < L; ++l) {
     float out[8];
-    switch (F) {
-      case 1: grid_level_forward<1>(g.levels[l], g.interpolation, table, x, y, z, out, 1); break;
-      case 2: grid_level_forward<2>(g.levels[l], g.interpolation, table, x, y, z, out, 1); break;
-      case 4: grid_level_forward<4>(g.levels[l], g.interpolation, table, x, y, z, out, 1); break;
-      default: grid_level_forward<8>(g.levels[l], g.interpolation, table, x, y, z, out, 1); break;
-    }
+    with_feature_count(g.n_features, [&](auto Fc) {
+      grid_level_forward<decltype(Fc)::value>(g.levels[l], g.interpolation, table, x, y, z, out, 1);
+    });
     for (int f = 0; f < F; ++f) row[l * F + f] = __float2half_rn(out[f]);
   }
   for (int k = L * F; k < in_pad; ++k) row[k] = __float2half_rn(0.0f);

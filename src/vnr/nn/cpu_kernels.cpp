@@ -328,12 +328,7 @@ void EncodeF(const GridLayout& g, const uint16_t* table, const float* x, const f
 
 void GridEncode(const GridLayout& g, const uint16_t* table, const float* x, const float* y, const float* z, int n,
                 float* X0) {
-  switch (g.n_features) {
-    case 1: EncodeF<1>(g, table, x, y, z, n, X0); break;
-    case 2: EncodeF<2>(g, table, x, y, z, n, X0); break;
-    case 4: EncodeF<4>(g, table, x, y, z, n, X0); break;
-    case 8: EncodeF<8>(g, table, x, y, z, n, X0); break;
-  }
+  with_feature_count(g.n_features, [&](auto F) { EncodeF<decltype(F)::value>(g, table, x, y, z, n, X0); });
 }
 
 // Backward of one block of N samples from its corner block: per sample and corner, one vector load of
@@ -441,12 +436,9 @@ void BackwardF(const GridLayout& g, uint32_t l, const float* x, const float* y, 
 
 void GridBackwardLevel(const GridLayout& g, uint32_t level, const float* x, const float* y, const float* z,
                        int64_t n, const float* dEnc, uint32_t in_pad, int chunk, float* grad) {
-  switch (g.n_features) {
-    case 1: BackwardF<1>(g, level, x, y, z, n, dEnc, in_pad, chunk, grad); break;
-    case 2: BackwardF<2>(g, level, x, y, z, n, dEnc, in_pad, chunk, grad); break;
-    case 4: BackwardF<4>(g, level, x, y, z, n, dEnc, in_pad, chunk, grad); break;
-    case 8: BackwardF<8>(g, level, x, y, z, n, dEnc, in_pad, chunk, grad); break;
-  }
+  with_feature_count(g.n_features, [&](auto F) {
+    BackwardF<decltype(F)::value>(g, level, x, y, z, n, dEnc, in_pad, chunk, grad);
+  });
 }
 
 // adam_update() (adam_update.h) vectorised: the zero-gradient skip of grid parameters is a per-lane

@@ -4,6 +4,7 @@
 // The per-sample functions are single-source (VNR_HD) over a POD layout.
 #include <cmath>
 #include <cstdint>
+#include <type_traits>
 #include "vnr/core/half.h"
 #include "vnr/core/hd.h"
 #include "vnr/nn/config.h"
@@ -28,6 +29,21 @@ struct GridLayout {
   GridLevel levels[kMaxGridLevels];
   uint64_t n_params() const { return n_entries * n_features; }
 };
+
+// The one place where a grid's features per level, a runtime count, become the compile-time F of
+// the kernels (registers and vector widths): fn(std::integral_constant<int, F>()) for F = 1, 2, 4 or 8
+// (what tcnn supports; configs are checked when parsed), and true; false for any other count.
+VNR_HD_TEMPLATE
+template <typename Fn>
+VNR_HD inline bool with_feature_count(uint32_t n_features, Fn&& fn) {
+  switch (n_features) {
+    case 1: fn(std::integral_constant<int, 1>()); return true;
+    case 2: fn(std::integral_constant<int, 2>()); return true;
+    case 4: fn(std::integral_constant<int, 4>()); return true;
+    case 8: fn(std::integral_constant<int, 8>()); return true;
+    default: return false;
+  }
+}
 
 GridLayout make_grid_layout(const EncodingConfig& cfg);
 

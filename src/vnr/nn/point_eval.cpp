@@ -390,13 +390,8 @@ void PickKernels(const PointEvalData& d, PointEvaluator::Kernels* k) {
 }
 
 void SelectKernels(const PointEvalData& d, PointEvaluator::Kernels* k) {
-  switch (d.has_grid ? d.grid.n_features : 0) {
-    case 1: PickKernels<1>(d, k); break;
-    case 2: PickKernels<2>(d, k); break;
-    case 4: PickKernels<4>(d, k); break;
-    case 8: PickKernels<8>(d, k); break;
-    default: PickKernels<0>(d, k); break;
-  }
+  if (!d.has_grid || !with_feature_count(d.grid.n_features, [&](auto F) { PickKernels<decltype(F)::value>(d, k); }))
+    PickKernels<0>(d, k);
   k->target = hwy::TargetName(HWY_TARGET);
 }
 

@@ -15,12 +15,7 @@
 #include "vnr/render/integrators.h"
 
 // The per-pixel templates are __host__ __device__ but may be instantiated with a device-only
-// evaluator (warp intrinsics): nvcc checks the callee's space per instantiation, not per template.
-#if defined(__CUDACC__)
-#define VNR_HD_TEMPLATE _Pragma("nv_exec_check_disable")
-#else
-#define VNR_HD_TEMPLATE
-#endif
+// evaluator (warp intrinsics): VNR_HD_TEMPLATE (core/hd.h).
 
 namespace vnr {
 

@@ -17,17 +17,6 @@ const char* interpolation_name(Interpolation i) {
   return i == Interpolation::Linear ? "Linear" : (i == Interpolation::Nearest ? "Nearest" : "Smoothstep");
 }
 
-// One level of one point for every supported feature count (the features are a template parameter).
-template <typename Fn>
-void with_features(uint32_t n_features, Fn&& fn) {
-  switch (n_features) {
-    case 1: fn(std::integral_constant<int, 1>()); break;
-    case 2: fn(std::integral_constant<int, 2>()); break;
-    case 4: fn(std::integral_constant<int, 4>()); break;
-    case 8: fn(std::integral_constant<int, 8>()); break;
-  }
-}
-
 class GridEncoding final : public Encoding {
 public:
   explicit GridEncoding(const EncodingConfig& e) : cfg_(e), grid_(make_grid_layout(e)) {}
@@ -48,14 +37,14 @@ public:
   }
 
   void encode_point(const float xyz[3], const uint16_t* params, float* out) const override {
-    with_features(grid_.n_features, [&](auto F) {
+    with_feature_count(grid_.n_features, [&](auto F) {
       for (uint32_t l = 0; l < grid_.n_levels; ++l)
         grid_level_forward<F()>(grid_.levels[l], grid_.interpolation, params, xyz[0], xyz[1], xyz[2],
                                 out + l * F(), 1);
     });
   }
   void encode_point_input_grad(const float xyz[3], const uint16_t* params, float* jac) const override {
-    with_features(grid_.n_features, [&](auto F) {
+    with_feature_count(grid_.n_features, [&](auto F) {
       float tmp[F() * 3];
       for (uint32_t l = 0; l < grid_.n_levels; ++l) {
         grid_level_input_grad<F()>(grid_.levels[l], grid_.interpolation, params, xyz[0], xyz[1], xyz[2], tmp);
