@@ -64,6 +64,10 @@ TEST(ErrorBoundCli, Float32BoundHoldsThroughFileDecodeAndEval) {
   ASSERT_EQ(e.code, 0) << e.err;
   EXPECT_HAS(e.out, "holds at every voxel");
   EXPECT_NEAR(parse_json_file(d + "/e.json")["error_bound"]["max_error"].get<double>(), bound, 1e-12 * bound);
+  // Rendering shows the network alone, and says so.
+  Result r = run("render " + d + "/ml.vnr -o " + d + "/ml.png --size 32x32 --spp 1 --device cpu -q");
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_HAS(r.err, "the image shows the network alone");
 
   // A byte of the residual block changed: one clear error on load.
   std::string bytes = read_all(d + "/ml.vnr");

@@ -69,6 +69,10 @@ CliRender open_cli_render(const std::string& input, const RenderArgs& a, const V
   std::string note;
   const Device device = choose_render_device(a.device, model, &note);
   if (!note.empty()) std::fprintf(stderr, "note: %s\n", note.c_str());
+  if (model && model->residuals)
+    std::fprintf(stderr, "note: the image shows the network alone; the model's residuals (error bound %.4g) apply to "
+                         "`vnr decode`, whose volume renders with them\n",
+                 model->residuals->bound * (model->hi - model->lo));
   const cuda::MlpPath mlp = cuda::parse_mlp_path(a.mlp);
   if (a.macrocell_size < 1) fail("--macrocell-size must be at least 1, got {}", a.macrocell_size);
 
