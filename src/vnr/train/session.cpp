@@ -230,7 +230,7 @@ Json attach_residuals_for_budget(Model& model, const Volume& volume, uint64_t fi
     return std::ceil(e) / range;
   };
   for (int attempt = 0; attempt < 3; ++attempt) {
-    if (network_bytes + slack >= aim) return Json();  // nothing left for residuals
+    if (network_bytes + slack + aim / 16 >= aim) return Json();  // next to nothing left for residuals
     model.residuals = residuals_for_budget(*model.net, volume.data.data(), volume.dims, aim - network_bytes - slack,
                                            guaranteed);
     const uint64_t total = model_file_bytes(model);
