@@ -89,8 +89,8 @@ void run_train(const TrainArgs& a) {
   auto say = [&](const std::string& line) {
     if (!a.quiet) std::fprintf(stderr, "%s\n", line.c_str());
   };
-  const int64_t steps = a.steps >= 0 ? a.steps : (a.seconds > 0 ? INT64_MAX : 1000);
-  const bool by_time = a.seconds > 0 && a.steps < 0;
+  const int64_t steps = planned_steps(a.steps, a.seconds);
+  const bool by_time = steps < 0;
   std::optional<Progress> bar;
   std::optional<StopSignalGuard> guard;
   std::unique_ptr<TrainPreview> preview;
@@ -116,7 +116,7 @@ void run_train(const TrainArgs& a) {
   TargetTraining trained;
   try {
     auto open = [&](const TrainingSetup& s) { return open_training_session(s, say); };
-    trained = train_for_targets(setup, by_time ? -1 : steps, a.seconds, open, say, before_training);
+    trained = train_for_targets(setup, steps, a.seconds, open, say, before_training);
   } catch (const std::exception&) {
     if (bar) bar->finish();
     throw;

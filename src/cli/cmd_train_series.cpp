@@ -161,7 +161,7 @@ void train_per_timestep(SeriesRun& run) {
   so.train = run.train_options();
   so.device = run.device;
   so.mlp = cuda::parse_mlp_path(run.a.mlp);
-  so.steps = a.steps >= 0 ? a.steps : (a.seconds > 0 ? -1 : 1000);
+  so.steps = planned_steps(a.steps, a.seconds);
   so.cooldown = a.cooldown;
   so.seconds = a.seconds;
   so.macrocell_size = a.macrocell_size;

@@ -43,7 +43,7 @@ TrainingSetup setup_of(const TrainArgs& a, bool preview) {
   return s;
 }
 
-int64_t brick_steps(const TrainArgs& a) { return a.steps >= 0 ? a.steps : (a.seconds > 0 ? -1 : 1000); }
+int64_t brick_steps(const TrainArgs& a) { return planned_steps(a.steps, a.seconds); }
 
 void check_brick_args(const TrainArgs& a) {
   if (a.bricks.empty()) fail("--resume needs --bricks (the same as the run it continues)");

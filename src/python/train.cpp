@@ -113,8 +113,7 @@ ModelPtr train(const TrainArgs& a) {
     lines.push_back(line);
   };
   const SessionOpener open = opener_of(a, setup, say);
-  const int64_t steps = a.steps ? *a.steps : (a.seconds ? INT64_MAX : 1000);
-  const bool by_time = a.seconds && !a.steps;
+  const int64_t steps = planned_steps(a.steps.value_or(-1), a.seconds.value_or(0));
   CallbackState st;
   st.callback = a.callback;
   auto attach = [&](TrainingSession& s) { s.add_step_callback([&](const TrainingProgress& p) { on_step(s, st, p); }); };
@@ -122,7 +121,7 @@ ModelPtr train(const TrainArgs& a) {
   bool psnr_short = false;  // target_psnr alone, and no size reached it
   {
     pyb::gil_scoped_release release;
-    TargetTraining trained = train_for_targets(setup, by_time ? -1 : steps, a.seconds.value_or(0), open, say, attach);
+    TargetTraining trained = train_for_targets(setup, steps, a.seconds.value_or(0), open, say, attach);
     psnr_short = trained.search && !trained.search->reached && !trained.search->interrupted;
     session = std::move(trained.session);
     session->finalize_model();  // quantized (compact), residuals attached (error bound)

@@ -213,6 +213,13 @@ struct TrainingSetup {
   SessionOptions session;
 };
 
+// The steps a run is to train, from what a front end was given (steps < 0: none; seconds <= 0: none):
+// those steps, else -1 (as long as the seconds allow) when seconds are given, else kDefaultSteps.
+constexpr int64_t kDefaultSteps = 1000;
+inline int64_t planned_steps(int64_t steps, double seconds) {
+  return steps >= 0 ? steps : (seconds > 0 ? -1 : kDefaultSteps);
+}
+
 // The checks of a setup that need no data (batch, steps, macro-cell size, out-of-core counts, a CUDA
 // device when "cuda" is asked for): one error line, before anything is loaded.
 void check_training_setup(const TrainingSetup& setup);
