@@ -219,8 +219,9 @@ int Renderer::render_until_converged(const Convergence& c, RenderStats* stats,
          c.min_frames, c.max_frames);
   while (frames_ < c.max_frames) {
     render_frame(stats);
-    if (progress) progress(frames_, noise());
-    if (frames_ >= c.min_frames && noise() <= c.noise) break;
+    const double n = noise();  // a pass over the image
+    if (progress) progress(frames_, n);
+    if (frames_ >= c.min_frames && n <= c.noise) break;
   }
   return frames_;
 }

@@ -6,6 +6,7 @@
 #include "vnr/core/error.h"
 #include "vnr/core/fileio.h"
 #include "vnr/core/half.h"
+#include "vnr/core/parallel.h"
 #include "vnr/nn/encoding.h"
 #include "vnr/nn/grid_encoding.h"
 #include "vnr/nn/mlp_layout.h"
@@ -27,6 +28,24 @@ int32_t quant_index(uint16_t h, float step) {
 uint16_t dequant(int32_t q, float step) { return float_to_half(float(q) * step); }
 
 bool valid_step(float step) { return std::isfinite(step) && step >= 0; }
+
+// f(i) for every segment i < n, segments claimed by whichever thread is free (they code independently);
+// the first segment's error is raised here, after the parallel region (none may leave a worker thread).
+template <typename F>
+void for_each_segment(size_t n, F&& f) {
+  std::vector<std::string> errors(n);
+  parallel_for_claimed(int64_t(n), 1, [&](int64_t b, int64_t e) {
+    for (int64_t i = b; i < e; ++i) {
+      try {
+        f(size_t(i));
+      } catch (const std::exception& x) {
+        errors[size_t(i)] = x.what();
+      }
+    }
+  });
+  for (const std::string& e : errors)
+    if (!e.empty()) fail("{}", e);
+}
 
 }  // namespace
 
@@ -126,20 +145,11 @@ std::string encode_params(const std::vector<uint16_t>& params, const std::vector
   if (off != params.size()) fail("quantization segments cover {} of {} parameters", off, params.size());
   // Segments are coded independently, so in parallel (rate control encodes many candidates).
   std::vector<CodedSegment> coded(segments.size());
-  std::vector<std::string> errors(segments.size());
-#pragma omp parallel for schedule(dynamic)
-  for (int64_t i = 0; i < int64_t(segments.size()); ++i) {
-    try {
-      coded[i] = encode_segment(params.data() + offsets[i], segments[i], zstd_level);
-    } catch (const std::exception& e) {
-      errors[i] = e.what();
-    }
-  }
+  for_each_segment(segments.size(), [&](size_t i) { coded[i] = encode_segment(params.data() + offsets[i], segments[i], zstd_level); });
   meta = Json::array();
   std::string block;
   bool any_context = false;
   for (size_t i = 0; i < segments.size(); ++i) {
-    if (!errors[i].empty()) fail("{}", errors[i]);
     block += coded[i].bytes;
     Json m = {{"n", segments[i].count}, {"step", segments[i].step}};
     if (coded[i].context) {
@@ -197,7 +207,6 @@ SegmentMeta segment_meta(const std::string& path, const Json& s) {
   return m;
 }
 
-// Quantization indices of one segment; damage is one error naming `path`.
 // One segment's parameters into p[0, n): raw fp16 bits (step 0) or dequantized indices, from either coder.
 void decode_segment(const std::string& path, const SegmentMeta& m, const char* data, uint16_t* p) {
   std::vector<int32_t> q(m.n);
@@ -254,20 +263,11 @@ std::vector<uint16_t> decode_params(const std::string& path, const char* block, 
     pos += m.bytes;
   }
   // Segments decode independently, so in parallel (a model loads in about half the time on 2 cores).
-  std::vector<std::string> errors(metas.size());
-#pragma omp parallel for schedule(dynamic)
-  for (int64_t s = 0; s < int64_t(metas.size()); ++s) {
-    try {
-      decode_segment(path, metas[s], block + positions[s], params.data() + offsets[s]);
-    } catch (const std::exception& e) {
-      errors[s] = e.what();
-    }
-  }
+  for_each_segment(metas.size(), [&](size_t s) {
+    decode_segment(path, metas[s], block + positions[s], params.data() + offsets[s]);
+  });
   segments.clear();
-  for (size_t s = 0; s < metas.size(); ++s) {
-    if (!errors[s].empty()) fail("{}", errors[s]);
-    segments.push_back({metas[s].n, metas[s].step, metas[s].layout});
-  }
+  for (const SegmentMeta& m : metas) segments.push_back({m.n, m.step, m.layout});
   return params;
 }
 

@@ -24,6 +24,12 @@ double normalised_error_bound(const ErrorBoundRequest& req, double lo, double hi
   return e / range;
 }
 
+double bound_after_rounding(double bound, double range, DType source_dtype) {
+  const double e = bound * range;
+  if (!dtype_is_integer(source_dtype) || e < 0.5 || e - std::floor(e) < 0.5) return bound;
+  return std::ceil(e) / range;
+}
+
 double residual_margin(double bound) { return std::min(bound / 16, 1e-5); }
 
 int64_t Residuals::nonzero() const {
@@ -190,7 +196,9 @@ Residuals residuals_for_budget(const Network& net, const float* original, Int3 d
                                const std::function<double(double)>& guaranteed) {
   const std::vector<float> pred = network_prediction(net, dims);
   auto quantised = [&](double bound, bool absolute) {
-    return against_prediction(original, absolute ? nullptr : pred.data(), dims, bound, kFillZone);
+    Residuals r = against_prediction(original, absolute ? nullptr : pred.data(), dims, bound, kFillZone);
+    if (guaranteed) r.bound = guaranteed(r.bound);  // what the coded description records
+    return r;
   };
   auto size_of = [](const Residuals& r, const std::string& only, bool search) {
     return double(encode_residuals(r, only, search).bytes.size());
@@ -233,12 +241,6 @@ Residuals residuals_for_budget(const Network& net, const float* original, Int3 d
     if (double(best->encoded->bytes.size()) > target)
       fail("residuals: even a bound of half the range takes {} bytes, over the {} left", best->encoded->bytes.size(),
            budget);
-  }
-  if (guaranteed) {  // recorded for the file: the description (coded last) carries it
-    best->bound = guaranteed(best->bound);
-    auto enc = std::make_shared<EncodedResiduals>(*best->encoded);
-    enc->meta["bound"] = best->bound;
-    best->encoded = std::move(enc);
   }
   return std::move(*best);
 }

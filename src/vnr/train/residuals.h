@@ -26,6 +26,10 @@ struct ErrorBoundRequest {
 // the integer type (`vnr decode --dtype source`) still lie within E (and within floor(E)). Fails on a
 // non-positive, non-finite or double request.
 double normalised_error_bound(const ErrorBoundRequest& request, double lo, double hi, DType source_dtype);
+// The bound recorded for residuals whose bound `bound` (normalised) came out of a search rather than a
+// request: values decoded within E data units of an integer source round back within E while frac(E) < 1/2
+// (or E < 1/2), else within ceil(E), which is then recorded, so that it holds for both decodes.
+double bound_after_rounding(double bound, double range, DType source_dtype);
 
 // Safety margin between the guaranteed bound and half the quantisation step, normalised units:
 // min(bound / 16, 1e-5). It covers fp32 rounding of the reference on other CPUs (SIMD targets) and of

@@ -195,6 +195,18 @@ void TrainingSession::save_checkpoint() {
   save_model(opts_.output, *model_);
 }
 
+namespace {
+// The report's "error_bound" of residuals attached to a model of `volume`.
+Json attached_residuals_summary(const Residuals& res, const Volume& volume) {
+  Json j = residual_coding_summary(res);
+  j["max_error"] = res.bound * (volume.hi - volume.lo);
+  j["max_error_normalised"] = res.bound;
+  j["step_normalised"] = res.step;
+  j["residual_nonzero"] = res.nonzero();
+  return j;
+}
+}  // namespace
+
 // The error-bound residuals of the trained network (SessionOptions::error_bound), kept in the model
 // (coded once here, so the save reuses the bytes); their summary for the report, or null.
 Json attach_error_bound(Model& model, const Volume& volume, const ErrorBoundRequest& request) {
@@ -202,14 +214,8 @@ Json attach_error_bound(Model& model, const Volume& volume, const ErrorBoundRequ
   // Residuals are taken against the network as the file stores it (fp16 parameters), not the fp32
   // master copy, so that a loaded model decodes to the same predictions.
   model.net->set_params_half(model.net->params_half());
-  Residuals res = smallest_residuals(*model.net, volume.data.data(), volume.dims, b);
-  Json j = residual_coding_summary(res);
-  j["max_error"] = b * (volume.hi - volume.lo);
-  j["max_error_normalised"] = b;
-  j["step_normalised"] = res.step;
-  j["residual_nonzero"] = res.nonzero();
-  model.residuals = std::move(res);
-  return j;
+  model.residuals = smallest_residuals(*model.net, volume.data.data(), volume.dims, b);
+  return attached_residuals_summary(*model.residuals, volume);
 }
 
 Json attach_residuals_for_budget(Model& model, const Volume& volume, uint64_t file_bytes) {
@@ -221,14 +227,7 @@ Json attach_residuals_for_budget(Model& model, const Volume& volume, uint64_t fi
   // description; what the description turns out to take is given back on a second try.
   const uint64_t aim = file_bytes - std::min<uint64_t>(file_bytes / 50, 256);
   uint64_t slack = 1024;
-  // Decoded values within E of an integer source round back within E while frac(E) < 1/2 (or E < 1/2),
-  // else within ceil(E): the bound recorded holds for both decodes.
-  const double range = volume.hi - volume.lo;
-  auto guaranteed = [&](double b) {
-    const double e = b * range;
-    if (!dtype_is_integer(model.source_dtype) || e < 0.5 || e - std::floor(e) < 0.5) return b;
-    return std::ceil(e) / range;
-  };
+  auto guaranteed = [&](double b) { return bound_after_rounding(b, volume.hi - volume.lo, model.source_dtype); };
   for (int attempt = 0; attempt < 3; ++attempt) {
     if (network_bytes + slack + aim / 16 >= aim) return Json();  // next to nothing left for residuals
     model.residuals = residuals_for_budget(*model.net, volume.data.data(), volume.dims, aim - network_bytes - slack,
@@ -239,12 +238,7 @@ Json attach_residuals_for_budget(Model& model, const Volume& volume, uint64_t fi
     model.residuals.reset();
   }
   if (!model.residuals) return Json();
-  const Residuals& res = *model.residuals;
-  Json j = residual_coding_summary(res);
-  j["max_error"] = res.bound * range;
-  j["max_error_normalised"] = res.bound;
-  j["step_normalised"] = res.step;
-  j["residual_nonzero"] = res.nonzero();
+  Json j = attached_residuals_summary(*model.residuals, volume);
   j["chosen_by"] = "target_ratio";
   j["seconds"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return j;

@@ -209,7 +209,7 @@ void CpuTrainer::sum_gradients() {
   const int64_t n_summed = int64_t(dW_[0].size()), n_mlp = int64_t(m.n_params);
   // Each element's sum is its own: ranges go to whichever thread is free.
   const int64_t grain = std::min<int64_t>(int64_t(1) << 16, (n_summed + n_threads_ - 1) / n_threads_);
-  parallel_for_claimed(n_summed, std::max<int64_t>(grain, 1), [&](int64_t b, int64_t e) {
+  parallel_for_claimed(n_summed, grain, [&](int64_t b, int64_t e) {
     std::memcpy(gm + b, dW_[0].data() + b, sizeof(float) * size_t(e - b));
     for (int t = 1; t < n_threads_; ++t)
       for (int64_t i = b; i < e; ++i) gm[i] += dW_[t][size_t(i)];
