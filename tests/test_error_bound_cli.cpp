@@ -64,10 +64,19 @@ TEST(ErrorBoundCli, Float32BoundHoldsThroughFileDecodeAndEval) {
   ASSERT_EQ(e.code, 0) << e.err;
   EXPECT_HAS(e.out, "holds at every voxel");
   EXPECT_NEAR(parse_json_file(d + "/e.json")["error_bound"]["max_error"].get<double>(), bound, 1e-12 * bound);
-  // Rendering shows the network alone, and says so.
-  Result r = run("render " + d + "/ml.vnr -o " + d + "/ml.png --size 32x32 --spp 1 --device cpu -q");
+  // Rendered from the brick cache (the default on the CPU), the residuals apply at full resolution: the
+  // image is closer to the volume's than the network's alone (--strategy streaming), and both say so.
+  const std::string view = " --size 48x48 --spp 4 --seed 2 --device cpu -q";
+  ASSERT_EQ(run("render " + d + "/ml.json -o " + d + "/truth.pfm" + view).code, 0);
+  Result r = run("render " + d + "/ml.vnr -o " + d + "/ml.pfm --reference " + d + "/truth.pfm --report " + d + "/rc.json" + view);
   ASSERT_EQ(r.code, 0) << r.err;
-  EXPECT_HAS(r.err, "the image shows the network alone");
+  EXPECT_HAS(r.err, "the model's residuals apply where the cache reads full-resolution bricks");
+  Result n = run("render " + d + "/ml.vnr -o " + d + "/mn.pfm --strategy streaming --reference " + d + "/truth.pfm --report " + d + "/rn.json" + view);
+  ASSERT_EQ(n.code, 0) << n.err;
+  EXPECT_HAS(n.err, "the image shows the network alone");
+  const double with_residuals = parse_json_file(d + "/rc.json")["image_psnr"].get<double>();
+  const double network_alone = parse_json_file(d + "/rn.json")["image_psnr"].get<double>();
+  EXPECT_GT(with_residuals, network_alone + 3) << "image PSNR against the volume's image";
 
   // A byte of the residual block changed: one clear error on load.
   std::string bytes = read_all(d + "/ml.vnr");

@@ -97,7 +97,7 @@ TEST_F(Golden, RenderModelAndVolume) {
         check(key, out);
       }
   vnr_ok("render " + d + "/small.vnr -o " + d + "/grid_mc.pfm --size 40x32 --macrocells grid --volume " + d +
-         "/ml.json --shade --spp 1 -q" + fixed);  // the default (--spp auto) before it existed
+         "/ml.json --shade --spp 1 --strategy streaming -q" + fixed);  // the defaults before --spp auto and the cache
   check("render_network_grid_macrocells_shaded", d + "/grid_mc.pfm");
 }
 

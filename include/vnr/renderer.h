@@ -14,6 +14,7 @@
 #include "vnr/cuda/cuda.h"
 #include "vnr/model.h"
 #include "vnr/render/camera.h"
+#include "vnr/fields/brick_cache.h"
 #include "vnr/fields/fields.h"
 #include "vnr/render/image.h"
 #include "vnr/render/macrocell.h"
@@ -83,8 +84,23 @@ public:
   // The faster strategy for this renderer's field, device and mode (fastest_render_strategy): what
   // --strategy auto sets.
   RenderStrategy automatic_strategy() const {
-    return fastest_render_strategy(field_->kind(), device_ == Device::Cuda, options_.mode);
+    return fastest_render_strategy(field().kind(), device_ == Device::Cuda, options_.mode);
   }
+  // The brick cache in front of a model's field (fields/brick_cache.h, docs/RENDERING.md): decoded
+  // bricks at the level of detail the view needs; nullopt = off (the default). CPU only; a volume has
+  // nothing to cache. The cache is kept across every other setting.
+  void set_cache(std::optional<BrickCacheSettings> settings);
+  const std::optional<BrickCacheSettings>& cache() const { return cache_settings_; }
+  // A front end's --strategy: "auto" (the brick cache for a model on the CPU, then the faster execution
+  // strategy for the field), "cache" (the cache with that), "streaming" or "inshader" (no cache).
+  // cache_budget: bytes of the cache's pool (0 = default_cache_budget()); cache_dims: the voxels the
+  // cache decodes the model at (0 = the model's dims; larger shows more than the model was trained at).
+  void choose_strategy(const std::string& choice, uint64_t cache_budget = 0, Int3 cache_dims = {0, 0, 0});
+  // With a cache: renders one frame of the current view (not accumulated) and decodes every brick it
+  // asked for, so the frames after it read the cache alone (vnr render, Python render and benchmarks do
+  // this before accumulating; an interactive loop does not). No-op without a cache.
+  void warm_cache();
+  BrickCacheStats cache_stats() const;  // zeros without a cache
   void set_macrocells(MacroCellMode mode, int cell_size = 16);
   void set_step(float step, float step_max = 0);  // voxels; step_max 0 = 16 x step
   void set_light(const DirectionalLight& light);
@@ -106,7 +122,7 @@ public:
   Device device() const { return device_; }
   cuda::MlpPath mlp_path() const { return mlp_; }
   Vec3f box() const { return box_; }     // world size of the volume box (voxel units)
-  const RenderableField& field() const { return *field_; }
+  const RenderableField& field() const { return cached_ ? *cached_ : *field_; }  // the cache when on
   const Model* model() const { return model_; }
 
   // Renders the next frame, adds it to the accumulation and returns the accumulated image (the mean of
@@ -141,6 +157,9 @@ private:
   const Volume* volume_ = nullptr;
   Device device_;
   std::unique_ptr<RenderableField> field_;
+  std::optional<BrickCacheSettings> cache_settings_;
+  std::unique_ptr<struct ModelDecode> decode_;  // the cache's decode (api/renderer.cpp)
+  std::unique_ptr<CachedField> cached_;
   Vec3f box_;
   RenderOptions options_;
   Camera camera_;

@@ -80,7 +80,7 @@ void add_bench_rd(CLI::App& bench);  // cmd_bench_rd.cpp
 struct RenderArgs {
   std::string scene, tf, mode = "raymarch", strategy = "auto", macrocells, size = "768x768";
   std::string orbit, eye, center, up = "0,1,0", light, background, volume, ray_packets = "on";
-  std::string device = "auto", mlp = "auto", precision = "auto";
+  std::string device = "auto", mlp = "auto", precision = "auto", cache_budget = "auto", cache_dims;
   float step = 1, step_max = 0, fovy = 30, density = 1;
   uint32_t seed = 0;
   int k = 0, macrocell_size = 16, threads = 0;

@@ -30,6 +30,7 @@ struct Cell {
   RenderMode mode;
   RenderStrategy strategy;
   MacroCellMode mc;
+  bool cache;  // "cache": the brick cache, warm, with the execution strategy auto picks for it
 };
 
 // Times one cell: `warmup` untimed frames, then `frames` timed ones with the camera orbiting 360 degrees
@@ -38,13 +39,22 @@ struct CellTimer {
   Renderer& r;
   int macrocell_size, warmup, frames;
   float elevation, fovy;
+  uint64_t cache_budget;
 
   Camera camera_of(int i) const {
     return orbit_camera(r.box(), 360.0f * float(i) / float(frames), elevation, fovy);
   }
-  double operator()(const RenderOptions& o, MacroCellMode mc, RenderStats* total) const {
+  double operator()(const RenderOptions& o, MacroCellMode mc, RenderStats* total, bool cache = false) const {
     r.set_options(o);
     r.set_macrocells(mc, macrocell_size);
+    if (cache) {  // a fresh cache, warmed at every camera of the orbit: what a view that has settled reads
+      BrickCacheSettings s;
+      s.budget_bytes = cache_budget;
+      r.set_cache(s);
+      for (int i = 0; i < frames; ++i) r.set_camera(camera_of(i)), r.warm_cache();
+    } else {
+      r.set_cache(std::nullopt);
+    }
     r.set_camera(camera_of(0));
     for (int i = 0; i < warmup; ++i) r.render_frame_resident(uint32_t(i));
     std::vector<double> times;
@@ -90,24 +100,27 @@ Json table_rows(const CellTimer& time_cell, const RenderOptions& options, MacroC
   for (const std::string& m : modes)
     for (const std::string& s : strategies)
       for (MacroCellMode mc : {MacroCellMode::Off, with})
-        cells.push_back(Cell{parse_render_mode(m), parse_render_strategy(s), mc});
+        cells.push_back(s == "cache" ? Cell{parse_render_mode(m), RenderStrategy::InShader, mc, true}
+                                     : Cell{parse_render_mode(m), parse_render_strategy(s), mc, false});
   std::printf("| mode | strategy | macro-cells | frames/s | field samples/s (M) | of raw query rate | host syncs/frame |\n"
               "|---|---|---|---|---|---|---|\n");
   Json rows = Json::array();
   for (const Cell& cell : cells) {
     RenderOptions o = options;
     o.mode = cell.mode;
-    o.strategy = cell.strategy;
+    o.strategy = cell.cache ? fastest_render_strategy("cache", false, cell.mode) : cell.strategy;
     RenderStats tot;
-    double fps = time_cell(o, cell.mc, &tot);
+    double fps = time_cell(o, cell.mc, &tot, cell.cache);
+    const std::string strategy =
+        cell.cache ? fmt::format("cache ({})", render_strategy_name(o.strategy)) : render_strategy_name(o.strategy);
     double sps = double(tot.field_samples) / tot.seconds;
     const double syncs = double(tot.host_syncs) / tot.frames;
-    std::printf("| %s | %s | %s | %.2f | %.2f | %s | %.0f |\n", render_mode_name(cell.mode),
-                render_strategy_name(cell.strategy), macrocell_mode_name(cell.mc), fps, sps / 1e6,
+    std::printf("| %s | %s | %s | %.2f | %.2f | %s | %.0f |\n", render_mode_name(cell.mode), strategy.c_str(),
+                macrocell_mode_name(cell.mc), fps, sps / 1e6,
                 raw > 0 ? fmt::format("{:.0f}%", 100 * sps / raw).c_str() : "-", syncs);
     std::fflush(stdout);
     rows.push_back({{"mode", render_mode_name(cell.mode)},
-                    {"strategy", render_strategy_name(cell.strategy)},
+                    {"strategy", strategy},
                     {"macrocells", macrocell_mode_name(cell.mc)},
                     {"fps", fps},
                     {"field_samples_per_second", sps},
@@ -135,7 +148,7 @@ void add_bench_render(CLI::App& bench) {
       ->capture_default_str();
   c->add_option("--warmup", a->warmup, "untimed frames per cell")->capture_default_str();
   c->add_option("--modes", a->modes, "comma-separated subset of raymarch,shadow,pathtrace")->capture_default_str();
-  c->add_option("--strategies", a->strategies, "comma-separated subset of inshader,streaming")->capture_default_str();
+  c->add_option("--strategies", a->strategies, "comma-separated subset of inshader,streaming,cache (cache: a warm brick cache of a model, CPU)")->capture_default_str();
   c->add_option("--with-macrocells", a->macrocells,
                 "the 'with' setting: grid or online (default: online for a vnr-trained model, else grid)");
   c->add_option("--tune-k", a->tune_k,
@@ -157,12 +170,14 @@ void add_bench_render(CLI::App& bench) {
     if (with == MacroCellMode::Off)
       fail("no macro-cells to compare with: give a model trained by vnr (online ranges) or --volume");
     r.set_macrocells(with, a->r.macrocell_size);
+    r.set_cache(std::nullopt);  // the cells choose; the raw rate is the model's own field
     r.prepare();  // a setting that cannot be rendered fails before the table starts
 
     // The raw rate: the CPU's batched query, or on the GPU the network's resident encoding + MLP (what
     // `vnr bench infer --device cuda` reports as resident); 0 = not measured (the grid on the GPU).
     const double raw = field_query_rate(r, 2.0);
-    const CellTimer time_cell{r, a->r.macrocell_size, a->warmup, a->frames, cr.orbit_elevation, a->r.fovy};
+    const CellTimer time_cell{r,           a->r.macrocell_size, a->warmup, a->frames, cr.orbit_elevation, a->r.fovy,
+                              parse_cache_budget(a->r.cache_budget)};
 
     Json report;
     report["input"] = cr.input->description;

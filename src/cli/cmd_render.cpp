@@ -1,4 +1,5 @@
 // vnr render: renders a model or a volume to an image (paper "Rendering"; docs/semantics.md B.5-B.10).
+#include <chrono>
 #include <cstdio>
 #include "cli.h"
 #include "render_setup.h"
@@ -6,6 +7,7 @@
 #include "vnr/core/fileio.h"
 #include "vnr/core/parallel.h"
 #include "vnr/core/progress.h"
+#include "vnr/core/units.h"
 
 namespace vnr::cli {
 
@@ -24,9 +26,18 @@ void RenderArgs::add(CLI::App* c) {
   }() + ") or a JSON file");
   c->add_option("--mode", mode, "raymarch|shadow|pathtrace")->capture_default_str();
   c->add_option("--strategy", strategy,
-                "auto|streaming|inshader (auto: the faster for the input, device and mode; both give the same "
-                "image)")
+                "auto|cache|streaming|inshader: cache = a model's bricks decoded at the level of detail the view "
+                "needs and ray marched as a grid (CPU; docs/RENDERING.md), streaming and inshader query the field "
+                "for every sample (the same image); auto = the cache for a model on the CPU, then the faster of the "
+                "two for the field, device and mode")
       ->capture_default_str();
+  c->add_option("--cache-budget", cache_budget,
+                "memory of the brick cache's decoded bricks, e.g. 512MiB (auto: a quarter of the available memory, "
+                "at most 4 GiB)")
+      ->capture_default_str();
+  c->add_option("--cache-dims", cache_dims,
+                "X,Y,Z: the voxels the cache decodes a model at (default: the model's dims; any size, e.g. "
+                "4096,4096,4096: only the bricks a view needs are decoded)");
   c->add_option("--macrocells", macrocells,
                 "grid|online|off (default: online for a vnr-trained model, grid for a volume)");
   c->add_option("--macrocell-size", macrocell_size, "voxels per macro-cell for --macrocells grid")->capture_default_str();
@@ -106,6 +117,9 @@ void add_render(CLI::App& app) {
     std::optional<Image> reference;
     if (!a->reference.empty()) reference = read_image(a->reference);
     r.prepare();
+    const auto t_cache = std::chrono::steady_clock::now();
+    r.warm_cache();  // the view's bricks decoded before accumulating: every frame reads the cache
+    const double cache_seconds = seconds_since(t_cache);
     if (reference && (reference->width != r.options().width || reference->height != r.options().height))
       fail("the --reference image '{}' has size {}x{}, the render is {}x{}", a->reference, reference->width,
            reference->height, r.options().width, r.options().height);
@@ -141,6 +155,14 @@ void add_render(CLI::App& app) {
                    {"host_syncs", st.host_syncs},
                    {"spp", spp ? Json(spp) : Json("auto")},
                    {"noise", r.frames() > 1 ? Json(r.noise()) : Json(nullptr)}};
+    std::string cached;
+    if (r.cache()) {
+      const BrickCacheStats cs = r.cache_stats();
+      report["cache"] = {{"warm_seconds", cache_seconds}, {"bricks_decoded", cs.decoded}, {"bricks_resident", cs.resident},
+                         {"pool_bytes", cs.pool_bytes}, {"budget_bytes", cs.budget_bytes}, {"levels", cs.levels}};
+      cached = fmt::format(" from a brick cache ({} bricks, {}, warmed in {:.2f} s)", cs.resident,
+                           human_bytes(double(cs.pool_bytes)), cache_seconds);
+    }
     std::string cmp;
     if (reference) {
       ImageMetrics im = compare_images(r.image(), *reference);
@@ -149,9 +171,9 @@ void add_render(CLI::App& app) {
       cmp = fmt::format(", vs reference: PSNR {:.2f} dB, SSIM {:.4f}", im.psnr, im.ssim);
     }
     if (!a->quiet)
-      std::printf("%s: %s %s %s %dx%d, %d frame(s)%s, %.3f s/frame (%.2f frames/s), %.1f M field samples/s%s -> %s\n",
+      std::printf("%s: %s %s %s%s %dx%d, %d frame(s)%s, %.3f s/frame (%.2f frames/s), %.1f M field samples/s%s -> %s\n",
                   cr.input->description.c_str(), device_name(r.device()), render_mode_name(o.mode),
-                  render_strategy_name(o.strategy), o.width, o.height, st.frames,
+                  render_strategy_name(o.strategy), cached.c_str(), o.width, o.height, st.frames,
                   r.frames() > 1 ? fmt::format(" (noise {:.5f})", r.noise()).c_str() : "",
                   st.seconds / st.frames, st.frames / st.seconds, double(st.field_samples) / st.seconds / 1e6,
                   cmp.c_str(), a->output.c_str());

@@ -42,8 +42,6 @@ CliRender open_cli_render(const std::string& input, const RenderArgs& a, const V
   c.input = std::make_unique<RenderInput>(open_render_input(input, a.volume, va.open(), parse_precision(a.precision)));
   RenderOptions o;
   o.mode = parse_render_mode(a.mode);
-  const std::optional<RenderStrategy> strategy = parse_render_strategy_choice(a.strategy);
-  if (strategy) o.strategy = *strategy;
   parse_size(a.size, &o.width, &o.height);
   o.step = a.step;
   o.step_max = a.step_max;
@@ -69,10 +67,6 @@ CliRender open_cli_render(const std::string& input, const RenderArgs& a, const V
   std::string note;
   const Device device = choose_render_device(a.device, model, &note);
   if (!note.empty()) std::fprintf(stderr, "note: %s\n", note.c_str());
-  if (model && model->residuals)
-    std::fprintf(stderr, "note: the image shows the network alone; the model's residuals (error bound %.4g) apply to "
-                         "`vnr decode`, whose volume renders with them\n",
-                 model->residuals->bound * (model->hi - model->lo));
   const cuda::MlpPath mlp = cuda::parse_mlp_path(a.mlp);
   if (a.macrocell_size < 1) fail("--macrocell-size must be at least 1, got {}", a.macrocell_size);
 
@@ -82,7 +76,24 @@ CliRender open_cli_render(const std::string& input, const RenderArgs& a, const V
   if (tf) r.set_transfer_function(*tf);
   if (camera) r.set_camera(*camera);
   r.set_options(o);
-  if (!strategy) r.set_strategy(r.automatic_strategy());
+  Int3 cache_dims{0, 0, 0};
+  if (!a.cache_dims.empty()) {
+    long long d[3];
+    char tail;
+    if (std::sscanf(a.cache_dims.c_str(), "%lld,%lld,%lld%c", &d[0], &d[1], &d[2], &tail) != 3 || d[0] < 1 ||
+        d[1] < 1 || d[2] < 1)
+      fail("--cache-dims expects X,Y,Z (three positive integers), got '{}'", a.cache_dims);
+    if (!model) fail("--cache-dims is for models (a volume is drawn directly)");
+    cache_dims = Int3{d[0], d[1], d[2]};
+  }
+  r.choose_strategy(a.strategy, parse_cache_budget(a.cache_budget), cache_dims);
+  if (cache_dims.count() > 0 && !r.cache()) fail("--cache-dims needs the brick cache (--strategy cache or auto on the CPU)");
+  if (model && model->residuals)
+    std::fprintf(stderr, "note: %s\n",
+                 r.cache() ? "the model's residuals apply where the cache reads full-resolution bricks (voxels no "
+                             "larger than a pixel); coarser bricks and direct queries show the network alone"
+                           : "the image shows the network alone; the model's residuals apply with --strategy cache "
+                             "and to `vnr decode`");
   r.set_macrocells(mc_mode, a.macrocell_size);
   r.set_mlp_path(mlp);
   return c;

@@ -71,8 +71,6 @@ pyb::array_t<float> render(const Model* model, const Volume* volume, const Rende
     fail("unknown device '{}' (allowed: auto, cpu, cuda)", a.device);
   RenderOptions o;
   o.mode = parse_render_mode(a.mode);
-  const std::optional<RenderStrategy> strategy = parse_render_strategy_choice(a.strategy);
-  if (strategy) o.strategy = *strategy;
   o.width = w;
   o.height = h;
   o.step = a.step;
@@ -93,9 +91,10 @@ pyb::array_t<float> render(const Model* model, const Volume* volume, const Rende
   r->set_transfer_function(tf);
   r->set_camera(camera_of(a, r->box()));
   r->set_options(o);
-  if (!strategy) r->set_strategy(r->automatic_strategy());
+  r->choose_strategy(a.strategy);
   r->set_macrocells(mc, 16);
   r->prepare();
+  r->warm_cache();
   if (a.spp == 0) r->render_until_converged(converge);
   for (int f = 0; f < a.spp; ++f) r->render_frame();
   const Image& img = r->image();

@@ -63,7 +63,7 @@ VIEW=(--size 64x48 --orbit 30,20 --tf cool-warm --precision fp32 --threads 1)
 run 1 "$V" render m1 -o r1.pfm "${VIEW[@]}" -q > /dev/null
 run "$N" "$V" render m1 -o rN.pfm "${VIEW[@]}" --report render.json > /dev/null
 check "render on $N ranks = on 1 rank, bit for bit" cmp -s r1.pfm rN.pfm
-"$V" render m1 -o one.pfm "${VIEW[@]}" --spp 1 -q --reference rN.pfm --report r.json > /dev/null  # MPI renders one frame
+"$V" render m1 -o one.pfm "${VIEW[@]}" --spp 1 --strategy streaming -q --reference rN.pfm --report r.json > /dev/null  # MPI renders one frame
 check "render on $N ranks = the one-process frame (image PSNR >= 40 dB), not blank" $PY -c "
 import json, numpy as np
 p = json.load(open('r.json'))['image_psnr']; print('image PSNR', p); assert p >= 40, p

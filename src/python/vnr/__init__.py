@@ -122,7 +122,7 @@ def render(target: Union[Model, Volume], camera: Union[None, Camera, dict, Tuple
     mode: "raymarch", "shadow" or "pathtrace"; size: (width, height); spp: frames accumulated, or "auto"
     (the default, as the CLI's): until the image's noise (RMS standard error of its pixels) is at most
     `noise`, at most max_spp frames;
-    device: "auto", "cpu" or "cuda"; strategy: "auto" (the faster, as the CLI's), "streaming" or "inshader"; macrocells: "grid", "online"
+    device: "auto", "cpu" or "cuda"; strategy: "auto" (as the CLI's: a model's brick cache on the CPU, docs/RENDERING.md), "cache", "streaming" or "inshader"; macrocells: "grid", "online"
     or "off" (default as the CLI's); step, seed, shade, background, light: the CLI's options.
     """
     w, h = (int(v) for v in size)

@@ -43,6 +43,7 @@ public:
   }
   int64_t render_inshader(const InshaderJob& job) const override { return grid_.render_inshader(job); }
   GpuFieldSource gpu_source() const override { return grid_.gpu_source(); }
+  float point(float x, float y, float z) const override { return grid_.point(x, y, z); }
 
 private:
   Volume decoded_;

@@ -110,6 +110,53 @@ Renderer::Renderer(const RenderInput& input, Device device)
 }
 Renderer::~Renderer() = default;
 
+// What a cache decodes its bricks with: the model's Decoder (residuals at the model's dims, blended
+// bricks of a multi-brick model), on the CPU.
+struct ModelDecode {
+  explicit ModelDecode(const Model& m) : decoder(m, Device::Cpu) {}
+  Decoder decoder;
+};
+
+void Renderer::set_cache(std::optional<BrickCacheSettings> settings) {
+  cached_.reset();
+  decode_.reset();
+  cache_settings_ = settings;
+  if (settings) {
+    if (!model_) fail("the brick cache is for models: a volume is drawn directly");
+    if (device_ == Device::Cuda) fail("the brick cache renders on the CPU (the GPU draws the network directly); use --device cpu or another --strategy");
+    decode_ = std::make_unique<ModelDecode>(*model_);
+    Decoder* d = &decode_->decoder;
+    cached_ = std::make_unique<CachedField>(
+        *field_, [d](Int3 dims, const int64_t* index, int64_t n, float* out) { d->voxels(dims, index, n, out); },
+        settings->dims.count() > 0 ? settings->dims : model_->dims, *settings);
+  }
+  invalidate();
+}
+
+void Renderer::choose_strategy(const std::string& choice, uint64_t cache_budget, Int3 cache_dims) {
+  const std::string c = to_lower(choice);
+  if (c != "auto" && c != "cache" && c != "streaming" && c != "inshader")
+    fail("unknown render strategy '{}' (expected auto, cache, streaming or inshader)", choice);
+  if (c != "auto" && c != "cache") {
+    set_cache(std::nullopt);
+    return set_strategy(parse_render_strategy(c));
+  }
+  BrickCacheSettings cache;
+  cache.budget_bytes = cache_budget;
+  cache.dims = cache_dims;
+  if (c == "cache" || (model_ && device_ == Device::Cpu)) set_cache(cache);
+  else set_cache(std::nullopt);
+  set_strategy(automatic_strategy());
+}
+
+void Renderer::warm_cache() {
+  if (!cached_) return;
+  backend().render_frame(0, frame_);
+  cached_->decode_pending();
+}
+
+BrickCacheStats Renderer::cache_stats() const { return cached_ ? cached_->stats() : BrickCacheStats{}; }
+
 void Renderer::set_camera(const Camera& camera) {
   camera_ = camera;
   restart();
@@ -198,7 +245,7 @@ const MacroCells& Renderer::macrocells() {
 FrameRenderer& Renderer::backend() {
   if (!backend_) {
     const MacroCells& mc = macrocells();
-    backend_ = make_renderer(device_, *field_, box_, mc, tf_, camera_, options_, mlp_);
+    backend_ = make_renderer(device_, field(), box_, mc, tf_, camera_, options_, mlp_);
   }
   return *backend_;
 }

@@ -19,7 +19,7 @@ public:
   void query(const float* x, const float* y, const float* z, int64_t n, float* out) const override;
   int64_t render_inshader(const InshaderJob& job) const override;
   GpuFieldSource gpu_source() const override;
-  float point(float x, float y, float z) const;  // one blended value (what the in-shader strategy samples)
+  float point(float x, float y, float z) const override;  // one blended value (what the in-shader strategy samples)
 
 private:
   std::vector<const Network*> nets_;

@@ -18,6 +18,8 @@ namespace vnr {
 class RenderableField : public Field {
 public:
   virtual GpuFieldSource gpu_source() const = 0;
+  // One value at u in [0,1)^3 (what the in-shader strategy samples; the brick cache's exact misses).
+  virtual float point(float x, float y, float z) const = 0;
 };
 
 class GridField final : public RenderableField {
@@ -28,6 +30,7 @@ public:
   void query(const float* x, const float* y, const float* z, int64_t n, float* out) const override;
   int64_t render_inshader(const InshaderJob& job) const override;  // SIMD ray packets where they apply
   GpuFieldSource gpu_source() const override { return GpuFieldSource{g_, nullptr, dims()}; }
+  float point(float x, float y, float z) const override { return grid_lookup(g_, x, y, z); }
   const GridView& view() const { return g_; }
 
 private:
@@ -48,6 +51,7 @@ public:
   void query(const float* x, const float* y, const float* z, int64_t n, float* out) const override;
   int64_t render_inshader(const InshaderJob& job) const override;
   GpuFieldSource gpu_source() const override { return GpuFieldSource{GridView{}, &net_, dims_}; }
+  float point(float x, float y, float z) const override { return point_.eval(x, y, z); }
   NetworkPointFn point_fn() const { return NetworkPointFn{&point_}; }
   const Network& network() const { return net_; }
 

@@ -1,4 +1,4 @@
-// Packet ray marching of the grid (see grid_packets.h), compiled per SIMD target.
+// Packet ray marching of the grid and of the brick cache (see grid_packets.h), compiled per SIMD target.
 #undef HWY_TARGET_INCLUDE
 #define HWY_TARGET_INCLUDE "vnr/fields/grid_packets.cpp"
 #include <hwy/foreach_target.h>  // IWYU pragma: keep
@@ -7,6 +7,8 @@
 #include <cmath>
 #include <cstring>
 #include <vector>
+#include "vnr/fields/brick_cache_view.h"
+#include "vnr/fields/fields.h"
 #include "vnr/fields/grid_packets.h"
 #include "vnr/volume/lookup-inl.h"
 
@@ -41,8 +43,134 @@ struct RayPacket {
   uint64_t active = 0;
 };
 
+// The grid's lanes: GridLookupVec, with the next sample's rows prefetched.
+struct GridLanes {
+  const GridView& g;
+  template <class DF, class VF>
+  HWY_INLINE void prefetch(DF df, VF ux, VF uy, VF uz) const {
+    GridPrefetchVec(df, g, ux, uy, uz);
+  }
+  template <class DF, class VF>
+  HWY_INLINE VF lookup(DF df, VF ux, VF uy, VF uz, uint64_t) {
+    return GridLookupVec<true>(df, g, ux, uy, uz);
+  }
+};
+
+// The brick cache's lanes: BrickCacheView::sample for a vector of points, bit for bit. Lanes at one
+// level whose bricks are decoded read them with GridLookupVec's arithmetic (x-neighbours as pairs);
+// lanes of a packet that straddles levels, and misses, take the scalar path (the source on a miss).
+struct CacheLanes {
+  static constexpr size_t kMaxLanes = HWY_MAX_BYTES / sizeof(float);
+  const BrickCacheView& c;
+  const RenderableField& source;
+  alignas(HWY_MAX_BYTES) int32_t last_brick[kMaxLanes];
+  int last_level = -1;
+
+  template <class DF, class VF>
+  HWY_INLINE void prefetch(DF, VF, VF, VF) const {}
+
+  template <class DF, class VF>
+  HWY_NOINLINE VF scalar(DF df, VF ux, VF uy, VF uz, uint64_t lanes, VF done) {
+    alignas(HWY_MAX_BYTES) float x[kMaxLanes], y[kMaxLanes], z[kMaxLanes], v[kMaxLanes];
+    hn::Store(ux, df, x), hn::Store(uy, df, y), hn::Store(uz, df, z), hn::Store(done, df, v);
+    for (; lanes; lanes &= lanes - 1) {
+      const size_t l = size_t(__builtin_ctzll(lanes));
+      bool miss = false;
+      v[l] = c.sample(x[l], y[l], z[l], &miss);
+      if (miss) v[l] = source.point(x[l], y[l], z[l]);
+    }
+    last_level = -1;
+    return hn::Load(df, v);
+  }
+
+  template <class DF, class VF>
+  HWY_INLINE VF lookup(DF df, VF ux, VF uy, VF uz, uint64_t active) {
+    const int l = lane_level(df, ux, uy, uz, active);
+    if (l < 0) return scalar(df, ux, uy, uz, active, hn::Zero(df));
+    return at_level(df, l, ux, uy, uz, active);
+  }
+
+  // The level of the active lanes when they agree, else -1.
+  template <class DF, class VF>
+  HWY_INLINE int lane_level(DF df, VF ux, VF uy, VF uz, uint64_t active) const {
+    const hn::RebindToSigned<DF> di;
+    using VI = hn::Vec<decltype(di)>;
+    const CacheLevelView& L0 = c.level[0];
+    const int s = c.shift;
+    const VI b0 = hn::Add(hn::ShiftRightSame(hn::ConvertTo(di, CellAxisPos(df, ux, L0.nx)), s),
+                          hn::Mul(hn::Set(di, L0.bx),
+                                  hn::Add(hn::ShiftRightSame(hn::ConvertTo(di, CellAxisPos(df, uy, L0.ny)), s),
+                                          hn::Mul(hn::Set(di, L0.by),
+                                                  hn::ShiftRightSame(hn::ConvertTo(di, CellAxisPos(df, uz, L0.nz)), s)))));
+    const VI lev = hn::GatherIndex(di, c.lod, b0);
+    const int l = hn::ExtractLane(lev, size_t(__builtin_ctzll(active)));
+    return lane_bits(df, hn::RebindMask(df, hn::Ne(lev, hn::Set(di, l)))) & active ? -1 : l;
+  }
+
+  template <class DF, class VF>
+  HWY_INLINE VF at_level(DF df, int l, VF ux, VF uy, VF uz, uint64_t active) {
+    const hn::RebindToSigned<DF> di;
+    using VI = hn::Vec<decltype(di)>;
+    const int s = c.shift;
+    const CacheLevelView& L = c.level[l];
+    const hn::Vec<DF> u[3] = {ux, uy, uz};
+    const int32_t n[3] = {L.nx, L.ny, L.nz};
+    VI i0[3], i1[3];
+    hn::Vec<DF> t[3];
+    for (int d = 0; d < 3; ++d) {
+      const auto q = CellAxisPos(df, u[d], n[d]);
+      if (d == 0) {  // the pair's lower voxel at most N-2 (GridLookupVec's kPairs)
+        i0[0] = hn::Min(hn::ConvertTo(di, hn::Floor(q)), hn::Set(di, n[0] - 2));
+        t[0] = hn::Sub(q, hn::ConvertTo(df, i0[0]));
+      } else {
+        const auto fl = hn::Floor(q);
+        i0[d] = hn::ConvertTo(di, fl);
+        i1[d] = hn::Min(hn::Add(i0[d], hn::Set(di, 1)), hn::Set(di, n[d] - 1));
+        t[d] = hn::Sub(q, fl);
+      }
+    }
+    const VI bx = hn::ShiftRightSame(i0[0], s), by = hn::ShiftRightSame(i0[1], s), bz = hn::ShiftRightSame(i0[2], s);
+    const VI brick = hn::Add(bx, hn::Mul(hn::Set(di, L.bx), hn::Add(by, hn::Mul(hn::Set(di, L.by), bz))));
+    const VI slot = hn::GatherIndex(di, L.slot, brick);
+    const uint64_t miss = lane_bits(df, hn::RebindMask(df, hn::Lt(slot, hn::Zero(di)))) & active;
+    // Bricks a lane enters are marked read this frame (the least-recently-used order of eviction).
+    const VI last = hn::Load(di, last_brick);
+    uint64_t entered = l == last_level ? lane_bits(df, hn::RebindMask(df, hn::Ne(brick, last))) & active & ~miss
+                                       : active & ~miss;
+    if (entered) {
+      alignas(HWY_MAX_BYTES) int32_t bs[kMaxLanes];
+      hn::Store(brick, di, bs);
+      for (; entered; entered &= entered - 1) c.touch(L, bs[__builtin_ctzll(entered)]);
+    }
+    hn::Store(brick, di, last_brick);
+    last_level = l;
+    const VI sy = hn::Set(di, c.sy), sz = hn::Set(di, c.sz);
+    const VI base = hn::Add(hn::Mul(hn::Max(slot, hn::Zero(di)), hn::Set(di, int32_t(c.brick_floats))),
+                            hn::Add(hn::Sub(i0[0], hn::ShiftLeftSame(bx, s)),
+                                    hn::Add(hn::Mul(hn::Sub(i0[1], hn::ShiftLeftSame(by, s)), sy),
+                                            hn::Mul(hn::Sub(i0[2], hn::ShiftLeftSame(bz, s)), sz))));
+    const VI dy = hn::Mul(hn::Sub(i1[1], i0[1]), sy), dz = hn::Mul(hn::Sub(i1[2], i0[2]), sz);
+    hn::Vec<DF> v[8];
+    for (int k = 0; k < 4; ++k) {
+      const VI row = hn::Add(base, hn::Add(k & 1 ? dy : hn::Zero(di), k & 2 ? dz : hn::Zero(di)));
+      GatherPairs(df, c.pool, row, &v[2 * k], &v[2 * k + 1]);
+    }
+    const auto one = hn::Set(df, 1.0f);
+    const auto u0 = hn::Sub(one, t[0]), u1 = hn::Sub(one, t[1]), u2 = hn::Sub(one, t[2]);
+    const auto c00 = hn::Add(hn::Mul(v[0], u0), hn::Mul(v[1], t[0]));
+    const auto c10 = hn::Add(hn::Mul(v[2], u0), hn::Mul(v[3], t[0]));
+    const auto c01 = hn::Add(hn::Mul(v[4], u0), hn::Mul(v[5], t[0]));
+    const auto c11 = hn::Add(hn::Mul(v[6], u0), hn::Mul(v[7], t[0]));
+    const auto c0 = hn::Add(hn::Mul(c00, u1), hn::Mul(c10, t[1]));
+    const auto c1 = hn::Add(hn::Mul(c01, u1), hn::Mul(c11, t[1]));
+    const VF value = hn::Add(hn::Mul(c0, u2), hn::Mul(c1, t[2]));
+    return miss ? scalar(df, ux, uy, uz, miss, value) : value;
+  }
+};
+
 // Long on purpose: the hot SIMD loop keeps every lane's state in registers; split into calls it would spill.
-int64_t MarchGridPackets(const RenderParams& p, const GridView& g, TileCursor cursor, Vec4f* pixels) {
+template <class Lanes>
+int64_t MarchPackets(const RenderParams& p, Lanes& lanes, TileCursor cursor, Vec4f* pixels) {
   const hn::ScalableTag<float> df;
   const hn::RebindToSigned<decltype(df)> di;
   using VF = hn::Vec<decltype(df)>;
@@ -123,9 +251,9 @@ int64_t MarchGridPackets(const RenderParams& p, const GridView& g, TileCursor cu
     const VF uz = hn::Mul(hn::Add(oz, hn::Mul(dz, ts)), ibz);
     // The next sample's rows, one step ahead: their loads overlap this sample's arithmetic.
     const VF tn = hn::Add(ts, hn::Load(df, r.seg_len));
-    GridPrefetchVec(df, g, hn::Mul(hn::Add(ox, hn::Mul(dx, tn)), ibx), hn::Mul(hn::Add(oy, hn::Mul(dy, tn)), iby),
-                    hn::Mul(hn::Add(oz, hn::Mul(dz, tn)), ibz));
-    const VF v = GridLookupVec<true>(df, g, ux, uy, uz);
+    lanes.prefetch(df, hn::Mul(hn::Add(ox, hn::Mul(dx, tn)), ibx), hn::Mul(hn::Add(oy, hn::Mul(dy, tn)), iby),
+                   hn::Mul(hn::Add(oz, hn::Mul(dz, tn)), ibz));
+    const VF v = lanes.lookup(df, ux, uy, uz, r.active);
 
     // tf_lookup (clampf written as its compare-and-select, so every target matches the scalar code)
     const VF y = hn::Mul(hn::Sub(v, tf_lo), tf_scale);
@@ -178,6 +306,16 @@ int64_t MarchGridPackets(const RenderParams& p, const GridView& g, TileCursor cu
   return samples;
 }
 
+int64_t MarchGridPackets(const RenderParams& p, const GridView& g, TileCursor cursor, Vec4f* pixels) {
+  GridLanes lanes{g};
+  return MarchPackets(p, lanes, cursor, pixels);
+}
+int64_t MarchCachePackets(const RenderParams& p, const BrickCacheView& c, const RenderableField& source,
+                          TileCursor cursor, Vec4f* pixels) {
+  CacheLanes lanes{c, source, {}, -1};
+  return MarchPackets(p, lanes, cursor, pixels);
+}
+
 }  // namespace HWY_NAMESPACE
 }  // namespace vnr
 HWY_AFTER_NAMESPACE();
@@ -185,8 +323,13 @@ HWY_AFTER_NAMESPACE();
 #if HWY_ONCE
 namespace vnr {
 HWY_EXPORT(MarchGridPackets);
+HWY_EXPORT(MarchCachePackets);
 int64_t march_grid_packets(const RenderParams& p, const GridView& g, TileCursor cursor, Vec4f* pixels) {
   return HWY_DYNAMIC_DISPATCH(MarchGridPackets)(p, g, cursor, pixels);
+}
+int64_t march_cache_packets(const RenderParams& p, const BrickCacheView& c, const RenderableField& source,
+                            TileCursor cursor, Vec4f* pixels) {
+  return HWY_DYNAMIC_DISPATCH(MarchCachePackets)(p, c, source, cursor, pixels);
 }
 }  // namespace vnr
 #endif

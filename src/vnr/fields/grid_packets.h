@@ -23,6 +23,16 @@ inline bool grid_packets_apply(const RenderParams& p, const GridView& g) {
 // returns the number of field samples taken.
 int64_t march_grid_packets(const RenderParams& p, const GridView& g, TileCursor cursor, Vec4f* pixels);
 
+struct BrickCacheView;    // fields/brick_cache_view.h
+class RenderableField;    // fields/fields.h
+// Whether march_cache_packets can render this frame: unshaded ray marching, every level at least 2
+// voxels wide in x.
+bool cache_packets_apply(const RenderParams& p, const BrickCacheView& c);
+// The same packets over the brick cache (BrickCacheView::sample per lane, bit for bit; a miss reads
+// `source`, the model's field, one point at a time).
+int64_t march_cache_packets(const RenderParams& p, const BrickCacheView& c, const RenderableField& source,
+                            TileCursor cursor, Vec4f* pixels);
+
 // The ground-truth grid's point function.
 struct GridPointFn {
   GridView g;

@@ -31,16 +31,8 @@ const char* render_mode_name(RenderMode m) {
 }
 const char* render_strategy_name(RenderStrategy s) { return s == RenderStrategy::InShader ? "inshader" : "streaming"; }
 
-std::optional<RenderStrategy> parse_render_strategy_choice(const std::string& s) {
-  const std::string l = to_lower(s);
-  if (l == "auto") return std::nullopt;
-  if (l != "streaming" && l != "inshader")
-    fail("unknown render strategy '{}' (expected auto, streaming or inshader)", s);
-  return parse_render_strategy(l);
-}
-
 RenderStrategy fastest_render_strategy(const std::string& field_kind, bool gpu, RenderMode mode) {
-  const bool grid = field_kind == "grid";
+  const bool grid = field_kind == "grid" || field_kind == "cache";  // the cache is a grid of bricks
   if (gpu) return grid || mode != RenderMode::Shadow ? RenderStrategy::InShader : RenderStrategy::Streaming;
   return grid && mode != RenderMode::Shadow ? RenderStrategy::InShader : RenderStrategy::Streaming;
 }
@@ -203,6 +195,7 @@ void CpuRenderer::render_frame(uint32_t frame, Image& img, RenderStats* stats) {
   auto t0 = std::chrono::steady_clock::now();
   if (img.width != opt_.width || img.height != opt_.height) img = Image(opt_.width, opt_.height);
   params_.frame = frame;
+  field_.begin_frame(params_);
   if (opt_.strategy == RenderStrategy::Streaming) {
     if (opt_.mode == RenderMode::PathTrace)
       stream_path_frame(*stream_, params_, img.pixels.data(), st);

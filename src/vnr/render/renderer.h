@@ -30,12 +30,10 @@ RenderMode parse_render_mode(const std::string& s);
 RenderStrategy parse_render_strategy(const std::string& s);
 const char* render_mode_name(RenderMode m);
 const char* render_strategy_name(RenderStrategy s);
-// The faster strategy for a field kind ("grid" or "network"), device and mode, as measured on bonsai
+// The faster strategy for a field kind ("grid", "network" or "cache": a grid of bricks), device and mode, as measured on bonsai
 // (docs/benchmarks.md: CPU ray marching and path tracing of a grid in-shader (packets), its shadows
 // streaming, a network streaming; GPU grids in-shader (17-20x), GPU networks in-shader but shadows).
 RenderStrategy fastest_render_strategy(const std::string& field_kind, bool gpu, RenderMode mode);
-// A front end's --strategy: "auto" (nullopt: the renderer's automatic_strategy), "streaming" or "inshader".
-std::optional<RenderStrategy> parse_render_strategy_choice(const std::string& s);
 
 // Samples per live ray per streaming iteration (docs/semantics.md B.7); `vnr bench render --tune-k`
 // finds the best K for a machine.

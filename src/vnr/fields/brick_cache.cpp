@@ -1,0 +1,312 @@
+#include "vnr/fields/brick_cache.h"
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include "vnr/core/error.h"
+#include "vnr/core/grid_view.h"
+#include "vnr/core/parallel.h"
+#include "vnr/core/progress.h"
+#include "vnr/core/units.h"
+#include "vnr/fields/grid_packets.h"
+#include "vnr/render/inshader.h"
+
+namespace vnr {
+
+uint64_t default_cache_budget() {
+  const uint64_t quarter = available_memory_bytes() / 4;
+  return std::clamp<uint64_t>(quarter, uint64_t(64) << 20, uint64_t(4) << 30);
+}
+
+uint64_t parse_cache_budget(const std::string& text) {
+  if (text.empty() || text == "auto") return default_cache_budget();
+  const uint64_t b = parse_byte_size(text);
+  return b == 0 ? default_cache_budget() : b;
+}
+
+namespace {
+// One level of detail's storage (its view: CacheLevelView).
+struct Level {
+  Int3 n, nb;  // voxels, bricks per axis
+  std::vector<int32_t> slot;
+  std::unique_ptr<std::atomic<uint32_t>[]> used, asked;  // the last frame that read / asked for a brick
+  int64_t bricks() const { return int64_t(nb.x) * nb.y * nb.z; }
+};
+struct BrickKey {
+  int level;
+  int64_t brick;
+  float distance;
+};
+int64_t ceil_div(int64_t a, int64_t b) { return (a + b - 1) / b; }
+}  // namespace
+
+struct CachedField::State {
+  std::vector<Level> levels;
+  std::vector<int32_t> lod;          // per level-0 brick: the level its samples read
+  CameraFrame lod_cam{};             // the view lod was computed for
+  std::unique_ptr<float[]> pool;     // slots of (B+1)^3 voxels, committed by the OS as they are written
+  int32_t slots = 0, slots_used = 0;
+  std::vector<int32_t> free_slots;
+  struct Resident {
+    int level;
+    int64_t brick;
+    int32_t slot;
+  };
+  std::vector<Resident> resident;
+  std::mutex asked_mutex;
+  std::vector<BrickKey> asked;       // bricks asked for since the last begin_frame
+  BrickCacheView view;
+  BrickCacheStats totals;
+  std::atomic<int64_t> misses{0};
+
+  static void ask(void* self, int l, int64_t b) {
+    State& s = *static_cast<State*>(self);
+    Level& L = s.levels[size_t(l)];
+    const uint32_t frame = s.view.frame;
+    if (L.asked[b].load(std::memory_order_relaxed) == frame) return;
+    if (L.asked[b].exchange(frame, std::memory_order_relaxed) == frame) return;
+    std::lock_guard<std::mutex> lock(s.asked_mutex);
+    s.asked.push_back(BrickKey{l, b, 0});
+  }
+};
+
+namespace {
+struct CachePointFn {
+  const BrickCacheView* view;
+  const RenderableField* source;
+  float operator()(float x, float y, float z) const {
+    bool miss = false;
+    const float v = view->sample(x, y, z, &miss);
+    return miss ? source->point(x, y, z) : v;
+  }
+};
+}  // namespace
+
+CachedField::CachedField(const RenderableField& source, VoxelDecode decode, Int3 dims, BrickCacheSettings settings)
+    : source_(source), decode_(std::move(decode)), dims_(dims), settings_(settings), s_(std::make_unique<State>()) {
+  const int B = settings_.brick;
+  if (B < 4 || B > 128 || (B & (B - 1))) fail("cache bricks must be a power of two from 4 to 128 cells, got {}", B);
+  if (dims.x < 1 || dims.y < 1 || dims.z < 1)
+    fail("a brick cache needs dims of at least 1, got {}x{}x{}", dims.x, dims.y, dims.z);
+  if (!(settings_.lod_pixels > 0))
+    fail("the cache's level-of-detail footprint must be positive, got {}", settings_.lod_pixels);
+  if (!decode_) fail("a brick cache needs a decode");
+  if (settings_.budget_bytes == 0) settings_.budget_bytes = default_cache_budget();
+  State& s = *s_;
+  BrickCacheView& v = s.view;
+  v.shift = __builtin_ctz(unsigned(B));
+  v.sy = B + 1, v.sz = (B + 1) * (B + 1);
+  v.brick_floats = int64_t(B + 1) * v.sz;
+  v.coarser = settings_.misses == CacheMisses::Coarser;
+  v.ask = &State::ask;
+  v.cache = &s;
+  v.misses = &s.misses;
+  const uint64_t brick_bytes = uint64_t(v.brick_floats) * sizeof(float);
+  if (settings_.budget_bytes < brick_bytes)
+    fail("a cache budget of {} holds no brick of {}^3 voxels ({})", human_bytes(double(settings_.budget_bytes)), B + 1,
+         human_bytes(double(brick_bytes)));
+  s.slots = int32_t(std::min<uint64_t>(settings_.budget_bytes / brick_bytes, uint64_t(INT32_MAX) / uint64_t(v.brick_floats)));
+  s.pool.reset(new float[size_t(s.slots) * size_t(v.brick_floats)]);  // not touched: committed as bricks are written
+  v.pool = s.pool.get();
+  for (int l = 0;; ++l) {  // down to a level that is one brick
+    if (l == BrickCacheView::kMaxLevels) fail("a brick cache of {}x{}x{} voxels needs too many levels", dims.x, dims.y, dims.z);
+    Level L;
+    L.n = Int3{int32_t(std::max<int64_t>(1, ceil_div(dims.x, int64_t(1) << l))),
+               int32_t(std::max<int64_t>(1, ceil_div(dims.y, int64_t(1) << l))),
+               int32_t(std::max<int64_t>(1, ceil_div(dims.z, int64_t(1) << l)))};
+    L.nb = Int3{int32_t((L.n.x - 1) / B + 1), int32_t((L.n.y - 1) / B + 1), int32_t((L.n.z - 1) / B + 1)};
+    L.slot.assign(size_t(L.bricks()), -1);
+    L.used.reset(new std::atomic<uint32_t>[size_t(L.bricks())]());
+    L.asked.reset(new std::atomic<uint32_t>[size_t(L.bricks())]());
+    if (L.n.x > INT32_MAX || L.n.y > INT32_MAX || L.n.z > INT32_MAX || L.bricks() > INT32_MAX)
+      fail("a brick cache of {}x{}x{} voxels has more than 2^31 bricks or voxels a side", dims.x, dims.y, dims.z);
+    v.level[l] = CacheLevelView{int32_t(L.n.x),  int32_t(L.n.y),  int32_t(L.n.z),  int32_t(L.nb.x),
+                                int32_t(L.nb.y), int32_t(L.nb.z), L.slot.data(), L.used.get()};
+    s.levels.push_back(std::move(L));
+    if (s.levels.back().bricks() == 1) break;
+  }
+  v.levels = int(s.levels.size());
+  s.lod.assign(size_t(s.levels[0].bricks()), 0);
+  v.lod = s.lod.data();
+  s.totals.levels = v.levels;
+  s.totals.budget_bytes = settings_.budget_bytes;
+}
+
+CachedField::~CachedField() = default;
+
+float CachedField::point(float x, float y, float z) const { return CachePointFn{&s_->view, &source_}(x, y, z); }
+
+bool cache_packets_apply(const RenderParams& p, const BrickCacheView& c) {
+  if (p.shade) return false;
+  for (int l = 0; l < c.levels; ++l)
+    if (c.level[l].nx < 2) return false;
+  return true;
+}
+
+int64_t CachedField::render_inshader(const InshaderJob& job) const {
+  const RenderParams& p = *job.params;
+  if (job.ray_packets && job.mode == RenderMode::RayMarch && cache_packets_apply(p, s_->view)) {
+    std::atomic<int64_t> samples{0}, next_tile{0};
+    parallel_threads([&](int, int) {
+      const TileCursor tiles{p.cam.width, p.cam.height, kInshaderTile, 0, 1, &next_tile};
+      samples += march_cache_packets(p, s_->view, source_, tiles, job.pixels);
+    });
+    return samples.load();
+  }
+  return run_inshader(job, CachePointFn{&s_->view, &source_});
+}
+
+void CachedField::query(const float* x, const float* y, const float* z, int64_t n, float* out) const {
+  State& s = *s_;
+  std::vector<uint8_t> miss(static_cast<size_t>(n));
+  parallel_for_claimed(n, 4096, [&](int64_t b, int64_t e) {
+    for (int64_t i = b; i < e; ++i) {
+      bool m = false;
+      out[i] = s.view.sample(x[i], y[i], z[i], &m);
+      miss[size_t(i)] = m;
+    }
+  });
+  std::vector<int64_t> where;  // the misses, read from the source in one batched query
+  for (int64_t i = 0; i < n; ++i)
+    if (miss[size_t(i)]) where.push_back(i);
+  if (where.empty()) return;
+  const size_t m = where.size();
+  std::vector<float> px(m), py(m), pz(m), v(m);
+  for (size_t k = 0; k < m; ++k) px[k] = x[where[k]], py[k] = y[where[k]], pz[k] = z[where[k]];
+  source_.query(px.data(), py.data(), pz.data(), int64_t(m), v.data());
+  for (size_t k = 0; k < m; ++k) out[where[k]] = v[k];
+}
+
+bool CachedField::decode_brick(int l, int64_t b) const {
+  State& s = *s_;
+  Level& L = s.levels[size_t(l)];
+  if (L.slot[size_t(b)] >= 0) return true;
+  int32_t slot;
+  if (!s.free_slots.empty()) {
+    slot = s.free_slots.back();
+    s.free_slots.pop_back();
+  } else if (s.slots_used < s.slots) {
+    slot = s.slots_used++;
+  } else {  // evict the least recently read brick that the frame just rendered did not read
+    size_t victim = s.resident.size();
+    uint32_t oldest = s.view.frame;
+    for (size_t r = 0; r < s.resident.size(); ++r) {
+      if (s.resident[r].level + 1 == int(s.levels.size())) continue;  // the root stays
+      const uint32_t u = s.levels[size_t(s.resident[r].level)].used[s.resident[r].brick].load(std::memory_order_relaxed);
+      if (u < oldest) oldest = u, victim = r;
+    }
+    if (victim == s.resident.size()) return false;
+    const State::Resident gone = s.resident[victim];
+    s.levels[size_t(gone.level)].slot[size_t(gone.brick)] = -1;
+    slot = gone.slot;
+    s.resident[victim] = s.resident.back();
+    s.resident.pop_back();
+    s.totals.evicted += 1;
+  }
+  // The brick's voxels with its far faces, clamped to the level (the lookup never reads past them).
+  const int B = settings_.brick, side = B + 1;
+  const int64_t bx = b % L.nb.x, by = (b / L.nb.x) % L.nb.y, bz = b / (int64_t(L.nb.x) * L.nb.y);
+  std::vector<int64_t> index(size_t(s.view.brick_floats));
+  for (int k = 0; k < side; ++k)
+    for (int j = 0; j < side; ++j)
+      for (int i = 0; i < side; ++i) {
+        const int64_t gx = std::min<int64_t>(bx * B + i, L.n.x - 1), gy = std::min<int64_t>(by * B + j, L.n.y - 1),
+                      gz = std::min<int64_t>(bz * B + k, L.n.z - 1);
+        index[size_t(i + side * (j + int64_t(side) * k))] = gx + L.n.x * (gy + int64_t(L.n.y) * gz);
+      }
+  decode_(L.n, index.data(), int64_t(index.size()), s.pool.get() + int64_t(slot) * s.view.brick_floats);
+  L.slot[size_t(b)] = slot;
+  L.used[b].store(s.view.frame, std::memory_order_relaxed);
+  s.resident.push_back(State::Resident{l, b, slot});
+  s.totals.decoded += 1;
+  return true;
+}
+
+void CachedField::decode_asked(double seconds) const {
+  State& s = *s_;
+  const auto t0 = std::chrono::steady_clock::now();
+  std::vector<BrickKey> todo;
+  {
+    std::lock_guard<std::mutex> lock(s.asked_mutex);
+    todo.swap(s.asked);
+  }
+  // Nearest the camera of the last view first.
+  const Vec3f eye = s.lod_cam.eye;
+  const int64_t B = settings_.brick;
+  for (BrickKey& k : todo) {
+    const Level& L = s.levels[size_t(k.level)];
+    const int64_t bx = k.brick % L.nb.x, by = (k.brick / L.nb.x) % L.nb.y, bz = k.brick / (int64_t(L.nb.x) * L.nb.y);
+    const Vec3f c{(float(bx * B) + 0.5f * float(B)) / float(L.n.x) * float(dims_.x),
+                  (float(by * B) + 0.5f * float(B)) / float(L.n.y) * float(dims_.y),
+                  (float(bz * B) + 0.5f * float(B)) / float(L.n.z) * float(dims_.z)};
+    k.distance = length(c - eye);
+  }
+  std::sort(todo.begin(), todo.end(), [](const BrickKey& a, const BrickKey& b) { return a.distance < b.distance; });
+  size_t done = 0;
+  for (; done < todo.size(); ++done) {  // what is left is asked for again by the next frames that need it
+    if (seconds >= 0 && done > 0 && seconds_since(t0) >= seconds) break;
+    if (!decode_brick(todo[done].level, todo[done].brick)) break;
+  }
+  s.totals.requested = int64_t(todo.size() - done);
+  s.totals.decode_seconds += seconds_since(t0);
+}
+
+// Levels of detail for a new view: per level-0 brick, from the distance of its nearest point to the eye,
+// the coarsest level whose voxels cover at most lod_pixels pixels there.
+void CachedField::update_levels(const RenderParams& p) const {
+  State& s = *s_;
+  const CameraFrame& c = p.cam;
+  s.lod_cam = c;
+  const Level& L0 = s.levels[0];
+  const float B = float(settings_.brick);
+  const Vec3f cell{p.box.x / float(dims_.x), p.box.y / float(dims_.y), p.box.z / float(dims_.z)};
+  const float voxel = std::max(cell.x, std::max(cell.y, cell.z));
+  const float pixel_per_distance = length(c.dv) / float(std::max(1, c.height));
+  const int top = int(s.levels.size()) - 1;
+  parallel_for(L0.bricks(), [&](int64_t b) {
+    const int64_t bx = b % L0.nb.x, by = (b / L0.nb.x) % L0.nb.y, bz = b / (int64_t(L0.nb.x) * L0.nb.y);
+    const Vec3f lo{float(bx) * B * cell.x, float(by) * B * cell.y, float(bz) * B * cell.z};
+    const Vec3f hi{std::min(float(bx + 1) * B * cell.x, p.box.x), std::min(float(by + 1) * B * cell.y, p.box.y),
+                   std::min(float(bz + 1) * B * cell.z, p.box.z)};
+    const Vec3f q{std::clamp(c.eye.x, lo.x, hi.x), std::clamp(c.eye.y, lo.y, hi.y), std::clamp(c.eye.z, lo.z, hi.z)};
+    const float footprint = length(q - c.eye) * pixel_per_distance * settings_.lod_pixels / voxel;  // level-0 voxels
+    const int l = footprint >= 2 ? int(std::floor(std::log2(footprint))) : 0;
+    s.lod[size_t(b)] = std::min(l, top);
+  });
+}
+
+void CachedField::begin_frame(const RenderParams& p) const {
+  State& s = *s_;
+  const auto same = [](Vec3f a, Vec3f b) { return a.x == b.x && a.y == b.y && a.z == b.z; };
+  if (!same(p.cam.eye, s.lod_cam.eye) || !same(p.cam.dv, s.lod_cam.dv) || p.cam.height != s.lod_cam.height)
+    update_levels(p);
+  // The root brick first: with it, a Coarser cache answers every sample from the first frame on.
+  if (s.view.coarser && s.levels.back().slot[0] < 0) decode_brick(int(s.levels.size()) - 1, 0);
+  decode_asked(settings_.decode_seconds);
+  s.misses = 0;
+  s.view.frame += 1;
+}
+
+void CachedField::decode_pending() const { decode_asked(-1); }
+
+void CachedField::clear() const {
+  State& s = *s_;
+  for (const State::Resident& r : s.resident) {
+    s.levels[size_t(r.level)].slot[size_t(r.brick)] = -1;
+    s.free_slots.push_back(r.slot);
+  }
+  s.resident.clear();
+}
+
+BrickCacheStats CachedField::stats() const {
+  const State& s = *s_;
+  BrickCacheStats st = s.totals;
+  st.resident = int64_t(s.resident.size());
+  st.pool_bytes = uint64_t(s.slots_used) * uint64_t(s.view.brick_floats) * sizeof(float);
+  st.misses = s.misses.load();
+  return st;
+}
+
+const BrickCacheView& CachedField::view() const { return s_->view; }
+
+}  // namespace vnr

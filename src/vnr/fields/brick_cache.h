@@ -1,0 +1,95 @@
+#pragma once
+// A cache of decoded bricks in front of a model's field (docs/RENDERING.md "Brick cache"): the model
+// decoded at several levels of detail (level l = the model's dims halved l times), each level cut into
+// bricks of B^3 cells stored with their far faces ((B+1)^3 voxels), so a trilinear lookup never leaves
+// its brick. A sample reads the level its distance to the camera asks for (a level-l voxel covers at
+// most `lod_pixels` pixels), from a bounded pool of bricks (least recently used evicted); a brick not
+// decoded yet is requested, and the sample reads the model's field directly (exact) or the nearest
+// decoded coarser level (interactive: no network query at all once the root brick is in). Between
+// frames (Field::begin_frame) the requested bricks are decoded nearest first within a time budget, so
+// no frame waits for the whole cache. At level 0 a warm cache reads exactly what a GridField over the
+// model's decode reads (the same voxels, the same cell-centred trilinear arithmetic).
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <mutex>
+#include <vector>
+#include "vnr/fields/brick_cache_view.h"
+#include "vnr/fields/fields.h"
+
+namespace vnr {
+
+// The decode a cache fills its bricks with: n voxels of a grid of `dims` voxels given by index
+// (x + dims.x * (y + dims.y * z)), normalised values out (train's Decoder::voxels: what a whole decode
+// at those dims gives them, residuals included where they apply).
+using VoxelDecode = std::function<void(Int3 dims, const int64_t* voxel_index, int64_t n, float* out)>;
+
+enum class CacheMisses {
+  Exact,   // a sample whose brick is not decoded yet reads the model's field (vnr render: exact frames)
+  Coarser  // it reads the nearest decoded coarser level (the viewer: fast frames that sharpen)
+};
+
+struct BrickCacheSettings {
+  uint64_t budget_bytes = 0;     // pool of decoded bricks; 0 = default_cache_budget()
+  int brick = 32;                // cells per brick side (a power of two, 4..128)
+  float lod_pixels = 1;          // level l where a level-l voxel covers at most this many pixels
+  double decode_seconds = 0.05;  // decoding per frame (begin_frame); at least one brick a frame
+  CacheMisses misses = CacheMisses::Exact;
+  Int3 dims{0, 0, 0};            // level 0's voxels (Renderer: 0 = the model's dims; any size)
+};
+
+// A quarter of the memory available, at most 4 GiB, at least 64 MiB.
+uint64_t default_cache_budget();
+// "512MiB", "2GiB", "100M", plain bytes; 0 or "auto" = default_cache_budget(). Fails on anything else.
+uint64_t parse_cache_budget(const std::string& text);
+
+struct BrickCacheStats {
+  int64_t resident = 0, decoded = 0, evicted = 0;  // bricks in the pool now, decoded and evicted so far
+  int64_t requested = 0;                           // bricks asked for and not decoded yet
+  int64_t misses = 0;  // samples of the current frame (since begin_frame) that read the source
+  uint64_t pool_bytes = 0, budget_bytes = 0;
+  int levels = 0;
+  double decode_seconds = 0;  // in begin_frame, all frames
+};
+
+class CachedField final : public RenderableField {
+public:
+  // source (the model's field) and decode must outlive the cache; dims = the level-0 grid (usually the
+  // model's dims, any size: only the bricks a view needs are decoded).
+  CachedField(const RenderableField& source, VoxelDecode decode, Int3 dims, BrickCacheSettings settings = {});
+  ~CachedField() override;
+  Int3 dims() const override { return dims_; }
+  const char* kind() const override { return "cache"; }
+  void query(const float* x, const float* y, const float* z, int64_t n, float* out) const override;
+  int64_t render_inshader(const InshaderJob& job) const override;
+  void begin_frame(const RenderParams& p) const override;
+  // The GPU draws the source (the cache lives on the host).
+  GpuFieldSource gpu_source() const override { return source_.gpu_source(); }
+  float point(float x, float y, float z) const override;
+
+  // Decodes every brick requested so far, however long it takes (tests, benchmarks' warm cache).
+  void decode_pending() const;
+  // Drops every decoded brick (a model that changed: training in the loop).
+  void clear() const;
+  BrickCacheStats stats() const;
+  const BrickCacheSettings& settings() const { return settings_; }
+  const BrickCacheView& view() const;  // what lookups read (fields/brick_cache_view.h)
+
+  struct State;  // brick_cache.cpp: levels, page tables, pool, requests
+
+private:
+  // Decodes brick b of level l into a pool slot (evicting the least recently used brick not read by
+  // the last frame when the budget is full); false when every resident brick is still in use.
+  bool decode_brick(int l, int64_t b) const;
+  // Decodes the bricks asked for, nearest the camera first, until `seconds` have passed (< 0: all).
+  void decode_asked(double seconds) const;
+  void update_levels(const RenderParams& p) const;
+
+  const RenderableField& source_;
+  VoxelDecode decode_;
+  Int3 dims_;
+  BrickCacheSettings settings_;
+  std::unique_ptr<State> s_;
+};
+
+}  // namespace vnr

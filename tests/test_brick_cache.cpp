@@ -1,0 +1,245 @@
+// The brick cache (fields/brick_cache.h) against independent references: with a grid as the source,
+// level 0 of the cache holds the grid's own voxels, so every lookup and every image must equal the
+// grid's bit for bit (cold, partly warm, warm, under a budget that evicts, SIMD packets or per ray);
+// coarser levels equal a grid of the source sampled at the level's voxel centres; the level of detail
+// follows the closed form of a voxel's footprint in pixels; and a trained model renders from its cache
+// within the stated image PSNR of rendering its network directly.
+#include <gtest/gtest.h>
+#include <hwy/targets.h>
+#include <cmath>
+#include "vnr/core/error.h"
+#include "vnr/core/rng.h"
+#include "vnr/core/value_range_grid.h"
+#include "vnr/fields/brick_cache.h"
+#include "vnr/render/renderer.h"
+#include "vnr/renderer.h"
+#include "vnr/train/sampler.h"
+#include "vnr/train/trainer.h"
+#include "test_support.h"
+
+using namespace vnr;
+using namespace vnr::test;
+
+namespace {
+
+// The decode of a grid source: its own voxels at its dims, else the grid sampled at the voxel centres.
+VoxelDecode grid_decode(const Volume& vol) {
+  return [&vol](Int3 dims, const int64_t* index, int64_t n, float* out) {
+    for (int64_t i = 0; i < n; ++i) {
+      if (dims == vol.dims) {
+        out[i] = vol.data[size_t(index[i])];
+        continue;
+      }
+      const int64_t x = index[i] % dims.x, y = (index[i] / dims.x) % dims.y, z = index[i] / (int64_t(dims.x) * dims.y);
+      out[i] = grid_lookup(view_of(vol), (float(x) + 0.5f) / float(dims.x), (float(y) + 0.5f) / float(dims.y),
+                           (float(z) + 0.5f) / float(dims.z));
+    }
+  };
+}
+
+BrickCacheSettings level0(int brick, uint64_t budget = uint64_t(64) << 20) {
+  BrickCacheSettings s;
+  s.brick = brick;
+  s.budget_bytes = budget;
+  s.lod_pixels = 1e-6f;  // every voxel is far below a pixel: level 0 everywhere
+  s.decode_seconds = 1e-9;  // one brick a frame: frames render from a partly warm cache
+  return s;
+}
+
+bool same_image(const Image& a, const Image& b) {
+  for (size_t i = 0; i < a.pixels.size(); ++i) {
+    const Vec4f &p = a.pixels[i], &q = b.pixels[i];
+    if (!(p.x == q.x && p.y == q.y && p.z == q.z && p.w == q.w)) return false;
+  }
+  return a.pixels.size() == b.pixels.size();
+}
+
+RenderParams params_for(const Camera& cam, Int3 dims, int width, int height) {
+  RenderParams p;
+  p.cam = make_camera_frame(cam, width, height);
+  p.box = Vec3f{float(dims.x), float(dims.y), float(dims.z)};
+  return p;
+}
+
+}  // namespace
+
+TEST(BrickCache, LevelZeroReadsTheGridsOwnValuesColdAndWarm) {
+  Volume vol = synth(Int3{40, 36, 29});  // bricks of 8: partial bricks on every axis
+  GridField grid(view_of(vol));
+  CachedField cache(grid, grid_decode(vol), vol.dims, level0(8));
+  Pcg32 rng(5);
+  const int64_t n = 20000;
+  std::vector<float> x(n), y(n), z(n), got(n);
+  for (int64_t i = 0; i < n; ++i) {
+    x[size_t(i)] = i < 8 ? float(i & 1) * 0.99999f : rng.next_float();  // corners: the clamped edges
+    y[size_t(i)] = i < 8 ? float((i >> 1) & 1) * 0.99999f : rng.next_float();
+    z[size_t(i)] = i < 8 ? float((i >> 2) & 1) * 0.99999f : rng.next_float();
+  }
+  cache.begin_frame(params_for(orbit_camera(box_of(vol), 0, 0, 30), vol.dims, 64, 64));
+  for (int pass = 0; pass < 2; ++pass) {  // cold: every sample a miss read from the source; warm: all hits
+    cache.query(x.data(), y.data(), z.data(), n, got.data());
+    for (int64_t i = 0; i < n; ++i)
+      ASSERT_EQ(got[size_t(i)], grid_lookup(view_of(vol), x[size_t(i)], y[size_t(i)], z[size_t(i)])) << "pass " << pass << " i " << i;
+    EXPECT_EQ(cache.stats().misses, pass == 0 ? n : 0);
+    cache.decode_pending();
+    cache.begin_frame(params_for(orbit_camera(box_of(vol), 0, 0, 30), vol.dims, 64, 64));
+  }
+  EXPECT_EQ(cache.stats().resident, 5 * 5 * 4) << "every brick of level 0 was asked for once";
+}
+
+TEST(BrickCache, ImagesEqualTheGridsInEveryStrategyAndUnderAnEvictingBudget) {
+  Volume vol = synth(Int3{40, 36, 32});
+  GridField grid(view_of(vol));
+  TransferFunction tf = tf_preset("ramp");
+  MacroCells mc(value_ranges_from_grid(view_of(vol), 8), box_of(vol));
+  mc.update(tf);
+  RenderOptions o;
+  o.width = 37, o.height = 29, o.seed = 3;
+  o.strategy = RenderStrategy::InShader;
+  const uint64_t brick_bytes = 9 * 9 * 9 * sizeof(float);
+  for (uint64_t budget : {uint64_t(64) << 20, 3 * brick_bytes}) {
+    CachedField cache(grid, grid_decode(vol), vol.dims, level0(8, budget));
+    for (int frame = 0; frame < 6; ++frame) {  // the cache fills a brick a frame (and evicts under 3 bricks)
+      const Camera cam = orbit_camera(box_of(vol), 35.0f + 40.0f * float(frame), 25, 30);
+      for (RenderStrategy strategy : {RenderStrategy::InShader, RenderStrategy::Streaming}) {
+        o.strategy = strategy;
+        o.ray_packets = false;
+        Image ref = CpuRenderer(grid, box_of(vol), mc, tf, cam, o).render(1);
+        Image per_ray = CpuRenderer(cache, box_of(vol), mc, tf, cam, o).render(1);
+        ASSERT_TRUE(same_image(per_ray, ref)) << "frame " << frame << " " << render_strategy_name(strategy);
+      }
+      o.strategy = RenderStrategy::InShader;
+      o.ray_packets = true;
+      for (int64_t t : hwy::SupportedAndGeneratedTargets()) {
+        hwy::SetSupportedTargetsForTest(t);
+        Image ref = CpuRenderer(grid, box_of(vol), mc, tf, cam, o).render(1);
+        Image packets = CpuRenderer(cache, box_of(vol), mc, tf, cam, o).render(1);
+        ASSERT_TRUE(same_image(packets, ref)) << hwy::TargetName(t) << " frame " << frame;
+      }
+      hwy::SetSupportedTargetsForTest(0);
+    }
+    const BrickCacheStats st = cache.stats();
+    EXPECT_LE(st.pool_bytes, budget);
+    EXPECT_GT(st.resident, 0);
+    EXPECT_EQ(st.evicted, 0) << "every frame reads every brick: none is evicted while a frame needs it";
+  }
+}
+
+TEST(BrickCache, TheLeastRecentlyReadBrickIsEvictedWhenTheBudgetIsFull) {
+  Volume vol = synth(Int3{32, 32, 32});  // 4 x 4 x 4 bricks of 8
+  GridField grid(view_of(vol));
+  BrickCacheSettings s = level0(8, 2 * 9 * 9 * 9 * sizeof(float));
+  s.decode_seconds = 100;  // every brick asked for, each frame
+  CachedField cache(grid, grid_decode(vol), vol.dims, s);
+  const RenderParams p = params_for(orbit_camera(box_of(vol), 0, 0, 30), vol.dims, 64, 64);
+  cache.begin_frame(p);
+  for (int k = 1; k <= 6; ++k) {  // frame k reads brick (k % 4, k / 4, 0) and brick 0 (the one to keep)
+    const float x[2] = {(8.0f * float(k % 4) + 4) / 32, 4.0f / 32}, y[2] = {(8.0f * float(k / 4) + 4) / 32, 0.1f},
+                z[2] = {0.1f, 0.1f};
+    float v[2];
+    cache.query(x, y, z, 2, v);
+    for (int i = 0; i < 2; ++i) ASSERT_EQ(v[i], grid_lookup(view_of(vol), x[i], y[i], z[i]));
+    cache.begin_frame(p);  // decodes what frame k asked for
+    const BrickCacheStats st = cache.stats();
+    EXPECT_LE(st.resident, 2);
+    EXPECT_LE(st.pool_bytes, 2 * 9 * 9 * 9 * sizeof(float));
+  }
+  EXPECT_EQ(cache.stats().evicted, 5) << "each brick made way for the next one";
+  const float x = 4.0f / 32, y = 0.1f, z = 0.1f;
+  float v;
+  cache.query(&x, &y, &z, 1, &v);
+  EXPECT_EQ(cache.stats().misses, 0) << "brick 0, read every frame, stayed";
+}
+
+TEST(BrickCache, CoarserMissesReadTheNearestDecodedLevel) {
+  Volume vol = synth(Int3{32, 32, 32});
+  GridField grid(view_of(vol));
+  BrickCacheSettings s = level0(8);
+  s.misses = CacheMisses::Coarser;
+  CachedField cache(grid, grid_decode(vol), vol.dims, s);
+  ASSERT_EQ(cache.stats().levels, 3);  // 32, 16, 8 voxels: the root is one brick
+  cache.begin_frame(params_for(orbit_camera(box_of(vol), 0, 0, 30), vol.dims, 64, 64));  // decodes the root
+  // The reference: the source sampled at the 8^3 centres, looked up as a grid.
+  Volume root;
+  root.dims = Int3{8, 8, 8};
+  root.data.resize(512);
+  const VoxelDecode decode = grid_decode(vol);
+  std::vector<int64_t> index(512);
+  for (int64_t i = 0; i < 512; ++i) index[size_t(i)] = i;
+  decode(root.dims, index.data(), 512, root.data.data());
+  Pcg32 rng(9);
+  for (int i = 0; i < 1000; ++i) {
+    const float x = rng.next_float(), y = rng.next_float(), z = rng.next_float();
+    float v;
+    cache.query(&x, &y, &z, 1, &v);
+    ASSERT_EQ(v, grid_lookup(view_of(root), x, y, z));
+  }
+  EXPECT_EQ(cache.stats().misses, 0) << "no sample reads the source once the root is in";
+}
+
+TEST(BrickCache, LevelOfDetailFollowsTheVoxelFootprint) {
+  // 128^3 voxels, bricks of 8: levels of 128, 64, 32, 16 and 8 voxels. The camera looks down -z at the
+  // middle of the +z face from distance D; one pixel there spans D * 2 tan(15 deg) / H voxels, and a
+  // sample reads the coarsest level whose voxels (2^l) are at most that wide.
+  const Int3 dims{128, 128, 128};
+  Volume vol = synth(Int3{8, 8, 8});
+  GridField grid(view_of(vol));
+  BrickCacheSettings s;
+  s.brick = 8;
+  CachedField cache(grid, grid_decode(vol), dims, s);
+  const int H = 100;
+  for (float pixel_voxels : {0.7f, 1.5f, 2.5f, 4.5f, 9.0f, 40.0f}) {
+    const float D = pixel_voxels * float(H) / (2 * std::tan(15.0f * 3.14159265f / 180));
+    const Camera cam{Vec3f{64, 64, 128 + D}, Vec3f{64, 64, 0}, Vec3f{0, 1, 0}, 30};
+    cache.begin_frame(params_for(cam, dims, H, H));
+    const int expect = std::min(4, pixel_voxels < 2 ? 0 : int(std::floor(std::log2(pixel_voxels))));
+    EXPECT_EQ(cache.view().level_at(0.5f, 0.5f, 0.999f), expect) << pixel_voxels << " voxels a pixel";
+  }
+}
+
+TEST(BrickCache, RejectsBadSettingsWithOneClearError) {
+  Volume vol = synth(Int3{16, 16, 16});
+  GridField grid(view_of(vol));
+  BrickCacheSettings s;
+  s.brick = 12;
+  EXPECT_THROW(CachedField(grid, grid_decode(vol), vol.dims, s), Error);
+  s.brick = 8;
+  s.budget_bytes = 100;  // less than one brick
+  EXPECT_THROW(CachedField(grid, grid_decode(vol), vol.dims, s), Error);
+  EXPECT_EQ(parse_cache_budget("512MiB"), uint64_t(512) << 20);
+  EXPECT_EQ(parse_cache_budget("auto"), default_cache_budget());
+  EXPECT_THROW(parse_cache_budget("lots"), Error);
+}
+
+TEST(BrickCache, ATrainedModelRendersFromItsCacheAsItsNetworkDoes) {
+  Volume vol = synth(Int3{32, 32, 32});
+  Json cfg = {{"encoding", {{"otype", "HashGrid"}, {"n_levels", 4}, {"n_features_per_level", 2},
+                            {"log2_hashmap_size", 14}, {"base_resolution", 4}}},
+              {"network", {{"otype", "FullyFusedMLP"}, {"n_neurons", 32}, {"n_hidden_layers", 2}}},
+              {"loss", {{"otype", "L2"}}},
+              {"optimizer", {{"otype", "Adam"}, {"learning_rate", 1e-2}}}};
+  Model model = create_model(ModelConfig::from_json(cfg), vol);
+  CpuTrainer trainer(*model.net, std::make_shared<InCoreSampler>(vol), TrainOptions{16384, 3});
+  for (int i = 0; i < 200; ++i) trainer.step();
+  Renderer direct(model, Device::Cpu), cached(model, Device::Cpu);
+  for (Renderer* r : {&direct, &cached}) {
+    r->set_size(64, 64);
+    r->set_camera(orbit_camera(r->box(), 40, 25, 30));
+    r->set_macrocells(MacroCellMode::Off);
+  }
+  direct.choose_strategy("streaming");
+  cached.choose_strategy("auto");  // a model on the CPU: the cache
+  ASSERT_TRUE(cached.cache().has_value());
+  EXPECT_STREQ(cached.field().kind(), "cache");
+  cached.warm_cache();
+  for (int f = 0; f < 4; ++f) direct.render_frame(), cached.render_frame();
+  const double psnr = compare_images(cached.image(), direct.image()).psnr;
+  std::printf("image PSNR of the cached model against its network: %.2f dB\n", psnr);
+  EXPECT_GT(psnr, 40.0);
+  EXPECT_EQ(cached.cache_stats().misses, 0) << "a warm cache answers the whole view";
+  EXPECT_THROW(cached.choose_strategy("fastest"), Error);
+  Renderer volume_renderer(vol, Device::Cpu);
+  EXPECT_THROW(volume_renderer.choose_strategy("cache"), Error);
+  volume_renderer.choose_strategy("auto");
+  EXPECT_FALSE(volume_renderer.cache().has_value()) << "a volume is drawn directly";
+}
