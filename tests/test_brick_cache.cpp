@@ -243,3 +243,34 @@ TEST(BrickCache, ATrainedModelRendersFromItsCacheAsItsNetworkDoes) {
   volume_renderer.choose_strategy("auto");
   EXPECT_FALSE(volume_renderer.cache().has_value()) << "a volume is drawn directly";
 }
+
+TEST(BrickCache, AChangedModelRefreshesItsBricksWithinTheFrameBudget) {
+  Volume a = synth(Int3{32, 32, 32}), b = a;
+  for (float& v : b.data) v = 1 - v;  // the "trained" model: another field
+  GridField field_a(view_of(a)), field_b(view_of(b));
+  const Volume* current = &a;
+  VoxelDecode decode = [&](Int3 dims, const int64_t* index, int64_t n, float* out) { grid_decode(*current)(dims, index, n, out); };
+  BrickCacheSettings s = level0(8);
+  s.decode_seconds = 100;
+  CachedField cache(field_a, decode, a.dims, s);
+  const RenderParams p = params_for(orbit_camera(box_of(a), 0, 0, 30), a.dims, 64, 64);
+  std::vector<float> x, y, z;
+  Pcg32 rng(3);
+  for (int i = 0; i < 4000; ++i) x.push_back(rng.next_float()), y.push_back(rng.next_float()), z.push_back(rng.next_float());
+  std::vector<float> v(x.size());
+  cache.begin_frame(p);
+  cache.query(x.data(), y.data(), z.data(), int64_t(x.size()), v.data());
+  cache.begin_frame(p);  // decodes all 64 bricks
+  ASSERT_EQ(cache.stats().resident, 64);
+  const uint64_t version = cache.content_version();
+  current = &b;
+  cache.replace_source(field_b, true);
+  EXPECT_EQ(cache.stats().stale, 64);
+  cache.query(x.data(), y.data(), z.data(), int64_t(x.size()), v.data());
+  for (size_t i = 0; i < x.size(); ++i) ASSERT_EQ(v[i], grid_lookup(view_of(a), x[i], y[i], z[i])) << "stale bricks are still read";
+  cache.begin_frame(p);  // refreshes every brick the frame read
+  EXPECT_EQ(cache.stats().stale, 0);
+  EXPECT_GT(cache.content_version(), version);
+  cache.query(x.data(), y.data(), z.data(), int64_t(x.size()), v.data());
+  for (size_t i = 0; i < x.size(); ++i) ASSERT_EQ(v[i], grid_lookup(view_of(b), x[i], y[i], z[i]));
+}

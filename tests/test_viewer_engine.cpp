@@ -83,7 +83,9 @@ bool wait_until(const std::function<bool()>& cond, double timeout = 30) {
 }
 
 // The reference: vnr::Renderer on the same input with the engine's camera, TF and size, `frames` frames.
-std::vector<uint8_t> reference_rgba(const RenderInput& input, bool network, const ViewerState& st, int frames) {
+// What vnr::Renderer draws for the same settings; with `cache`, from the model's warm brick cache.
+std::vector<uint8_t> reference_rgba(const RenderInput& input, bool network, const ViewerState& st, int frames,
+                                    bool cache = false) {
   std::unique_ptr<Renderer> r;
   if (network)
     r = std::make_unique<Renderer>(*input.model, Device::Cpu, input.volume ? &*input.volume : nullptr);
@@ -93,6 +95,8 @@ std::vector<uint8_t> reference_rgba(const RenderInput& input, bool network, cons
   r->set_camera(st.camera);
   r->set_transfer_function(to_transfer_function(st.tf));
   r->set_size(st.width, st.height);
+  if (cache) r->choose_strategy("cache");
+  r->warm_cache();
   for (int i = 0; i < frames; ++i) r->render_frame();
   return to_rgba8(r->image());
 }
@@ -155,6 +159,8 @@ TEST(ViewerEngine, NetworkViewEqualsTheRendererAndAccumulationStops) {
   EXPECT_EQ(engine.state().training.state, TrainingState::Unavailable);
   ViewerRender r = engine.state().render;
   EXPECT_EQ(r.macrocells, MacroCellMode::Online);
+  EXPECT_TRUE(r.cache) << "the brick cache by default";
+  r.cache = false;  // the network itself (the cache: NetworkCacheViewSharpensToTheWarmCachesImage)
   r.max_frames = 3;
   engine.set_viewport(160, 128);
   engine.set_render(r);
@@ -183,6 +189,36 @@ TEST(ViewerEngine, NetworkViewEqualsTheRendererAndAccumulationStops) {
   EXPECT_EQ(refined->images[0].rgba, reference_rgba(input, true, engine.state(), 3));
   const Image shot = engine.screenshot(10);
   EXPECT_EQ(to_rgba8(shot), refined->images[0].rgba);
+}
+
+TEST(ViewerEngine, NetworkCacheViewSharpensToTheWarmCachesImage) {
+  TmpDir dir("viewer");
+  ViewerSetup setup;
+  setup.input = trained_model_file(dir);
+  setup.device = "cpu";
+  ViewerEngine engine(setup);
+  ViewerRender r = engine.state().render;
+  r.max_frames = 3;
+  engine.set_viewport(160, 128);
+  engine.set_render(r);
+  // Accumulation completes once every brick the view reads is decoded: then the image is the one a
+  // Renderer draws from its warm cache, and the engine goes idle.
+  auto done = wait_for(engine, [](const ViewerFrame& f) {
+    return f.refined && f.accumulated == 3 && f.cache_bricks > 0 && f.cache_pending == 0 && f.cache_stale == 0;
+  });
+  ASSERT_TRUE(done);
+  const RenderInput input = open_render_input(setup.input, "", {}, parse_precision("auto"));
+  const ViewerFrame* last = done.get();
+  std::shared_ptr<const ViewerFrame> more;
+  while ((more = engine.wait_frame(last->id, 1.0))) last = (done = more).get();  // until idle
+  EXPECT_TRUE(last->refined);
+  EXPECT_EQ(last->images[0].rgba, reference_rgba(input, true, engine.state(), 3, true));
+  // Moving: full-resolution frames (no coarse ones) from the same cache.
+  engine.set_camera(orbit_camera(box_of(kDims), 40, 20, 30), true);
+  auto moving = wait_for(engine, [](const ViewerFrame& f) { return f.images.size() == 1 && f.accumulated >= 1; });
+  ASSERT_TRUE(moving);
+  EXPECT_EQ(moving->images[0].width, 160);
+  EXPECT_GT(moving->cache_bricks, 0);
 }
 
 TEST(ViewerEngine, TrainingLossFallsPsnrRisesPauseAndReset) {

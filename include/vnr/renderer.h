@@ -158,7 +158,6 @@ private:
   Device device_;
   std::unique_ptr<RenderableField> field_;
   std::optional<BrickCacheSettings> cache_settings_;
-  std::unique_ptr<struct ModelDecode> decode_;  // the cache's decode (api/renderer.cpp)
   std::unique_ptr<CachedField> cached_;
   Vec3f box_;
   RenderOptions options_;

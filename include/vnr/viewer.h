@@ -80,6 +80,9 @@ TransferFunction to_transfer_function(const ViewerTf& tf);
 struct ViewerRender {
   RenderMode mode = RenderMode::RayMarch;
   RenderStrategy strategy = RenderStrategy::Streaming;
+  // A model on the CPU draws from its brick cache (docs/RENDERING.md; misses read coarser levels, bricks
+  // are refreshed while training): full-resolution frames while the camera moves. Else `strategy`.
+  bool cache = true;
   MacroCellMode macrocells = MacroCellMode::Online;  // adjusted to what the input allows
   float step = 1;                   // s1 in voxels; s2 = 16 x step
   bool shade = false;
@@ -100,7 +103,7 @@ struct ViewerTraining {
   double psnr = 0;                       // estimate on held-back voxels (0: none yet)
   double learning_rate = 0;              // current
   // Training time per frame (at least one step); 0 = auto: 1.5 x the last frame's render time, at least
-  // 0.05 s, so training keeps about 60% of the machine whatever the frame costs.
+  // 0.03 s, so training keeps about 60% of the machine whatever the frame costs.
   double budget_seconds = 0;
   int timestep = 0;                      // the target timestep
   bool continuous = false;               // the target advances every switch_every steps
@@ -135,6 +138,9 @@ struct ViewerFrame {
   int accumulated = 0;    // frames averaged into the network image
   double render_seconds = 0;
   double train_seconds = 0;  // training time before this frame
+  // The brick cache of the network view (bricks < 0: none): bricks decoded, of them stale (from an
+  // earlier step of training), bricks the view still waits for.
+  int64_t cache_bricks = -1, cache_stale = 0, cache_pending = 0;
   int64_t step = 0;
   std::vector<ViewerImage> images;
 };

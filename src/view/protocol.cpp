@@ -28,7 +28,7 @@ Json tf_json(const ViewerTf& tf) {
 
 Json render_json(const ViewerRender& r) {
   return {{"mode", render_mode_name(r.mode)},
-          {"strategy", render_strategy_name(r.strategy)},
+          {"strategy", r.cache ? "cache" : render_strategy_name(r.strategy)},
           {"macrocells", macrocell_mode_name(r.macrocells)},
           {"step", r.step},
           {"shade", r.shade},
@@ -126,7 +126,11 @@ std::string frame_message_head(const ViewerFrame& f, const ViewerImage& im) {
                                    {"accumulated", f.accumulated},
                                    {"render_ms", f.render_seconds * 1e3},
                                    {"train_ms", f.train_seconds * 1e3},
-                                   {"step", f.step}});
+                                   {"step", f.step},
+                                   {"cache", f.cache_bricks < 0 ? Json(nullptr)
+                                                                : Json{{"bricks", f.cache_bricks},
+                                                                       {"stale", f.cache_stale},
+                                                                       {"pending", f.cache_pending}}}});
   const uint32_t n = uint32_t(header.size());
   std::string out(4, '\0');
   for (int k = 0; k < 4; ++k) out[size_t(k)] = char((n >> (8 * k)) & 255);  // little-endian on any host

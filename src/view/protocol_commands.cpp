@@ -177,8 +177,8 @@ Run tf_command(const Fields& f) {
 Run render_command(const Fields& f) {
   auto mode = f.choice("mode", std::array{RenderMode::RayMarch, RenderMode::Shadow, RenderMode::PathTrace},
                        render_mode_name);
-  auto strategy = f.choice("strategy", std::array{RenderStrategy::Streaming, RenderStrategy::InShader},
-                           render_strategy_name);
+  auto strategy = f.choice("strategy", std::array<const char*, 3>{"cache", "streaming", "inshader"},
+                           +[](const char* s) { return s; });
   auto macrocells = f.choice("macrocells", std::array{MacroCellMode::Online, MacroCellMode::Grid, MacroCellMode::Off},
                              macrocell_mode_name);
   auto step = f.number("step", 1e-3, 1e3), density = f.number("density", 0, 1e6);
@@ -188,7 +188,10 @@ Run render_command(const Fields& f) {
   return [=](ViewerEngine& e) {
     ViewerRender r = e.state().render;
     if (mode) r.mode = *mode;
-    if (strategy) r.strategy = *strategy;
+    if (strategy) {
+      r.cache = std::string(*strategy) == "cache";
+      if (!r.cache) r.strategy = parse_render_strategy(*strategy);
+    }
     if (macrocells) r.macrocells = *macrocells;
     if (step) r.step = float(*step);
     if (shade) r.shade = *shade;

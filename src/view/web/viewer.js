@@ -158,6 +158,10 @@ VNR.Viewer = class {
     VNR.$("status-train-ms").textContent = VNR.format(h.train_ms, 3);
     VNR.$("status-accumulated").textContent = `${h.accumulated}`;
     VNR.$("status-refined").textContent = h.refined ? "refined" : "coarse";
+    VNR.$("status-cache").textContent = h.cache
+      ? ` · cache ${h.cache.bricks} bricks, ${h.cache.bricks ? Math.round(100 * (1 - h.cache.stale / h.cache.bricks)) : 100}% fresh` +
+        (h.cache.pending ? `, ${h.cache.pending} to decode` : "")
+      : "";
   }
 };
 

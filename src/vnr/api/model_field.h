@@ -1,6 +1,7 @@
 #pragma once
 // The field a renderer draws for a Model: its network, or a multi-brick model's blended bricks.
 #include <memory>
+#include "vnr/fields/brick_cache.h"
 #include "vnr/fields/bricked_field.h"
 #include "vnr/fields/fields.h"
 #include "vnr/core/error.h"
@@ -61,6 +62,17 @@ inline std::unique_ptr<RenderableField> make_model_field(const Model& model, Dev
     nets.push_back(b ? b->net.get() : nullptr);
   }
   return std::make_unique<BrickedField>(std::move(nets), model.bricks->layout);
+}
+
+// The brick cache of a model in front of its field `source` (which must outlive it), decoded by the
+// model's Decoder on the CPU (residuals at the model's dims, multi-brick models blended); level 0 at
+// settings.dims, or the model's dims when 0.
+inline std::unique_ptr<CachedField> make_model_cache(const Model& model, const RenderableField& source,
+                                                     const BrickCacheSettings& settings) {
+  auto decoder = std::make_shared<Decoder>(model, Device::Cpu);
+  return std::make_unique<CachedField>(
+      source, [decoder](Int3 dims, const int64_t* index, int64_t n, float* out) { decoder->voxels(dims, index, n, out); },
+      settings.dims.count() > 0 ? settings.dims : model.dims, settings);
 }
 
 }  // namespace vnr

@@ -110,25 +110,13 @@ Renderer::Renderer(const RenderInput& input, Device device)
 }
 Renderer::~Renderer() = default;
 
-// What a cache decodes its bricks with: the model's Decoder (residuals at the model's dims, blended
-// bricks of a multi-brick model), on the CPU.
-struct ModelDecode {
-  explicit ModelDecode(const Model& m) : decoder(m, Device::Cpu) {}
-  Decoder decoder;
-};
-
 void Renderer::set_cache(std::optional<BrickCacheSettings> settings) {
   cached_.reset();
-  decode_.reset();
   cache_settings_ = settings;
   if (settings) {
     if (!model_) fail("the brick cache is for models: a volume is drawn directly");
     if (device_ == Device::Cuda) fail("the brick cache renders on the CPU (the GPU draws the network directly); use --device cpu or another --strategy");
-    decode_ = std::make_unique<ModelDecode>(*model_);
-    Decoder* d = &decode_->decoder;
-    cached_ = std::make_unique<CachedField>(
-        *field_, [d](Int3 dims, const int64_t* index, int64_t n, float* out) { d->voxels(dims, index, n, out); },
-        settings->dims.count() > 0 ? settings->dims : model_->dims, *settings);
+    cached_ = make_model_cache(*model_, *field_, *settings);
   }
   invalidate();
 }

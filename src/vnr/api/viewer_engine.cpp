@@ -169,6 +169,10 @@ void ViewerEngine::Impl::iterate(const ViewerSnapshot& snap) {
       if (!halting) rendered = render(snap, &frame->refined, &frame->accumulated);
       frame->render_seconds = std::chrono::duration<double>(Clock::now() - t0).count();
       if (rendered) last_render_seconds = frame->render_seconds;
+      if (net_content.cache) {
+        const BrickCacheStats cs = net_content.cache->stats();
+        frame->cache_bricks = cs.resident, frame->cache_stale = cs.stale, frame->cache_pending = cs.requested;
+      }
       // A new layout (or any change) shows at once, even when its images were already complete.
       if (!halting && !rendered && snap.epoch != published_epoch) {
         frame->refined = !snap.interacting;

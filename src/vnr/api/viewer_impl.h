@@ -12,6 +12,7 @@
 #include <optional>
 #include <thread>
 #include <vector>
+#include "vnr/fields/brick_cache.h"
 #include "vnr/fields/fields.h"
 #include "vnr/model.h"
 #include "vnr/renderer.h"
@@ -36,6 +37,8 @@ struct ViewerSnapshot {
 // A field to render and its macro-cells, rebuilt when what it shows changes.
 struct ViewContent {
   std::unique_ptr<RenderableField> field;
+  std::unique_ptr<CachedField> cache;  // in front of field (ViewerRender::cache, a model on the CPU)
+  const RenderableField& drawn() const { return cache ? *cache : *field; }
   std::unique_ptr<MacroCells> mc;
   uint64_t version = ~uint64_t(0);  // model or volume version it was built for
   MacroCellMode mode = MacroCellMode::Off;
@@ -47,6 +50,7 @@ struct ViewPass {
   std::unique_ptr<FrameRenderer> backend;
   uint64_t content_version = ~uint64_t(0), tf_epoch = ~uint64_t(0), options_epoch = ~uint64_t(0);
   bool coarse = false;
+  uint64_t cache_version = 0;  // CachedField::content_version the accumulation started from
   Camera camera;
   Image frame, acc;
   int count = 0;              // frames averaged into acc
@@ -151,7 +155,7 @@ struct ViewerEngine::Impl {
   // Renders what the snapshot needs; returns false when every image was already complete.
   bool render(const ViewerSnapshot& snap, bool* refined, int* accumulated);
   bool render_slices(const ViewSettings& view);
-  void update_network_content(MacroCellMode mode);
+  void update_network_content(MacroCellMode mode, bool cache);
   void update_truth_content();
   const ValueRangeGrid& volume_ranges();
   std::vector<ViewerImage> frame_images(const ViewerSnapshot& snap) const;

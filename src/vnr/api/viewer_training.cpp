@@ -21,7 +21,7 @@ constexpr int64_t kProbeEverySteps = 50;
 // A training budget is run in slices of at most this long, so pause/reset/stop take effect soon.
 constexpr double kSliceSeconds = 0.05;
 // The automatic budget (budget_seconds = 0): training gets 1.5x the time the last frame took to render.
-constexpr double kAutoBudgetFactor = 1.5, kAutoBudgetMin = 0.05;
+constexpr double kAutoBudgetFactor = 1.5, kAutoBudgetMin = 0.03;
 // samples_per_second averages the steps of about the last this many training seconds.
 constexpr double kRateWindowSeconds = 1.0;
 
@@ -145,17 +145,24 @@ double ViewerEngine::Impl::train_chunk(const ViewerSnapshot& snap) {
   const double budget = want.budget_seconds > 0 ? want.budget_seconds : std::max(kAutoBudgetMin, kAutoBudgetFactor * last_render_seconds);
   try {
     if (run.probe_step < 0) take_probe();
+    // Whole steps, as many as come closest to the budget (a step of a large batch is a good part of it).
+    const TrainingSession& s = *run.session;
+    const double step_seconds = s.steps_done() > 0 ? s.training_seconds() / double(s.steps_done()) : 0;
     double spent = 0;
     do {
       int64_t limit = -1;
       if (run.continuous) limit = std::max<int64_t>(1, run.switch_at - run.steps());
+      if (step_seconds > 0) {
+        const int64_t fit = std::max<int64_t>(1, std::llround((budget - spent) / step_seconds));
+        limit = limit < 0 ? fit : std::min(limit, fit);
+      }
       run.session->run(limit, std::min(budget - spent, kSliceSeconds));
       spent = run.seconds() - t0;
       if (run.continuous && run.steps() >= run.switch_at) {
         load_timestep((snap.state.training.timestep + 1) % info.n_timesteps);
         break;
       }
-    } while (spent < budget && keep_training());
+    } while (spent + 0.5 * step_seconds < budget && keep_training());
     if (run.steps() - run.probe_step >= kProbeEverySteps && run.seconds() - run.probe_seconds >= kProbeEverySeconds)
       take_probe();
   } catch (const std::exception& e) {

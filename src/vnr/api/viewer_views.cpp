@@ -53,15 +53,15 @@ int viewer_max_frames(const ViewerRender& r) {
 
 namespace {
 
-// Renders the next frame of `pass` (restarting it when its content, settings or camera changed);
-// false when it already holds `target` frames.
+// Renders the next frame of `pass` (restarting it when its content, settings or camera changed, or its
+// cache decoded bricks); false when it already holds `target` frames and its cache waits for nothing.
 bool render_pass(ViewPass& pass, const ViewContent& content, const TransferFunction& tf, const ViewerSnapshot& snap,
                  const RenderOptions& opt, bool coarse, int target, Device device, Vec3f box) {
   const Camera& cam = snap.state.camera;
   if (!pass.backend || pass.content_version != content.version || pass.tf_epoch != snap.tf_epoch ||
       pass.options_epoch != snap.options_epoch || pass.coarse != coarse) {
     pass.backend.reset();
-    pass.backend = make_renderer(device, *content.field, box, *content.mc, tf, cam, opt, cuda::MlpPath::Auto);
+    pass.backend = make_renderer(device, content.drawn(), box, *content.mc, tf, cam, opt, cuda::MlpPath::Auto);
     pass.content_version = content.version;
     pass.tf_epoch = snap.tf_epoch;
     pass.options_epoch = snap.options_epoch;
@@ -73,7 +73,16 @@ bool render_pass(ViewPass& pass, const ViewContent& content, const TransferFunct
     pass.camera = cam;
     pass.count = 0;
   }
-  if (pass.count >= target) return false;
+  if (content.cache && pass.cache_version != content.cache->content_version()) {
+    pass.cache_version = content.cache->content_version();  // bricks came in: the image sharpens
+    pass.count = 0;
+  }
+  if (pass.count >= target) {
+    if (!content.cache) return false;
+    const BrickCacheStats cs = content.cache->stats();
+    if (cs.requested == 0 && cs.stale == 0) return false;
+    pass.count = 0;  // a frame more decodes (or refreshes) the bricks the view still waits for
+  }
   pass.backend->render_frame(uint32_t(pass.count), pass.frame);
   if (pass.count == 0)
     pass.acc = pass.frame;
@@ -138,13 +147,25 @@ const ValueRangeGrid& ViewerEngine::Impl::volume_ranges() {
   return *grid_ranges;
 }
 
-// The network's field and macro-cells for the current parameters and macro-cell mode.
-void ViewerEngine::Impl::update_network_content(MacroCellMode mode) {
+// The network's field (behind its brick cache when `cache`) and macro-cells for the current parameters
+// and macro-cell mode. Training keeps the cache: its bricks turn stale and are decoded again a few a frame.
+void ViewerEngine::Impl::update_network_content(MacroCellMode mode, bool cache) {
   ViewContent& c = net_content;
-  if (c.field && c.version == model_version && c.mode == mode) return;
+  if (c.field && c.version == model_version && c.mode == mode && bool(c.cache) == cache) return;
+  const bool params_changed = c.version != model_version;
   net_pass.backend.reset();  // it refers to the old field and cells
   if (run.session) run.session->trainer().download();
+  std::unique_ptr<RenderableField> old = std::move(c.field);  // the cache reads it until it has the new one
   c.field = make_model_field(*model, render_device);
+  if (!cache) {
+    c.cache.reset();
+  } else if (!c.cache) {
+    BrickCacheSettings s;
+    s.misses = CacheMisses::Coarser;  // frames never wait for the network: coarser levels until bricks come in
+    c.cache = make_model_cache(*model, *c.field, s);
+  } else {
+    c.cache->replace_source(*c.field, params_changed);
+  }
   const bool trained = run.session && run.session->steps_done() > 0;
   if (mode == MacroCellMode::Online && trained)
     c.mc = std::make_unique<MacroCells>(run.session->trainer().online_ranges(), box);
@@ -179,29 +200,34 @@ bool ViewerEngine::Impl::render(const ViewerSnapshot& snap, bool* refined, int* 
     tf = to_transfer_function(st.tf);
     built_tf_epoch = snap.tf_epoch;
   }
-  const bool coarse = snap.interacting;
+  const bool want_cache = st.render.cache && render_device == Device::Cpu && st.view.layout != ViewLayout::Truth;
+  const bool coarse = snap.interacting && !want_cache;  // the cache renders full frames while moving
   const int scale = coarse ? st.render.coarse_scale : 1;
   const RenderOptions opt =
       viewer_render_options(st.render, input.scene, std::max(1, st.width / scale), std::max(1, st.height / scale));
+  RenderOptions net_opt = opt;
+  if (want_cache) net_opt.strategy = fastest_render_strategy("cache", false, opt.mode);
   const int target = coarse ? 1 : viewer_max_frames(st.render);
   const bool want_net = st.view.layout != ViewLayout::Truth;
   const bool want_truth = volume && st.view.layout != ViewLayout::Network;
-  auto draw = [&](ViewContent& c, ViewPass& pass) {
+  auto draw = [&](ViewContent& c, ViewPass& pass, const RenderOptions& o) {
     if (c.tf_epoch != snap.tf_epoch) {
       pass.backend.reset();
       c.mc->update(tf);
       c.tf_epoch = snap.tf_epoch;
     }
-    return render_pass(pass, c, tf, snap, opt, coarse, target, render_device, box);
+    return render_pass(pass, c, tf, snap, o, coarse, target, render_device, box);
   };
   bool any = false;
   if (want_net) {
-    update_network_content(st.render.macrocells);
-    any |= draw(net_content, net_pass);
+    update_network_content(st.render.macrocells, want_cache);
+    // Decoding's share of a frame: less while training in the loop, which gets 1.5x a frame's time.
+    if (net_content.cache) net_content.cache->set_decode_seconds(st.training.state == TrainingState::Running ? 0.01 : 0.03);
+    any |= draw(net_content, net_pass, net_opt);
   }
   if (want_truth) {
     update_truth_content();
-    any |= draw(truth_content, truth_pass);
+    any |= draw(truth_content, truth_pass, opt);
   }
   *refined = !coarse;
   *accumulated = (want_net ? net_pass : truth_pass).count;

@@ -44,6 +44,7 @@ struct CachedField::State {
   std::vector<Level> levels;
   std::vector<int32_t> lod;          // per level-0 brick: the level its samples read
   CameraFrame lod_cam{};             // the view lod was computed for
+  Vec3f box{1, 1, 1};                // world size of the volume box of that view
   std::unique_ptr<float[]> pool;     // slots of (B+1)^3 voxels, committed by the OS as they are written
   int32_t slots = 0, slots_used = 0;
   std::vector<int32_t> free_slots;
@@ -51,7 +52,10 @@ struct CachedField::State {
     int level;
     int64_t brick;
     int32_t slot;
+    uint32_t generation;  // of the model it was decoded from
   };
+  uint32_t generation = 0;  // grows with model_changed
+  uint64_t version = 0;     // grows with every brick decoded
   std::vector<Resident> resident;
   std::mutex asked_mutex;
   std::vector<BrickKey> asked;       // bricks asked for since the last begin_frame
@@ -83,7 +87,7 @@ struct CachePointFn {
 }  // namespace
 
 CachedField::CachedField(const RenderableField& source, VoxelDecode decode, Int3 dims, BrickCacheSettings settings)
-    : source_(source), decode_(std::move(decode)), dims_(dims), settings_(settings), s_(std::make_unique<State>()) {
+    : source_(&source), decode_(std::move(decode)), dims_(dims), settings_(settings), s_(std::make_unique<State>()) {
   const int B = settings_.brick;
   if (B < 4 || B > 128 || (B & (B - 1))) fail("cache bricks must be a power of two from 4 to 128 cells, got {}", B);
   if (dims.x < 1 || dims.y < 1 || dims.z < 1)
@@ -129,12 +133,13 @@ CachedField::CachedField(const RenderableField& source, VoxelDecode decode, Int3
   s.lod.assign(size_t(s.levels[0].bricks()), 0);
   v.lod = s.lod.data();
   s.totals.levels = v.levels;
+  s.box = Vec3f{float(dims.x), float(dims.y), float(dims.z)};
   s.totals.budget_bytes = settings_.budget_bytes;
 }
 
 CachedField::~CachedField() = default;
 
-float CachedField::point(float x, float y, float z) const { return CachePointFn{&s_->view, &source_}(x, y, z); }
+float CachedField::point(float x, float y, float z) const { return CachePointFn{&s_->view, source_}(x, y, z); }
 
 bool cache_packets_apply(const RenderParams& p, const BrickCacheView& c) {
   if (p.shade) return false;
@@ -149,11 +154,11 @@ int64_t CachedField::render_inshader(const InshaderJob& job) const {
     std::atomic<int64_t> samples{0}, next_tile{0};
     parallel_threads([&](int, int) {
       const TileCursor tiles{p.cam.width, p.cam.height, kInshaderTile, 0, 1, &next_tile};
-      samples += march_cache_packets(p, s_->view, source_, tiles, job.pixels);
+      samples += march_cache_packets(p, s_->view, *source_, tiles, job.pixels);
     });
     return samples.load();
   }
-  return run_inshader(job, CachePointFn{&s_->view, &source_});
+  return run_inshader(job, CachePointFn{&s_->view, source_});
 }
 
 void CachedField::query(const float* x, const float* y, const float* z, int64_t n, float* out) const {
@@ -173,7 +178,7 @@ void CachedField::query(const float* x, const float* y, const float* z, int64_t 
   const size_t m = where.size();
   std::vector<float> px(m), py(m), pz(m), v(m);
   for (size_t k = 0; k < m; ++k) px[k] = x[where[k]], py[k] = y[where[k]], pz[k] = z[where[k]];
-  source_.query(px.data(), py.data(), pz.data(), int64_t(m), v.data());
+  source_->query(px.data(), py.data(), pz.data(), int64_t(m), v.data());
   for (size_t k = 0; k < m; ++k) out[where[k]] = v[k];
 }
 
@@ -203,8 +208,20 @@ bool CachedField::decode_brick(int l, int64_t b) const {
     s.resident.pop_back();
     s.totals.evicted += 1;
   }
+  s.resident.push_back(State::Resident{l, b, slot, s.generation});
+  refresh_brick(s.resident.size() - 1);
+  L.slot[size_t(b)] = slot;
+  L.used[b].store(s.view.frame, std::memory_order_relaxed);
+  return true;
+}
+
+void CachedField::refresh_brick(size_t r) const {
+  State& s = *s_;
+  State::Resident& res = s.resident[r];
+  const Level& L = s.levels[size_t(res.level)];
   // The brick's voxels with its far faces, clamped to the level (the lookup never reads past them).
   const int B = settings_.brick, side = B + 1;
+  const int64_t b = res.brick;
   const int64_t bx = b % L.nb.x, by = (b / L.nb.x) % L.nb.y, bz = b / (int64_t(L.nb.x) * L.nb.y);
   std::vector<int64_t> index(size_t(s.view.brick_floats));
   for (int k = 0; k < side; ++k)
@@ -214,12 +231,28 @@ bool CachedField::decode_brick(int l, int64_t b) const {
                       gz = std::min<int64_t>(bz * B + k, L.n.z - 1);
         index[size_t(i + side * (j + int64_t(side) * k))] = gx + L.n.x * (gy + int64_t(L.n.y) * gz);
       }
-  decode_(L.n, index.data(), int64_t(index.size()), s.pool.get() + int64_t(slot) * s.view.brick_floats);
-  L.slot[size_t(b)] = slot;
-  L.used[b].store(s.view.frame, std::memory_order_relaxed);
-  s.resident.push_back(State::Resident{l, b, slot});
+  decode_(L.n, index.data(), int64_t(index.size()), s.pool.get() + int64_t(res.slot) * s.view.brick_floats);
+  res.generation = s.generation;
   s.totals.decoded += 1;
-  return true;
+  s.version += 1;
+}
+
+void CachedField::replace_source(const RenderableField& source, bool model_changed) const {
+  source_ = &source;
+  if (model_changed) s_->generation += 1;
+}
+
+uint64_t CachedField::content_version() const { return s_->version; }
+
+float CachedField::brick_distance(int level, int64_t brick) const {
+  const Level& L = s_->levels[size_t(level)];
+  const int64_t B = settings_.brick;
+  const int64_t bx = brick % L.nb.x, by = (brick / L.nb.x) % L.nb.y, bz = brick / (int64_t(L.nb.x) * L.nb.y);
+  const Vec3f box = s_->box;
+  const Vec3f c{(float(bx * B) + 0.5f * float(B)) / float(L.n.x) * box.x,
+                (float(by * B) + 0.5f * float(B)) / float(L.n.y) * box.y,
+                (float(bz * B) + 0.5f * float(B)) / float(L.n.z) * box.z};
+  return length(c - s_->lod_cam.eye);
 }
 
 void CachedField::decode_asked(double seconds) const {
@@ -230,24 +263,32 @@ void CachedField::decode_asked(double seconds) const {
     std::lock_guard<std::mutex> lock(s.asked_mutex);
     todo.swap(s.asked);
   }
-  // Nearest the camera of the last view first.
-  const Vec3f eye = s.lod_cam.eye;
-  const int64_t B = settings_.brick;
-  for (BrickKey& k : todo) {
-    const Level& L = s.levels[size_t(k.level)];
-    const int64_t bx = k.brick % L.nb.x, by = (k.brick / L.nb.x) % L.nb.y, bz = k.brick / (int64_t(L.nb.x) * L.nb.y);
-    const Vec3f c{(float(bx * B) + 0.5f * float(B)) / float(L.n.x) * float(dims_.x),
-                  (float(by * B) + 0.5f * float(B)) / float(L.n.y) * float(dims_.y),
-                  (float(bz * B) + 0.5f * float(B)) / float(L.n.z) * float(dims_.z)};
-    k.distance = length(c - eye);
-  }
+  for (BrickKey& k : todo) k.distance = brick_distance(k.level, k.brick);  // nearest the camera first
   std::sort(todo.begin(), todo.end(), [](const BrickKey& a, const BrickKey& b) { return a.distance < b.distance; });
   size_t done = 0;
+  bool full = false;  // every slot holds a brick the last frame read: the rest keep reading the source
   for (; done < todo.size(); ++done) {  // what is left is asked for again by the next frames that need it
     if (seconds >= 0 && done > 0 && seconds_since(t0) >= seconds) break;
-    if (!decode_brick(todo[done].level, todo[done].brick)) break;
+    if (!decode_brick(todo[done].level, todo[done].brick)) {
+      full = true;
+      break;
+    }
   }
-  s.totals.requested = int64_t(todo.size() - done);
+  s.totals.requested = full ? 0 : int64_t(todo.size() - done);
+  // Stale bricks in the time left: those the last frame read first, then the nearest.
+  std::vector<std::pair<float, size_t>> stale;
+  for (size_t r = 0; r < s.resident.size(); ++r) {
+    const State::Resident& res = s.resident[r];
+    if (res.generation == s.generation) continue;
+    const Level& L = s.levels[size_t(res.level)];
+    const bool read = L.used[res.brick].load(std::memory_order_relaxed) == s.view.frame;
+    stale.emplace_back((read ? 0.0f : 1e30f) + brick_distance(res.level, res.brick), r);
+  }
+  std::sort(stale.begin(), stale.end());
+  for (const auto& [priority, r] : stale) {
+    if (seconds >= 0 && seconds_since(t0) >= seconds) break;
+    refresh_brick(r);
+  }
   s.totals.decode_seconds += seconds_since(t0);
 }
 
@@ -257,6 +298,7 @@ void CachedField::update_levels(const RenderParams& p) const {
   State& s = *s_;
   const CameraFrame& c = p.cam;
   s.lod_cam = c;
+  s.box = p.box;
   const Level& L0 = s.levels[0];
   const float B = float(settings_.brick);
   const Vec3f cell{p.box.x / float(dims_.x), p.box.y / float(dims_.y), p.box.z / float(dims_.z)};
@@ -304,6 +346,7 @@ BrickCacheStats CachedField::stats() const {
   st.resident = int64_t(s.resident.size());
   st.pool_bytes = uint64_t(s.slots_used) * uint64_t(s.view.brick_floats) * sizeof(float);
   st.misses = s.misses.load();
+  for (const State::Resident& r : s.resident) st.stale += r.generation != s.generation;
   return st;
 }
 

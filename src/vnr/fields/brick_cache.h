@@ -45,8 +45,9 @@ uint64_t parse_cache_budget(const std::string& text);
 
 struct BrickCacheStats {
   int64_t resident = 0, decoded = 0, evicted = 0;  // bricks in the pool now, decoded and evicted so far
-  int64_t requested = 0;                           // bricks asked for and not decoded yet
+  int64_t requested = 0;  // bricks asked for and left for later frames (0 when the budget is full)
   int64_t misses = 0;  // samples of the current frame (since begin_frame) that read the source
+  int64_t stale = 0;   // resident bricks decoded from an earlier model (model_changed)
   uint64_t pool_bytes = 0, budget_bytes = 0;
   int levels = 0;
   double decode_seconds = 0;  // in begin_frame, all frames
@@ -64,15 +65,22 @@ public:
   int64_t render_inshader(const InshaderJob& job) const override;
   void begin_frame(const RenderParams& p) const override;
   // The GPU draws the source (the cache lives on the host).
-  GpuFieldSource gpu_source() const override { return source_.gpu_source(); }
+  GpuFieldSource gpu_source() const override { return source_->gpu_source(); }
   float point(float x, float y, float z) const override;
 
   // Decodes every brick requested so far, however long it takes (tests, benchmarks' warm cache).
   void decode_pending() const;
-  // Drops every decoded brick (a model that changed: training in the loop).
+  // Drops every decoded brick.
   void clear() const;
+  // Misses read `source` from now on. With `model_changed` (training in the loop) every decoded brick
+  // is stale: still read, and decoded again in the frame budget new bricks leave, the bricks the last
+  // frame read first, nearest first.
+  void replace_source(const RenderableField& source, bool model_changed) const;
+  // Grows whenever a brick is decoded: an image accumulated over frames restarts when it changes.
+  uint64_t content_version() const;
   BrickCacheStats stats() const;
   const BrickCacheSettings& settings() const { return settings_; }
+  void set_decode_seconds(double seconds) const { settings_.decode_seconds = seconds; }  // per frame from now on
   const BrickCacheView& view() const;  // what lookups read (fields/brick_cache_view.h)
 
   struct State;  // brick_cache.cpp: levels, page tables, pool, requests
@@ -81,14 +89,17 @@ private:
   // Decodes brick b of level l into a pool slot (evicting the least recently used brick not read by
   // the last frame when the budget is full); false when every resident brick is still in use.
   bool decode_brick(int l, int64_t b) const;
+  // Decodes resident brick r again (model_changed).
+  void refresh_brick(size_t r) const;
   // Decodes the bricks asked for, nearest the camera first, until `seconds` have passed (< 0: all).
   void decode_asked(double seconds) const;
   void update_levels(const RenderParams& p) const;
+  float brick_distance(int level, int64_t brick) const;  // of its centre from the last view's eye (world units)
 
-  const RenderableField& source_;
+  mutable const RenderableField* source_;  // model_changed replaces it
   VoxelDecode decode_;
   Int3 dims_;
-  BrickCacheSettings settings_;
+  mutable BrickCacheSettings settings_;  // decode_seconds can change between frames
   std::unique_ptr<State> s_;
 };
 
