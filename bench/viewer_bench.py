@@ -102,9 +102,7 @@ def release_to_refined(b, repeats):
                      all(abs(a - c) < 1e-3 for a, c in zip(s["camera"]["eye"], last_cam["msg"]["eye"])))
         # With the brick cache every frame is full size: the final camera's may come before the release.
         frame = next((f for f in frames_of(trace) if f["header"]["refined"] and f["header"]["version"] >= state["version"]), None)
-        if frame is None:
-            print("DEBUG", state["version"], state["t"], released, [(f["t"], f["header"]["version"], f["header"]["refined"]) for f in frames_of(trace)][-6:], len(trace), file=sys.stderr)
-            print("DEBUG2", [(e["kind"], e["t"], e.get("version")) for e in trace if e["kind"] != "frame"][-8:], file=sys.stderr)
+        if frame is None:  # that frame arrived before the trace caught the state: this repeat does not count
             continue
         out.append(max(0.0, frame["t"] - released))
     return out
