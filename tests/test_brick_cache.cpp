@@ -10,6 +10,7 @@
 #include "vnr/core/error.h"
 #include "vnr/core/rng.h"
 #include "vnr/core/value_range_grid.h"
+#include "vnr/api/model_field.h"
 #include "vnr/fields/brick_cache.h"
 #include "vnr/render/renderer.h"
 #include "vnr/renderer.h"
@@ -273,4 +274,109 @@ TEST(BrickCache, AChangedModelRefreshesItsBricksWithinTheFrameBudget) {
   EXPECT_GT(cache.content_version(), version);
   cache.query(x.data(), y.data(), z.data(), int64_t(x.size()), v.data());
   for (size_t i = 0; i < x.size(); ++i) ASSERT_EQ(v[i], grid_lookup(view_of(b), x[i], y[i], z[i]));
+}
+
+TEST(BrickCache, RefreshChangesExactlyTheRefreshedBricks) {
+  Volume a = synth(Int3{32, 32, 32}), b = a;
+  for (float& v : b.data) v = 1 - v;
+  GridField field_a(view_of(a)), field_b(view_of(b));
+  const Volume* current = &a;
+  VoxelDecode decode = [&](Int3 dims, const int64_t* index, int64_t n, float* out) { grid_decode(*current)(dims, index, n, out); };
+  BrickCacheSettings s = level0(8);
+  s.decode_seconds = 100;
+  CachedField cache(field_a, decode, a.dims, s);
+  const RenderParams p = params_for(orbit_camera(box_of(a), 0, 0, 30), a.dims, 64, 64);
+  // One sample at the centre of each of the 64 bricks.
+  std::vector<float> x, y, z;
+  for (int k = 0; k < 4; ++k)
+    for (int j = 0; j < 4; ++j)
+      for (int i = 0; i < 4; ++i) x.push_back((8.0f * i + 4) / 32), y.push_back((8.0f * j + 4) / 32), z.push_back((8.0f * k + 4) / 32);
+  std::vector<float> v(64);
+  cache.begin_frame(p);
+  cache.query(x.data(), y.data(), z.data(), 64, v.data());
+  cache.begin_frame(p);
+  ASSERT_EQ(cache.stats().resident, 64);
+  current = &b;
+  cache.replace_source(field_b, true);
+  cache.set_decode_seconds(1e-9);  // one brick a frame
+  for (int frame = 1; frame <= 3; ++frame) {
+    cache.query(x.data(), y.data(), z.data(), 64, v.data());
+    cache.begin_frame(p);
+    EXPECT_EQ(cache.stats().stale, 64 - frame);
+    cache.query(x.data(), y.data(), z.data(), 64, v.data());
+    int changed = 0;
+    for (int i = 0; i < 64; ++i) {
+      const float old_value = grid_lookup(view_of(a), x[i], y[i], z[i]), new_value = grid_lookup(view_of(b), x[i], y[i], z[i]);
+      ASSERT_TRUE(v[i] == old_value || v[i] == new_value);
+      changed += v[i] == new_value;
+    }
+    EXPECT_EQ(changed, frame) << "exactly the refreshed bricks read the new model";
+  }
+}
+
+TEST(BrickCache, UnderATinyBudgetCoarserLevelsCoverEverySample) {
+  Volume vol = synth(Int3{40, 36, 32});
+  GridField grid(view_of(vol));
+  BrickCacheSettings s = level0(8, 3 * 9 * 9 * 9 * sizeof(float));  // the root and two bricks
+  s.misses = CacheMisses::Coarser;
+  s.decode_seconds = 100;
+  CachedField cache(grid, grid_decode(vol), vol.dims, s);
+  TransferFunction tf = tf_preset("ramp");
+  MacroCells mc(value_ranges_from_grid(view_of(vol), 8), box_of(vol));
+  mc.update(tf);
+  RenderOptions o;
+  o.width = 48, o.height = 40;
+  o.strategy = RenderStrategy::InShader;
+  for (int frame = 0; frame < 4; ++frame) {
+    const Camera cam = orbit_camera(box_of(vol), 30.0f + 50.0f * float(frame), 20, 30);
+    Image img = CpuRenderer(cache, box_of(vol), mc, tf, cam, o).render(1);
+    Image ref = CpuRenderer(grid, box_of(vol), mc, tf, cam, o).render(1);
+    EXPECT_EQ(cache.stats().misses, 0) << "no hole: every sample read a decoded level";
+    EXPECT_GT(compare_images(img, ref).psnr, 20.0) << "coarser levels look like the volume";
+    EXPECT_LE(cache.stats().pool_bytes, s.budget_bytes);
+  }
+}
+
+TEST(BrickCache, AModelsCacheEqualsItsDecodeAndRendersAsTheDecodedGrid) {
+  Volume vol = synth(Int3{28, 24, 20});
+  Json cfg = {{"encoding", {{"otype", "HashGrid"}, {"n_levels", 4}, {"n_features_per_level", 2},
+                            {"log2_hashmap_size", 12}, {"base_resolution", 4}}},
+              {"network", {{"otype", "FullyFusedMLP"}, {"n_neurons", 16}, {"n_hidden_layers", 1}}},
+              {"loss", {{"otype", "L2"}}},
+              {"optimizer", {{"otype", "Adam"}, {"learning_rate", 1e-2}}}};
+  Model model = create_model(ModelConfig::from_json(cfg), vol);
+  CpuTrainer trainer(*model.net, std::make_shared<InCoreSampler>(vol), TrainOptions{8192, 3});
+  for (int i = 0; i < 50; ++i) trainer.step();
+  NetworkField field(*model.net, model.dims);
+  BrickCacheSettings s = level0(8);
+  s.decode_seconds = 100;
+  std::unique_ptr<CachedField> cache = make_model_cache(model, field, s);
+  Volume decoded;
+  decoded.dims = model.dims;
+  decoded.data.resize(size_t(model.dims.count()));
+  Decoder(model, Device::Cpu).slices(model.dims, 0, model.dims.z, decoded.data.data());
+  GridField grid(view_of(decoded));
+  TransferFunction tf = tf_preset("ramp");
+  MacroCells mc = MacroCells::single(model.dims, box_of(vol));
+  mc.update(tf);
+  RenderOptions o;
+  o.width = 40, o.height = 32;
+  o.strategy = RenderStrategy::InShader;
+  const Camera cam = orbit_camera(box_of(vol), 25, 15, 30);
+  cache->begin_frame(params_for(cam, model.dims, o.width, o.height));
+  Pcg32 rng(4);
+  std::vector<float> x(3000), y(3000), z(3000), v(3000);
+  for (size_t i = 0; i < x.size(); ++i) x[i] = rng.next_float(), y[i] = rng.next_float(), z[i] = rng.next_float();
+  cache->query(x.data(), y.data(), z.data(), int64_t(x.size()), v.data());  // asks for every brick
+  cache->decode_pending();
+  cache->begin_frame(params_for(cam, model.dims, o.width, o.height));
+  cache->query(x.data(), y.data(), z.data(), int64_t(x.size()), v.data());
+  EXPECT_EQ(cache->stats().misses, 0);
+  for (size_t i = 0; i < x.size(); ++i) ASSERT_EQ(v[i], grid_lookup(view_of(decoded), x[i], y[i], z[i])) << i;
+  for (bool packets : {false, true}) {
+    o.ray_packets = packets;
+    EXPECT_TRUE(same_image(CpuRenderer(*cache, box_of(vol), mc, tf, cam, o).render(2),
+                           CpuRenderer(grid, box_of(vol), mc, tf, cam, o).render(2)))
+        << "packets " << packets;
+  }
 }

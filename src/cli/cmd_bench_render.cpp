@@ -39,7 +39,7 @@ struct CellTimer {
   Renderer& r;
   int macrocell_size, warmup, frames;
   float elevation, fovy;
-  uint64_t cache_budget;
+  BrickCacheSettings cache_settings;  // of the cache cells
 
   Camera camera_of(int i) const {
     return orbit_camera(r.box(), 360.0f * float(i) / float(frames), elevation, fovy);
@@ -48,9 +48,7 @@ struct CellTimer {
     r.set_options(o);
     r.set_macrocells(mc, macrocell_size);
     if (cache) {  // a fresh cache, warmed at every camera of the orbit: what a view that has settled reads
-      BrickCacheSettings s;
-      s.budget_bytes = cache_budget;
-      r.set_cache(s);
+      r.set_cache(cache_settings);
       for (int i = 0; i < frames; ++i) r.set_camera(camera_of(i)), r.warm_cache();
     } else {
       r.set_cache(std::nullopt);
@@ -170,6 +168,8 @@ void add_bench_render(CLI::App& bench) {
     if (with == MacroCellMode::Off)
       fail("no macro-cells to compare with: give a model trained by vnr (online ranges) or --volume");
     r.set_macrocells(with, a->r.macrocell_size);
+    BrickCacheSettings cache = r.cache().value_or(BrickCacheSettings{});  // --cache-budget, --cache-dims
+    cache.budget_bytes = parse_cache_budget(a->r.cache_budget);
     r.set_cache(std::nullopt);  // the cells choose; the raw rate is the model's own field
     r.prepare();  // a setting that cannot be rendered fails before the table starts
 
@@ -177,7 +177,7 @@ void add_bench_render(CLI::App& bench) {
     // `vnr bench infer --device cuda` reports as resident); 0 = not measured (the grid on the GPU).
     const double raw = field_query_rate(r, 2.0);
     const CellTimer time_cell{r,           a->r.macrocell_size, a->warmup, a->frames, cr.orbit_elevation, a->r.fovy,
-                              parse_cache_budget(a->r.cache_budget)};
+                              cache};
 
     Json report;
     report["input"] = cr.input->description;

@@ -125,11 +125,18 @@ class ModelView(ViewerTestCase):
         shot = self.settled_screenshot("drag")
         before = self.state()
         canvas = self.browser.driver.find_element("id", "canvas-main")
+        self.browser.js("vnrViewer.tracing = true;")
         ActionChains(self.browser.driver).move_to_element(canvas).click_and_hold() \
             .move_by_offset(40, 0).move_by_offset(40, 15).move_by_offset(30, 10).release().perform()
         self.wait_state(f"s.version > {before['version']} && s.camera.eye[0] !== {before['camera']['eye'][0]}",
                         "the camera to change")
-        # the drag sent coarse frames (interacting), then a refined one
+        # From the brick cache, frames stay at full resolution while the camera moves.
+        frames = self.browser.js("const t = vnrViewer.trace; vnrViewer.tracing = false;"
+                                 " return t.filter(e => e.kind === 'frame' && e.header.view === 'network')"
+                                 ".map(e => [e.header.width, e.header.refined, e.header.cache !== null]);")
+        width = self.state()["viewport"]["width"]
+        self.assertTrue(frames, "frames came during the drag")
+        self.assertTrue(all(f == [width, True, True] for f in frames), f"full-size cached frames: {frames[:5]}")
         self.assert_matches_render("drag", MODEL, previous_shot=shot)
 
     def test_3_shadow_mode(self):

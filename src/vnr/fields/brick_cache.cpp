@@ -285,8 +285,8 @@ void CachedField::decode_asked(double seconds) const {
     stale.emplace_back((read ? 0.0f : 1e30f) + brick_distance(res.level, res.brick), r);
   }
   std::sort(stale.begin(), stale.end());
-  for (const auto& [priority, r] : stale) {
-    if (seconds >= 0 && seconds_since(t0) >= seconds) break;
+  for (const auto& [priority, r] : stale) {  // at least one brick a frame, new or refreshed
+    if (seconds >= 0 && (done > 0 || r != stale.front().second) && seconds_since(t0) >= seconds) break;
     refresh_brick(r);
   }
   s.totals.decode_seconds += seconds_since(t0);
