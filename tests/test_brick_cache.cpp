@@ -239,6 +239,9 @@ TEST(BrickCache, ATrainedModelRendersFromItsCacheAsItsNetworkDoes) {
   EXPECT_GT(psnr, 40.0);
   EXPECT_EQ(cached.cache_stats().misses, 0) << "a warm cache answers the whole view";
   EXPECT_THROW(cached.choose_strategy("fastest"), Error);
+  cached.choose_strategy("auto", 0, Int3{0, 0, 0}, 1);  // one frame: warming would cost more than it saves
+  EXPECT_FALSE(cached.cache().has_value());
+  EXPECT_STREQ(cached.field().kind(), "network");
   Renderer volume_renderer(vol, Device::Cpu);
   EXPECT_THROW(volume_renderer.choose_strategy("cache"), Error);
   volume_renderer.choose_strategy("auto");

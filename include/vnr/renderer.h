@@ -91,15 +91,19 @@ public:
   // nothing to cache. The cache is kept across every other setting.
   void set_cache(std::optional<BrickCacheSettings> settings);
   const std::optional<BrickCacheSettings>& cache() const { return cache_settings_; }
-  // A front end's --strategy: "auto" (the brick cache for a model on the CPU, then the faster execution
-  // strategy for the field), "cache" (the cache with that), "streaming" or "inshader" (no cache).
-  // cache_budget: bytes of the cache's pool (0 = default_cache_budget()); cache_dims: the voxels the
-  // cache decodes the model at (0 = the model's dims; larger shows more than the model was trained at).
-  void choose_strategy(const std::string& choice, uint64_t cache_budget = 0, Int3 cache_dims = {0, 0, 0});
+  // A front end's --strategy: "auto" (the brick cache for a model on the CPU when `frames` will be
+  // accumulated, 0 = unknown, at least kCacheFrames: warming it costs about ten network frames; then
+  // the faster execution strategy for the field), "cache" (the cache with that), "streaming" or
+  // "inshader" (no cache). cache_budget: bytes of the cache's pool (0 = default_cache_budget());
+  // cache_dims: the voxels the cache decodes the model at (0 = the model's dims; any size).
+  static constexpr int kCacheFrames = 8;
+  void choose_strategy(const std::string& choice, uint64_t cache_budget = 0, Int3 cache_dims = {0, 0, 0},
+                       int frames = 0);
   // With a cache: renders one frame of the current view (not accumulated) and decodes every brick it
   // asked for, so the frames after it read the cache alone (vnr render, Python render and benchmarks do
-  // this before accumulating; an interactive loop does not). No-op without a cache.
-  void warm_cache();
+  // this before accumulating; an interactive loop does not). No-op without a cache. progress(done,
+  // total) after each brick.
+  void warm_cache(const std::function<void(int64_t, int64_t)>& progress = {});
   BrickCacheStats cache_stats() const;  // zeros without a cache
   void set_macrocells(MacroCellMode mode, int cell_size = 16);
   void set_step(float step, float step_max = 0);  // voxels; step_max 0 = 16 x step

@@ -112,13 +112,17 @@ void add_render(CLI::App& app) {
     if (!(a->converge.noise >= 0)) fail("--noise must be at least 0, got {}", a->converge.noise);
     if (a->converge.max_frames < a->converge.min_frames)
       fail("--max-spp must be at least {}, got {}", a->converge.min_frames, a->converge.max_frames);
-    CliRender cr = open_cli_render(a->input, a->r, a->vol);
+    CliRender cr = open_cli_render(a->input, a->r, a->vol, spp);
     Renderer& r = *cr.renderer;
     std::optional<Image> reference;
     if (!a->reference.empty()) reference = read_image(a->reference);
     r.prepare();
     const auto t_cache = std::chrono::steady_clock::now();
-    r.warm_cache();  // the view's bricks decoded before accumulating: every frame reads the cache
+    {  // the view's bricks decoded before accumulating: every frame reads the cache
+      Progress warm("cache", 1, a->quiet);
+      r.warm_cache([&](int64_t done, int64_t total) { warm.update(double(done) / double(total), fmt::format("{} of {} bricks", done, total)); });
+      if (r.cache()) warm.finish();
+    }
     const double cache_seconds = seconds_since(t_cache);
     if (reference && (reference->width != r.options().width || reference->height != r.options().height))
       fail("the --reference image '{}' has size {}x{}, the render is {}x{}", a->reference, reference->width,

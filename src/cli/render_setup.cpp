@@ -37,7 +37,7 @@ std::optional<Camera> parse_camera(const RenderArgs& a, const Scene& scene, Vec3
 
 }  // namespace
 
-CliRender open_cli_render(const std::string& input, const RenderArgs& a, const VolumeArgs& va) {
+CliRender open_cli_render(const std::string& input, const RenderArgs& a, const VolumeArgs& va, int frames) {
   CliRender c;
   c.input = std::make_unique<RenderInput>(open_render_input(input, a.volume, va.open(), parse_precision(a.precision)));
   RenderOptions o;
@@ -86,7 +86,7 @@ CliRender open_cli_render(const std::string& input, const RenderArgs& a, const V
     if (!model) fail("--cache-dims is for models (a volume is drawn directly)");
     cache_dims = Int3{d[0], d[1], d[2]};
   }
-  r.choose_strategy(a.strategy, parse_cache_budget(a.cache_budget), cache_dims);
+  r.choose_strategy(a.strategy, parse_cache_budget(a.cache_budget), cache_dims, frames);
   if (cache_dims.count() > 0 && !r.cache()) fail("--cache-dims needs the brick cache (--strategy cache or auto on the CPU)");
   if (model && model->residuals)
     std::fprintf(stderr, "note: %s\n",

@@ -17,6 +17,8 @@ struct CliRender {
 // Opens the input (with --volume as its ground truth), chooses the device (auto's fallback to the CPU
 // is printed as a note) and applies every rendering option; the scene (--scene, else the input's)
 // fills in what the options leave out.
-CliRender open_cli_render(const std::string& input, const RenderArgs& a, const VolumeArgs& va);
+// frames: how many will be accumulated (0 = unknown, e.g. --spp auto): --strategy auto takes the brick
+// cache only where it pays (Renderer::choose_strategy).
+CliRender open_cli_render(const std::string& input, const RenderArgs& a, const VolumeArgs& va, int frames = 0);
 
 }  // namespace vnr::cli

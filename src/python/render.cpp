@@ -91,7 +91,7 @@ pyb::array_t<float> render(const Model* model, const Volume* volume, const Rende
   r->set_transfer_function(tf);
   r->set_camera(camera_of(a, r->box()));
   r->set_options(o);
-  r->choose_strategy(a.strategy);
+  r->choose_strategy(a.strategy, 0, Int3{0, 0, 0}, a.spp);
   r->set_macrocells(mc, 16);
   r->prepare();
   r->warm_cache();

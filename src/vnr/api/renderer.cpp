@@ -121,7 +121,7 @@ void Renderer::set_cache(std::optional<BrickCacheSettings> settings) {
   invalidate();
 }
 
-void Renderer::choose_strategy(const std::string& choice, uint64_t cache_budget, Int3 cache_dims) {
+void Renderer::choose_strategy(const std::string& choice, uint64_t cache_budget, Int3 cache_dims, int frames) {
   const std::string c = to_lower(choice);
   if (c != "auto" && c != "cache" && c != "streaming" && c != "inshader")
     fail("unknown render strategy '{}' (expected auto, cache, streaming or inshader)", choice);
@@ -132,15 +132,16 @@ void Renderer::choose_strategy(const std::string& choice, uint64_t cache_budget,
   BrickCacheSettings cache;
   cache.budget_bytes = cache_budget;
   cache.dims = cache_dims;
-  if (c == "cache" || (model_ && device_ == Device::Cpu)) set_cache(cache);
+  const bool pays = frames == 0 || frames >= kCacheFrames || cache_dims.count() > 0;
+  if (c == "cache" || (model_ && device_ == Device::Cpu && pays)) set_cache(cache);
   else set_cache(std::nullopt);
   set_strategy(automatic_strategy());
 }
 
-void Renderer::warm_cache() {
+void Renderer::warm_cache(const std::function<void(int64_t, int64_t)>& progress) {
   if (!cached_) return;
   backend().render_frame(0, frame_);
-  cached_->decode_pending();
+  cached_->decode_pending(progress);
 }
 
 BrickCacheStats Renderer::cache_stats() const { return cached_ ? cached_->stats() : BrickCacheStats{}; }

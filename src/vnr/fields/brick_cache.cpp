@@ -255,7 +255,7 @@ float CachedField::brick_distance(int level, int64_t brick) const {
   return length(c - s_->lod_cam.eye);
 }
 
-void CachedField::decode_asked(double seconds) const {
+void CachedField::decode_asked(double seconds, const std::function<void(int64_t, int64_t)>& progress) const {
   State& s = *s_;
   const auto t0 = std::chrono::steady_clock::now();
   std::vector<BrickKey> todo;
@@ -273,6 +273,7 @@ void CachedField::decode_asked(double seconds) const {
       full = true;
       break;
     }
+    if (progress) progress(int64_t(done + 1), int64_t(todo.size()));
   }
   s.totals.requested = full ? 0 : int64_t(todo.size() - done);
   // Stale bricks in the time left: those the last frame read first, then the nearest.
@@ -329,7 +330,9 @@ void CachedField::begin_frame(const RenderParams& p) const {
   s.view.frame += 1;
 }
 
-void CachedField::decode_pending() const { decode_asked(-1); }
+void CachedField::decode_pending(const std::function<void(int64_t, int64_t)>& progress) const {
+  decode_asked(-1, progress);
+}
 
 void CachedField::clear() const {
   State& s = *s_;

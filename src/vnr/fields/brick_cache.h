@@ -68,8 +68,9 @@ public:
   GpuFieldSource gpu_source() const override { return source_->gpu_source(); }
   float point(float x, float y, float z) const override;
 
-  // Decodes every brick requested so far, however long it takes (tests, benchmarks' warm cache).
-  void decode_pending() const;
+  // Decodes every brick requested so far, however long it takes (tests, benchmarks' warm cache);
+  // progress(done, total) after each brick.
+  void decode_pending(const std::function<void(int64_t, int64_t)>& progress = {}) const;
   // Drops every decoded brick.
   void clear() const;
   // Misses read `source` from now on. With `model_changed` (training in the loop) every decoded brick
@@ -92,7 +93,7 @@ private:
   // Decodes resident brick r again (model_changed).
   void refresh_brick(size_t r) const;
   // Decodes the bricks asked for, nearest the camera first, until `seconds` have passed (< 0: all).
-  void decode_asked(double seconds) const;
+  void decode_asked(double seconds, const std::function<void(int64_t, int64_t)>& progress = {}) const;
   void update_levels(const RenderParams& p) const;
   float brick_distance(int level, int64_t brick) const;  // of its centre from the last view's eye (world units)
 
