@@ -207,6 +207,8 @@ TEST(BrickCache, RejectsBadSettingsWithOneClearError) {
   s.brick = 8;
   s.budget_bytes = 100;  // less than one brick
   EXPECT_THROW(CachedField(grid, grid_decode(vol), vol.dims, s), Error);
+  s.budget_bytes = uint64_t(64) << 20;  // an index of 512^3 bricks (16384^3 voxels) would need ~2 GiB
+  EXPECT_THROW(CachedField(grid, grid_decode(vol), Int3{16384, 16384, 16384}, s), Error);
   EXPECT_EQ(parse_cache_budget("512MiB"), uint64_t(512) << 20);
   EXPECT_EQ(parse_cache_budget("auto"), default_cache_budget());
   EXPECT_THROW(parse_cache_budget("lots"), Error);

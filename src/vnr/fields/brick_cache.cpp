@@ -112,6 +112,14 @@ CachedField::CachedField(const RenderableField& source, VoxelDecode decode, Int3
   s.slots = int32_t(std::min<uint64_t>(settings_.budget_bytes / brick_bytes, uint64_t(INT32_MAX) / uint64_t(v.brick_floats)));
   s.pool.reset(new float[size_t(s.slots) * size_t(v.brick_floats)]);  // not touched: committed as bricks are written
   v.pool = s.pool.get();
+  // The index (per brick of every level: slot and two stamps; per level-0 brick: its level) lives
+  // outside the pool: it must not outgrow it (a resolution far beyond what the budget can show).
+  const double level0_bricks = double(ceil_div(dims.x, B)) * double(ceil_div(dims.y, B)) * double(ceil_div(dims.z, B));
+  const double index_bytes = level0_bricks * (8.0 / 7.0 * 12.0 + 4.0);
+  if (index_bytes > double(settings_.budget_bytes))
+    fail("a brick cache of {}x{}x{} voxels needs {} for its index alone, more than its budget of {}: give a "
+         "larger budget or a smaller resolution", dims.x, dims.y, dims.z, human_bytes(index_bytes),
+         human_bytes(double(settings_.budget_bytes)));
   for (int l = 0;; ++l) {  // down to a level that is one brick
     if (l == BrickCacheView::kMaxLevels) fail("a brick cache of {}x{}x{} voxels needs too many levels", dims.x, dims.y, dims.z);
     Level L;
