@@ -115,7 +115,9 @@ void Renderer::set_cache(std::optional<BrickCacheSettings> settings) {
   cache_settings_ = settings;
   if (settings) {
     if (!model_) fail("the brick cache is for models: a volume is drawn directly");
-    if (device_ == Device::Cuda) fail("the brick cache renders on the CPU (the GPU draws the network directly); use --device cpu or another --strategy");
+    if (device_ == Device::Cuda)
+      fail("the brick cache renders on the CPU (the GPU draws the network directly); use --device cpu or "
+           "another --strategy");
     cached_ = make_model_cache(*model_, *field_, *settings);
   }
   invalidate();

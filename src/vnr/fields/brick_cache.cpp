@@ -3,6 +3,7 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <new>
 #include "vnr/core/error.h"
 #include "vnr/core/grid_view.h"
 #include "vnr/core/parallel.h"
@@ -54,7 +55,7 @@ struct CachedField::State {
     int32_t slot;
     uint32_t generation;  // of the model it was decoded from
   };
-  uint32_t generation = 0;  // grows with model_changed
+  uint32_t generation = 0;  // grows with replace_source(..., true)
   uint64_t version = 0;     // grows with every brick decoded
   std::vector<Resident> resident;
   std::mutex asked_mutex;
@@ -110,7 +111,11 @@ CachedField::CachedField(const RenderableField& source, VoxelDecode decode, Int3
     fail("a cache budget of {} holds no brick of {}^3 voxels ({})", human_bytes(double(settings_.budget_bytes)), B + 1,
          human_bytes(double(brick_bytes)));
   s.slots = int32_t(std::min<uint64_t>(settings_.budget_bytes / brick_bytes, uint64_t(INT32_MAX) / uint64_t(v.brick_floats)));
-  s.pool.reset(new float[size_t(s.slots) * size_t(v.brick_floats)]);  // not touched: committed as bricks are written
+  try {  // not touched here: the OS commits the pages as bricks are written
+    s.pool.reset(new float[size_t(s.slots) * size_t(v.brick_floats)]);
+  } catch (const std::bad_alloc&) {
+    fail("cannot reserve {} for the brick cache: give a smaller cache budget", human_bytes(double(settings_.budget_bytes)));
+  }
   v.pool = s.pool.get();
   // The index (per brick of every level: slot and two stamps; per level-0 brick: its level) lives
   // outside the pool: it must not outgrow it (a resolution far beyond what the budget can show).
