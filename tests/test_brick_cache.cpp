@@ -216,12 +216,7 @@ TEST(BrickCache, RejectsBadSettingsWithOneClearError) {
 
 TEST(BrickCache, ATrainedModelRendersFromItsCacheAsItsNetworkDoes) {
   Volume vol = synth(Int3{32, 32, 32});
-  Json cfg = {{"encoding", {{"otype", "HashGrid"}, {"n_levels", 4}, {"n_features_per_level", 2},
-                            {"log2_hashmap_size", 14}, {"base_resolution", 4}}},
-              {"network", {{"otype", "FullyFusedMLP"}, {"n_neurons", 32}, {"n_hidden_layers", 2}}},
-              {"loss", {{"otype", "L2"}}},
-              {"optimizer", {{"otype", "Adam"}, {"learning_rate", 1e-2}}}};
-  Model model = create_model(ModelConfig::from_json(cfg), vol);
+  Model model = create_model(ModelConfig::from_json(small_hash_config(14, 32, 2)), vol);
   CpuTrainer trainer(*model.net, std::make_shared<InCoreSampler>(vol), TrainOptions{16384, 3});
   for (int i = 0; i < 200; ++i) trainer.step();
   Renderer direct(model, Device::Cpu), cached(model, Device::Cpu);
@@ -344,12 +339,7 @@ TEST(BrickCache, UnderATinyBudgetCoarserLevelsCoverEverySample) {
 
 TEST(BrickCache, AModelsCacheEqualsItsDecodeAndRendersAsTheDecodedGrid) {
   Volume vol = synth(Int3{28, 24, 20});
-  Json cfg = {{"encoding", {{"otype", "HashGrid"}, {"n_levels", 4}, {"n_features_per_level", 2},
-                            {"log2_hashmap_size", 12}, {"base_resolution", 4}}},
-              {"network", {{"otype", "FullyFusedMLP"}, {"n_neurons", 16}, {"n_hidden_layers", 1}}},
-              {"loss", {{"otype", "L2"}}},
-              {"optimizer", {{"otype", "Adam"}, {"learning_rate", 1e-2}}}};
-  Model model = create_model(ModelConfig::from_json(cfg), vol);
+  Model model = create_model(ModelConfig::from_json(small_hash_config(12, 16, 1)), vol);
   CpuTrainer trainer(*model.net, std::make_shared<InCoreSampler>(vol), TrainOptions{8192, 3});
   for (int i = 0; i < 50; ++i) trainer.step();
   NetworkField field(*model.net, model.dims);

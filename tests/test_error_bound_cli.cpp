@@ -66,7 +66,7 @@ TEST(ErrorBoundCli, Float32BoundHoldsThroughFileDecodeAndEval) {
   EXPECT_NEAR(parse_json_file(d + "/e.json")["error_bound"]["max_error"].get<double>(), bound, 1e-12 * bound);
   // Rendered from the brick cache (the default on the CPU), the residuals apply at full resolution: the
   // image is closer to the volume's than the network's alone (--strategy streaming), and both say so.
-  const std::string view = " --size 48x48 --spp 4 --seed 2 --device cpu -q";
+  const std::string view = " --size 48x48 --spp 8 --seed 2 --device cpu -q";  // 8 frames: auto takes the cache
   ASSERT_EQ(run("render " + d + "/ml.json -o " + d + "/truth.pfm" + view).code, 0);
   Result r = run("render " + d + "/ml.vnr -o " + d + "/ml.pfm --reference " + d + "/truth.pfm --report " + d + "/rc.json" + view);
   ASSERT_EQ(r.code, 0) << r.err;

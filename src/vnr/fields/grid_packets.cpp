@@ -155,15 +155,7 @@ struct CacheLanes {
       const VI row = hn::Add(base, hn::Add(k & 1 ? dy : hn::Zero(di), k & 2 ? dz : hn::Zero(di)));
       GatherPairs(df, c.pool, row, &v[2 * k], &v[2 * k + 1]);
     }
-    const auto one = hn::Set(df, 1.0f);
-    const auto u0 = hn::Sub(one, t[0]), u1 = hn::Sub(one, t[1]), u2 = hn::Sub(one, t[2]);
-    const auto c00 = hn::Add(hn::Mul(v[0], u0), hn::Mul(v[1], t[0]));
-    const auto c10 = hn::Add(hn::Mul(v[2], u0), hn::Mul(v[3], t[0]));
-    const auto c01 = hn::Add(hn::Mul(v[4], u0), hn::Mul(v[5], t[0]));
-    const auto c11 = hn::Add(hn::Mul(v[6], u0), hn::Mul(v[7], t[0]));
-    const auto c0 = hn::Add(hn::Mul(c00, u1), hn::Mul(c10, t[1]));
-    const auto c1 = hn::Add(hn::Mul(c01, u1), hn::Mul(c11, t[1]));
-    const VF value = hn::Add(hn::Mul(c0, u2), hn::Mul(c1, t[2]));
+    const VF value = TrilinearCornersVec(df, v, t);
     return miss ? scalar(df, ux, uy, uz, miss, value) : value;
   }
 };

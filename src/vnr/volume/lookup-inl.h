@@ -48,6 +48,22 @@ HWY_INLINE void GridPrefetchVec(DF df, const GridView& g, hwy::HWY_NAMESPACE::Ve
   }
 }
 
+// trilinear_corners() per lane: the 8 corners v[x + 2y + 4z], the upper corners' weights t per axis.
+template <class DF>
+HWY_INLINE hwy::HWY_NAMESPACE::Vec<DF> TrilinearCornersVec(DF df, const hwy::HWY_NAMESPACE::Vec<DF>* v,
+                                                           const hwy::HWY_NAMESPACE::Vec<DF>* t) {
+  namespace hn = hwy::HWY_NAMESPACE;
+  const auto one = hn::Set(df, 1.0f);
+  const auto u0 = hn::Sub(one, t[0]), u1 = hn::Sub(one, t[1]), u2 = hn::Sub(one, t[2]);
+  const auto c00 = hn::Add(hn::Mul(v[0], u0), hn::Mul(v[1], t[0]));
+  const auto c10 = hn::Add(hn::Mul(v[2], u0), hn::Mul(v[3], t[0]));
+  const auto c01 = hn::Add(hn::Mul(v[4], u0), hn::Mul(v[5], t[0]));
+  const auto c11 = hn::Add(hn::Mul(v[6], u0), hn::Mul(v[7], t[0]));
+  const auto c0 = hn::Add(hn::Mul(c00, u1), hn::Mul(c10, t[1]));
+  const auto c1 = hn::Add(hn::Mul(c01, u1), hn::Mul(c11, t[1]));
+  return hn::Add(hn::Mul(c0, u2), hn::Mul(c1, t[2]));
+}
+
 // grid_lookup() for a vector of points. kPairs (volumes at least 2 voxels wide in x): each pair of
 // x-neighbours loads as one 64-bit element (GatherPairs), half the gathered elements. The lower x
 // corner is then clamped to N-2, so at q = N-1 the pair is (N-2, N-1) with weight 1 on the last
@@ -59,7 +75,6 @@ HWY_INLINE hwy::HWY_NAMESPACE::Vec<DF> GridLookupVec(DF df, const GridView& g, h
   namespace hn = hwy::HWY_NAMESPACE;
   const hn::RebindToSigned<DF> di;
   using VI = hn::Vec<decltype(di)>;
-  const auto one = hn::Set(df, 1.0f);
   const auto sy = hn::Set(di, g.nx), sz = hn::Set(di, g.nx * g.ny), ione = hn::Set(di, 1);
   const hn::Vec<DF> u[3] = {ux, uy, uz};
   const int32_t dims[3] = {g.nx, g.ny, g.nz};
@@ -88,15 +103,7 @@ HWY_INLINE hwy::HWY_NAMESPACE::Vec<DF> GridLookupVec(DF df, const GridView& g, h
       v[2 * k + 1] = hn::GatherIndex(df, g.data, hn::Add(i1[0], row));
     }
   }
-  // trilinear_corners()
-  const auto u0 = hn::Sub(one, t[0]), u1 = hn::Sub(one, t[1]), u2 = hn::Sub(one, t[2]);
-  const auto c00 = hn::Add(hn::Mul(v[0], u0), hn::Mul(v[1], t[0]));
-  const auto c10 = hn::Add(hn::Mul(v[2], u0), hn::Mul(v[3], t[0]));
-  const auto c01 = hn::Add(hn::Mul(v[4], u0), hn::Mul(v[5], t[0]));
-  const auto c11 = hn::Add(hn::Mul(v[6], u0), hn::Mul(v[7], t[0]));
-  const auto c0 = hn::Add(hn::Mul(c00, u1), hn::Mul(c10, t[1]));
-  const auto c1 = hn::Add(hn::Mul(c01, u1), hn::Mul(c11, t[1]));
-  return hn::Add(hn::Mul(c0, u2), hn::Mul(c1, t[2]));
+  return TrilinearCornersVec(df, v, t);
 }
 
 }  // namespace HWY_NAMESPACE
