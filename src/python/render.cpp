@@ -26,6 +26,8 @@ struct RenderArgs {
   uint32_t seed = 0;
   bool shade = false;
   std::optional<Vec3> background, light;
+  std::string cache_budget;                            // "" or "auto": default_cache_budget()
+  std::optional<std::tuple<int64_t, int64_t, int64_t>> cache_dims;  // (x, y, z); none: the model's dims
 };
 
 // A preset name, the JSON text of a transfer function (instantvnr's or vnr's, as --tf files hold)
@@ -91,7 +93,14 @@ pyb::array_t<float> render(const Model* model, const Volume* volume, const Rende
   r->set_transfer_function(tf);
   r->set_camera(camera_of(a, r->box()));
   r->set_options(o);
-  r->choose_strategy(a.strategy, 0, Int3{0, 0, 0}, a.spp);
+  Int3 cache_dims{0, 0, 0};
+  if (a.cache_dims) {
+    const auto [x, y, z] = *a.cache_dims;
+    if (x < 1 || y < 1 || z < 1) fail("cache_dims expects (x, y, z), positive, got ({}, {}, {})", x, y, z);
+    if (!model) fail("cache_dims is for models (a volume is drawn directly)");
+    cache_dims = Int3{x, y, z};
+  }
+  r->choose_strategy(a.strategy, parse_cache_budget(a.cache_budget), cache_dims, a.spp);
   r->set_macrocells(mc, 16);
   r->prepare();
   r->warm_cache();
@@ -112,9 +121,10 @@ void bind_render(pyb::module_& m) {
          std::pair<int, int> size, int spp, double noise, int max_spp, const std::string& device,
          const std::string& strategy,
          std::optional<std::string> macrocells, float step, uint32_t seed, bool shade, std::optional<Vec3> background,
-         std::optional<Vec3> light) {
+         std::optional<Vec3> light, const std::string& cache_budget,
+         std::optional<std::tuple<int64_t, int64_t, int64_t>> cache_dims) {
         RenderArgs a{eye, center, up, fovy, orbit, tf, mode, strategy, device, macrocells, size, spp, noise, max_spp,
-                     step, seed, shade, background, light};
+                     step, seed, shade, background, light, cache_budget, cache_dims};
         if (pyb::isinstance<ModelHolder>(target)) {
           ModelPtr h = target.cast<ModelPtr>();
           return render(&h->model, nullptr, a, &h->mutex);
@@ -126,7 +136,8 @@ void bind_render(pyb::module_& m) {
       pyb::arg("tf"), pyb::arg("mode"), pyb::arg("size"), pyb::arg("spp"), pyb::arg("noise"), pyb::arg("max_spp"),
       pyb::arg("device"), pyb::arg("strategy"),
       pyb::arg("macrocells"), pyb::arg("step"), pyb::arg("seed"), pyb::arg("shade"), pyb::arg("background"),
-      pyb::arg("light"), "The renderer behind vnr.render (which documents the arguments).");
+      pyb::arg("light"), pyb::arg("cache_budget"), pyb::arg("cache_dims"),
+      "The renderer behind vnr.render (which documents the arguments).");
 }
 
 }  // namespace vnr::py

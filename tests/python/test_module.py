@@ -101,6 +101,20 @@ def test_render_equals_cli(trained, cli):
     np.testing.assert_array_equal(image2[..., :3], read_pfm(str(d / "r2.pfm")))
 
 
+def test_render_from_the_brick_cache_equals_cli(trained, cli):
+    d = trained["dir"]
+    cli("render", trained["cli_model"], "-o", d / "c.pfm", "--size", "40x32", "--orbit", "30,20", "--strategy", "cache",
+        "--cache-dims", "40,36,30", "--cache-budget", "64MiB", "--threads", THREADS, "--spp", 8, "-q")
+    model = vnr.Model.load(trained["cli_model"])
+    image = vnr.render(model, camera=(30, 20), size=(40, 32), spp=8, device="cpu", strategy="cache",
+                       cache_dims=(40, 36, 30), cache_budget="64MiB")
+    np.testing.assert_array_equal(image[..., :3], read_pfm(str(d / "c.pfm")))
+    direct = vnr.render(model, camera=(30, 20), size=(40, 32), spp=8, device="cpu", strategy="streaming")
+    assert np.abs(image - direct).max() < 0.25 and not np.array_equal(image, direct)  # close, not the same samples
+    with pytest.raises(Exception, match="cache_dims"):
+        vnr.render(model, size=(8, 8), cache_dims=(0, 4, 4))
+
+
 def test_render_volume_equals_cli(trained, cli):
     d = trained["dir"]
     cli("render", trained["side"], "-o", d / "v.pfm", "--size", "24x20", "--threads", THREADS, "-q")

@@ -110,7 +110,8 @@ def render(target: Union[Model, Volume], camera: Union[None, Camera, dict, Tuple
            size: Tuple[int, int] = (512, 512), spp: Union[int, str] = "auto", device: str = "auto", *,
            strategy: str = "auto", macrocells: Optional[str] = None, step: float = 1.0, seed: int = 0,
            shade: bool = False, background: Optional[Sequence[float]] = None,
-           light: Optional[Sequence[float]] = None, noise: float = 1 / 255, max_spp: int = 256) -> Any:
+           light: Optional[Sequence[float]] = None, noise: float = 1 / 255, max_spp: int = 256,
+           cache_budget: str = "auto", cache_dims: Optional[Sequence[int]] = None) -> Any:
     """Renders a vnr.Model (or a vnr.Volume, the ground truth) and returns the image as a float32 array
     of shape (height, width, 4): straight RGB and alpha, row 0 at the top.
 
@@ -122,8 +123,12 @@ def render(target: Union[Model, Volume], camera: Union[None, Camera, dict, Tuple
     mode: "raymarch", "shadow" or "pathtrace"; size: (width, height); spp: frames accumulated, or "auto"
     (the default, as the CLI's): until the image's noise (RMS standard error of its pixels) is at most
     `noise`, at most max_spp frames;
-    device: "auto", "cpu" or "cuda"; strategy: "auto" (as the CLI's: a model's brick cache on the CPU, docs/RENDERING.md), "cache", "streaming" or "inshader"; macrocells: "grid", "online"
-    or "off" (default as the CLI's); step, seed, shade, background, light: the CLI's options.
+        device: "auto", "cpu" or "cuda"; strategy: "auto" (as the CLI's: a model's brick cache on the CPU
+    when 8 frames or more are accumulated, docs/RENDERING.md), "cache", "streaming" or "inshader";
+    macrocells: "grid", "online" or "off" (default as the CLI's); step, seed, shade, background, light:
+    the CLI's options; cache_budget ("512MiB", ...; "auto": a quarter of the available memory, at most
+    4 GiB) and cache_dims ((x, y, z): the resolution the cache decodes a model at, any size): the CLI's
+    --cache-budget and --cache-dims.
     """
     w, h = (int(v) for v in size)
     if (isinstance(spp, str) and spp != "auto") or (not isinstance(spp, str) and int(spp) < 1):
@@ -132,4 +137,6 @@ def render(target: Union[Model, Volume], camera: Union[None, Camera, dict, Tuple
                    noise=float(noise), max_spp=int(max_spp), device=device,
                    strategy=strategy, macrocells=macrocells, step=float(step), seed=int(seed), shade=bool(shade),
                    background=None if background is None else tuple(float(x) for x in background),
-                   light=None if light is None else tuple(float(x) for x in light), **_camera_args(camera))
+                   light=None if light is None else tuple(float(x) for x in light), cache_budget=str(cache_budget),
+                   cache_dims=None if cache_dims is None else tuple(int(x) for x in cache_dims),
+                   **_camera_args(camera))

@@ -131,7 +131,8 @@ def _render(target: Union[Model, Volume], eye: Optional[Sequence[float]], center
             size: Tuple[int, int], spp: int, noise: float, max_spp: int, device: str, strategy: str,
             macrocells: Optional[str], step: float,
             seed: int, shade: bool, background: Optional[Sequence[float]],
-            light: Optional[Sequence[float]]) -> npt.NDArray[np.float32]: ...
+            light: Optional[Sequence[float]], cache_budget: str,
+            cache_dims: Optional[Tuple[int, int, int]]) -> npt.NDArray[np.float32]: ...
 
 
 def _error_stats(reference: npt.NDArray[Any], test: npt.NDArray[Any],
