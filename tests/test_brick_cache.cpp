@@ -375,3 +375,29 @@ TEST(BrickCache, AModelsCacheEqualsItsDecodeAndRendersAsTheDecodedGrid) {
         << "packets " << packets;
   }
 }
+
+TEST(BrickCache, BricksUnderTheCursorAreDecodedFirst) {
+  Volume vol = synth(Int3{32, 32, 32});  // 4 x 4 x 4 bricks of 8
+  GridField grid(view_of(vol));
+  CachedField cache(grid, grid_decode(vol), vol.dims, level0(8));  // one brick a frame
+  const RenderParams p = params_for(orbit_camera(box_of(vol), 0, 0, 30), vol.dims, 64, 64);
+  cache.begin_frame(p);
+  std::vector<float> x, y, z;
+  for (int k = 0; k < 4; ++k)
+    for (int j = 0; j < 4; ++j)
+      for (int i = 0; i < 4; ++i) x.push_back((8.0f * i + 4) / 32), y.push_back((8.0f * j + 4) / 32), z.push_back((8.0f * k + 4) / 32);
+  std::vector<float> v(64);
+  cache.query(x.data(), y.data(), z.data(), 64, v.data());  // asks for all 64
+  // The cursor's ray runs along x through the centres of the bricks (i, 2, 3).
+  cache.set_focus(std::make_pair(Vec3f{-50, 20, 28}, Vec3f{1, 0, 0}));
+  cache.begin_frame(p);
+  ASSERT_EQ(cache.stats().resident, 1);
+  const float on_x[4] = {4.0f / 32, 12.0f / 32, 20.0f / 32, 28.0f / 32}, on_y[4] = {0.625f, 0.625f, 0.625f, 0.625f},
+              on_z[4] = {0.875f, 0.875f, 0.875f, 0.875f};
+  float got[4];
+  cache.query(on_x, on_y, on_z, 4, got);
+  EXPECT_EQ(cache.stats().misses, 3) << "one of the four bricks on the ray came first";
+  const float far_x = 0.9f, far_y = 0.1f, far_z = 0.1f;
+  cache.query(&far_x, &far_y, &far_z, 1, got);
+  EXPECT_EQ(cache.stats().misses, 4) << "a brick off the ray waits";
+}

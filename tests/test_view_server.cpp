@@ -221,6 +221,8 @@ TEST_F(ViewServerTest, BadMessagesGetAnErrorAndTheConnectionStays) {
       {R"({"type": "viewport", "width": 8})", "viewport.width"},
       {R"({"type": "viewport", "width": 100.5})", "viewport.width"},
       {R"({"type": "camera", "eye": [1, 2]})", "camera.eye"},
+      {R"({"type": "cursor", "x": 0.5})", "cursor.x and cursor.y go together"},
+      {R"({"type": "cursor", "x": 1.5, "y": 0.5})", "cursor.x"},
       {R"({"type": "render", "step": -1})", "render.step"},
       {R"({"type": "train", "action": "fly"})", "train.action"},
       {R"({"type": "tf", "opacity": [[0, 0.5], [1]]})", "tf.opacity"},
@@ -234,6 +236,8 @@ TEST_F(ViewServerTest, BadMessagesGetAnErrorAndTheConnectionStays) {
     ASSERT_TRUE(m) << text;
     EXPECT_HAS(json_of(*m)["message"].get<std::string>(), needle);
   }
+  c->send(R"({"type": "cursor", "x": 0.25, "y": 0.75})");  // accepted: no reply, no new state
+  c->send(R"({"type": "cursor"})");
   c->send(R"({"type": "ping", "id": 7, "unknown_field": true})");
   std::optional<WsMessage> pong = c->read_until([](const WsMessage& m) { return is_type(m, "pong"); });
   ASSERT_TRUE(pong);

@@ -168,6 +168,9 @@ public:
   void set_camera(const Camera& camera, bool interacting);
   void reset_camera();  // the scene's camera, else orbit_camera(box, 0, 0, 30)... as `vnr render`
   void set_viewport(int width, int height);  // 16..4096 each
+  // Where the user's cursor is over the network view, (x, y) in [0, 1], row 0 at the top (none: not
+  // over it): the brick cache decodes the bricks under it first. Changes no image.
+  void set_cursor(std::optional<std::array<float, 2>> xy);
   void set_view(const ViewSettings& view);
   void set_tf(const ViewerTf& tf);
   void set_render(const ViewerRender& render);

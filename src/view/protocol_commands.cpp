@@ -256,6 +256,14 @@ ClientCommand parse_client_message(std::string_view text) {
   if (type == "camera") c.run = camera_command(f);
   else if (type == "reset_camera") c.run = [](ViewerEngine& e) { e.reset_camera(); return Json(); };
   else if (type == "viewport") c.run = viewport_command(f);
+  else if (type == "cursor") {
+    auto x = f.number("x", 0, 1), y = f.number("y", 0, 1);
+    if (bool(x) != bool(y)) fail("cursor.x and cursor.y go together (neither: no cursor)");
+    c.run = [=](ViewerEngine& e) {
+      e.set_cursor(x ? std::optional<std::array<float, 2>>({float(*x), float(*y)}) : std::nullopt);
+      return Json();
+    };
+  }
   else if (type == "view") c.run = view_command(f);
   else if (type == "tf") c.run = tf_command(f);
   else if (type == "tf_load") {

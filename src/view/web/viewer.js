@@ -49,6 +49,18 @@ VNR.Viewer = class {
       () => (this.state ? this.state.camera : null),
       (cam, interacting) => send({ type: "camera", eye: cam.eye, center: cam.center, up: cam.up, fovy: cam.fovy, interacting }),
       () => VNR.$("views").clientHeight);
+    // The cursor over the network view (at most 10 messages a second): the brick cache decodes there first.
+    const main = VNR.$("canvas-main");
+    let cursorSent = 0;
+    main.addEventListener("pointermove", (e) => {
+      const now = performance.now();
+      if (this.camera.interacting || now - cursorSent < 100) return;
+      cursorSent = now;
+      const r = main.getBoundingClientRect();
+      const clamp = (v) => Math.min(1, Math.max(0, v));
+      send({ type: "cursor", x: clamp((e.clientX - r.left) / r.width), y: clamp((e.clientY - r.top) / r.height) });
+    });
+    main.addEventListener("pointerleave", () => send({ type: "cursor" }));
     VNR.$("error-close").addEventListener("click", () => { VNR.$("error").hidden = true; });
     VNR.$("screenshot").href = VNR.url("/screenshot.png");
     VNR.$("tf-save").href = VNR.url("/tf.json");

@@ -137,6 +137,7 @@ void ViewerEngine::Impl::thread_main() {
       if (stopping) break;
       snap.state = state;
       snap.interacting = interacting;
+      snap.cursor = cursor;
       snap.epoch = epoch;
       snap.tf_epoch = tf_epoch;
       snap.options_epoch = options_epoch;
@@ -280,6 +281,13 @@ void ViewerEngine::set_camera(const Camera& camera, bool interacting) {
 }
 
 void ViewerEngine::reset_camera() { set_camera(impl_->initial.camera, false); }
+
+void ViewerEngine::set_cursor(std::optional<std::array<float, 2>> xy) {
+  if (xy && !((*xy)[0] >= 0 && (*xy)[0] <= 1 && (*xy)[1] >= 0 && (*xy)[1] <= 1))
+    fail("the cursor position ({}, {}) is outside [0, 1]", (*xy)[0], (*xy)[1]);
+  std::lock_guard<std::mutex> lock(impl_->mu);
+  impl_->cursor = xy;  // read with the next frame's snapshot; no image changes
+}
 
 void ViewerEngine::set_viewport(int width, int height) {
   if (width < 16 || width > 4096) fail("viewport width {} is outside 16..4096", width);

@@ -5,6 +5,7 @@
 // Locking: `mu` guards what every thread sees (the state, pending requests, losses, the newest frame);
 // `work_mu` is held by the engine thread while it trains or renders, so save_model never sees a step
 // half done. Everything under "engine thread" is touched only with work_mu held.
+#include <array>
 #include <atomic>
 #include <condition_variable>
 #include <memory>
@@ -32,6 +33,7 @@ struct ViewerSnapshot {
   bool reset = false;
   std::optional<double> reset_learning_rate;
   std::optional<int> timestep;
+  std::optional<std::array<float, 2>> cursor;  // over the network view, [0, 1]^2
 };
 
 // A field to render and its macro-cells, rebuilt when what it shows changes.
@@ -115,6 +117,7 @@ struct ViewerEngine::Impl {
   mutable std::condition_variable frame_cv;
   ViewerState state;
   bool interacting = false;
+  std::optional<std::array<float, 2>> cursor;  // ViewerEngine::set_cursor
   uint64_t epoch = 1, tf_epoch = 1, options_epoch = 1;
   uint64_t complete_epoch = 0;  // the engine rendered everything there is for this epoch
   bool pending_reset = false;

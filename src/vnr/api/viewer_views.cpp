@@ -222,7 +222,16 @@ bool ViewerEngine::Impl::render(const ViewerSnapshot& snap, bool* refined, int* 
   if (want_net) {
     update_network_content(st.render.macrocells, want_cache);
     // Decoding's share of a frame: less while training in the loop, which gets 1.5x a frame's time.
-    if (net_content.cache) net_content.cache->set_decode_seconds(st.training.state == TrainingState::Running ? 0.01 : 0.03);
+    if (net_content.cache) {
+      net_content.cache->set_decode_seconds(st.training.state == TrainingState::Running ? 0.01 : 0.03);
+      std::optional<std::pair<Vec3f, Vec3f>> focus;  // the ray under the cursor: its bricks first
+      if (snap.cursor) {
+        const CameraFrame f = make_camera_frame(st.camera, net_opt.width, net_opt.height);
+        const float x = (*snap.cursor)[0] * float(f.width), y = (*snap.cursor)[1] * float(f.height);
+        focus = std::make_pair(f.eye, camera_ray_dir(f, 0, 0, x, y));
+      }
+      net_content.cache->set_focus(focus);
+    }
     any |= draw(net_content, net_pass, net_opt);
   }
   if (want_truth) {

@@ -46,6 +46,7 @@ struct CachedField::State {
   std::vector<int32_t> lod;          // per level-0 brick: the level its samples read
   CameraFrame lod_cam{};             // the view lod was computed for
   Vec3f box{1, 1, 1};                // world size of the volume box of that view
+  std::optional<std::pair<Vec3f, Vec3f>> focus;  // the cursor's ray: origin, unit direction
   std::unique_ptr<float[]> pool;     // slots of (B+1)^3 voxels, committed by the OS as they are written
   int32_t slots = 0, slots_used = 0;
   std::vector<int32_t> free_slots;
@@ -265,7 +266,18 @@ float CachedField::brick_distance(int level, int64_t brick) const {
   const Vec3f c{(float(bx * B) + 0.5f * float(B)) / float(L.n.x) * box.x,
                 (float(by * B) + 0.5f * float(B)) / float(L.n.y) * box.y,
                 (float(bz * B) + 0.5f * float(B)) / float(L.n.z) * box.z};
+  if (s_->focus) {  // under the cursor first: the distance from its ray (behind the eye: from the eye)
+    const auto& [o, d] = *s_->focus;
+    const Vec3f rel = c - o;
+    const float along = dot(rel, d);
+    return along > 0 ? length(rel - d * along) : length(rel);
+  }
   return length(c - s_->lod_cam.eye);
+}
+
+void CachedField::set_focus(std::optional<std::pair<Vec3f, Vec3f>> origin_and_direction) const {
+  if (origin_and_direction) origin_and_direction->second = normalize(origin_and_direction->second);
+  s_->focus = origin_and_direction;
 }
 
 void CachedField::decode_asked(double seconds, const std::function<void(int64_t, int64_t)>& progress) const {

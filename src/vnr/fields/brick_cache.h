@@ -13,6 +13,7 @@
 #include <functional>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <vector>
 #include "vnr/fields/brick_cache_view.h"
 #include "vnr/fields/fields.h"
@@ -77,6 +78,8 @@ public:
   // is stale: still read, and decoded again in the frame budget new bricks leave, the bricks the last
   // frame read first, nearest first.
   void replace_source(const RenderableField& source, bool model_changed) const;
+  // The ray under the user's cursor (world units; none: no cursor): bricks near it are decoded first.
+  void set_focus(std::optional<std::pair<Vec3f, Vec3f>> origin_and_direction) const;
   // Grows whenever a brick is decoded: an image accumulated over frames restarts when it changes.
   uint64_t content_version() const;
   BrickCacheStats stats() const;
@@ -95,7 +98,8 @@ private:
   // Decodes the bricks asked for, nearest the camera first, until `seconds` have passed (< 0: all).
   void decode_asked(double seconds, const std::function<void(int64_t, int64_t)>& progress = {}) const;
   void update_levels(const RenderParams& p) const;
-  float brick_distance(int level, int64_t brick) const;  // of its centre from the last view's eye (world units)
+  // Decoding order: its centre's distance from the cursor's ray, else from the last view's eye (world units).
+  float brick_distance(int level, int64_t brick) const;
 
   mutable const RenderableField* source_;  // model_changed replaces it
   VoxelDecode decode_;
