@@ -58,6 +58,12 @@ public:
   // The whole grid at dims (zero dims: the model's own) as a Volume with the model's range and dtype.
   // Refused with the sizes, before allocating, when it cannot fit the memory (check_decode_fits_memory).
   Volume decode(Int3 dims = {});
+  // What `vnr decode` writes: the grid at dims (zero dims: the model's own) in original units, stored as
+  // dtype (integers rounded to nearest and clamped), in a volume file (OUT.raw with its OUT.json
+  // sidecar, or OUT.nrrd) written atomically, in z-slabs of about 16 M voxels: memory stays bounded at
+  // any size. progress(slices done, slices in all) after each slab.
+  void decode_to_file(const std::string& path, Int3 dims, DType dtype,
+                      const std::function<void(int64_t, int64_t)>& progress = {});
 
   Device device() const { return device_; }
   const Model& model() const { return model_; }

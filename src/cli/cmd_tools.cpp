@@ -163,25 +163,11 @@ void add_decode(CLI::App& app) {
     m.net->set_inference_precision(parse_precision(a->precision));
     ModelQuery query(m, cuda::resolve_device(a->device));
     const Device dev = query.device();
-    Int3 dims = a->dims.empty() ? m.dims : parse_dims(a->dims);
-    DType out_t = a->dtype == "source" ? m.source_dtype : parse_dtype(a->dtype);
-    // Slabs of ~16 M voxels: memory stays bounded whatever the output size.
-    // (in double: a hostile --dims must not overflow before check_decode_fits_memory refuses it)
-    const int64_t slab = std::max<int64_t>(1, int64_t(double(int64_t(1) << 24) / (double(dims.x) * double(dims.y))));
-    // Voxel size relative to the model's grid (model files carry no physical spacing).
-    Vec3f spacing{float(double(m.dims.x) / dims.x), float(double(m.dims.y) / dims.y), float(double(m.dims.z) / dims.z)};
-    check_decode_fits_memory(dims, std::min<int64_t>(slab, dims.z));
-    VolumeWriter w(a->output, dims, out_t, spacing, std::make_pair(m.lo, m.hi));
-    std::vector<float> buf(size_t(dims.x * dims.y * std::min<int64_t>(slab, dims.z)));
+    const Int3 dims = a->dims.empty() ? m.dims : parse_dims(a->dims);
+    const DType out_t = a->dtype == "source" ? m.source_dtype : parse_dtype(a->dtype);
     Progress bar("decode", double(dims.z), a->quiet);
     auto t0 = std::chrono::steady_clock::now();
-    for (int64_t z0 = 0; z0 < dims.z; z0 += slab) {
-      int64_t z1 = std::min(dims.z, z0 + slab);
-      query.slab(dims, z0, z1, buf.data(), ValueUnits::Original);
-      w.write_slices(buf.data(), z1 - z0);
-      bar.update(double(z1));
-    }
-    w.commit();
+    query.decode_to_file(a->output, dims, out_t, [&](int64_t done, int64_t) { bar.update(double(done)); });
     bar.finish();
     std::printf("decoded %lldx%lldx%lld %s to %s in %.2fs (%s)\n", (long long)dims.x, (long long)dims.y,
                 (long long)dims.z, dtype_name(out_t), a->output.c_str(), seconds_since(t0), device_name(dev));

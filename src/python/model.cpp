@@ -27,19 +27,6 @@ constexpr int64_t kSlabVoxels = int64_t(1) << 24;
 // Points converted to interleaved float32 per batch when the input is not already that.
 constexpr int64_t kPointBatch = int64_t(1) << 20;
 
-// `vnr decode`'s conversion of values in original units to an output dtype.
-template <typename T>
-void store_values(const float* in, int64_t n, T* out) {
-  for (int64_t i = 0; i < n; ++i) out[i] = to_stored_value<T>(in[i]);
-}
-
-void store_as(DType t, const float* in, int64_t n, void* out) {
-  detail::with_sample_type(t, [&](auto tag) {
-    using T = typename decltype(tag)::type;
-    store_values(in, n, static_cast<T*>(out));
-  });
-}
-
 pyb::array decode(ModelHolder& h, const pyb::object& shape, const std::string& dtype_name,
                   const std::string& device) {
   const Int3 dims = shape.is_none() ? h.model.dims : dims_of_shape(pyb::tuple(shape));
@@ -59,7 +46,8 @@ pyb::array decode(ModelHolder& h, const pyb::object& shape, const std::string& d
   for (int64_t z0 = 0; z0 < dims.z; z0 += slab) {
     const int64_t z1 = std::min(dims.z, z0 + slab), n = plane * (z1 - z0);
     q.slab(dims, z0, z1, buf.data(), ValueUnits::Original);
-    store_as(out_t, buf.data(), n, static_cast<char*>(dst) + z0 * plane * int64_t(dtype_size(out_t)));
+    // `vnr decode`'s conversion (little-endian bytes: the host's order on every platform vnr builds for)
+    store_values(out_t, buf.data(), n, static_cast<unsigned char*>(dst) + z0 * plane * int64_t(dtype_size(out_t)));
   }
   return out;
 }
@@ -157,6 +145,26 @@ original units of the volume. Arrays are (nz, ny, nx), x fastest (see vnr.Volume
 shape: the output's (nz, ny, nx) (default: the trained volume's); dtype: "float32", "source" (the
 trained volume's dtype, integers rounded to nearest and clamped, as `vnr decode --dtype source`) or a
 dtype name; device: "auto", "cpu" or "cuda". The GIL is released while it runs.)");
+  c.def(
+      "decode_to_file",
+      [](ModelHolder& h, const std::string& path, const pyb::object& shape, const std::string& dtype_name,
+         const std::string& device, bool force) {
+        const Int3 dims = shape.is_none() ? h.model.dims : dims_of_shape(pyb::tuple(shape));
+        const DType out_t = dtype_name == "source" ? h.model.source_dtype : parse_dtype(dtype_name);
+        const Device dev = parse_device(device);
+        if (!force)
+          for (const std::string& f : volume_output_files(path))
+            if (file_exists(f)) fail("'{}' exists (force=True replaces it)", f);
+        pyb::gil_scoped_release release;
+        std::lock_guard lock(h.mutex);
+        h.query_on(dev).decode_to_file(path, dims, out_t);
+      },
+      pyb::arg("path"), pyb::arg("shape") = pyb::none(), pyb::arg("dtype") = "float32", pyb::arg("device") = "auto",
+      pyb::arg("force") = false,
+      R"(Writes what `vnr decode` writes: the volume decoded at `shape` (nz, ny, nx; default the trained
+volume's) into path (OUT.raw with its OUT.json sidecar, or OUT.nrrd), atomically, in slabs of about
+16 M voxels, so a volume larger than memory decodes too. dtype and device as decode(); force=True
+replaces existing files. The GIL is released while it runs.)");
   c.def("sample", &sample, pyb::arg("points"), pyb::arg("device") = "auto",
         R"(The model's values (original units, float32, shape (N,)) at N points given as an (N, 3) float32 or
 float64 array of normalised x, y, z in [0, 1] (voxel i's centre is (i + 0.5) / n). Runs in batches on

@@ -45,6 +45,15 @@ def test_train_decode_equals_cli(trained, cli):
     cli("decode", trained["cli_model"], "-o", d / "cli_small.raw", "--dims", "7,6,5", "--threads", THREADS,
         "--device", "cpu", "-q")
     np.testing.assert_array_equal(model.decode(shape=(5, 6, 7), device="cpu"), read_raw_json(str(d / "cli_small.json")))
+    # To a file, as `vnr decode` writes it: the same bytes and sidecar; an existing file needs force=True.
+    cli_model = vnr.Model.load(trained["cli_model"])
+    cli_model.decode_to_file(str(d / "py_src.raw"), dtype="source", device="cpu")
+    assert (d / "py_src.raw").read_bytes() == (d / "cli_src.raw").read_bytes()
+    np.testing.assert_array_equal(read_raw_json(str(d / "py_src.json")), source)  # its sidecar describes it
+    with pytest.raises(Exception, match="force=True"):
+        cli_model.decode_to_file(str(d / "py_src.raw"), dtype="source")
+    cli_model.decode_to_file(str(d / "py_src.raw"), shape=(5, 6, 7), device="cpu", force=True)
+    np.testing.assert_array_equal(read_raw_json(str(d / "py_src.json")), read_raw_json(str(d / "cli_small.json")))
     assert model.training["steps"] == STEPS
     assert model.value_range == (float(trained["array"].min()), float(trained["array"].max()))
     # A vnr.Volume (shared, not copied) trains to the same model as the array it came from.

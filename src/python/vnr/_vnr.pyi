@@ -77,6 +77,11 @@ class Model:
                device: DeviceName = "auto") -> npt.NDArray[Any]:
         """The volume decoded at voxel centres in original units, shape (nz, ny, nx)."""
 
+    def decode_to_file(self, path: str, shape: Optional[Sequence[int]] = None,
+                       dtype: Union[Literal["float32", "source"], str] = "float32",
+                       device: DeviceName = "auto", force: bool = False) -> None:
+        """What `vnr decode` writes (OUT.raw + OUT.json, or OUT.nrrd), in slabs: any size."""
+
     def sample(self, points: npt.NDArray[np.floating[Any]], device: DeviceName = "auto") -> npt.NDArray[np.float32]:
         """Values (original units) at an (N, 3) array of normalised x, y, z in [0, 1]."""
 

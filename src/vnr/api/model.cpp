@@ -3,6 +3,7 @@
 #include "vnr/core/error.h"
 #include "vnr/train/bricks.h"
 #include "vnr/core/units.h"
+#include "vnr/volume/writer.h"
 
 namespace vnr {
 
@@ -81,6 +82,26 @@ Volume ModelQuery::decode(Int3 dims) {
   v.data.resize(dims.count());
   slab(dims, 0, dims.z, v.data.data());
   return v;
+}
+
+void ModelQuery::decode_to_file(const std::string& path, Int3 dims, DType dtype,
+                                const std::function<void(int64_t, int64_t)>& progress) {
+  if (dims.x == 0 || dims.y == 0 || dims.z == 0) dims = model_.dims;
+  // (in double: hostile dims must not overflow before check_decode_fits_memory refuses them)
+  const int64_t slices = std::max<int64_t>(1, int64_t(double(int64_t(1) << 24) / (double(dims.x) * double(dims.y))));
+  check_decode_fits_memory(dims, std::min<int64_t>(slices, dims.z));
+  // Voxel size relative to the model's grid (model files carry no physical spacing).
+  const Vec3f spacing{float(double(model_.dims.x) / double(dims.x)), float(double(model_.dims.y) / double(dims.y)),
+                      float(double(model_.dims.z) / double(dims.z))};
+  VolumeWriter w(path, dims, dtype, spacing, std::make_pair(model_.lo, model_.hi));
+  std::vector<float> buf(size_t(dims.x * dims.y * std::min<int64_t>(slices, dims.z)));
+  for (int64_t z0 = 0; z0 < dims.z; z0 += slices) {
+    const int64_t z1 = std::min(dims.z, z0 + slices);
+    slab(dims, z0, z1, buf.data(), ValueUnits::Original);
+    w.write_slices(buf.data(), z1 - z0);
+    if (progress) progress(z1, dims.z);
+  }
+  w.commit();
 }
 
 EvalResult evaluate_model(const Model& model, const Volume& volume, bool with_ssim, Device device) {
