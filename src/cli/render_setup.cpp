@@ -16,23 +16,25 @@ Vec3f parse_vec3(const std::string& s, const char* what) {
   return Vec3f{v[0], v[1], v[2]};
 }
 
-// --eye/--center (with --up, --fovy), else --orbit AZIMUTH[,ELEVATION] (or the default orbit when the
-// scene has no camera); nullopt keeps the scene's camera.
-std::optional<Camera> parse_camera(const RenderArgs& a, const Scene& scene, Vec3f box, float* orbit_elevation) {
-  if (!a.eye.empty() || !a.center.empty()) {
-    if (a.eye.empty() || a.center.empty()) fail("--eye and --center go together");
-    return Camera{parse_vec3(a.eye, "--eye"), parse_vec3(a.center, "--center"), parse_vec3(a.up, "--up"), a.fovy};
-  }
-  if (a.orbit.empty() && scene.camera) return std::nullopt;
-  float az = 0, el = 0;
+// --eye/--center (with --up, --fovy), else --orbit AZIMUTH[,ELEVATION], else the scene's camera or the
+// default orbit (camera_for).
+Camera parse_camera(const RenderArgs& a, const Scene& scene, Vec3f box, float* orbit_elevation) {
+  if (a.eye.empty() != a.center.empty()) fail("--eye and --center go together");
+  CameraRequest r;
+  if (!a.eye.empty()) r.eye = parse_vec3(a.eye, "--eye");
+  if (!a.center.empty()) r.center = parse_vec3(a.center, "--center");
+  r.up = parse_vec3(a.up, "--up");
+  r.fovy = a.fovy;
   if (!a.orbit.empty()) {
+    float az = 0, el = 0;
     char tail;
-    int got = std::sscanf(a.orbit.c_str(), "%f,%f%c", &az, &el, &tail);
-    if (got < 1 || got > 2 || !std::isfinite(az) || !std::isfinite(el) || el <= -90 || el >= 90)
-      fail("--orbit expects AZIMUTH[,ELEVATION] in degrees (elevation in (-90, 90)), got '{}'", a.orbit);
+    const int got = std::sscanf(a.orbit.c_str(), "%f,%f%c", &az, &el, &tail);
+    if (got < 1 || got > 2) fail("--orbit expects AZIMUTH[,ELEVATION] in degrees, got '{}'", a.orbit);
+    r.orbit = std::make_pair(az, el);
   }
-  *orbit_elevation = el;
-  return orbit_camera(box, az, el, a.fovy);
+  const Camera cam = camera_for(r, box, scene.camera);
+  if (!r.eye && (r.orbit || !scene.camera)) *orbit_elevation = r.orbit ? r.orbit->second : 0;
+  return cam;
 }
 
 }  // namespace
@@ -57,7 +59,7 @@ CliRender open_cli_render(const std::string& input, const RenderArgs& a, const V
   const Volume* volume = c.input->volume ? &*c.input->volume : nullptr;
   const Int3 dims = model ? model->dims : volume->dims;
   const Vec3f box{float(dims.x), float(dims.y), float(dims.z)};  // Renderer::box() of this input
-  const std::optional<Camera> camera = parse_camera(a, scene, box, &c.orbit_elevation);
+  const Camera camera = parse_camera(a, scene, box, &c.orbit_elevation);
   o.light = scene.light.value_or(DirectionalLight{});
   o.background = scene.background.value_or(Vec3f{0, 0, 0});
   if (!a.light.empty()) o.light.direction = parse_vec3(a.light, "--light");
@@ -74,7 +76,7 @@ CliRender open_cli_render(const std::string& input, const RenderArgs& a, const V
   Renderer& r = *c.renderer;
   r.set_scene(scene);  // camera and transfer function; the options below override them
   if (tf) r.set_transfer_function(*tf);
-  if (camera) r.set_camera(*camera);
+  r.set_camera(camera);
   r.set_options(o);
   Int3 cache_dims{0, 0, 0};
   if (!a.cache_dims.empty()) {

@@ -50,14 +50,13 @@ TransferFunction transfer_function_of(const std::string& tf) {
 }
 
 Camera camera_of(const RenderArgs& a, Vec3f box) {
-  if (a.eye || a.center) {
-    if (!a.eye || !a.center) fail("a camera needs both eye and center");
-    return Camera{vec(*a.eye), vec(*a.center), vec(a.up), a.fovy};
-  }
-  const auto [az, el] = a.orbit.value_or(std::make_pair(0.f, 0.f));
-  if (!std::isfinite(az) || !std::isfinite(el) || el <= -90 || el >= 90)
-    fail("orbit expects (azimuth, elevation) in degrees with elevation in (-90, 90), got ({}, {})", az, el);
-  return orbit_camera(box, az, el, a.fovy);
+  CameraRequest r;
+  if (a.eye) r.eye = vec(*a.eye);
+  if (a.center) r.center = vec(*a.center);
+  r.up = vec(a.up);
+  r.fovy = a.fovy;
+  r.orbit = a.orbit;
+  return camera_for(r, box);
 }
 
 // `model_mutex` (the model's holder's, or null) is locked only once the GIL is released: a query holding

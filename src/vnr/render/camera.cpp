@@ -67,4 +67,17 @@ Camera orbit_camera(Vec3f box, float azimuth_deg, float elevation_deg, float fov
   return c;
 }
 
+Camera camera_for(const CameraRequest& r, Vec3f box, const std::optional<Camera>& fallback) {
+  if (r.eye || r.center) {
+    if (!r.eye || !r.center) fail("the camera's eye and center go together");
+    return Camera{*r.eye, *r.center, r.up, r.fovy};
+  }
+  if (!r.orbit && fallback) return *fallback;
+  const auto [azimuth, elevation] = r.orbit.value_or(std::make_pair(0.f, 0.f));
+  if (!std::isfinite(azimuth) || !std::isfinite(elevation) || elevation <= -90 || elevation >= 90)
+    fail("an orbit camera takes an azimuth and an elevation in degrees, the elevation in (-90, 90); got {}, {}",
+         azimuth, elevation);
+  return orbit_camera(box, azimuth, elevation, r.fovy);
+}
+
 }  // namespace vnr
