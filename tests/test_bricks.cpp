@@ -532,5 +532,35 @@ TEST(BrickCli, SecondsApplyPerBrick) {
 }
 #endif
 
+TEST(BrickModel, RankSharesTileTheGridAndLoadTheirNeighbours) {
+  TmpDir tmp;
+  const std::string vol = tmp / "v.json";
+  synth_volume("marschner-lobb", Int3{16, 16, 16}, vol);
+  train_bricks(test::small_brick_setup(vol), Int3{2, 2, 1}, 2, tmp / "m", test::brick_steps(2));
+  for (const Int3 dims : {Int3{16, 16, 16}, Int3{9, 13, 5}}) {
+    int64_t voxels = 0;
+    for (int rank = 0; rank < 3; ++rank) {
+      const BrickShare share = open_brick_share(tmp / "m", dims, 1, rank, 3);
+      for (const Box3& r : share.regions) voxels += r.voxels();
+      int loaded = 0;
+      for (const auto& b : share.model->bricks) loaded += b.has_value();
+      EXPECT_EQ(size_t(loaded), share.loaded);
+      EXPECT_GE(share.loaded, share.regions.size()) << "its bricks, and neighbours within reach";
+    }
+    EXPECT_EQ(voxels, dims.count()) << "the ranks' regions tile the grid";
+  }
+  int idle = 0;  // more ranks than bricks: some have none (and load nothing of their own)
+  int64_t voxels = 0;
+  for (int rank = 0; rank < 8; ++rank) {
+    const BrickShare share = open_brick_share(tmp / "m", Int3{16, 16, 16}, 1, rank, 8);
+    for (const Box3& r : share.regions) voxels += r.voxels();
+    if (!share.regions.empty()) continue;
+    idle += 1;
+    EXPECT_EQ(share.loaded, 0u);
+  }
+  EXPECT_EQ(idle, 4);
+  EXPECT_EQ(voxels, int64_t(16 * 16 * 16));
+}
+
 }  // namespace
 }  // namespace vnr

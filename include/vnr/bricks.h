@@ -17,7 +17,8 @@ namespace vnr {
 // The bricked part of a model opened by load_model (null for a single-network model).
 inline const BrickedModel* bricked(const Model& m) { return m.bricks.get(); }
 
-// Distributed decode and evaluation: a rank takes contiguous_bricks(plan, rank, n), decodes
+// Distributed decode and evaluation: a rank opens its share (open_brick_share: contiguous_bricks(plan,
+// rank, n) and their neighbours loaded), decodes
 // brick_output_region of each, and evaluate_region(model, file, that region) gives its share of the
 // evaluation (errors, and with SSIM the windows starting in it); the ranks' EvalSums add up to the
 // single-process evaluation. The rank needs its bricks and those within 7 voxels loaded.

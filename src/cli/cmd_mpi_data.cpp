@@ -27,37 +27,12 @@ double seconds_since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
 
-// This rank's bricks (contiguous_bricks), their output regions at `dims`, and the model with those bricks
-// and the bricks within `reach` voxels of them loaded.
-struct RankShare {
-  std::shared_ptr<BrickedModel> model;
-  std::vector<Box3> regions;
-  size_t loaded = 0;  // bricks loaded
-};
-RankShare open_rank_share(const std::string& dir, Int3 dims, int reach, const std::string& precision) {
+// This rank's share (BrickShare, train/bricks.h), its networks at the asked precision.
+BrickShare open_rank_share(const std::string& dir, Int3 dims, int reach, const std::string& precision) {
   if (!is_bricked_model_dir(dir))
     fail("'{}' is not a multi-brick model directory (manifest.json): under mpirun, decode, eval and render run "
          "over the bricks of a model trained with --bricks; run a single model without mpirun", dir);
-  const std::vector<int> none;
-  const BrickPlan plan = load_bricked_model(dir, &none)->plan;
-  RankShare share;
-  std::vector<int> only;
-  for (int b : contiguous_bricks(plan, mpi::rank(), mpi::size())) {
-    const Box3 region = brick_output_region(plan, b, dims);
-    if (region.empty()) continue;
-    share.regions.push_back(region);
-    Box3 grown = plan.bricks[size_t(b)].owned;
-    for (int a = 0; a < 3; ++a) {
-      grown.lo[a] = std::max<int64_t>(0, grown.lo[a] - reach);
-      grown.hi[a] = std::min<int64_t>(plan.dims[a], grown.hi[a] + reach);
-    }
-    for (int n : bricks_touching(plan, grown)) only.push_back(n);
-  }
-  std::sort(only.begin(), only.end());
-  only.erase(std::unique(only.begin(), only.end()), only.end());
-  share.loaded = only.size();
-  if (only.empty()) only.push_back(0);  // a rank without bricks (more ranks than bricks): the model's description
-  share.model = load_bricked_model(dir, &only);
+  BrickShare share = open_brick_share(dir, dims, reach, mpi::rank(), mpi::size());
   for (std::optional<Model>& b : share.model->bricks)
     if (b) b->net->set_inference_precision(parse_precision(precision));
   return share;
@@ -98,7 +73,7 @@ void write_region(mpi::ParallelFile& file, uint64_t data_offset, const BrickedMo
 }
 
 void run_decode_mpi(const DecodeMpiArgs& a) {
-  RankShare share;
+  BrickShare share;
   Int3 dims;
   DType out_t = DType::Float32;
   mpi::agree("to open the model", [&] {
@@ -142,7 +117,7 @@ struct EvalMpiArgs {
 };
 
 void run_eval_mpi(const EvalMpiArgs& a) {
-  RankShare share;
+  BrickShare share;
   VolumeDesc desc;
   ValueRange range;
   std::string range_source;

@@ -279,4 +279,28 @@ std::vector<bool> bricks_done(const std::string& out_dir, const BrickPlan& plan,
   return done;
 }
 
+BrickShare open_brick_share(const std::string& dir, Int3 dims, int reach, int rank, int n_ranks) {
+  const std::vector<int> none;
+  const BrickPlan plan = load_bricked_model(dir, &none)->plan;
+  BrickShare share;
+  std::vector<int> only;
+  for (int b : contiguous_bricks(plan, rank, n_ranks)) {
+    const Box3 region = brick_output_region(plan, b, dims);
+    if (region.empty()) continue;
+    share.regions.push_back(region);
+    Box3 grown = plan.bricks[size_t(b)].owned;
+    for (int a = 0; a < 3; ++a) {
+      grown.lo[a] = std::max<int64_t>(0, grown.lo[a] - reach);
+      grown.hi[a] = std::min<int64_t>(plan.dims[a], grown.hi[a] + reach);
+    }
+    for (int n : bricks_touching(plan, grown)) only.push_back(n);
+  }
+  std::sort(only.begin(), only.end());
+  only.erase(std::unique(only.begin(), only.end()), only.end());
+  share.loaded = only.size();
+  if (only.empty()) only.push_back(0);
+  share.model = load_bricked_model(dir, &only);
+  return share;
+}
+
 }  // namespace vnr

@@ -63,6 +63,17 @@ std::vector<int> contiguous_bricks(const BrickPlan& plan, int rank, int n_ranks)
 // answers for: those whose centre lies in its owned box. The bricks' regions tile the grid exactly
 // (integer arithmetic: no voxel on a face is lost or taken twice); a region may be empty.
 Box3 brick_output_region(const BrickPlan& plan, int index, Int3 out_dims);
+// Process `rank` of n_ranks's share of the model in directory `dir` for decoding or evaluating at dims:
+// its bricks (contiguous_bricks), their non-empty output regions, and the model with those bricks and
+// every brick within `reach` voxels of them loaded (the blend's and resampling's reach: 1; with the
+// SSIM's windows: 7). A process without bricks (more than there are) loads brick 0 for the description.
+struct BrickedModel;  // below
+struct BrickShare {
+  std::shared_ptr<BrickedModel> model;
+  std::vector<Box3> regions;
+  size_t loaded = 0;  // bricks loaded for the share (0 for a process without bricks)
+};
+BrickShare open_brick_share(const std::string& dir, Int3 dims, int reach, int rank, int n_ranks);
 
 // What a brick's training does beyond the setup (setup.steps, seed, config, target_ratio apply per brick;
 // setup.session.output is ignored: the brick's file is out_dir/spec.file).
