@@ -235,6 +235,18 @@ TEST(BrickCache, ATrainedModelRendersFromItsCacheAsItsNetworkDoes) {
   std::printf("image PSNR of the cached model against its network: %.2f dB\n", psnr);
   EXPECT_GT(psnr, 40.0);
   EXPECT_EQ(cached.cache_stats().misses, 0) << "a warm cache answers the whole view";
+  // What vnr bench render times: an orbit from a cache warmed at its every camera reads no network.
+  RenderStats orbit_stats;
+  RenderOptions orbit_options = cached.options();
+  orbit_options.strategy = RenderStrategy::InShader;
+  const double fps = orbit_frame_rate(cached, orbit_options, MacroCellMode::Off, RenderOrbit{3, 0, 20, 30, 16},
+                                      BrickCacheSettings{}, &orbit_stats);
+  EXPECT_GT(fps, 0);
+  EXPECT_EQ(orbit_stats.frames, 3);
+  EXPECT_EQ(cached.cache_stats().misses, 0);
+  EXPECT_THROW(orbit_frame_rate(cached, orbit_options, MacroCellMode::Off, RenderOrbit{0, 0, 20, 30, 16}, std::nullopt,
+                                &orbit_stats),
+               Error);
   EXPECT_THROW(cached.choose_strategy("fastest"), Error);
   cached.choose_strategy("auto", 0, Int3{0, 0, 0}, 1);  // one frame: warming would cost more than it saves
   EXPECT_FALSE(cached.cache().has_value());

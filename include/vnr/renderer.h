@@ -184,4 +184,17 @@ private:
 // measured (a grid on the GPU).
 double field_query_rate(const Renderer& renderer, double seconds);
 
+// What `vnr bench render` times for one cell of its table: the renderer with `options` and macro-cells
+// `mc` (cells of macrocell_size voxels), with `cache` a fresh brick cache warmed at every camera of the
+// orbit first (what a view that has settled reads); `warmup` untimed frames, then `frames` timed ones
+// with the camera orbiting 360 degrees (frame i of n from azimuth 360 i / n, at `elevation`). Returns
+// frames/s of the median frame; the timed frames' statistics are added to *total.
+struct RenderOrbit {
+  int frames = 6, warmup = 1;
+  float elevation = 0, fovy = 30;
+  int macrocell_size = 16;
+};
+double orbit_frame_rate(Renderer& renderer, const RenderOptions& options, MacroCellMode mc, const RenderOrbit& orbit,
+                        const std::optional<BrickCacheSettings>& cache, RenderStats* total);
+
 }  // namespace vnr

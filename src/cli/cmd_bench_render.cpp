@@ -33,41 +33,13 @@ struct Cell {
   bool cache;  // "cache": the brick cache, warm, with the execution strategy auto picks for it
 };
 
-// Times one cell: `warmup` untimed frames, then `frames` timed ones with the camera orbiting 360 degrees
-// (frame i of n from azimuth 360 i / n); frames/s of the median frame, the statistics summed into *total.
+// One cell's frames/s (orbit_frame_rate) with this run's renderer, orbit and cache settings.
 struct CellTimer {
   Renderer& r;
-  int macrocell_size, warmup, frames;
-  float elevation, fovy;
+  RenderOrbit orbit;
   BrickCacheSettings cache_settings;  // of the cache cells
-
-  Camera camera_of(int i) const {
-    return orbit_camera(r.box(), 360.0f * float(i) / float(frames), elevation, fovy);
-  }
   double operator()(const RenderOptions& o, MacroCellMode mc, RenderStats* total, bool cache = false) const {
-    r.set_options(o);
-    r.set_macrocells(mc, macrocell_size);
-    if (cache) {  // a fresh cache, warmed at every camera of the orbit: what a view that has settled reads
-      r.set_cache(cache_settings);
-      for (int i = 0; i < frames; ++i) r.set_camera(camera_of(i)), r.warm_cache();
-    } else {
-      r.set_cache(std::nullopt);
-    }
-    r.set_camera(camera_of(0));
-    for (int i = 0; i < warmup; ++i) r.render_frame_resident(uint32_t(i));
-    std::vector<double> times;
-    for (int i = 0; i < frames; ++i) {
-      r.set_camera(camera_of(i));
-      RenderStats st;
-      r.render_frame_resident(uint32_t(i), &st);
-      times.push_back(st.seconds);
-      total->field_samples += st.field_samples;
-      total->host_syncs += st.host_syncs;
-      total->iterations += st.iterations;
-      total->seconds += st.seconds;
-      total->frames += 1;
-    }
-    return 1.0 / upper_median(times);
+    return orbit_frame_rate(r, o, mc, orbit, cache ? std::optional(cache_settings) : std::nullopt, total);
   }
 };
 
@@ -176,7 +148,7 @@ void add_bench_render(CLI::App& bench) {
     // The raw rate: the CPU's batched query, or on the GPU the network's resident encoding + MLP (what
     // `vnr bench infer --device cuda` reports as resident); 0 = not measured (the grid on the GPU).
     const double raw = field_query_rate(r, 2.0);
-    const CellTimer time_cell{r,           a->r.macrocell_size, a->warmup, a->frames, cr.orbit_elevation, a->r.fovy,
+    const CellTimer time_cell{r, RenderOrbit{a->frames, a->warmup, cr.orbit_elevation, a->r.fovy, a->r.macrocell_size},
                               cache};
 
     Json report;

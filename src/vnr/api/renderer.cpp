@@ -296,4 +296,32 @@ double field_query_rate(const Renderer& renderer, double seconds) {
   return upper_median(rates);
 }
 
+double orbit_frame_rate(Renderer& r, const RenderOptions& options, MacroCellMode mc, const RenderOrbit& orbit,
+                        const std::optional<BrickCacheSettings>& cache, RenderStats* total) {
+  if (orbit.frames < 1 || orbit.warmup < 0) fail("an orbit needs at least one timed frame and no negative warm-up");
+  const auto camera_of = [&](int i) {
+    return orbit_camera(r.box(), 360.0f * float(i) / float(orbit.frames), orbit.elevation, orbit.fovy);
+  };
+  r.set_options(options);
+  r.set_macrocells(mc, orbit.macrocell_size);
+  r.set_cache(cache);
+  if (cache)
+    for (int i = 0; i < orbit.frames; ++i) r.set_camera(camera_of(i)), r.warm_cache();
+  r.set_camera(camera_of(0));
+  for (int i = 0; i < orbit.warmup; ++i) r.render_frame_resident(uint32_t(i));
+  std::vector<double> times;
+  for (int i = 0; i < orbit.frames; ++i) {
+    r.set_camera(camera_of(i));
+    RenderStats st;
+    r.render_frame_resident(uint32_t(i), &st);
+    times.push_back(st.seconds);
+    total->field_samples += st.field_samples;
+    total->host_syncs += st.host_syncs;
+    total->iterations += st.iterations;
+    total->seconds += st.seconds;
+    total->frames += 1;
+  }
+  return 1.0 / upper_median(times);
+}
+
 }  // namespace vnr
