@@ -257,16 +257,36 @@ TEST(BrickCache, ATrainedModelRendersFromItsCacheAsItsNetworkDoes) {
   EXPECT_FALSE(volume_renderer.cache().has_value()) << "a volume is drawn directly";
 }
 
-TEST(BrickCache, AChangedModelRefreshesItsBricksWithinTheFrameBudget) {
-  Volume a = synth(Int3{32, 32, 32}), b = a;
-  for (float& v : b.data) v = 1 - v;  // the "trained" model: another field
-  GridField field_a(view_of(a)), field_b(view_of(b));
+// A cache of model a whose model then changes to b (1 - a): what training in the loop does to it.
+struct ChangingModel {
+  Volume a = synth(Int3{32, 32, 32}), b = inverted(a);
+  GridField field_a{view_of(a)}, field_b{view_of(b)};
   const Volume* current = &a;
-  VoxelDecode decode = [&](Int3 dims, const int64_t* index, int64_t n, float* out) { grid_decode(*current)(dims, index, n, out); };
-  BrickCacheSettings s = level0(8);
-  s.decode_seconds = 100;
-  CachedField cache(field_a, decode, a.dims, s);
+  CachedField cache{field_a,
+                    [this](Int3 dims, const int64_t* index, int64_t n, float* out) { grid_decode(*current)(dims, index, n, out); },
+                    a.dims, settings()};
   const RenderParams p = params_for(orbit_camera(box_of(a), 0, 0, 30), a.dims, 64, 64);
+
+  static Volume inverted(Volume v) {
+    for (float& x : v.data) x = 1 - x;
+    return v;
+  }
+  static BrickCacheSettings settings() {
+    BrickCacheSettings s = level0(8);
+    s.decode_seconds = 100;
+    return s;
+  }
+  void change() {
+    current = &b;
+    cache.replace_source(field_b, true);
+  }
+};
+
+TEST(BrickCache, AChangedModelRefreshesItsBricksWithinTheFrameBudget) {
+  ChangingModel m;
+  const Volume &a = m.a, &b = m.b;
+  CachedField& cache = m.cache;
+  const RenderParams& p = m.p;
   std::vector<float> x, y, z;
   Pcg32 rng(3);
   for (int i = 0; i < 4000; ++i) x.push_back(rng.next_float()), y.push_back(rng.next_float()), z.push_back(rng.next_float());
@@ -276,8 +296,7 @@ TEST(BrickCache, AChangedModelRefreshesItsBricksWithinTheFrameBudget) {
   cache.begin_frame(p);  // decodes all 64 bricks
   ASSERT_EQ(cache.stats().resident, 64);
   const uint64_t version = cache.content_version();
-  current = &b;
-  cache.replace_source(field_b, true);
+  m.change();
   EXPECT_EQ(cache.stats().stale, 64);
   cache.query(x.data(), y.data(), z.data(), int64_t(x.size()), v.data());
   for (size_t i = 0; i < x.size(); ++i) ASSERT_EQ(v[i], grid_lookup(view_of(a), x[i], y[i], z[i])) << "stale bricks are still read";
@@ -289,15 +308,10 @@ TEST(BrickCache, AChangedModelRefreshesItsBricksWithinTheFrameBudget) {
 }
 
 TEST(BrickCache, RefreshChangesExactlyTheRefreshedBricks) {
-  Volume a = synth(Int3{32, 32, 32}), b = a;
-  for (float& v : b.data) v = 1 - v;
-  GridField field_a(view_of(a)), field_b(view_of(b));
-  const Volume* current = &a;
-  VoxelDecode decode = [&](Int3 dims, const int64_t* index, int64_t n, float* out) { grid_decode(*current)(dims, index, n, out); };
-  BrickCacheSettings s = level0(8);
-  s.decode_seconds = 100;
-  CachedField cache(field_a, decode, a.dims, s);
-  const RenderParams p = params_for(orbit_camera(box_of(a), 0, 0, 30), a.dims, 64, 64);
+  ChangingModel m;
+  const Volume &a = m.a, &b = m.b;
+  CachedField& cache = m.cache;
+  const RenderParams& p = m.p;
   // One sample at the centre of each of the 64 bricks.
   std::vector<float> x, y, z;
   for (int k = 0; k < 4; ++k)
@@ -308,8 +322,7 @@ TEST(BrickCache, RefreshChangesExactlyTheRefreshedBricks) {
   cache.query(x.data(), y.data(), z.data(), 64, v.data());
   cache.begin_frame(p);
   ASSERT_EQ(cache.stats().resident, 64);
-  current = &b;
-  cache.replace_source(field_b, true);
+  m.change();
   cache.set_decode_seconds(1e-9);  // one brick a frame
   for (int frame = 1; frame <= 3; ++frame) {
     cache.query(x.data(), y.data(), z.data(), 64, v.data());

@@ -117,18 +117,7 @@ struct CacheLanes {
     const int32_t n[3] = {L.nx, L.ny, L.nz};
     VI i0[3], i1[3];
     hn::Vec<DF> t[3];
-    for (int d = 0; d < 3; ++d) {
-      const auto q = CellAxisPos(df, u[d], n[d]);
-      if (d == 0) {  // the pair's lower voxel at most N-2 (GridLookupVec's kPairs)
-        i0[0] = hn::Min(hn::ConvertTo(di, hn::Floor(q)), hn::Set(di, n[0] - 2));
-        t[0] = hn::Sub(q, hn::ConvertTo(df, i0[0]));
-      } else {
-        const auto fl = hn::Floor(q);
-        i0[d] = hn::ConvertTo(di, fl);
-        i1[d] = hn::Min(hn::Add(i0[d], hn::Set(di, 1)), hn::Set(di, n[d] - 1));
-        t[d] = hn::Sub(q, fl);
-      }
-    }
+    CellAxesVec<true>(df, u, n, i0, i1, t);  // x as pairs: GridLookupVec's kPairs
     const VI bx = hn::ShiftRightSame(i0[0], s), by = hn::ShiftRightSame(i0[1], s), bz = hn::ShiftRightSame(i0[2], s);
     const VI brick = hn::Add(bx, hn::Mul(hn::Set(di, L.bx), hn::Add(by, hn::Mul(hn::Set(di, L.by), bz))));
     const VI slot = hn::GatherIndex(di, L.slot, brick);

@@ -64,6 +64,30 @@ HWY_INLINE hwy::HWY_NAMESPACE::Vec<DF> TrilinearCornersVec(DF df, const hwy::HWY
   return hn::Add(hn::Mul(c0, u2), hn::Mul(c1, t[2]));
 }
 
+// cell_axis() of the three axes for a vector of points: the lower voxels i0, the upper ones i1 (clamped
+// to N-1) and the upper ones' weights t. kPairs: the x axis's lower voxel is clamped to N-2 instead, so
+// that the pair (i0, i0 + 1) loads as one element (see GridLookupVec); i1[0] is then not set.
+template <bool kPairs, class DF>
+HWY_INLINE void CellAxesVec(DF df, const hwy::HWY_NAMESPACE::Vec<DF>* u, const int32_t* n,
+                            hwy::HWY_NAMESPACE::Vec<hwy::HWY_NAMESPACE::RebindToSigned<DF>>* i0,
+                            hwy::HWY_NAMESPACE::Vec<hwy::HWY_NAMESPACE::RebindToSigned<DF>>* i1,
+                            hwy::HWY_NAMESPACE::Vec<DF>* t) {
+  namespace hn = hwy::HWY_NAMESPACE;
+  const hn::RebindToSigned<DF> di;
+  for (int d = 0; d < 3; ++d) {
+    const auto q = CellAxisPos(df, u[d], n[d]);
+    if (kPairs && d == 0) {
+      i0[0] = hn::Min(hn::ConvertTo(di, hn::Floor(q)), hn::Set(di, n[0] - 2));
+      t[0] = hn::Sub(q, hn::ConvertTo(df, i0[0]));
+    } else {
+      const auto fl = hn::Floor(q);
+      i0[d] = hn::ConvertTo(di, fl);
+      i1[d] = hn::Min(hn::Add(i0[d], hn::Set(di, 1)), hn::Set(di, n[d] - 1));
+      t[d] = hn::Sub(q, fl);
+    }
+  }
+}
+
 // grid_lookup() for a vector of points. kPairs (volumes at least 2 voxels wide in x): each pair of
 // x-neighbours loads as one 64-bit element (GatherPairs), half the gathered elements. The lower x
 // corner is then clamped to N-2, so at q = N-1 the pair is (N-2, N-1) with weight 1 on the last
@@ -75,23 +99,12 @@ HWY_INLINE hwy::HWY_NAMESPACE::Vec<DF> GridLookupVec(DF df, const GridView& g, h
   namespace hn = hwy::HWY_NAMESPACE;
   const hn::RebindToSigned<DF> di;
   using VI = hn::Vec<decltype(di)>;
-  const auto sy = hn::Set(di, g.nx), sz = hn::Set(di, g.nx * g.ny), ione = hn::Set(di, 1);
+  const auto sy = hn::Set(di, g.nx), sz = hn::Set(di, g.nx * g.ny);
   const hn::Vec<DF> u[3] = {ux, uy, uz};
   const int32_t dims[3] = {g.nx, g.ny, g.nz};
   VI i0[3], i1[3];
   hn::Vec<DF> t[3];
-  for (int d = 0; d < 3; ++d) {
-    const auto q = CellAxisPos(df, u[d], dims[d]);
-    if (kPairs && d == 0) {
-      i0[0] = hn::Min(hn::ConvertTo(di, hn::Floor(q)), hn::Set(di, dims[0] - 2));
-      t[0] = hn::Sub(q, hn::ConvertTo(df, i0[0]));
-    } else {
-      const auto fl = hn::Floor(q);
-      i0[d] = hn::ConvertTo(di, fl);
-      i1[d] = hn::Min(hn::Add(i0[d], ione), hn::Set(di, dims[d] - 1));
-      t[d] = hn::Sub(q, fl);
-    }
-  }
+  CellAxesVec<kPairs>(df, u, dims, i0, i1, t);
   // The 8 corners v[x + 2y + 4z] (x = 0: i0, 1: i1), a row pair at a time.
   hn::Vec<DF> v[8];
   for (int k = 0; k < 4; ++k) {
