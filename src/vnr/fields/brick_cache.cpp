@@ -49,7 +49,6 @@ struct CachedField::State {
   std::optional<std::pair<Vec3f, Vec3f>> focus;  // the cursor's ray: origin, unit direction
   std::unique_ptr<float[]> pool;     // slots of (B+1)^3 voxels, committed by the OS as they are written
   int32_t slots = 0, slots_used = 0;
-  std::vector<int32_t> free_slots;
   struct Resident {
     int level;
     int64_t brick;
@@ -201,10 +200,7 @@ bool CachedField::decode_brick(int l, int64_t b) const {
   Level& L = s.levels[size_t(l)];
   if (L.slot[size_t(b)] >= 0) return true;
   int32_t slot;
-  if (!s.free_slots.empty()) {
-    slot = s.free_slots.back();
-    s.free_slots.pop_back();
-  } else if (s.slots_used < s.slots) {
+  if (s.slots_used < s.slots) {
     slot = s.slots_used++;
   } else {  // evict the least recently read brick that the frame just rendered did not read
     size_t victim = s.resident.size();
@@ -357,15 +353,6 @@ void CachedField::begin_frame(const RenderParams& p) const {
 
 void CachedField::decode_pending(const std::function<void(int64_t, int64_t)>& progress) const {
   decode_asked(-1, progress);
-}
-
-void CachedField::clear() const {
-  State& s = *s_;
-  for (const State::Resident& r : s.resident) {
-    s.levels[size_t(r.level)].slot[size_t(r.brick)] = -1;
-    s.free_slots.push_back(r.slot);
-  }
-  s.resident.clear();
 }
 
 BrickCacheStats CachedField::stats() const {

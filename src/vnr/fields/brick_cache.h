@@ -48,7 +48,7 @@ struct BrickCacheStats {
   int64_t resident = 0, decoded = 0, evicted = 0;  // bricks in the pool now, decoded and evicted so far
   int64_t requested = 0;  // bricks asked for and left for later frames (0 when the budget is full)
   int64_t misses = 0;  // samples of the current frame (since begin_frame) that read the source
-  int64_t stale = 0;   // resident bricks decoded from an earlier model (model_changed)
+  int64_t stale = 0;   // resident bricks decoded from an earlier model (replace_source)
   uint64_t pool_bytes = 0, budget_bytes = 0;
   int levels = 0;
   double decode_seconds = 0;  // in begin_frame, all frames
@@ -72,8 +72,6 @@ public:
   // Decodes every brick requested so far, however long it takes (tests, benchmarks' warm cache);
   // progress(done, total) after each brick.
   void decode_pending(const std::function<void(int64_t, int64_t)>& progress = {}) const;
-  // Drops every decoded brick.
-  void clear() const;
   // Misses read `source` from now on. With `model_changed` (training in the loop) every decoded brick
   // is stale: still read, and decoded again in the frame budget new bricks leave, the bricks the last
   // frame read first, nearest first.
@@ -93,7 +91,7 @@ private:
   // Decodes brick b of level l into a pool slot (evicting the least recently used brick not read by
   // the last frame when the budget is full); false when every resident brick is still in use.
   bool decode_brick(int l, int64_t b) const;
-  // Decodes resident brick r again (model_changed).
+  // Decodes resident brick r (again, when stale).
   void refresh_brick(size_t r) const;
   // Decodes the bricks asked for, nearest the camera first, until `seconds` have passed (< 0: all).
   void decode_asked(double seconds, const std::function<void(int64_t, int64_t)>& progress = {}) const;
@@ -101,7 +99,7 @@ private:
   // Decoding order: its centre's distance from the cursor's ray, else from the last view's eye (world units).
   float brick_distance(int level, int64_t brick) const;
 
-  mutable const RenderableField* source_;  // model_changed replaces it
+  mutable const RenderableField* source_;  // replace_source changes it
   VoxelDecode decode_;
   Int3 dims_;
   mutable BrickCacheSettings settings_;  // decode_seconds can change between frames
