@@ -192,6 +192,19 @@ void ViewerEngine::Impl::update_truth_content() {
   c.tf_epoch = ~uint64_t(0);
 }
 
+// The network view's cache for this frame: decoding's share of the frame (less while training in the
+// loop, which gets 1.5x a frame's time) and the ray under the cursor, whose bricks come first.
+static void steer_cache(const CachedField& cache, const ViewerSnapshot& snap, const RenderOptions& opt) {
+  cache.set_decode_seconds(snap.state.training.state == TrainingState::Running ? 0.01 : 0.03);
+  std::optional<std::pair<Vec3f, Vec3f>> focus;
+  if (snap.cursor) {
+    const CameraFrame f = make_camera_frame(snap.state.camera, opt.width, opt.height);
+    const float x = (*snap.cursor)[0] * float(f.width), y = (*snap.cursor)[1] * float(f.height);
+    focus = std::make_pair(f.eye, camera_ray_dir(f, 0, 0, x, y));
+  }
+  cache.set_focus(focus);
+}
+
 // Renders one frame of each view the layout needs that is not complete, and the slices when on.
 bool ViewerEngine::Impl::render(const ViewerSnapshot& snap, bool* refined, int* accumulated) {
   const ViewerState& st = snap.state;
@@ -221,17 +234,7 @@ bool ViewerEngine::Impl::render(const ViewerSnapshot& snap, bool* refined, int* 
   bool any = false;
   if (want_net) {
     update_network_content(st.render.macrocells, want_cache);
-    // Decoding's share of a frame: less while training in the loop, which gets 1.5x a frame's time.
-    if (net_content.cache) {
-      net_content.cache->set_decode_seconds(st.training.state == TrainingState::Running ? 0.01 : 0.03);
-      std::optional<std::pair<Vec3f, Vec3f>> focus;  // the ray under the cursor: its bricks first
-      if (snap.cursor) {
-        const CameraFrame f = make_camera_frame(st.camera, net_opt.width, net_opt.height);
-        const float x = (*snap.cursor)[0] * float(f.width), y = (*snap.cursor)[1] * float(f.height);
-        focus = std::make_pair(f.eye, camera_ray_dir(f, 0, 0, x, y));
-      }
-      net_content.cache->set_focus(focus);
-    }
+    if (net_content.cache) steer_cache(*net_content.cache, snap, net_opt);
     any |= draw(net_content, net_pass, net_opt);
   }
   if (want_truth) {
