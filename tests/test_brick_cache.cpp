@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 #include <hwy/targets.h>
 #include <cmath>
+#include <set>
 #include "vnr/core/error.h"
 #include "vnr/core/rng.h"
 #include "vnr/core/value_range_grid.h"
@@ -425,4 +426,37 @@ TEST(BrickCache, BricksUnderTheCursorAreDecodedFirst) {
   const float far_x = 0.9f, far_y = 0.1f, far_z = 0.1f;
   cache.query(&far_x, &far_y, &far_z, 1, got);
   EXPECT_EQ(cache.stats().misses, 4) << "a brick off the ray waits";
+}
+
+TEST(BrickCache, PacketsStraddlingLevelsGiveThePerRayImage) {
+  const Volume vol = synth(Int3{96, 80, 64});  // bricks of 8: levels of 96, 48, 24, 12 and 6 voxels
+  GridField grid(view_of(vol));
+  BrickCacheSettings s;
+  s.brick = 8;
+  s.lod_pixels = 1.2f;  // a voxel footprint of 4 pixels (levels 1 | 2) falls inside the volume at this view
+  s.decode_seconds = 100;
+  CachedField cache(grid, grid_decode(vol), vol.dims, s);
+  TransferFunction tf = tf_preset("ramp");
+  MacroCells mc = MacroCells::single(vol.dims, box_of(vol));
+  mc.update(tf);
+  const Camera cam = orbit_camera(box_of(vol), 30, 20, 30);
+  RenderOptions o;
+  o.width = 48, o.height = 40;
+  o.strategy = RenderStrategy::InShader;
+  o.ray_packets = false;
+  CpuRenderer(cache, box_of(vol), mc, tf, cam, o).render(1);  // asks for the view's bricks
+  const Image ref = CpuRenderer(cache, box_of(vol), mc, tf, cam, o).render(1);  // decodes them, then reads them
+  // The view reads more than one level.
+  const RenderParams p = params_for(cam, vol.dims, o.width, o.height);
+  std::set<int> levels;
+  for (float z : {0.05f, 0.5f, 0.95f})
+    for (float x : {0.05f, 0.95f}) levels.insert(cache.view().level_at(x, 0.5f, z));
+  ASSERT_GE(levels.size(), 2u) << "the camera " << p.cam.eye.z << " sees two levels";
+  EXPECT_EQ(cache.stats().misses, 0);
+  o.ray_packets = true;
+  for (int64_t t : hwy::SupportedAndGeneratedTargets()) {
+    hwy::SetSupportedTargetsForTest(t);
+    EXPECT_TRUE(same_image(CpuRenderer(cache, box_of(vol), mc, tf, cam, o).render(1), ref)) << hwy::TargetName(t);
+  }
+  hwy::SetSupportedTargetsForTest(0);
 }

@@ -56,9 +56,9 @@ struct GridLanes {
   }
 };
 
-// The brick cache's lanes: BrickCacheView::sample for a vector of points, bit for bit. Lanes at one
-// level whose bricks are decoded read them with GridLookupVec's arithmetic (x-neighbours as pairs);
-// lanes of a packet that straddles levels, and misses, take the scalar path (the source on a miss).
+// The brick cache's lanes: BrickCacheView::sample for a vector of points, bit for bit. The lanes of
+// each level (one, or two where the packet straddles a boundary) read their decoded bricks with
+// GridLookupVec's arithmetic (x-neighbours as pairs); misses take the scalar path (the source).
 struct CacheLanes {
   static constexpr size_t kMaxLanes = HWY_MAX_BYTES / sizeof(float);
   const BrickCacheView& c;
@@ -83,16 +83,26 @@ struct CacheLanes {
     return hn::Load(df, v);
   }
 
+  // The lanes of one level at a time: all of them but where the packet straddles a level boundary.
   template <class DF, class VF>
   HWY_INLINE VF lookup(DF df, VF ux, VF uy, VF uz, uint64_t active) {
-    const int l = lane_level(df, ux, uy, uz, active);
-    if (l < 0) return scalar(df, ux, uy, uz, active, hn::Zero(df));
-    return at_level(df, l, ux, uy, uz, active);
+    const hn::RebindToSigned<DF> di;
+    const auto lev = lane_levels(df, ux, uy, uz);
+    VF value = hn::Zero(df);
+    for (uint64_t left = active; left;) {
+      const int l = hn::ExtractLane(lev, size_t(__builtin_ctzll(left)));
+      const auto at_l = hn::RebindMask(df, hn::Eq(lev, hn::Set(di, l)));
+      const uint64_t lanes = lane_bits(df, at_l) & left;
+      const VF v = at_level(df, l, ux, uy, uz, lanes);
+      value = lanes == active ? v : hn::IfThenElse(at_l, v, value);
+      left &= ~lanes;
+    }
+    return value;
   }
 
-  // The level of the active lanes when they agree, else -1.
+  // The level each lane reads (BrickCacheView::level_at).
   template <class DF, class VF>
-  HWY_INLINE int lane_level(DF df, VF ux, VF uy, VF uz, uint64_t active) const {
+  HWY_INLINE hn::Vec<hn::RebindToSigned<DF>> lane_levels(DF df, VF ux, VF uy, VF uz) const {
     const hn::RebindToSigned<DF> di;
     using VI = hn::Vec<decltype(di)>;
     const CacheLevelView& L0 = c.level[0];
@@ -102,9 +112,7 @@ struct CacheLanes {
                                   hn::Add(hn::ShiftRightSame(hn::ConvertTo(di, CellAxisPos(df, uy, L0.ny)), s),
                                           hn::Mul(hn::Set(di, L0.by),
                                                   hn::ShiftRightSame(hn::ConvertTo(di, CellAxisPos(df, uz, L0.nz)), s)))));
-    const VI lev = hn::GatherIndex(di, c.lod, b0);
-    const int l = hn::ExtractLane(lev, size_t(__builtin_ctzll(active)));
-    return lane_bits(df, hn::RebindMask(df, hn::Ne(lev, hn::Set(di, l)))) & active ? -1 : l;
+    return hn::GatherIndex(di, c.lod, b0);
   }
 
   template <class DF, class VF>
