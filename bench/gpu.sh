@@ -160,6 +160,7 @@ if want render && [ "${VNR_RENDER:-1}" != 0 ]; then
       --no-ssim --report "$OUT/render_train_$name.json" > "$OUT/render_train_$name.log" 2>&1 || status=1
     tail -1 "$OUT/render_train_$name.log"
     $VNR bench render "$OUT/render_$name.vnr" --device cuda --size 768x768 --frames "$FRAMES" \
+      --strategies inshader,streaming,cache \
       --report "$OUT/render_neural_$name.json" > "$OUT/render_neural_$name.log" 2>&1 || status=1
     cat "$OUT/render_neural_$name.log"
     $VNR bench render "$V" --device cuda --size 768x768 --frames "$FRAMES" \

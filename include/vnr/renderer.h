@@ -87,8 +87,10 @@ public:
     return fastest_render_strategy(field().kind(), device_ == Device::Cuda, options_.mode);
   }
   // The brick cache in front of a model's field (fields/brick_cache.h, docs/RENDERING.md): decoded
-  // bricks at the level of detail the view needs; nullopt = off (the default). CPU only; a volume has
-  // nothing to cache. The cache is kept across every other setting.
+  // bricks at the level of detail the view needs; nullopt = off (the default). On the GPU, the cache
+  // with all of level 0 in: the model decoded once on the device at the cache's dims, when that fits
+  // the budget and a quarter of the GPU's free memory. A volume has nothing to cache. The cache is kept
+  // across every other setting.
   void set_cache(std::optional<BrickCacheSettings> settings);
   const std::optional<BrickCacheSettings>& cache() const { return cache_settings_; }
   // A front end's --strategy: "auto" (the brick cache for a model on the CPU when `frames` will be
@@ -104,7 +106,7 @@ public:
   // this before accumulating; an interactive loop does not). No-op without a cache. progress(done,
   // total) after each brick.
   void warm_cache(const std::function<void(int64_t, int64_t)>& progress = {});
-  BrickCacheStats cache_stats() const;  // zeros without a cache
+  BrickCacheStats cache_stats() const;  // zeros without a brick cache (none on the GPU)
   void set_macrocells(MacroCellMode mode, int cell_size = 16);
   void set_step(float step, float step_max = 0);  // voxels; step_max 0 = 16 x step
   void set_light(const DirectionalLight& light);
@@ -162,7 +164,8 @@ private:
   Device device_;
   std::unique_ptr<RenderableField> field_;
   std::optional<BrickCacheSettings> cache_settings_;
-  std::unique_ptr<CachedField> cached_;
+  std::unique_ptr<RenderableField> cached_;  // the brick cache (CPU) or the model's decode (GPU)
+  const CachedField* brick_cache_ = nullptr;  // cached_ on the CPU
   Vec3f box_;
   RenderOptions options_;
   Camera camera_;

@@ -78,7 +78,8 @@ Json table_rows(const CellTimer& time_cell, const RenderOptions& options, MacroC
   for (const Cell& cell : cells) {
     RenderOptions o = options;
     o.mode = cell.mode;
-    o.strategy = cell.cache ? fastest_render_strategy("cache", false, cell.mode) : cell.strategy;
+    o.strategy =
+        cell.cache ? fastest_render_strategy("cache", time_cell.r.device() == Device::Cuda, cell.mode) : cell.strategy;
     RenderStats tot;
     double fps = time_cell(o, cell.mc, &tot, cell.cache);
     const std::string strategy =

@@ -160,7 +160,10 @@ void add_render(CLI::App& app) {
                    {"spp", spp ? Json(spp) : Json("auto")},
                    {"noise", r.frames() > 1 ? Json(r.noise()) : Json(nullptr)}};
     std::string cached;
-    if (r.cache()) {
+    if (r.cache() && r.device() == Device::Cuda) {
+      report["cache"] = {{"decoded_on_gpu", true}};
+      cached = " from its decode on the GPU (the cache with all of level 0 in)";
+    } else if (r.cache()) {
       const BrickCacheStats cs = r.cache_stats();
       report["cache"] = {{"warm_seconds", cache_seconds}, {"bricks_decoded", cs.decoded}, {"bricks_resident", cs.resident},
                          {"pool_bytes", cs.pool_bytes}, {"budget_bytes", cs.budget_bytes}, {"levels", cs.levels}};

@@ -11,34 +11,38 @@
 
 namespace vnr {
 
-// Why a multi-brick model cannot render on the GPU, empty when it can: it is drawn from its decode at its
-// own dims (as float32), which must fit a quarter of the GPU's free memory and the host's memory.
-inline std::string bricked_gpu_render_reason(const Model& model) {
-  const double bytes = double(model.dims.count()) * sizeof(float);
+// Why `what` cannot render on the GPU from its decode at dims (as float32), empty when it can: the decode
+// must fit a quarter of the GPU's free memory and the host's memory.
+inline std::string gpu_decode_reason(const std::string& what, Int3 dims) {
+  const double bytes = double(dims.count()) * sizeof(float);
   if (bytes > double(cuda::free_memory_bytes()) / 4)
-    return fmt::format("a multi-brick model renders on the GPU from its decode ({}), more than a quarter of the "
-                       "GPU's free memory ({})", human_bytes(bytes), human_bytes(double(cuda::free_memory_bytes())));
+    return fmt::format("{} renders on the GPU from its decode ({}), more than a quarter of the GPU's free memory ({})",
+                       what, human_bytes(bytes), human_bytes(double(cuda::free_memory_bytes())));
   if (bytes > double(available_memory_bytes()))
-    return fmt::format("a multi-brick model renders on the GPU from its decode ({}), more than the memory available",
+    return fmt::format("{} renders on the GPU from its decode ({}), more than the memory available", what,
                        human_bytes(bytes));
   return {};
 }
+inline std::string bricked_gpu_render_reason(const Model& model) {
+  return gpu_decode_reason("a multi-brick model", model.dims);
+}
 
-// A multi-brick model drawn on the GPU: decoded once at its dims, each brick's network on the GPU and
-// blended as on the CPU (Decoder), then ray marched as a grid: trilinear between voxel centres where the
-// CPU's BrickedField queries the networks (docs/MODEL_FORMAT.md states the difference).
-class DecodedBricksField final : public RenderableField {
+// A model drawn on the GPU from its decode: decoded once at dims on the GPU (a multi-brick model's bricks
+// blended as on the CPU; residuals where they apply: Decoder), then ray marched as a grid, trilinear
+// between voxel centres. What a multi-brick model always is on the GPU (where the CPU's BrickedField
+// queries the networks; docs/MODEL_FORMAT.md states the difference), and the GPU's brick cache: the
+// cache with every brick of level 0 in, for a decode that fits (docs/RENDERING.md).
+class DecodedModelField final : public RenderableField {
 public:
-  explicit DecodedBricksField(const Model& model) : grid_(GridView{}) {
+  DecodedModelField(const Model& model, Int3 dims, const char* kind) : grid_(GridView{}), kind_(kind) {
     cuda::require_device();
-    if (const std::string why = bricked_gpu_render_reason(model); !why.empty()) fail("{}", why);
-    decoded_.dims = model.dims;
-    decoded_.data.resize(model.dims.count());
-    Decoder(model, Device::Cuda).slices(model.dims, 0, model.dims.z, decoded_.data.data());
+    decoded_.dims = dims;
+    decoded_.data.resize(dims.count());
+    Decoder(model, Device::Cuda).slices(dims, 0, dims.z, decoded_.data.data());
     grid_ = GridField(view_of(decoded_));
   }
   Int3 dims() const override { return grid_.dims(); }
-  const char* kind() const override { return "network"; }
+  const char* kind() const override { return kind_; }
   void query(const float* x, const float* y, const float* z, int64_t n, float* out) const override {
     grid_.query(x, y, z, n, out);
   }
@@ -49,13 +53,17 @@ public:
 private:
   Volume decoded_;
   GridField grid_;
+  const char* kind_;  // "network" (a multi-brick model) or "cache"
 };
 
 // The field of a model for a renderer on `device`: its network, or a multi-brick model's blended bricks
 // (on the GPU: their decode).
 inline std::unique_ptr<RenderableField> make_model_field(const Model& model, Device device) {
   if (!model.bricks) return std::make_unique<NetworkField>(*model.net, model.dims);
-  if (device == Device::Cuda) return std::make_unique<DecodedBricksField>(model);
+  if (device == Device::Cuda) {
+    if (const std::string why = bricked_gpu_render_reason(model); !why.empty()) fail("{}", why);
+    return std::make_unique<DecodedModelField>(model, model.dims, "network");
+  }
   std::vector<const Network*> nets;
   for (auto& b : model.bricks->bricks) {
     if (b) b->net->set_inference_precision(model.net->inference_precision());  // Model::net carries it

@@ -112,13 +112,24 @@ Renderer::~Renderer() = default;
 
 void Renderer::set_cache(std::optional<BrickCacheSettings> settings) {
   cached_.reset();
+  brick_cache_ = nullptr;
   cache_settings_ = settings;
   if (settings) {
     if (!model_) fail("the brick cache is for models: a volume is drawn directly");
-    if (device_ == Device::Cuda)
-      fail("the brick cache renders on the CPU (the GPU draws the network directly); use --device cpu or "
-           "another --strategy");
-    cached_ = make_model_cache(*model_, *field_, *settings);
+    if (device_ == Device::Cuda) {  // all of level 0, decoded once on the device
+      const Int3 dims = settings->dims.count() > 0 ? settings->dims : model_->dims;
+      const uint64_t budget = settings->budget_bytes ? settings->budget_bytes : default_cache_budget();
+      if (double(dims.count()) * sizeof(float) > double(budget))
+        fail("on the GPU the cache holds the whole decode, {} at {}x{}x{}, more than its budget of {}: give a "
+             "larger --cache-budget, smaller --cache-dims, or another --strategy",
+             human_bytes(double(dims.count()) * sizeof(float)), dims.x, dims.y, dims.z, human_bytes(double(budget)));
+      if (const std::string why = gpu_decode_reason("the cache", dims); !why.empty()) fail("{}", why);
+      cached_ = std::make_unique<DecodedModelField>(*model_, dims, "cache");
+    } else {
+      auto cache = make_model_cache(*model_, *field_, *settings);
+      brick_cache_ = cache.get();
+      cached_ = std::move(cache);
+    }
   }
   invalidate();
 }
@@ -141,12 +152,12 @@ void Renderer::choose_strategy(const std::string& choice, uint64_t cache_budget,
 }
 
 void Renderer::warm_cache(const std::function<void(int64_t, int64_t)>& progress) {
-  if (!cached_) return;
+  if (!brick_cache_) return;
   backend().render_frame(0, frame_);
-  cached_->decode_pending(progress);
+  brick_cache_->decode_pending(progress);
 }
 
-BrickCacheStats Renderer::cache_stats() const { return cached_ ? cached_->stats() : BrickCacheStats{}; }
+BrickCacheStats Renderer::cache_stats() const { return brick_cache_ ? brick_cache_->stats() : BrickCacheStats{}; }
 
 void Renderer::set_camera(const Camera& camera) {
   camera_ = camera;

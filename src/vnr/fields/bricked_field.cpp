@@ -43,7 +43,7 @@ int64_t BrickedField::render_inshader(const InshaderJob& job) const {
 float BrickedField::point(float x, float y, float z) const { return BrickedPointFn{&layout_, points_.data()}(x, y, z); }
 
 GpuFieldSource BrickedField::gpu_source() const {
-  fail("BrickedField draws on the CPU; the GPU draws a multi-brick model from its decode (DecodedBricksField)");
+  fail("BrickedField draws on the CPU; the GPU draws a multi-brick model from its decode (DecodedModelField)");
 }
 
 }  // namespace vnr
