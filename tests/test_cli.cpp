@@ -237,13 +237,14 @@ TEST(Cli, RenderModelAndVolumeWithReportsAndReference) {
                  "/bench.json");
   ASSERT_EQ(b.code, 0) << b.err;
   Json bench = parse_json_file(d + "/bench.json");
-  ASSERT_EQ(bench["rows"].size(), 4u);
+  ASSERT_EQ(bench["rows"].size(), 6u);  // in-shader, streaming and the brick cache, without and with cells
   for (const Json& row : bench["rows"]) {
     EXPECT_EQ(row["mode"], "raymarch");
     EXPECT_GT(row["fps"].get<double>(), 0);
     EXPECT_GT(row["field_samples_per_second"].get<double>(), 0);
   }
   EXPECT_NE(b.out.find("| raymarch | streaming | online |"), std::string::npos) << b.out;
+  EXPECT_NE(b.out.find("| raymarch | cache (inshader) | online |"), std::string::npos) << b.out;
 }
 
 TEST(Cli, RenderBadInputGivesOneClearErrorLine) {

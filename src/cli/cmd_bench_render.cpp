@@ -105,7 +105,7 @@ Json table_rows(const CellTimer& time_cell, const RenderOptions& options, MacroC
 
 void add_bench_render(CLI::App& bench) {
   struct Args {
-    std::string input, report, modes = "raymarch,shadow,pathtrace", strategies = "inshader,streaming",
+    std::string input, report, modes = "raymarch,shadow,pathtrace", strategies,
                                   macrocells, tune_k;
     int frames = 6, warmup = 1;
     RenderArgs r;
@@ -119,7 +119,9 @@ void add_bench_render(CLI::App& bench) {
       ->capture_default_str();
   c->add_option("--warmup", a->warmup, "untimed frames per cell")->capture_default_str();
   c->add_option("--modes", a->modes, "comma-separated subset of raymarch,shadow,pathtrace")->capture_default_str();
-  c->add_option("--strategies", a->strategies, "comma-separated subset of inshader,streaming,cache (cache: a warm brick cache of a model, CPU)")->capture_default_str();
+  c->add_option("--strategies", a->strategies,
+                "comma-separated subset of inshader,streaming,cache (cache: the model's warm brick cache; default: "
+                "all three for a model, inshader,streaming for a volume)");
   c->add_option("--with-macrocells", a->macrocells,
                 "the 'with' setting: grid or online (default: online for a vnr-trained model, else grid)");
   c->add_option("--tune-k", a->tune_k,
@@ -174,7 +176,9 @@ void add_bench_render(CLI::App& bench) {
     if (!a->tune_k.empty()) {
       report["tune_k"] = tune_k_rows(time_cell, options, with, split_list(a->tune_k));
     } else {
-      report["rows"] = table_rows(time_cell, options, with, raw, split_list(a->modes), split_list(a->strategies));
+      const std::string strategies =
+          !a->strategies.empty() ? a->strategies : (model ? "inshader,streaming,cache" : "inshader,streaming");
+      report["rows"] = table_rows(time_cell, options, with, raw, split_list(a->modes), split_list(strategies));
     }
     write_report(a->report, report);
   });
