@@ -145,7 +145,8 @@ double ViewerEngine::Impl::train_chunk(const ViewerSnapshot& snap) {
   const double budget = want.budget_seconds > 0 ? want.budget_seconds : std::max(kAutoBudgetMin, kAutoBudgetFactor * last_render_seconds);
   try {
     if (run.probe_step < 0) take_probe();
-    // Whole steps, as many as come closest to the budget (a step of a large batch is a good part of it).
+    // Whole steps that fit the budget, at least one (a step of a large batch is a good part of it: a
+    // budget overshot by a step would take frames from the viewer).
     const TrainingSession& s = *run.session;
     const double step_seconds = s.steps_done() > 0 ? s.training_seconds() / double(s.steps_done()) : 0;
     double spent = 0;
@@ -153,7 +154,7 @@ double ViewerEngine::Impl::train_chunk(const ViewerSnapshot& snap) {
       int64_t limit = -1;
       if (run.continuous) limit = std::max<int64_t>(1, run.switch_at - run.steps());
       if (step_seconds > 0) {
-        const int64_t fit = std::max<int64_t>(1, std::llround((budget - spent) / step_seconds));
+        const int64_t fit = std::max<int64_t>(1, int64_t((budget - spent) / step_seconds));
         limit = limit < 0 ? fit : std::min(limit, fit);
       }
       run.session->run(limit, std::min(budget - spent, kSliceSeconds));
@@ -162,7 +163,7 @@ double ViewerEngine::Impl::train_chunk(const ViewerSnapshot& snap) {
         load_timestep((snap.state.training.timestep + 1) % info.n_timesteps);
         break;
       }
-    } while (spent + 0.5 * step_seconds < budget && keep_training());
+    } while (spent + step_seconds <= budget && keep_training());
     if (run.steps() - run.probe_step >= kProbeEverySteps && run.seconds() - run.probe_seconds >= kProbeEverySeconds)
       take_probe();
   } catch (const std::exception& e) {
