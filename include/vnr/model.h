@@ -58,6 +58,9 @@ public:
   // The whole grid at dims (zero dims: the model's own) as a Volume with the model's range and dtype.
   // Refused with the sizes, before allocating, when it cannot fit the memory (check_decode_fits_memory).
   Volume decode(Int3 dims = {});
+  // The grid at dims in original units, z-slab by z-slab of about 16 M voxels (memory bounded at any
+  // size; refused with the sizes when even a slab cannot fit): sink(z0, z1, values) for each, x fastest.
+  void for_each_slab(Int3 dims, const std::function<void(int64_t z0, int64_t z1, const float* values)>& sink);
   // What `vnr decode` writes: the grid at dims (zero dims: the model's own) in original units, stored as
   // dtype (integers rounded to nearest and clamped), in a volume file (OUT.raw with its OUT.json
   // sidecar, or OUT.nrrd) written atomically, in z-slabs of about 16 M voxels: memory stays bounded at

@@ -35,7 +35,7 @@ void add_training_precision_option(CLI::App* app, std::string& precision);
 // (its own fp16 MLP) or without a network (a grid).
 Json precision_json(const Network* net, Device dev);
 
-Int3 parse_dims(const std::string& s);
+Int3 parse_dims(const std::string& s, const char* option = "--dims");  // X,Y,Z, positive
 void write_report(const std::string& path, const Json& report);  // atomic; "" = no report
 // Refuses to replace existing volume files (a decoded or generated volume must never silently
 // overwrite someone's data) unless force is set.

@@ -80,13 +80,13 @@ void add_device_option(CLI::App* app, std::string& device) {
       ->capture_default_str();
 }
 
-Int3 parse_dims(const std::string& s) {
+Int3 parse_dims(const std::string& s, const char* option) {
   long long v[3];
   char tail;
   if (std::sscanf(s.c_str(), "%lld,%lld,%lld%c", &v[0], &v[1], &v[2], &tail) != 3)
-    fail("--dims expects X,Y,Z (three positive integers), got '{}'", s);
+    fail("{} expects X,Y,Z (three positive integers), got '{}'", option, s);
   for (long long d : v)
-    if (d <= 0) fail("--dims must be positive, got '{}'", s);
+    if (d <= 0) fail("{} must be positive, got '{}'", option, s);
   return Int3{v[0], v[1], v[2]};
 }
 

@@ -80,13 +80,8 @@ CliRender open_cli_render(const std::string& input, const RenderArgs& a, const V
   r.set_options(o);
   Int3 cache_dims{0, 0, 0};
   if (!a.cache_dims.empty()) {
-    long long d[3];
-    char tail;
-    if (std::sscanf(a.cache_dims.c_str(), "%lld,%lld,%lld%c", &d[0], &d[1], &d[2], &tail) != 3 || d[0] < 1 ||
-        d[1] < 1 || d[2] < 1)
-      fail("--cache-dims expects X,Y,Z (three positive integers), got '{}'", a.cache_dims);
+    cache_dims = parse_dims(a.cache_dims, "--cache-dims");
     if (!model) fail("--cache-dims is for models (a volume is drawn directly)");
-    cache_dims = Int3{d[0], d[1], d[2]};
   }
   r.choose_strategy(a.strategy, parse_cache_budget(a.cache_budget), cache_dims, frames);
   if (cache_dims.count() > 0 && !r.cache()) fail("--cache-dims needs the brick cache (--strategy cache or auto on the CPU)");

@@ -22,8 +22,6 @@ ModelQuery& ModelHolder::query_on(Device device) {
 
 namespace {
 
-// Decoded voxels per slab when converting to another dtype: bounded memory at any output size.
-constexpr int64_t kSlabVoxels = int64_t(1) << 24;
 // Points converted to interleaved float32 per batch when the input is not already that.
 constexpr int64_t kPointBatch = int64_t(1) << 20;
 
@@ -41,14 +39,11 @@ pyb::array decode(ModelHolder& h, const pyb::object& shape, const std::string& d
     q.slab(dims, 0, dims.z, static_cast<float*>(dst), ValueUnits::Original);
     return out;
   }
-  const int64_t plane = dims.x * dims.y, slab = std::max<int64_t>(1, kSlabVoxels / plane);
-  std::vector<float> buf(size_t(plane * std::min(slab, dims.z)));
-  for (int64_t z0 = 0; z0 < dims.z; z0 += slab) {
-    const int64_t z1 = std::min(dims.z, z0 + slab), n = plane * (z1 - z0);
-    q.slab(dims, z0, z1, buf.data(), ValueUnits::Original);
+  const int64_t plane = dims.x * dims.y;
+  q.for_each_slab(dims, [&](int64_t z0, int64_t z1, const float* values) {
     // `vnr decode`'s conversion (little-endian bytes: the host's order on every platform vnr builds for)
-    store_values(out_t, buf.data(), n, static_cast<unsigned char*>(dst) + z0 * plane * int64_t(dtype_size(out_t)));
-  }
+    store_values(out_t, values, plane * (z1 - z0), static_cast<unsigned char*>(dst) + z0 * plane * int64_t(dtype_size(out_t)));
+  });
   return out;
 }
 

@@ -84,23 +84,30 @@ Volume ModelQuery::decode(Int3 dims) {
   return v;
 }
 
-void ModelQuery::decode_to_file(const std::string& path, Int3 dims, DType dtype,
-                                const std::function<void(int64_t, int64_t)>& progress) {
-  if (dims.x == 0 || dims.y == 0 || dims.z == 0) dims = model_.dims;
+void ModelQuery::for_each_slab(Int3 dims, const std::function<void(int64_t, int64_t, const float*)>& sink) {
   // (in double: hostile dims must not overflow before check_decode_fits_memory refuses them)
   const int64_t slices = std::max<int64_t>(1, int64_t(double(int64_t(1) << 24) / (double(dims.x) * double(dims.y))));
   check_decode_fits_memory(dims, std::min<int64_t>(slices, dims.z));
-  // Voxel size relative to the model's grid (model files carry no physical spacing).
-  const Vec3f spacing{float(double(model_.dims.x) / double(dims.x)), float(double(model_.dims.y) / double(dims.y)),
-                      float(double(model_.dims.z) / double(dims.z))};
-  VolumeWriter w(path, dims, dtype, spacing, std::make_pair(model_.lo, model_.hi));
   std::vector<float> buf(size_t(dims.x * dims.y * std::min<int64_t>(slices, dims.z)));
   for (int64_t z0 = 0; z0 < dims.z; z0 += slices) {
     const int64_t z1 = std::min(dims.z, z0 + slices);
     slab(dims, z0, z1, buf.data(), ValueUnits::Original);
-    w.write_slices(buf.data(), z1 - z0);
-    if (progress) progress(z1, dims.z);
+    sink(z0, z1, buf.data());
   }
+}
+
+void ModelQuery::decode_to_file(const std::string& path, Int3 dims, DType dtype,
+                                const std::function<void(int64_t, int64_t)>& progress) {
+  if (dims.x == 0 || dims.y == 0 || dims.z == 0) dims = model_.dims;
+  check_decode_fits_memory(dims, 1);  // before the writer creates anything
+  // Voxel size relative to the model's grid (model files carry no physical spacing).
+  const Vec3f spacing{float(double(model_.dims.x) / double(dims.x)), float(double(model_.dims.y) / double(dims.y)),
+                      float(double(model_.dims.z) / double(dims.z))};
+  VolumeWriter w(path, dims, dtype, spacing, std::make_pair(model_.lo, model_.hi));
+  for_each_slab(dims, [&](int64_t z0, int64_t z1, const float* values) {
+    w.write_slices(values, z1 - z0);
+    if (progress) progress(z1, dims.z);
+  });
   w.commit();
 }
 

@@ -173,7 +173,7 @@ void Renderer::set_transfer_function(const std::string& preset_or_file) {
   set_transfer_function(load_transfer_function(preset_or_file));
 }
 void Renderer::set_scene(const Scene& scene) {
-  set_camera(scene.camera ? *scene.camera : orbit_camera(box_, 0, 0, 30));
+  set_camera(camera_for(CameraRequest{}, box_, scene.camera));
   set_transfer_function(scene.tf ? *scene.tf : tf_preset("ramp"));
   options_.light = scene.light ? *scene.light : DirectionalLight{};
   options_.background = scene.background ? *scene.background : Vec3f{0, 0, 0};

@@ -83,7 +83,7 @@ void ViewerEngine::Impl::open(const ViewerSetup& s) {
   }
 
   ViewerState& st = state;
-  st.camera = input.scene.camera ? *input.scene.camera : orbit_camera(box, 0, 0, 30);
+  st.camera = camera_for(CameraRequest{}, box, input.scene.camera);
   st.tf = viewer_tf_from_table(input.scene.tf ? *input.scene.tf : tf_preset("ramp"));
   st.view.layout = volume ? ViewLayout::SideBySide : ViewLayout::Network;
   st.render.macrocells = input.model ? default_macrocell_mode(model, volume.get()) : MacroCellMode::Online;

@@ -32,6 +32,7 @@ struct Level {
   std::vector<int32_t> slot;
   std::unique_ptr<std::atomic<uint32_t>[]> used, asked;  // the last frame that read / asked for a brick
   int64_t bricks() const { return int64_t(nb.x) * nb.y * nb.z; }
+  Int3 brick_coords(int64_t b) const { return Int3{b % nb.x, (b / nb.x) % nb.y, b / (nb.x * nb.y)}; }  // x fastest
 };
 struct BrickKey {
   int level;
@@ -231,8 +232,7 @@ void CachedField::refresh_brick(size_t r) const {
   const Level& L = s.levels[size_t(res.level)];
   // The brick's voxels with its far faces, clamped to the level (the lookup never reads past them).
   const int B = settings_.brick, side = B + 1;
-  const int64_t b = res.brick;
-  const int64_t bx = b % L.nb.x, by = (b / L.nb.x) % L.nb.y, bz = b / (int64_t(L.nb.x) * L.nb.y);
+  const auto [bx, by, bz] = L.brick_coords(res.brick);
   std::vector<int64_t> index(size_t(s.view.brick_floats));
   for (int k = 0; k < side; ++k)
     for (int j = 0; j < side; ++j)
@@ -257,7 +257,7 @@ uint64_t CachedField::content_version() const { return s_->version; }
 float CachedField::brick_distance(int level, int64_t brick) const {
   const Level& L = s_->levels[size_t(level)];
   const int64_t B = settings_.brick;
-  const int64_t bx = brick % L.nb.x, by = (brick / L.nb.x) % L.nb.y, bz = brick / (int64_t(L.nb.x) * L.nb.y);
+  const auto [bx, by, bz] = L.brick_coords(brick);
   const Vec3f box = s_->box;
   const Vec3f c{(float(bx * B) + 0.5f * float(B)) / float(L.n.x) * box.x,
                 (float(by * B) + 0.5f * float(B)) / float(L.n.y) * box.y,
@@ -328,7 +328,7 @@ void CachedField::update_levels(const RenderParams& p) const {
   const float pixel_per_distance = length(c.dv) / float(std::max(1, c.height));
   const int top = int(s.levels.size()) - 1;
   parallel_for(L0.bricks(), [&](int64_t b) {
-    const int64_t bx = b % L0.nb.x, by = (b / L0.nb.x) % L0.nb.y, bz = b / (int64_t(L0.nb.x) * L0.nb.y);
+    const auto [bx, by, bz] = L0.brick_coords(b);
     const Vec3f lo{float(bx) * B * cell.x, float(by) * B * cell.y, float(bz) * B * cell.z};
     const Vec3f hi{std::min(float(bx + 1) * B * cell.x, p.box.x), std::min(float(by + 1) * B * cell.y, p.box.y),
                    std::min(float(bz + 1) * B * cell.z, p.box.z)};
