@@ -8,6 +8,7 @@
 #include "vnr/core/half.h"
 #include "vnr/core/parallel.h"
 #include "vnr/nn/mlp_layout.h"
+#include "vnr/train/config_sizing.h"
 #include "vnr/train/psnr_search.h"
 #include "vnr/train/rate_control.h"
 #include "vnr/train/rate_term.h"
@@ -357,8 +358,29 @@ TEST(RateTerm, RateAwareStepsZeroMoreOfTheGrid) {
   EXPECT_GT(rate_aware, plain + 0.05) << plain << " " << rate_aware;
 }
 
+// The split of a file between the network and its residuals (config_sizing.h), in closed form: a tenth
+// for the network, the config's where that is at least 32 KiB, else (config auto) the small preset's of
+// at least 8 KiB, and none where the network would take over half of the file.
+TEST(RateControl, ResidualSplitGivesTheNetworkATenthAndAFloor) {
+  const uint64_t bonsai = 16u << 20, voxels = 16u << 20, wmag = 91u * 91 * 91 * 4;
+  ResidualSplit s = residual_network_split(bonsai, voxels, 32, true, nullptr);
+  EXPECT_DOUBLE_EQ(s.network_ratio, 320.0);
+  EXPECT_FALSE(s.small_network);
+  s = residual_network_split(bonsai, voxels, 128, true, nullptr);  // a tenth is 13 KB: the small network
+  EXPECT_DOUBLE_EQ(s.network_ratio, 1280.0);
+  EXPECT_TRUE(s.small_network);
+  s = residual_network_split(bonsai, voxels, 128, false, nullptr);  // the user's config: 32 KiB, a quarter
+  EXPECT_DOUBLE_EQ(s.network_ratio, double(bonsai) / 32768);
+  EXPECT_FALSE(s.small_network);
+  s = residual_network_split(wmag, wmag / 4, 64, true, nullptr);  // a tenth is 4.6 KB: 8 KiB, 17 %
+  EXPECT_DOUBLE_EQ(s.network_ratio, double(wmag) / 8192);
+  EXPECT_TRUE(s.small_network);
+  EXPECT_EQ(residual_network_split(wmag, wmag / 4, 64, false, nullptr).network_ratio, 0.0);  // 32 KiB: 70 %
+  EXPECT_EQ(residual_network_split(wmag, wmag / 4, 512, true, nullptr).network_ratio, 0.0);  // 8 KiB > a half
+}
+
 // --target-ratio alone on a volume where the file has bits to spare (1 bit per voxel): --residuals auto
-// trains a smaller network and spends the rest of the file on residuals, the finest bound that fits.
+// trains a smaller network and spends the rest of the file on residuals (wavelet or voxel).
 // The file still meets the target within 5 %, the bound holds at every voxel, the decode is better than
 // the network alone (which renders) and than a network of the whole file; --residuals off keeps the
 // whole file for the network.
@@ -380,7 +402,9 @@ TEST(RateControl, ResidualsFillTheFileBesideASmallerNetwork) {
   EXPECT_EQ(with_opts.file_bytes, target);
   EXPECT_LE(double(with_opts.target_bytes), 0.5 * double(target));
   EXPECT_LE(with.model_bytes, target);
-  EXPECT_GE(double(with.model_bytes), 0.95 * double(target));
+  // Within 5 % of the target, or under it where the residuals reach fp32 precision (wavelets do on this
+  // smooth field: nothing is left to spend the rest on).
+  if (with.psnr < 120) EXPECT_GE(double(with.model_bytes), 0.95 * double(target)) << with.psnr;
   ASSERT_TRUE(with.report.contains("error_bound")) << with.report.dump();
   const Json& b = with.report["error_bound"];
   EXPECT_EQ(b["chosen_by"], "target_ratio");

@@ -38,7 +38,7 @@ struct RdOptions {
   std::vector<double> times;
   double time_ratio = 64;
   int64_t steps = -1;                                           // > 0: steps instead of seconds
-  std::string config = "paper";
+  std::string config = "auto";
   std::string residuals = "auto";  // the --target-ratio points' --residuals
   std::string device = "auto";
   uint32_t seed = 1337;

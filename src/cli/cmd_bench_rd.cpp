@@ -19,7 +19,7 @@ namespace vnr::cli {
 namespace {
 
 struct RdArgs {
-  std::string volume, report, plot, peers, ratios, bounds, zfp_rates, times, config = "paper", device = "auto",
+  std::string volume, report, plot, peers, ratios, bounds, zfp_rates, times, config = "auto", device = "auto",
               residuals = "auto";
   double seconds = 60, time_ratio = 64;
   int64_t steps = -1;
@@ -77,8 +77,10 @@ void run_rd(const RdArgs& a) {
   set_num_threads(a.threads);
   RdOptions o;
   if (!a.ratios.empty()) o.ratios = parse_list(a.ratios, "--ratios");
-  if (!a.bounds.empty()) o.rel_bounds = parse_list(a.bounds, "--bounds");
-  if (!a.zfp_rates.empty()) o.zfp_rates = parse_list(a.zfp_rates, "--zfp-rates");
+  if (a.bounds == "none") o.rel_bounds.clear();
+  else if (!a.bounds.empty()) o.rel_bounds = parse_list(a.bounds, "--bounds");
+  if (a.zfp_rates == "none") o.zfp_rates.clear();
+  else if (!a.zfp_rates.empty()) o.zfp_rates = parse_list(a.zfp_rates, "--zfp-rates");
   if (!a.times.empty()) o.times = parse_list(a.times, "--times");
   if (!(a.time_ratio > 0)) fail("--time-ratio must be positive, got {}", a.time_ratio);
   o.time_ratio = a.time_ratio;
@@ -118,9 +120,9 @@ void add_bench_rd(CLI::App& bench) {
                 "(e.g. 20,60,120)");
   c->add_option("--time-ratio", a->time_ratio, "target ratio of the --times models")->capture_default_str();
   c->add_option("--ratios", a->ratios, "vnr target ratios (default 8,16,32,64,128,256,512)");
-  c->add_option("--bounds", a->bounds, "error bounds as fractions of the range (default 1e-2,1e-3)");
-  c->add_option("--zfp-rates", a->zfp_rates, "ZFP fixed rates in bits per value (default 0.5,1,2,4,8)");
-  c->add_option("--config", a->config, "vnr preset or config file")->capture_default_str();
+  c->add_option("--bounds", a->bounds, "error bounds as fractions of the range (default 1e-2,1e-3; none: no bounded points)");
+  c->add_option("--zfp-rates", a->zfp_rates, "ZFP fixed rates in bits per value (default 0.5,1,2,4,8; none: no ZFP points)");
+  c->add_option("--config", a->config, "vnr preset or config file (auto: as vnr train's default)")->capture_default_str();
   c->add_option("--residuals", a->residuals, "the ratio points' --residuals (auto, off)")
       ->capture_default_str()
       ->check(CLI::IsMember({"auto", "off"}));

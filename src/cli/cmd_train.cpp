@@ -45,10 +45,11 @@ struct StopSignalGuard {
 void print_error_bound(const Json& report) {
   if (!report.contains("error_bound")) return;
   const Json& b = report["error_bound"];
-  std::printf("error bound %.4g (data units) %s; residuals: %.2f%% of voxels non-zero, %s (%.3f bits/voxel), "
+  const bool wavelet = b.value("transform", "none") != "none";
+  std::printf("error bound %.4g (data units) %s; residuals: %.2f%% of %s non-zero, %s (%.3f bits/voxel), "
               "network %s\n",
               b["max_error"].get<double>(), b["holds"].get<bool>() ? "holds at every voxel" : "VIOLATED",
-              100 * b["residual_nonzero_fraction"].get<double>(), human_bytes(b["residual_bytes"].get<double>()).c_str(),
+              100 * b["residual_nonzero_fraction"].get<double>(), wavelet ? "wavelet coefficients" : "voxels", human_bytes(b["residual_bytes"].get<double>()).c_str(),
               b["residual_bits_per_voxel"].get<double>(), human_bytes(b["network_bytes"].get<double>()).c_str());
   if (report.contains("network_psnr"))
     std::printf("the network alone (what renders and answers point queries): PSNR %.2f dB\n",

@@ -34,29 +34,42 @@ ModelConfig size_config_for_bytes(const ModelConfig& base, uint64_t target_bytes
   return best;
 }
 
-double bounded_network_ratio(const Volume& vol, uint64_t source_bytes, double bound, std::string* note) {
+ResidualSplit bounded_network_split(const Volume& vol, uint64_t source_bytes, double bound, std::string* note) {
   const uint64_t without = predictorless_bytes(vol.data.data(), vol.dims, bound);
-  const double budget = std::max(kBoundNetworkShare * double(without), 32768.0);
-  const double ratio = std::min(double(source_bytes) / budget, 1024.0);
-  if (ratio <= 1) {
+  const double share = kBoundNetworkShare * double(without);
+  ResidualSplit split;
+  split.small_network = share < kConfigNetworkFloorBytes;
+  const double budget = std::max(share, split.small_network ? kSmallNetworkFloorBytes : kConfigNetworkFloorBytes);
+  split.network_ratio = std::min(double(source_bytes) / budget, 1024.0);
+  if (split.network_ratio <= 1) {
     if (note) *note = "error bound alone: the volume is too small to size a network for it; the config's network is used";
-    return 0;
+    return {};
   }
   if (note)
-    *note = fmt::format("error bound alone: without a network it costs {} bytes ({:.2f}x); the network gets {:.0f} % "
+    *note = fmt::format("error bound alone: without a network it costs {} bytes ({:.2f}x); the {}network gets {:.0f} % "
                         "of that: --target-ratio {:.3g}", without, double(source_bytes) / double(std::max<uint64_t>(without, 1)),
-                        100 * kBoundNetworkShare, ratio);
-  return ratio;
+                        split.small_network ? "small preset's " : "", 100 * budget / double(std::max<uint64_t>(without, 1)),
+                        split.network_ratio);
+  return split;
 }
 
-double residual_network_ratio(uint64_t source_bytes, uint64_t voxels, double target_ratio, std::string* note) {
+ResidualSplit residual_network_split(uint64_t source_bytes, uint64_t voxels, double target_ratio, bool config_is_auto,
+                                     std::string* note) {
   const double budget = double(source_bytes) / target_ratio, bits_per_voxel = 8 * budget / double(voxels);
-  const double network = std::max(kResidualNetworkBitsPerVoxel * double(voxels) / 8, 32768.0);
-  if (network > 0.5 * budget) return 0;
+  const double tenth = kResidualNetworkShare * budget;
+  double network = std::max(tenth, kConfigNetworkFloorBytes);
+  ResidualSplit split;
+  if (tenth < kConfigNetworkFloorBytes && config_is_auto) {
+    network = std::max(tenth, kSmallNetworkFloorBytes);
+    split.small_network = true;
+  }
+  if (network > kResidualNetworkMaxShare * budget) return split;
+  split.network_ratio = double(source_bytes) / network;
   if (note)
-    *note = fmt::format("--residuals auto: {:.2f} bits per voxel; the network gets {:.0f} % of the file (ratio {:.3g}), "
-                        "residuals the rest", bits_per_voxel, 100 * network / budget, double(source_bytes) / network);
-  return double(source_bytes) / network;
+    *note = fmt::format("--residuals auto: {:.2f} bits per voxel; the {}network gets {:.0f} % of the file (ratio {:.3g}), "
+                        "wavelet or voxel residuals the rest", bits_per_voxel, split.small_network ? "small preset's " : "",
+                        100 * network / budget, split.network_ratio);
+  return split;
 }
 
 }  // namespace vnr

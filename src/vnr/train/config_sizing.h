@@ -14,19 +14,30 @@ constexpr double kDefaultBitsPerParam = 4.0;
 ModelConfig size_config_for_bytes(const ModelConfig& config, uint64_t target_bytes, double bits_per_param,
                                   std::string* note);
 
-// The network of an error bound given alone (--max-error/--max-rel-error without --target-ratio): its
-// file takes kBoundNetworkShare of the bytes the bound costs without a network (predictorless_bytes:
-// the voxels quantised and coded as residuals are), at least 32 KiB (a compact file of the paper's MLP
-// fits), as a target ratio of source_bytes, at most 1024; 0 (no sizing) when that leaves no ratio above
-// 1. docs/COMPRESSION.md has the runs that fitted the share. `bound` is normalised.
+// The network of an error bound given alone (--max-error/--max-rel-error without --target-ratio, config
+// auto): its file takes kBoundNetworkShare of the bytes the bound costs without a network
+// (predictorless_bytes: the voxels quantised and coded as residuals are), at least 32 KiB for the
+// config's network, or the small preset's of at least 8 KiB where the share is under 32 KiB; as a
+// target ratio of source_bytes, at most 1024; network_ratio 0 (no sizing) when that leaves no ratio
+// above 1. docs/COMPRESSION.md has the runs that fitted the share. `bound` is normalised.
 constexpr double kBoundNetworkShare = 0.1;
-double bounded_network_ratio(const Volume& vol, uint64_t source_bytes, double bound, std::string* note);
+struct ResidualSplit;
+ResidualSplit bounded_network_split(const Volume& vol, uint64_t source_bytes, double bound, std::string* note);
 
-// --target-ratio R alone with --residuals auto: a network of kResidualNetworkBitsPerVoxel (at least 32 KiB)
-// and residuals in the rest of the file (train/residuals.h: the finest bound that fits) decode better
-// than a network of the whole file, where that network takes at most half of it; the ratio of that
-// network, or 0 (the network takes the file). docs/COMPRESSION.md has the runs that fitted it.
-constexpr double kResidualNetworkBitsPerVoxel = 0.1;
-double residual_network_ratio(uint64_t source_bytes, uint64_t voxels, double target_ratio, std::string* note);
+// --target-ratio R alone with --residuals auto: residuals (wavelet or voxel, train/residuals.h) decode
+// closer than a network of the whole file, so the network gets kResidualNetworkShare of the file, enough to
+// render and answer point queries on its own, and the residuals the rest. The config's network needs
+// kConfigNetworkFloorBytes (a compact paper MLP fits); where a tenth is less and the config is `auto`,
+// the small preset's network (MLP 16 x 2) takes it instead, at least kSmallNetworkFloorBytes; a network
+// over kResidualNetworkMaxShare of the file leaves no residuals (network_ratio 0: it takes the file).
+// docs/COMPRESSION.md has the runs that fitted it.
+constexpr double kResidualNetworkShare = 0.1, kResidualNetworkMaxShare = 0.5;
+constexpr double kConfigNetworkFloorBytes = 32768, kSmallNetworkFloorBytes = 8192;
+struct ResidualSplit {
+  double network_ratio = 0;    // the network's target ratio; 0: no residuals
+  bool small_network = false;  // the small preset's network instead of the config's
+};
+ResidualSplit residual_network_split(uint64_t source_bytes, uint64_t voxels, double target_ratio, bool config_is_auto,
+                                     std::string* note);
 
 }  // namespace vnr

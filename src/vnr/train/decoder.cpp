@@ -40,10 +40,10 @@ void Decoder::voxels(Int3 dims, const int64_t* voxel_index, int64_t n, float* ou
   if (bounded_at(dims)) {
     const Residuals& r = *residuals_;
     if (r.absolute)
-      for (int64_t i = 0; i < n; ++i) out[i] = float(double(r.q[size_t(voxel_index[i])]) * r.step);
+      for (int64_t i = 0; i < n; ++i) out[i] = r.correction(voxel_index[i]);
     else {
       reference_voxels(net_, dims, voxel_index, n, out);
-      for (int64_t i = 0; i < n; ++i) out[i] += float(double(r.q[size_t(voxel_index[i])]) * r.step);
+      for (int64_t i = 0; i < n; ++i) out[i] += r.correction(voxel_index[i]);
     }
     return;
   }

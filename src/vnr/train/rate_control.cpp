@@ -307,9 +307,9 @@ Json train_compact(TrainingSession& session, int64_t steps, double seconds, cons
   if (!session.data() || !session.data()->sampler) fail("compact storage needs a session opened on training data");
   const double f = can_train_quantized(session) ? std::clamp(o.qat_fraction, 0.0, 1.0) : 0.0;
   const bool by_time = steps < 0 && seconds > 0;
-  // --seconds covers every phase: the residuals that fill the file after training get their estimated
-  // time off the training (compact_session takes the quantization planning's off the last phase).
-  if (by_time && o.file_bytes > 0)
+  // --seconds covers every phase: the residuals that fill the file or keep a bound after training get
+  // their estimated time off the training (compact_session takes the quantization planning's off the last).
+  if (by_time && (o.file_bytes > 0 || session.options().error_bound.active()))
     seconds = std::max(seconds - residual_fill_seconds(session.data()->dims), 0.5 * seconds);
   session.set_budget(steps, seconds);  // both phases: the cool-down ends with the quantization-aware steps
   const int64_t steps1 = by_time ? -1 : int64_t(std::llround(double(steps) * (1 - f)));

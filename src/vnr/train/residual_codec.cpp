@@ -8,6 +8,7 @@
 #include "vnr/core/parallel.h"
 #include "vnr/train/residual_context_coder.h"
 #include "vnr/train/residuals.h"
+#include "vnr/volume/wavelet.h"
 #include <zlib.h>
 
 namespace vnr {
@@ -101,6 +102,36 @@ const char* predictor_name(const Residuals& r, bool lorenzo) {
   if (r.absolute) return lorenzo ? "values-lorenzo" : "values";
   return lorenzo ? "lorenzo" : "none";
 }
+// Wavelet coefficients: the context coder alone, in flagged blocks, its contexts also seeing each
+// coefficient's parent (neighbours in a subband are alike, as residuals are, and large where their
+// parent is; Lorenzo across a subband's coefficients predicts nothing).
+EncodedResiduals encode_wavelet(const Residuals& r, const std::string& only) {
+  const std::string name = residual_coding_name("wavelet", predictor_name(r, false));
+  if (!only.empty() && only != name) fail("unknown residual coding '{}' for wavelet residuals", only);
+  EncodedResiduals enc;
+  enc.bytes = context_encode(r.q.data(), r.dims, /*wavelet=*/true);
+  Json outliers;
+  if (!r.outliers.empty()) {  // their stream after the coefficients'
+    const std::vector<uint8_t> o = context_encode(r.outliers.data(), r.dims);
+    enc.bytes.insert(enc.bytes.end(), o.begin(), o.end());
+    outliers = {{"step", r.outlier_step},
+                {"bytes", o.size()},
+                {"count", int64_t(r.outliers.size()) - std::count(r.outliers.begin(), r.outliers.end(), 0)},
+                {"crc32", values_crc(r.outliers)}};
+  }
+  enc.meta = {{"codec", "context"},
+              {"layout", "wavelet-cdf97"},
+              {"levels", r.wavelet_levels},
+              {"predictor", predictor_name(r, false)},
+              {"dims", {r.dims.x, r.dims.y, r.dims.z}},
+              {"bound", r.bound},
+              {"step", r.step},
+              {"nonzero", r.nonzero()},
+              {"crc32", values_crc(r.q)},
+              {"candidate_bytes", {{name, enc.bytes.size()}}}};
+  if (!outliers.is_null()) enc.meta["outliers"] = outliers;
+  return enc;
+}
 }  // namespace
 
 std::string residual_coding_name(const std::string& codec, const std::string& predictor) {
@@ -109,6 +140,7 @@ std::string residual_coding_name(const std::string& codec, const std::string& pr
 
 EncodedResiduals encode_residuals(const Residuals& r, const std::string& only, bool search) {
   if (r.q.size() != r.dims.count()) fail("residual field of {} values for {} voxels", r.q.size(), r.dims.count());
+  if (r.wavelet()) return encode_wavelet(r, only);
   EncodedResiduals best;
   Json sizes = Json::object();  // every candidate's size, kept in the description for the record
   auto wanted = [&](const char* codec, bool predict) {
@@ -170,7 +202,8 @@ Residuals decode_residuals(const Json& meta, const std::vector<uint8_t>& bytes, 
   const auto codec = meta_get<std::string>(meta, "codec", what), layout = meta_get<std::string>(meta, "layout", what);
   const auto predictor = meta_get<std::string>(meta, "predictor", what);
   const bool known = predictor == "none" || predictor == "lorenzo" || predictor == "values" || predictor == "values-lorenzo";
-  const bool context = codec == "context" && layout == "binary-ac" && known;
+  const bool wavelet = codec == "context" && layout == "wavelet-cdf97" && (predictor == "none" || predictor == "values");
+  const bool context = (codec == "context" && layout == "binary-ac" && known) || wavelet;
   if (!context && (codec != "zstd" || layout != "zigzag-bytes" || !known))
     fail("{}: unknown residual coding {}/{}/{} (written by a newer vnr?)", what, codec, layout, predictor);
   const bool lorenzo_coded = predictor == "lorenzo" || predictor == "values-lorenzo";
@@ -182,13 +215,27 @@ Residuals decode_residuals(const Json& meta, const std::vector<uint8_t>& bytes, 
   r.absolute = predictor == "values" || predictor == "values-lorenzo";
   r.bound = meta_get<double>(meta, "bound", what);
   r.step = meta_get<double>(meta, "step", what);
-  if (!(r.bound > 0) || !(r.step > 0) || !(r.step <= 2 * r.bound) || !std::isfinite(r.bound))
+  // A wavelet's step is in coefficients: its bound is measured or kept by outliers, not half the step.
+  if (!(r.bound > 0) || !(r.step > 0) || (!wavelet && !(r.step <= 2 * r.bound)) || !std::isfinite(r.bound))
     fail("{}: invalid residual bound {} / step {}", what, r.bound, r.step);
   const int64_t n = dims.count();
   if (context) {
     const auto crc = meta_get<uint64_t>(meta, "crc32", what);
     r.q.resize(size_t(n));
-    context_decode(bytes.data(), bytes.size(), dims, r.q.data(), what);
+    size_t coded = bytes.size();  // the coefficients' stream; the outliers' follows it
+    if (wavelet && meta.contains("outliers")) {
+      const Json& o = meta["outliers"];
+      const auto o_bytes = meta_get<uint64_t>(o, "bytes", what), o_crc = meta_get<uint64_t>(o, "crc32", what);
+      r.outlier_step = meta_get<double>(o, "step", what);
+      if (o_bytes > bytes.size()) fail("{}: the residual block is corrupted (outliers past its end)", what);
+      if (!(r.outlier_step > 0) || !(r.outlier_step <= 2 * r.bound))
+        fail("{}: invalid outlier step {} for the bound {}", what, r.outlier_step, r.bound);
+      coded = bytes.size() - o_bytes;
+      r.outliers.resize(size_t(n));
+      context_decode(bytes.data() + coded, o_bytes, dims, r.outliers.data(), what);
+      if (values_crc(r.outliers) != o_crc) fail("{}: the residual block is corrupted (outliers' CRC mismatch)", what);
+    }
+    context_decode(bytes.data(), coded, dims, r.q.data(), what, wavelet);
     if (lorenzo_coded) {  // differences back to values, in coding order
       int64_t v = 0;
       for (int64_t k = 0; k < dims.z; ++k)
@@ -200,6 +247,12 @@ Residuals decode_residuals(const Json& meta, const std::vector<uint8_t>& bytes, 
           }
     }
     if (values_crc(r.q) != crc) fail("{}: the residual block is corrupted (CRC mismatch)", what);
+    if (wavelet) {
+      r.wavelet_levels = meta_get<int>(meta, "levels", what);
+      if (r.wavelet_levels < 1 || r.wavelet_levels > wavelet_levels(dims))
+        fail("{}: the residual block's wavelet levels ({}) do not fit its dims", what, r.wavelet_levels);
+      invert_wavelet_residuals(r);
+    }
     return r;
   }
   const auto escapes = meta_get<uint64_t>(meta, "escapes", what), raw_bytes = meta_get<uint64_t>(meta, "raw_bytes", what);

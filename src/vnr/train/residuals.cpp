@@ -152,7 +152,16 @@ Residuals against_prediction(const float* original, const float* pred, Int3 dims
 }  // namespace
 
 Residuals smallest_residuals(const Network& net, const float* original, Int3 dims, double bound) {
-  return smaller_coded(compute_residuals(net, original, dims, bound), quantised_values(original, dims, bound));
+  if (!(bound > 0) || !std::isfinite(bound)) fail("the error bound must be positive, got {}", bound);
+  const std::vector<float> pred = network_prediction(net, dims);
+  Residuals voxels = smaller_coded(against_prediction(original, pred.data(), dims, bound), quantised_values(original, dims, bound));
+  std::optional<Residuals> wavelet = bounded_wavelet_residuals(original, pred.data(), dims, bound);
+  const size_t voxel_bytes = voxels.encoded->bytes.size();
+  if (!wavelet || wavelet->encoded->bytes.size() >= voxel_bytes) return voxels;
+  auto enc = std::make_shared<EncodedResiduals>(*wavelet->encoded);
+  enc->meta["candidate_bytes"]["voxels"] = voxel_bytes;
+  wavelet->encoded = std::move(enc);
+  return std::move(*wavelet);
 }
 
 namespace {
@@ -191,6 +200,25 @@ double finest_bound_within(const std::function<double(double)>& size, double goa
 // The dead zone of residuals that fill a budget (quantise): there the bound is an outcome, not a request,
 // and a wider zero bin buys more PSNR per byte than rounding to nearest (docs/COMPRESSION.md).
 constexpr double kFillZone = 0.65;
+
+namespace {
+// The voxel-coded residuals or the wavelet ones, whichever decodes with the smaller squared error; both
+// errors are kept in the description ("candidate_squared_error").
+Residuals smaller_error(Residuals voxels, std::optional<Residuals> wavelet, const float* original, const float* pred,
+                        const std::function<double(double)>& guaranteed) {
+  if (!wavelet) return voxels;
+  const double e_voxels = residual_squared_error(voxels, original, pred);
+  const double e_wavelet = residual_squared_error(*wavelet, original, pred);
+  Residuals& kept = e_wavelet < e_voxels ? *wavelet : voxels;
+  if (&kept == &*wavelet && guaranteed) kept.bound = guaranteed(kept.bound);
+  auto enc = std::make_shared<EncodedResiduals>(*kept.encoded);
+  enc->meta["bound"] = kept.bound;
+  enc->meta["candidate_squared_error"] = {{"voxels", e_voxels}, {"wavelet", e_wavelet}};
+  if (kept.wavelet()) enc->meta["reference_bytes"] = {{kept.absolute ? "none" : "network", enc->bytes.size()}};
+  kept.encoded = std::move(enc);
+  return std::move(kept);
+}
+}  // namespace
 
 Residuals residuals_for_budget(const Network& net, const float* original, Int3 dims, uint64_t budget,
                                const std::function<double(double)>& guaranteed) {
@@ -242,10 +270,11 @@ Residuals residuals_for_budget(const Network& net, const float* original, Int3 d
       fail("residuals: even a bound of half the range takes {} bytes, over the {} left", best->encoded->bytes.size(),
            budget);
   }
-  return std::move(*best);
+  return smaller_error(std::move(*best), wavelet_residuals_for_budget(original, pred.data(), dims, budget), original,
+                       pred.data(), guaranteed);
 }
 
-double residual_fill_seconds(Int3 dims) { return 0.3e-6 * double(dims.count()); }
+double residual_fill_seconds(Int3 dims) { return 0.55e-6 * double(dims.count()); }
 
 Json residual_coding_summary(const Residuals& r) {
   if (!r.encoded) fail("the residuals were not coded");
@@ -255,10 +284,11 @@ Json residual_coding_summary(const Residuals& r) {
           {"residual_nonzero_fraction", double(r.nonzero()) / voxels},
           {"residual_bits_per_voxel", 8.0 * bytes / voxels},
           {"codec", enc.meta["codec"]},
+          {"transform", r.wavelet() ? "wavelet-cdf97" : "none"},
           {"predictor", enc.meta["predictor"]},
           {"reference", r.absolute ? "none" : "network"},
-          {"reference_bytes", enc.meta["reference_bytes"]},
-          {"candidate_bytes", enc.meta["candidate_bytes"]}};
+          {"reference_bytes", enc.meta.value("reference_bytes", Json())},
+          {"candidate_bytes", enc.meta.value("candidate_bytes", Json())}};
 }
 
 Residuals compute_residuals(const Network& net, const float* original, Int3 dims, double bound) {
@@ -272,7 +302,10 @@ void apply_residuals(const Residuals& r, int64_t z0, int64_t z1, float* values) 
   if (z0 < 0 || z1 > r.dims.z || z0 > z1) fail("residual slab [{}, {}) is outside 0..{}", z0, z1, r.dims.z);
   const int32_t* q = r.q.data() + first;
   parallel_for_range(n, 1 << 16, [&](int64_t i0, int64_t i1) {
-    if (r.absolute)
+    if (r.wavelet()) {
+      const float* c = r.field->data() + first;
+      for (int64_t i = i0; i < i1; ++i) values[i] = r.absolute ? c[i] : values[i] + c[i];
+    } else if (r.absolute)
       for (int64_t i = i0; i < i1; ++i) values[i] = correction(r, q[i]);
     else
       for (int64_t i = i0; i < i1; ++i)

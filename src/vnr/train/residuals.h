@@ -5,6 +5,7 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <vector>
 #include "vnr/core/dtype.h"
 #include "vnr/core/json.h"
@@ -48,10 +49,25 @@ struct Residuals {
   double step = 0;   // 2 (bound - residual_margin(bound))
   bool absolute = false;
   std::vector<int32_t> q;
+  // Wavelet residuals (docs/COMPRESSION.md): q are the quantised CDF 9/7 coefficients of the correction
+  // (`wavelet_levels` levels, volume/wavelet.h), and `field` the correction at every voxel, inverted once.
+  int wavelet_levels = 0;
+  std::shared_ptr<const std::vector<float>> field;
+  // Wavelet residuals of a requested bound: the voxels the coefficients leave outside it are corrected by
+  // outliers[i] * outlier_step on top (SPERR's outlier coding), folded into `field`; empty: none.
+  std::vector<int32_t> outliers;
+  double outlier_step = 0;
   // The coded block, when known (after encoding or loading): saving reuses it instead of coding again.
   std::shared_ptr<const EncodedResiduals> encoded;
   int64_t nonzero() const;
+  bool wavelet() const { return wavelet_levels > 0; }
+  // What decoding adds at voxel i (x fastest), or the value there for absolute residuals.
+  float correction(int64_t i) const { return wavelet() ? (*field)[size_t(i)] : float(double(q[size_t(i)]) * step); }
 };
+
+// The correction of wavelet residuals at every voxel (r.field) from r.q: the inverse transform, and the
+// outliers added (the same float arithmetic when written and read).
+void invert_wavelet_residuals(Residuals& r);
 
 // The deterministic reference the residuals are taken against and applied on: the network in fp32
 // on the CPU (whatever its inference precision), evaluated in kChunk-sized chunks aligned to the
@@ -73,18 +89,33 @@ Residuals quantised_values(const float* original, Int3 dims, double bound);
 // Its coded bytes: what sizes the network of a bound given alone (train/config_sizing.h).
 uint64_t predictorless_bytes(const float* values, Int3 dims, double bound);
 // The residuals a model keeps for `bound`: against the network (compute_residuals) or absolute
-// (quantised_values), whichever codes smaller; coded (`encoded` set, its meta listing both sizes under
-// "reference_bytes").
+// (quantised_values), or wavelet residuals with outliers (bounded_wavelet_residuals), whichever codes
+// smallest; coded (`encoded` set, its meta listing the sizes under "reference_bytes" and "candidate_bytes").
 Residuals smallest_residuals(const Network& net, const float* original, Int3 dims, double bound);
 
 // The residuals that fill a byte budget (--target-ratio with residuals, docs/COMPRESSION.md): the finest
 // bound whose coded block takes at most `budget` bytes (98-100 % of it where the search reaches), against
 // the network or absolute and in the coding that ranks first there; coded, with a dead zone (the bound is
-// an outcome here, not a request). `guaranteed` maps the bound that holds for the decoded values to the
+// an outcome here, not a request); or the wavelet residuals that fill it, where their squared error is
+// smaller. `guaranteed` maps the bound that holds for the decoded values to the
 // one recorded (an integer source's rounding, see attach_residuals_for_budget); none: as is. Fails when
 // even a bound of half the range does not fit.
 Residuals residuals_for_budget(const Network& net, const float* original, Int3 dims, uint64_t budget,
                                const std::function<double(double)>& guaranteed = {});
+
+// The same fill with wavelet residuals (residual_wavelet.cpp): the finest coefficient step that fits,
+// against pred or absolute (pred null, or where that codes smaller), field inverted, bound = the largest
+// error measured (+ the margin). None when dims are too small for a level or even step 1 does not fit.
+std::optional<Residuals> wavelet_residuals_for_budget(const float* original, const float* pred, Int3 dims,
+                                                      uint64_t budget);
+// Wavelet residuals that hold `bound` (normalised) at every voxel: coefficients quantised at a step
+// searched around 1.5 bound, the outliers corrected, against pred or absolute, the smallest block coded;
+// none when dims are too small for a level.
+std::optional<Residuals> bounded_wavelet_residuals(const float* original, const float* pred, Int3 dims, double bound);
+// Sum of squared and largest |decoded - original| over every voxel of r (pred: the reference, unused for
+// absolute residuals).
+double residual_squared_error(const Residuals& r, const float* original, const float* pred);
+double residual_max_error(const Residuals& r, const float* original, const float* pred);
 
 // What residuals_for_budget is expected to take on `dims` voxels (0.3 us per voxel: 4.7 s measured on
 // bonsai's 16.8 M on 2 cores): what a --seconds budget leaves it after training.
@@ -100,7 +131,8 @@ void apply_residuals(const Residuals& r, int64_t z0, int64_t z1, float* values);
 
 // The residual block of a model file: a JSON description and the entropy-coded bytes. The integer
 // field is predicted (none, or 3-D Lorenzo from the neighbours already coded, whichever is smaller),
-// zig-zag mapped to bytes (values >= 255 escaped to a 4-byte side stream) and compressed with zstd.
+// zig-zag mapped to bytes (values >= 255 escaped to a 4-byte side stream) and compressed with zstd, or
+// context coded (residual_context_coder.h); wavelet coefficients are context coded.
 struct EncodedResiduals {
   Json meta;
   std::vector<uint8_t> bytes;

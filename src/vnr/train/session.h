@@ -198,7 +198,7 @@ struct TrainingSetup {
   double target_ratio = 0;       // > 0: a compact model file of volume bytes / R (within 5 %)
   double target_psnr = 0;        // > 0: the coarsest quantization reaching this PSNR (held-back estimate)
   // With target_ratio alone: "auto" lets residuals take part of the file where they decode better than a
-  // network of the whole budget (config_sizing.h: residual_network_ratio); "off": the network takes it all.
+  // network of the whole budget (config_sizing.h: residual_network_split); "off": the network takes it all.
   std::string residuals = "auto";
   double bits_per_param = kDefaultBitsPerParam;  // --target-ratio: grid sized for this many bits per parameter
   double qat_fraction = 0.15;    // compact models: last part of the steps trained quantization-aware

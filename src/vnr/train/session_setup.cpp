@@ -66,19 +66,23 @@ std::unique_ptr<TrainingSession> session_on_data(const TrainingSetup& s, ModelCo
   double target_ratio = s.target_ratio;
   if (target_ratio <= 0 && s.target_psnr <= 0 && s.session.error_bound.active() && !s.config_json &&
       s.config == "auto") {
-    target_ratio = bounded_network_ratio(*data->vol, data->source_bytes(),
-                                         normalised_error_bound(s.session.error_bound, data->lo, data->hi, data->dtype),
-                                         &note);
+    const ResidualSplit split = bounded_network_split(
+        *data->vol, data->source_bytes(), normalised_error_bound(s.session.error_bound, data->lo, data->hi, data->dtype),
+        &note);
     say(note);
+    target_ratio = split.network_ratio;
+    if (split.small_network) config = load_config("small");
   }
   uint64_t file_bytes = 0;  // > 0: residuals fill the file to this size beside a smaller network
   if (s.target_ratio > 0 && s.target_psnr <= 0 && !s.session.error_bound.active() && s.residuals == "auto" &&
       data->vol && !is_instantvnr_path(s.session.output)) {
-    const double network_ratio = residual_network_ratio(data->source_bytes(), data->dims.count(), s.target_ratio, &note);
-    if (network_ratio > 0) {
+    const ResidualSplit split = residual_network_split(data->source_bytes(), data->dims.count(), s.target_ratio,
+                                                       !s.config_json && s.config == "auto", &note);
+    if (split.network_ratio > 0) {
       say(note);
       file_bytes = uint64_t(double(data->source_bytes()) / s.target_ratio);
-      target_ratio = network_ratio;
+      target_ratio = split.network_ratio;
+      if (split.small_network) config = load_config("small");
     }
   }
   if (target_ratio > 0) {
