@@ -3,6 +3,9 @@
 // a model file, are chosen only where they decode closer, and a damaged block is one clear error.
 #include <random>
 #include "test_support.h"
+#include "vnr/api/model_field.h"
+#include "vnr/core/rng.h"
+#include "vnr/fields/brick_cache.h"
 #include "vnr/model.h"
 #include "vnr/train/residual_context_coder.h"
 #include "vnr/train/residuals.h"
@@ -229,4 +232,36 @@ TEST(WaveletResiduals, BlockCoderRoundTripsAdversarialFields) {
   EXPECT_LT(context_encode(fields[0].data(), dims, true).size(), 16u);
   fields[3][0] = INT32_MAX;  // beyond the coder's range: refused, not written undecodable
   EXPECT_HAS(one_line_error_of([&] { context_encode(fields[3].data(), dims, true); }), "out of its range");
+}
+
+// Rendering from the brick cache reads a wavelet-residual model's full-resolution bricks with the
+// residuals applied: every lookup equals the trilinear lookup of the model's decode.
+TEST(WaveletResiduals, TheBrickCacheReadsTheDecodeWithResiduals) {
+  const Volume vol = make_volume(kDims, [](float x, float y, float z) { return 0.5f + 0.4f * std::sin(7 * x * y) * z; });
+  Model model = model_for(kDims);
+  model.residuals = residuals_for_budget(*model.net, vol.data.data(), kDims, 4000);
+  ASSERT_TRUE(model.residuals->wavelet());
+  Volume decoded;
+  decoded.dims = kDims;
+  decoded.data.resize(size_t(kDims.count()));
+  ModelQuery(model, Device::Cpu).slab(kDims, 0, kDims.z, decoded.data.data());
+  NetworkField field(*model.net, model.dims);
+  BrickCacheSettings s;
+  s.brick = 8;
+  s.lod_pixels = 1e-6f;  // level 0 everywhere
+  s.decode_seconds = 100;
+  std::unique_ptr<CachedField> cache = make_model_cache(model, field, s);
+  RenderParams p;
+  p.cam = make_camera_frame(orbit_camera(box_of(vol), 25, 15, 30), 32, 32);
+  p.box = Vec3f{float(kDims.x), float(kDims.y), float(kDims.z)};
+  cache->begin_frame(p);
+  Pcg32 rng(2);
+  std::vector<float> x(2000), y(2000), z(2000), v(2000);
+  for (size_t i = 0; i < x.size(); ++i) x[i] = rng.next_float(), y[i] = rng.next_float(), z[i] = rng.next_float();
+  cache->query(x.data(), y.data(), z.data(), int64_t(x.size()), v.data());
+  cache->decode_pending();
+  cache->begin_frame(p);
+  cache->query(x.data(), y.data(), z.data(), int64_t(x.size()), v.data());
+  EXPECT_EQ(cache->stats().misses, 0);
+  for (size_t i = 0; i < x.size(); ++i) ASSERT_EQ(v[i], grid_lookup(view_of(decoded), x[i], y[i], z[i])) << i;
 }

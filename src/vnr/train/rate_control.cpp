@@ -309,8 +309,9 @@ Json train_compact(TrainingSession& session, int64_t steps, double seconds, cons
   const bool by_time = steps < 0 && seconds > 0;
   // --seconds covers every phase: the residuals that fill the file or keep a bound after training get
   // their estimated time off the training (compact_session takes the quantization planning's off the last).
+  const Int3 dims = session.data()->dims;
   if (by_time && (o.file_bytes > 0 || session.options().error_bound.active()))
-    seconds = std::max(seconds - residual_fill_seconds(session.data()->dims), 0.5 * seconds);
+    seconds = std::max(seconds - (o.file_bytes > 0 ? residual_fill_seconds(dims) : residual_bound_seconds(dims)), 0.5 * seconds);
   session.set_budget(steps, seconds);  // both phases: the cool-down ends with the quantization-aware steps
   const int64_t steps1 = by_time ? -1 : int64_t(std::llround(double(steps) * (1 - f)));
   session.run(steps1, by_time ? seconds * (1 - f) : 0);

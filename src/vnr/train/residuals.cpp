@@ -151,11 +151,35 @@ Residuals against_prediction(const float* original, const float* pred, Int3 dims
 }
 }  // namespace
 
+namespace {
+// Whether wavelet residuals may code a bound smaller than voxel residuals, judged on the central box of
+// half the dims (an eighth of the voxels) of a large volume: their search costs several passes over the
+// volume, and on most volumes and bounds the voxel residuals stay smaller (docs/COMPRESSION.md).
+bool wavelet_may_win(const float* original, const float* pred, Int3 dims, double bound) {
+  if (dims.count() < (int64_t(1) << 21)) return true;  // small: the whole search is cheap
+  const Int3 sub{std::max<int64_t>(dims.x / 2, 1), std::max<int64_t>(dims.y / 2, 1), std::max<int64_t>(dims.z / 2, 1)};
+  const Int3 at{(dims.x - sub.x) / 2, (dims.y - sub.y) / 2, (dims.z - sub.z) / 2};
+  std::vector<float> o(size_t(sub.count())), p(size_t(sub.count()));
+  parallel_for(sub.z, [&](int64_t z) {
+    for (int64_t y = 0; y < sub.y; ++y) {
+      const int64_t from = at.x + dims.x * (at.y + y + dims.y * (at.z + z)), to = sub.x * (y + sub.y * z);
+      std::copy_n(original + from, sub.x, o.begin() + to);
+      std::copy_n(pred + from, sub.x, p.begin() + to);
+    }
+  });
+  const Residuals voxels = smaller_coded(against_prediction(o.data(), p.data(), sub, bound), quantised_values(o.data(), sub, bound));
+  const std::optional<Residuals> wavelet = bounded_wavelet_residuals(o.data(), p.data(), sub, bound);
+  return wavelet && wavelet->encoded->bytes.size() < voxels.encoded->bytes.size();
+}
+}  // namespace
+
 Residuals smallest_residuals(const Network& net, const float* original, Int3 dims, double bound) {
   if (!(bound > 0) || !std::isfinite(bound)) fail("the error bound must be positive, got {}", bound);
   const std::vector<float> pred = network_prediction(net, dims);
   Residuals voxels = smaller_coded(against_prediction(original, pred.data(), dims, bound), quantised_values(original, dims, bound));
-  std::optional<Residuals> wavelet = bounded_wavelet_residuals(original, pred.data(), dims, bound);
+  std::optional<Residuals> wavelet;
+  if (wavelet_may_win(original, pred.data(), dims, bound))
+    wavelet = bounded_wavelet_residuals(original, pred.data(), dims, bound);
   const size_t voxel_bytes = voxels.encoded->bytes.size();
   if (!wavelet || wavelet->encoded->bytes.size() >= voxel_bytes) return voxels;
   auto enc = std::make_shared<EncodedResiduals>(*wavelet->encoded);
@@ -275,6 +299,7 @@ Residuals residuals_for_budget(const Network& net, const float* original, Int3 d
 }
 
 double residual_fill_seconds(Int3 dims) { return 0.55e-6 * double(dims.count()); }
+double residual_bound_seconds(Int3 dims) { return 1.5e-6 * double(dims.count()); }
 
 Json residual_coding_summary(const Residuals& r) {
   if (!r.encoded) fail("the residuals were not coded");

@@ -117,9 +117,11 @@ std::optional<Residuals> bounded_wavelet_residuals(const float* original, const 
 double residual_squared_error(const Residuals& r, const float* original, const float* pred);
 double residual_max_error(const Residuals& r, const float* original, const float* pred);
 
-// What residuals_for_budget is expected to take on `dims` voxels (0.3 us per voxel: 4.7 s measured on
-// bonsai's 16.8 M on 2 cores): what a --seconds budget leaves it after training.
+// What residuals_for_budget is expected to take on `dims` voxels (0.55 us per voxel: 8.8 s measured on
+// bonsai's 16.8 M on 2 cores), and smallest_residuals for a requested bound (1.5 us: 25 s there; zstd at
+// level 19 of both references and the wavelets' probe): what a --seconds budget leaves them after training.
 double residual_fill_seconds(Int3 dims);
+double residual_bound_seconds(Int3 dims);
 
 // How the residuals were coded, for reports: residual_bytes, residual_nonzero_fraction,
 // residual_bits_per_voxel, codec, predictor, reference (network or none), reference_bytes and

@@ -210,12 +210,15 @@ Json attached_residuals_summary(const Residuals& res, const Volume& volume) {
 // The error-bound residuals of the trained network (SessionOptions::error_bound), kept in the model
 // (coded once here, so the save reuses the bytes); their summary for the report, or null.
 Json attach_error_bound(Model& model, const Volume& volume, const ErrorBoundRequest& request) {
+  const auto t0 = std::chrono::steady_clock::now();
   const double b = normalised_error_bound(request, volume.lo, volume.hi, model.source_dtype);
   // Residuals are taken against the network as the file stores it (fp16 parameters), not the fp32
   // master copy, so that a loaded model decodes to the same predictions.
   model.net->set_params_half(model.net->params_half());
   model.residuals = smallest_residuals(*model.net, volume.data.data(), volume.dims, b);
-  return attached_residuals_summary(*model.residuals, volume);
+  Json j = attached_residuals_summary(*model.residuals, volume);
+  j["seconds"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  return j;
 }
 
 Json attach_residuals_for_budget(Model& model, const Volume& volume, uint64_t file_bytes) {
