@@ -13,6 +13,7 @@
 #include "vnr/train/trainer.h"
 
 using namespace vnr;
+using vnr::test::max_abs_diff;
 
 namespace {
 
@@ -37,12 +38,6 @@ std::unique_ptr<Network> trained_network(const std::string& preset, const Volume
   CpuTrainer tr(*net, std::make_shared<InCoreSampler>(vol), TrainOptions{4096, 7});
   for (int i = 0; i < steps; ++i) tr.step();
   return net;
-}
-
-double max_abs_diff(const std::vector<float>& a, const std::vector<float>& b) {
-  double m = 0;
-  for (size_t i = 0; i < a.size(); ++i) m = std::max(m, double(std::fabs(a[i] - b[i])));
-  return m;
 }
 
 double relative_l2(const float* a, const float* b, size_t n) {

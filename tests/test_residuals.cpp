@@ -50,12 +50,6 @@ std::vector<float> decode_in_slabs(const Model& m, int64_t slab) {
   return out;
 }
 
-template <typename B>
-double max_error(const std::vector<float>& a, const B& b) {
-  double e = 0;
-  for (size_t i = 0; i < a.size(); ++i) e = std::max(e, std::fabs(double(a[i]) - double(b[i])));
-  return e;
-}
 
 }  // namespace
 
@@ -72,11 +66,11 @@ TEST(Residuals, BoundHoldsAtEveryVoxelAfterCodingForEachFieldAndBound) {
       EXPECT_EQ(e.meta["nonzero"].get<int64_t>(), r.nonzero());
       m.residuals = std::move(back);
       const std::vector<float> dec = decode_in_slabs(m, 5);
-      EXPECT_LE(max_error(dec, nv.vol.data), bound);
+      EXPECT_LE(max_abs_diff(dec, nv.vol.data), bound);
       // The step uses the whole bound but the margin: at a coarse bound some voxels need no residual.
       EXPECT_DOUBLE_EQ(r.step, 2 * (bound - residual_margin(bound)));
       m.residuals.reset();
-      EXPECT_GT(max_error(decode_in_slabs(m, 5), nv.vol.data), 1e-5);  // the network alone is not within 1e-5
+      EXPECT_GT(max_abs_diff(decode_in_slabs(m, 5), nv.vol.data), 1e-5);  // the network alone is not within 1e-5
     }
   }
 }
@@ -224,7 +218,7 @@ TEST(Residuals, AbsoluteResidualsIgnoreTheNetworkAndTheSmallerIsKept) {
     EXPECT_TRUE(a.absolute);
     std::vector<float> out(vol.data.size(), 123.0f);
     apply_residuals(a, 0, vol.dims.z, out.data());
-    EXPECT_LE(max_error(out, vol.data), bound) << nv.name;
+    EXPECT_LE(max_abs_diff(out, vol.data), bound) << nv.name;
     const EncodedResiduals e = encode_residuals(a);
     const std::string pred = e.meta["predictor"].get<std::string>();
     EXPECT_TRUE(pred == "values" || pred == "values-lorenzo") << pred;
@@ -236,7 +230,7 @@ TEST(Residuals, AbsoluteResidualsIgnoreTheNetworkAndTheSmallerIsKept) {
     m.residuals = a;
     other.residuals = a;
     EXPECT_EQ(decode_in_slabs(m, 3), decode_in_slabs(other, 5)) << nv.name;
-    EXPECT_LE(max_error(decode_in_slabs(m, 4), vol.data), bound) << nv.name;
+    EXPECT_LE(max_abs_diff(decode_in_slabs(m, 4), vol.data), bound) << nv.name;
     // The choice: both sizes recorded, the smaller kept.
     const Residuals best = smallest_residuals(*m.net, vol.data.data(), vol.dims, bound);
     const Json sizes = best.encoded->meta["reference_bytes"];
@@ -262,7 +256,7 @@ TEST(Residuals, ResidualsForBudgetFillItWithTheFinestBound) {
     last_bound = r.bound;
     Model with = model_for(kDims);
     with.residuals = r;
-    EXPECT_LE(max_error(decode_in_slabs(with, 5), vol.data), r.bound);
+    EXPECT_LE(max_abs_diff(decode_in_slabs(with, 5), vol.data), r.bound);
   }
   const std::string msg = one_line_error_of([&] { residuals_for_budget(*m.net, vol.data.data(), kDims, 3); });
   EXPECT_NE(msg.find("even a bound of half the range"), std::string::npos) << msg;

@@ -43,6 +43,14 @@ inline uint32_t bits(float f) {
   return u;
 }
 
+// The largest |a[i] - b[i]| over a (b at least as long).
+template <typename A, typename B>
+double max_abs_diff(const A& a, const B& b) {
+  double e = 0;
+  for (size_t i = 0; i < a.size(); ++i) e = std::max(e, std::fabs(double(a[i]) - double(b[i])));
+  return e;
+}
+
 // ---- temporary directories ----------------------------------------------------------------------
 
 // A fresh, empty directory for one test, removed with its contents when this goes out of scope:

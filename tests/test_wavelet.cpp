@@ -24,13 +24,6 @@ std::vector<float> noise(Int3 dims, uint32_t seed) {
   return v;
 }
 
-template <typename B>
-double max_abs_diff(const std::vector<float>& a, const B& b) {
-  double e = 0;
-  for (size_t i = 0; i < a.size(); ++i) e = std::max(e, std::fabs(double(a[i]) - double(b[i])));
-  return e;
-}
-
 double sum_of_squares(const std::vector<float>& v) {
   double s = 0;
   for (float x : v) s += double(x) * double(x);
