@@ -101,10 +101,6 @@ Residuals fill(const Coefficients& t, Int3 dims, double budget) {
   return best;
 }
 
-}  // namespace
-
-namespace {
-
 // The outliers of wavelet residuals r (field inverted, none yet) for `bound`: where the decoded value
 // (reference + field, in float, as decoding adds them) misses the original by more than the bound less
 // its margin, the difference in steps of twice that, rounded to nearest; then folded into the field.
@@ -136,7 +132,8 @@ void add_outliers(Residuals& r, const float* original, const float* pred, double
 
 std::optional<Residuals> bounded_wavelet_residuals(const float* original, const float* pred, Int3 dims, double bound) {
   if (!(bound > 0) || !std::isfinite(bound)) fail("the error bound must be positive, got {}", bound);
-  if (wavelet_levels(dims) == 0) return std::nullopt;
+  // Below 1e-7 of the range (fp32's own precision) the outliers' steps could leave the coder's range.
+  if (wavelet_levels(dims) == 0 || bound < 1e-7) return std::nullopt;
   auto candidate = [&](const Coefficients& t, double step) {
     Residuals r = quantise(t, dims, step);
     r.bound = bound;
@@ -157,12 +154,15 @@ std::optional<Residuals> bounded_wavelet_residuals(const float* original, const 
     reference_bytes["none"] = bytes(alone);
     if (bytes(alone) < bytes(best)) best = std::move(alone), t = std::move(values);
   }
-  for (double factor : {1.5, 1 / 1.5})
+  const double start = best.step;
+  for (double factor : {1.5, 1 / 1.5}) {
+    if (factor < 1 && best.step != start) break;  // it fell upwards: the smaller steps lie behind
     for (double step = best.step * factor; step > 0.25 * bound && step < 16 * bound; step *= factor) {
       Residuals r = candidate(*t, step);
       if (bytes(r) >= bytes(best)) break;
       best = std::move(r);
     }
+  }
   if (residual_max_error(best, original, pred) > bound) return std::nullopt;  // fp32 rounding beyond the margin
   auto enc = std::make_shared<EncodedResiduals>(*best.encoded);
   enc->meta["reference_bytes"] = reference_bytes;  // at 1.5 bound

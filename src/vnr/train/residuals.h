@@ -110,7 +110,7 @@ std::optional<Residuals> wavelet_residuals_for_budget(const float* original, con
                                                       uint64_t budget);
 // Wavelet residuals that hold `bound` (normalised) at every voxel: coefficients quantised at a step
 // searched around 1.5 bound, the outliers corrected, against pred or absolute, the smallest block coded;
-// none when dims are too small for a level.
+// none when dims are too small for a level or the bound is under 1e-7 (normalised).
 std::optional<Residuals> bounded_wavelet_residuals(const float* original, const float* pred, Int3 dims, double bound);
 // Sum of squared and largest |decoded - original| over every voxel of r (pred: the reference, unused for
 // absolute residuals).
