@@ -180,7 +180,7 @@ TEST(WaveletResiduals, OutliersKeepARequestedBound) {
     const std::optional<Residuals> w = bounded_wavelet_residuals(vol.data.data(), pred.data(), kDims, bound);
     ASSERT_TRUE(w && w->wavelet());
     EXPECT_FALSE(w->outliers.empty());  // a step of 1.5 bound and more leaves some
-    EXPECT_LE(residual_max_error(*w, vol.data.data(), pred.data()), bound);
+    EXPECT_LE(residual_error_stats(*w, vol.data.data(), pred.data()).max_abs_error, bound);
     const Residuals back = decode_residuals(w->encoded->meta, w->encoded->bytes, kDims, "'w.vnr'");
     EXPECT_EQ(back.outliers, w->outliers);
     for (size_t i = 0; i < back.field->size(); ++i) ASSERT_EQ(bits((*back.field)[i]), bits((*w->field)[i])) << i;

@@ -34,12 +34,21 @@ ModelConfig size_config_for_bytes(const ModelConfig& base, uint64_t target_bytes
   return best;
 }
 
+namespace {
+// The network of `share` bytes beside residuals: the config's where the share is at least its floor,
+// else (config auto) the small preset's, at least its floor; *bytes is what it is given.
+ResidualSplit network_for_share(double share, bool config_is_auto, double* bytes) {
+  ResidualSplit split;
+  split.small_network = share < kConfigNetworkFloorBytes && config_is_auto;
+  *bytes = std::max(share, split.small_network ? kSmallNetworkFloorBytes : kConfigNetworkFloorBytes);
+  return split;
+}
+}  // namespace
+
 ResidualSplit bounded_network_split(const Volume& vol, uint64_t source_bytes, double bound, std::string* note) {
   const uint64_t without = predictorless_bytes(vol.data.data(), vol.dims, bound);
-  const double share = kBoundNetworkShare * double(without);
-  ResidualSplit split;
-  split.small_network = share < kConfigNetworkFloorBytes;
-  const double budget = std::max(share, split.small_network ? kSmallNetworkFloorBytes : kConfigNetworkFloorBytes);
+  double budget = 0;
+  ResidualSplit split = network_for_share(kBoundNetworkShare * double(without), true, &budget);
   split.network_ratio = std::min(double(source_bytes) / budget, 1024.0);
   if (split.network_ratio <= 1) {
     if (note) *note = "error bound alone: the volume is too small to size a network for it; the config's network is used";
@@ -56,13 +65,8 @@ ResidualSplit bounded_network_split(const Volume& vol, uint64_t source_bytes, do
 ResidualSplit residual_network_split(uint64_t source_bytes, uint64_t voxels, double target_ratio, bool config_is_auto,
                                      std::string* note) {
   const double budget = double(source_bytes) / target_ratio, bits_per_voxel = 8 * budget / double(voxels);
-  const double tenth = kResidualNetworkShare * budget;
-  double network = std::max(tenth, kConfigNetworkFloorBytes);
-  ResidualSplit split;
-  if (tenth < kConfigNetworkFloorBytes && config_is_auto) {
-    network = std::max(tenth, kSmallNetworkFloorBytes);
-    split.small_network = true;
-  }
+  double network = 0;
+  ResidualSplit split = network_for_share(kResidualNetworkShare * budget, config_is_auto, &network);
   if (network > kResidualNetworkMaxShare * budget) return split;
   split.network_ratio = double(source_bytes) / network;
   if (note)

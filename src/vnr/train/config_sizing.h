@@ -21,7 +21,12 @@ ModelConfig size_config_for_bytes(const ModelConfig& config, uint64_t target_byt
 // target ratio of source_bytes, at most 1024; network_ratio 0 (no sizing) when that leaves no ratio
 // above 1. docs/COMPRESSION.md has the runs that fitted the share. `bound` is normalised.
 constexpr double kBoundNetworkShare = 0.1;
-struct ResidualSplit;
+constexpr double kConfigNetworkFloorBytes = 32768, kSmallNetworkFloorBytes = 8192;
+// A network beside residuals: its target ratio (0: no residuals) and whether it is the small preset's.
+struct ResidualSplit {
+  double network_ratio = 0;    // the network's target ratio; 0: no residuals
+  bool small_network = false;  // the small preset's network instead of the config's
+};
 ResidualSplit bounded_network_split(const Volume& vol, uint64_t source_bytes, double bound, std::string* note);
 
 // --target-ratio R alone with --residuals auto: residuals (wavelet or voxel, train/residuals.h) decode
@@ -32,11 +37,6 @@ ResidualSplit bounded_network_split(const Volume& vol, uint64_t source_bytes, do
 // over kResidualNetworkMaxShare of the file leaves no residuals (network_ratio 0: it takes the file).
 // docs/COMPRESSION.md has the runs that fitted it.
 constexpr double kResidualNetworkShare = 0.1, kResidualNetworkMaxShare = 0.5;
-constexpr double kConfigNetworkFloorBytes = 32768, kSmallNetworkFloorBytes = 8192;
-struct ResidualSplit {
-  double network_ratio = 0;    // the network's target ratio; 0: no residuals
-  bool small_network = false;  // the small preset's network instead of the config's
-};
 ResidualSplit residual_network_split(uint64_t source_bytes, uint64_t voxels, double target_ratio, bool config_is_auto,
                                      std::string* note);
 

@@ -2,9 +2,7 @@
 // correction is coded as dead-zone quantised CDF 9/7 coefficients, which spend the bytes where a smooth
 // error has its energy instead of voxel by voxel.
 #include <algorithm>
-#include <atomic>
 #include <cmath>
-#include <cstring>
 #include <optional>
 #include "vnr/core/error.h"
 #include "vnr/core/parallel.h"
@@ -109,19 +107,14 @@ void add_outliers(Residuals& r, const float* original, const float* pred, double
   r.outlier_step = 2 * within;
   std::vector<int32_t> outliers(r.q.size(), 0);
   const std::vector<float>& field = *r.field;
-  std::atomic<int64_t> count{0};
   parallel_for_range(r.dims.count(), 1 << 16, [&](int64_t i0, int64_t i1) {
-    int64_t n = 0;
     for (int64_t i = i0; i < i1; ++i) {
       const float decoded = r.absolute ? field[size_t(i)] : pred[i] + field[size_t(i)];
       const double e = double(original[i]) - double(decoded);
-      if (std::fabs(e) <= within) continue;
-      outliers[size_t(i)] = int32_t(std::nearbyint(e / r.outlier_step));
-      ++n;
+      if (std::fabs(e) > within) outliers[size_t(i)] = int32_t(std::nearbyint(e / r.outlier_step));
     }
-    count += n;
   });
-  if (count == 0) return;
+  if (std::all_of(outliers.begin(), outliers.end(), [](int32_t o) { return o == 0; })) return;
   r.outliers = std::move(outliers);
   auto folded = std::make_shared<std::vector<float>>(field);
   fold_outliers(r, *folded);
@@ -163,47 +156,18 @@ std::optional<Residuals> bounded_wavelet_residuals(const float* original, const 
       best = std::move(r);
     }
   }
-  if (residual_max_error(best, original, pred) > bound) return std::nullopt;  // fp32 rounding beyond the margin
+  if (residual_error_stats(best, original, pred).max_abs_error > bound) return std::nullopt;  // fp32 rounding beyond the margin
   auto enc = std::make_shared<EncodedResiduals>(*best.encoded);
   enc->meta["reference_bytes"] = reference_bytes;  // at 1.5 bound
   best.encoded = std::move(enc);
   return best;
 }
 
-double residual_squared_error(const Residuals& r, const float* original, const float* pred) {
-  std::vector<double> partial(size_t(std::max(1, num_threads())), 0.0);
-  const int64_t n = r.dims.count(), chunks = int64_t(partial.size());
-  parallel_for(chunks, [&](int64_t c) {
-    double sum = 0;
-    for (int64_t i = n * c / chunks; i < n * (c + 1) / chunks; ++i) {
-      const float decoded = r.absolute ? r.correction(i) : pred[i] + r.correction(i);
-      const double e = double(decoded) - double(original[i]);
-      sum += e * e;
-    }
-    partial[size_t(c)] = sum;
-  });
-  double total = 0;
-  for (double p : partial) total += p;
-  return total;
-}
-
-double residual_max_error(const Residuals& r, const float* original, const float* pred) {
-  std::atomic<int64_t> worst_bits{0};  // non-negative doubles order as their bit patterns
-  parallel_for_range(r.dims.count(), 1 << 16, [&](int64_t i0, int64_t i1) {
-    double worst = 0;
-    for (int64_t i = i0; i < i1; ++i) {
-      const float decoded = r.absolute ? r.correction(i) : pred[i] + r.correction(i);
-      worst = std::max(worst, std::fabs(double(decoded) - double(original[i])));
-    }
-    int64_t bits;
-    std::memcpy(&bits, &worst, sizeof bits);
-    for (int64_t seen = worst_bits.load(); bits > seen && !worst_bits.compare_exchange_weak(seen, bits);) {
-    }
-  });
-  double worst;
-  const int64_t bits = worst_bits.load();
-  std::memcpy(&worst, &bits, sizeof worst);
-  return worst;
+ErrorStats residual_error_stats(const Residuals& r, const float* original, const float* pred) {
+  std::vector<float> decoded(size_t(r.dims.count()), 0.0f);
+  if (!r.absolute) std::copy_n(pred, decoded.size(), decoded.begin());
+  apply_residuals(r, 0, r.dims.z, decoded.data());  // decoding's own arithmetic
+  return error_stats(original, decoded.data(), r.dims);
 }
 
 std::optional<Residuals> wavelet_residuals_for_budget(const float* original, const float* pred, Int3 dims,
@@ -218,7 +182,7 @@ std::optional<Residuals> wavelet_residuals_for_budget(const float* original, con
   if (alone.encoded->bytes.size() < best.encoded->bytes.size()) best = fill(values, dims, goal);
   if (double(best.encoded->bytes.size()) > goal) return std::nullopt;
   invert_wavelet_residuals(best);
-  const double worst = residual_max_error(best, original, pred);
+  const double worst = residual_error_stats(best, original, pred).max_abs_error;
   best.bound = worst + residual_margin(worst);
   return best;
 }

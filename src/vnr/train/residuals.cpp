@@ -231,8 +231,9 @@ namespace {
 Residuals smaller_error(Residuals voxels, std::optional<Residuals> wavelet, const float* original, const float* pred,
                         const std::function<double(double)>& guaranteed) {
   if (!wavelet) return voxels;
-  const double e_voxels = residual_squared_error(voxels, original, pred);
-  const double e_wavelet = residual_squared_error(*wavelet, original, pred);
+  const double n = double(voxels.dims.count());  // squared errors summed over the voxels
+  const double e_voxels = residual_error_stats(voxels, original, pred).mse * n;
+  const double e_wavelet = residual_error_stats(*wavelet, original, pred).mse * n;
   Residuals& kept = e_wavelet < e_voxels ? *wavelet : voxels;
   if (&kept == &*wavelet && guaranteed) kept.bound = guaranteed(kept.bound);
   auto enc = std::make_shared<EncodedResiduals>(*kept.encoded);

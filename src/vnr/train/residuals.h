@@ -10,6 +10,7 @@
 #include "vnr/core/dtype.h"
 #include "vnr/core/json.h"
 #include "vnr/core/math.h"
+#include "vnr/core/metrics.h"
 #include "vnr/nn/network.h"
 
 namespace vnr {
@@ -112,10 +113,9 @@ std::optional<Residuals> wavelet_residuals_for_budget(const float* original, con
 // searched around 1.5 bound, the outliers corrected, against pred or absolute, the smallest block coded;
 // none when dims are too small for a level or the bound is under 1e-7 (normalised).
 std::optional<Residuals> bounded_wavelet_residuals(const float* original, const float* pred, Int3 dims, double bound);
-// Sum of squared and largest |decoded - original| over every voxel of r (pred: the reference, unused for
-// absolute residuals).
-double residual_squared_error(const Residuals& r, const float* original, const float* pred);
-double residual_max_error(const Residuals& r, const float* original, const float* pred);
+// The decoded volume's error against `original` over every voxel (pred: the reference, unused for
+// absolute residuals), decoded as apply_residuals does.
+ErrorStats residual_error_stats(const Residuals& r, const float* original, const float* pred);
 
 // What residuals_for_budget is expected to take on `dims` voxels (0.55 us per voxel: 8.8 s measured on
 // bonsai's 16.8 M on 2 cores), and smallest_residuals for a requested bound (1.5 us: 25 s there; zstd at
