@@ -360,7 +360,7 @@ TEST(RateTerm, RateAwareStepsZeroMoreOfTheGrid) {
 
 // The split of a file between the network and its residuals (config_sizing.h), in closed form: a tenth
 // for the network, the config's where that is at least 32 KiB, else (config auto) the small preset's of
-// at least 8 KiB, and none where the network would take over half of the file.
+// at least 4 KiB, and none where the network would take over half of the file.
 TEST(RateControl, ResidualSplitGivesTheNetworkATenthAndAFloor) {
   const uint64_t bonsai = 16u << 20, voxels = 16u << 20, wmag = 91u * 91 * 91 * 4;
   ResidualSplit s = residual_network_split(bonsai, voxels, 32, true, nullptr);
@@ -372,11 +372,14 @@ TEST(RateControl, ResidualSplitGivesTheNetworkATenthAndAFloor) {
   s = residual_network_split(bonsai, voxels, 128, false, nullptr);  // the user's config: 32 KiB, a quarter
   EXPECT_DOUBLE_EQ(s.network_ratio, double(bonsai) / 32768);
   EXPECT_FALSE(s.small_network);
-  s = residual_network_split(wmag, wmag / 4, 64, true, nullptr);  // a tenth is 4.6 KB: 8 KiB, 17 %
-  EXPECT_DOUBLE_EQ(s.network_ratio, double(wmag) / 8192);
+  s = residual_network_split(wmag, wmag / 4, 64, true, nullptr);  // a tenth is 4.7 KB: its own
+  EXPECT_DOUBLE_EQ(s.network_ratio, 640.0);
+  EXPECT_TRUE(s.small_network);
+  s = residual_network_split(wmag, wmag / 4, 128, true, nullptr);  // a tenth is 2.4 KB: 4 KiB, 17 %
+  EXPECT_DOUBLE_EQ(s.network_ratio, double(wmag) / 4096);
   EXPECT_TRUE(s.small_network);
   EXPECT_EQ(residual_network_split(wmag, wmag / 4, 64, false, nullptr).network_ratio, 0.0);  // 32 KiB: 70 %
-  EXPECT_EQ(residual_network_split(wmag, wmag / 4, 512, true, nullptr).network_ratio, 0.0);  // 8 KiB > a half
+  EXPECT_EQ(residual_network_split(wmag, wmag / 4, 512, true, nullptr).network_ratio, 0.0);  // 4 KiB > a half
 }
 
 // --target-ratio alone on a volume where the file has bits to spare (1 bit per voxel): --residuals auto

@@ -127,12 +127,52 @@ TEST(WaveletResiduals, FillTheBudgetAndKeepTheirBoundThroughAFile) {
   for (size_t i = 0; i < again.size(); ++i) ASSERT_EQ(bits(again[i]), bits(decoded[i])) << i;
 }
 
-TEST(WaveletResiduals, NoiseKeepsVoxelResiduals) {
-  std::vector<float> v = noise(kDims, 3);
-  for (float& x : v) x = 0.5f + 0.1f * x;
+// Non-zero coefficients are rebuilt at their bins' means per level: each offset is that mean (to 1e-3),
+// and it decodes closer than the bins' lower ends (q step) would.
+TEST(WaveletResiduals, CoefficientsAreRebuiltAtTheirBinsMeans) {
+  Volume vol = make_volume(kDims, [](float x, float y, float z) {
+    return 0.5f + 0.3f * std::sin(6 * x) * std::cos(5 * y) + (std::fabs(z - 0.5f) < 0.05f ? 0.15f : 0.f);
+  });
+  const std::optional<Residuals> r = wavelet_residuals_for_budget(vol.data.data(), nullptr, kDims, 3000);
+  ASSERT_TRUE(r);
+  ASSERT_EQ(r->wavelet_offsets.size(), size_t(r->wavelet_levels) + 1);
+  std::vector<float> c(vol.data.begin(), vol.data.end());
+  wavelet_forward(c, kDims, r->wavelet_levels);
+  const std::vector<uint8_t> level = wavelet_coefficient_levels(kDims, r->wavelet_levels);
+  std::vector<double> sum(r->wavelet_offsets.size(), 0.0), count(sum.size(), 0.0);
+  for (size_t i = 0; i < c.size(); ++i)
+    if (r->q[i] != 0) sum[level[i]] += std::fabs(c[i]) / r->step - std::abs(r->q[i]), count[level[i]] += 1;
+  for (size_t l = 0; l < sum.size(); ++l)
+    if (count[l] > 0) EXPECT_NEAR(r->wavelet_offsets[l], sum[l] / count[l], 5e-4 + 1e-9) << l;
+  Residuals plain = *r;
+  plain.wavelet_offsets.clear();
+  invert_wavelet_residuals(plain);
+  EXPECT_LT(residual_error_stats(*r, vol.data.data(), nullptr).mse, residual_error_stats(plain, vol.data.data(), nullptr).mse);
+}
+
+// Coefficient levels in the Mallat layout: the low band is the last level's box, level 0 all but the
+// first level's box (40 x 36 x 30 -> 20 x 18 x 15 -> 10 x 9 x 8 -> 5 x 9 x 4: y and z stop at 9 and 8).
+TEST(Wavelet, CoefficientLevelsFollowTheBoxes) {
+  ASSERT_EQ(wavelet_levels(kDims), 3);
+  const std::vector<uint8_t> level = wavelet_coefficient_levels(kDims, 3);
+  auto count = [&](int l) { return std::count(level.begin(), level.end(), uint8_t(l)); };
+  EXPECT_EQ(count(3), 5 * 5 * 4);
+  EXPECT_EQ(count(2), 10 * 9 * 8 - 5 * 5 * 4);
+  EXPECT_EQ(count(1), 20 * 18 * 15 - 10 * 9 * 8);
+  EXPECT_EQ(count(0), 40 * 36 * 30 - 20 * 18 * 15);
+  EXPECT_EQ(level[0], 3);
+  EXPECT_EQ(level[size_t(kDims.count()) - 1], 0);
+}
+
+// Isolated spikes: one voxel residual each, where a wavelet spreads every spike over its supports.
+TEST(WaveletResiduals, SpikesKeepVoxelResiduals) {
+  std::vector<float> v(size_t(kDims.count()), 0.5f);
+  Pcg32 rng(3);
+  for (float& x : v)
+    if (rng.next_float() < 0.01f) x = rng.next_float() < 0.5f ? 0.1f : 0.9f;
   const Volume vol = make_volume(kDims, v);
   Model m = model_for(kDims);
-  const Residuals r = residuals_for_budget(*m.net, vol.data.data(), kDims, 20000);
+  const Residuals r = residuals_for_budget(*m.net, vol.data.data(), kDims, 4000);
   EXPECT_FALSE(r.wavelet());
   const Json& errors = r.encoded->meta["candidate_squared_error"];
   EXPECT_LE(errors["voxels"].get<double>(), errors["wavelet"].get<double>());
@@ -147,8 +187,15 @@ TEST(WaveletResiduals, DamagedBlocksAreOneClearError) {
   r.q = std::vector<int32_t>(size_t(kDims.count()), 0);
   r.q[0] = 40, r.q[7] = -3, r.q[size_t(kDims.count()) - 1] = 1;
   const EncodedResiduals e = encode_residuals(r);
+  EXPECT_FALSE(e.meta.contains("offsets"));  // as files before the offsets: rebuilt at q step
   const Residuals back = decode_residuals(e.meta, e.bytes, kDims, "'w.vnr'");
   EXPECT_EQ(back.q, r.q);
+  EXPECT_FLOAT_EQ((*back.field)[0] , [&] {
+    std::vector<float> f(size_t(kDims.count()), 0.0f);
+    for (size_t i = 0; i < f.size(); ++i) f[i] = float(r.q[i] * r.step);
+    wavelet_inverse(f, kDims, r.wavelet_levels);
+    return f[0];
+  }());
   ASSERT_TRUE(back.field);
   EXPECT_GT(std::fabs((*back.field)[0]), 0.0f);
   auto error_of = [&](const Json& meta, const std::vector<uint8_t>& bytes) {
@@ -157,6 +204,9 @@ TEST(WaveletResiduals, DamagedBlocksAreOneClearError) {
   Json meta = e.meta;
   meta["levels"] = 9;
   EXPECT_HAS(error_of(meta, e.bytes), "wavelet levels");
+  meta = e.meta;
+  meta["offsets"] = {0.1, 0.2};
+  EXPECT_HAS(error_of(meta, e.bytes), "reconstruction offsets");
   meta = e.meta;
   meta["predictor"] = "lorenzo";
   EXPECT_HAS(error_of(meta, e.bytes), "unknown residual coding");

@@ -130,6 +130,7 @@ EncodedResiduals encode_wavelet(const Residuals& r, const std::string& only) {
               {"crc32", values_crc(r.q)},
               {"candidate_bytes", {{name, enc.bytes.size()}}}};
   if (!outliers.is_null()) enc.meta["outliers"] = outliers;
+  if (!r.wavelet_offsets.empty()) enc.meta["offsets"] = r.wavelet_offsets;
   return enc;
 }
 }  // namespace
@@ -251,6 +252,12 @@ Residuals decode_residuals(const Json& meta, const std::vector<uint8_t>& bytes, 
       r.wavelet_levels = meta_get<int>(meta, "levels", what);
       if (r.wavelet_levels < 1 || r.wavelet_levels > wavelet_levels(dims))
         fail("{}: the residual block's wavelet levels ({}) do not fit its dims", what, r.wavelet_levels);
+      if (meta.contains("offsets")) {  // absent before vnr rebuilt coefficients at their bins' means
+        r.wavelet_offsets = meta_get<std::vector<double>>(meta, "offsets", what);
+        if (r.wavelet_offsets.size() != size_t(r.wavelet_levels) + 1 ||
+            !std::all_of(r.wavelet_offsets.begin(), r.wavelet_offsets.end(), [](double o) { return o >= -1 && o <= 1; }))
+          fail("{}: the residual block's reconstruction offsets are invalid", what);
+      }
       invert_wavelet_residuals(r);
     }
     return r;

@@ -27,9 +27,17 @@ void fold_outliers(const Residuals& r, std::vector<float>& field) {
 
 void invert_wavelet_residuals(Residuals& r) {
   if (r.q.size() != size_t(r.dims.count())) fail("wavelet residuals of {} values for {} voxels", r.q.size(), r.dims.count());
+  const bool offsets = !r.wavelet_offsets.empty();
+  if (offsets && r.wavelet_offsets.size() != size_t(r.wavelet_levels) + 1)
+    fail("wavelet residuals: {} reconstruction offsets for {} levels", r.wavelet_offsets.size(), r.wavelet_levels);
+  const std::vector<uint8_t> level = offsets ? wavelet_coefficient_levels(r.dims, r.wavelet_levels) : std::vector<uint8_t>{};
   auto field = std::make_shared<std::vector<float>>(r.q.size());
   parallel_for_range(int64_t(r.q.size()), 1 << 16, [&](int64_t i0, int64_t i1) {
-    for (int64_t i = i0; i < i1; ++i) (*field)[size_t(i)] = float(double(r.q[size_t(i)]) * r.step);
+    for (int64_t i = i0; i < i1; ++i) {
+      const double q = r.q[size_t(i)];
+      const double rebuilt = offsets && q != 0 ? std::copysign(std::fabs(q) + r.wavelet_offsets[level[size_t(i)]], q) : q;
+      (*field)[size_t(i)] = float(rebuilt * r.step);
+    }
   });
   wavelet_inverse(*field, r.dims, r.wavelet_levels);
   fold_outliers(r, *field);
@@ -45,10 +53,12 @@ struct Coefficients {
   std::vector<float> c;
   int levels = 0;
   bool absolute = false;
+  std::vector<uint8_t> level;  // wavelet_coefficient_levels
 };
 
 Coefficients transform(const float* original, const float* pred, Int3 dims) {
-  Coefficients t{std::vector<float>(size_t(dims.count())), wavelet_levels(dims), pred == nullptr};
+  const int levels = wavelet_levels(dims);
+  Coefficients t{std::vector<float>(size_t(dims.count())), levels, pred == nullptr, wavelet_coefficient_levels(dims, levels)};
   parallel_for_range(dims.count(), 1 << 16, [&](int64_t i0, int64_t i1) {
     for (int64_t i = i0; i < i1; ++i) t.c[size_t(i)] = float(double(original[i]) - (pred ? double(pred[i]) : 0.0));
   });
@@ -70,6 +80,17 @@ Residuals quantise(const Coefficients& t, Int3 dims, double step) {
       r.q[size_t(i)] = int32_t(std::copysign(std::min(k, limit), c));
     }
   });
+  // Each level's offset: the mean of |c| / step - |q| over its non-zero coefficients, to 1e-3 (a
+  // Laplacian's bins hold more values near their lower end than a uniform one would).
+  std::vector<double> sum(size_t(t.levels) + 1, 0.0), count(size_t(t.levels) + 1, 0.0);
+  for (size_t i = 0; i < r.q.size(); ++i)
+    if (r.q[i] != 0 && std::abs(r.q[i]) < kMaxContextMagnitude) {
+      sum[t.level[i]] += std::fabs(double(t.c[i])) / step - std::abs(double(r.q[i]));
+      count[t.level[i]] += 1;
+    }
+  r.wavelet_offsets.assign(sum.size(), 0.0);
+  for (size_t l = 0; l < sum.size(); ++l)
+    if (count[l] > 0) r.wavelet_offsets[l] = std::nearbyint(1000 * sum[l] / count[l]) / 1000;
   return r;
 }
 

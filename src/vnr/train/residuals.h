@@ -53,6 +53,10 @@ struct Residuals {
   // Wavelet residuals (docs/COMPRESSION.md): q are the quantised CDF 9/7 coefficients of the correction
   // (`wavelet_levels` levels, volume/wavelet.h), and `field` the correction at every voxel, inverted once.
   int wavelet_levels = 0;
+  // Where a non-zero coefficient of level l (wavelet_coefficient_levels) is rebuilt: sign(q) (|q| +
+  // wavelet_offsets[l]) step, the mean of its bin's coefficients (the bins' values are not uniform);
+  // empty: at q step (files before the offsets).
+  std::vector<double> wavelet_offsets;
   std::shared_ptr<const std::vector<float>> field;
   // Wavelet residuals of a requested bound: the voxels the coefficients leave outside it are corrected by
   // outliers[i] * outlier_step on top (SPERR's outlier coding), folded into `field`; empty: none.

@@ -107,4 +107,19 @@ void wavelet_inverse(std::vector<float>& values, Int3 dims, int levels) {
       if (boxes[size_t(l)][size_t(axis)] >= kWaveletMinLength) lift_axis(values, dims, boxes[size_t(l)], axis, true);
 }
 
+std::vector<uint8_t> wavelet_coefficient_levels(Int3 dims, int levels) {
+  if (levels < 0 || levels > wavelet_levels(dims)) fail("wavelet: {} levels for dims {}x{}x{}", levels, dims.x, dims.y, dims.z);
+  const auto boxes = level_boxes(dims, levels);
+  std::vector<uint8_t> level(size_t(dims.count()));
+  parallel_for(dims.z, [&](int64_t z) {
+    for (int64_t y = 0; y < dims.y; ++y)
+      for (int64_t x = 0; x < dims.x; ++x) {
+        int l = 0;  // inside the next level's low box: one level coarser
+        while (l < levels && x < boxes[size_t(l) + 1][0] && y < boxes[size_t(l) + 1][1] && z < boxes[size_t(l) + 1][2]) ++l;
+        level[size_t(x + dims.x * (y + dims.y * z))] = uint8_t(l);
+      }
+  });
+  return level;
+}
+
 }  // namespace vnr

@@ -3,6 +3,7 @@
 // whole-sample symmetric extension, in place in the Mallat layout (each level's low band first along
 // every axis it splits). Residual coding (docs/COMPRESSION.md) quantises its coefficients: the
 // transform packs a smooth field's energy into few of them, as SPERR's and JPEG 2000's do.
+#include <cstdint>
 #include <vector>
 #include "vnr/core/math.h"
 
@@ -19,5 +20,8 @@ int wavelet_levels(Int3 dims);
 void wavelet_forward(std::vector<float>& values, Int3 dims, int levels);
 // The inverse (the forward transform's inverse up to float rounding).
 void wavelet_inverse(std::vector<float>& values, Int3 dims, int levels);
+// The level of each coefficient of a `levels`-level transform of dims in the Mallat layout: 0 for the
+// finest detail bands, up to levels - 1 for the coarsest, `levels` for the low band.
+std::vector<uint8_t> wavelet_coefficient_levels(Int3 dims, int levels);
 
 }  // namespace vnr
