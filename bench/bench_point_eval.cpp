@@ -49,8 +49,10 @@ const Network& model_net(int model) {
     net.init_params(1);
     std::mt19937 gen(2);
     std::uniform_real_distribution<float> U(-1.f, 1.f);
-    for (uint64_t i = 0; i < net.grid_params(); ++i) net.grid_table()[i] = U(gen);
-    net.sync_half_table();
+    net.edit_params([&](float* p, size_t) {
+      float* table = p + net.mlp().n_params;
+      for (uint64_t i = 0; i < net.grid_params(); ++i) table[i] = U(gen);
+    });
     if (model >= 3) net.set_inference_precision(parse_precision("bf16"));
   }
   return *nets[model];

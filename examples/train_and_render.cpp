@@ -45,7 +45,7 @@ int main(int argc, char** argv) {
                                          p.samples_per_second / 1e6);
     });
     session->run(steps);
-    session->record();  // the trained parameters and the online macro-cells into the model
+    session->finish();  // the trained parameters and the online macro-cells into the model
 
     const vnr::EvalResult eval = vnr::evaluate_model(model, volume);
     std::printf("PSNR %.2f dB, SSIM %.4f, compression ratio %.1f\n", eval.psnr, eval.ssim,

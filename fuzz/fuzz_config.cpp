@@ -2,7 +2,7 @@
 // load_config reads a config file.
 #include <string>
 #include "fuzz_support.h"
-#include "vnr/core/json.h"
+#include "vnr/json.h"
 #include "vnr/nn/config.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {

@@ -6,7 +6,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <string>
-#include "vnr/core/error.h"
+#include "vnr/error.h"
 
 namespace vnr::fuzz {
 

@@ -2,7 +2,7 @@
 // opacityControl, gaussianObjects), its standalone file and scene forms, and vnr's simple format.
 #include <string>
 #include "fuzz_support.h"
-#include "vnr/core/json.h"
+#include "vnr/json.h"
 #include "vnr/render/transfer_function.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {

@@ -6,7 +6,7 @@
 #include <cstring>
 #include <fstream>
 #include "test_support.h"
-#include "vnr/core/error.h"
+#include "vnr/error.h"
 #include "vnr/vnr.h"
 
 using namespace vnr;
@@ -82,8 +82,8 @@ TEST(ApiArrays, ASharedVolumeTrainsTheModelOfItsFile) {
   shared->run(6);
   const Network& a = from_file->network();
   const Network& b = shared->network();
-  ASSERT_EQ(a.params.size(), b.params.size());
-  EXPECT_EQ(std::memcmp(a.params.data(), b.params.data(), a.params.size() * sizeof(float)), 0);
+  ASSERT_EQ(a.params().size(), b.params().size());
+  EXPECT_EQ(std::memcmp(a.params().data(), b.params().data(), a.params().size() * sizeof(float)), 0);
   EXPECT_EQ(shared->model().source_dtype, DType::UInt8);
 
   in_memory.data.sampler = "outofcore";

@@ -7,7 +7,7 @@
 #include <set>
 #include "test_support.h"
 #include "vnr/benchmark.h"
-#include "vnr/core/progress.h"
+#include "vnr/progress.h"
 #include "vnr/vnr.h"
 
 using namespace vnr;

@@ -8,7 +8,7 @@
 #include <hwy/targets.h>
 #include <cmath>
 #include <set>
-#include "vnr/core/error.h"
+#include "vnr/error.h"
 #include "vnr/core/rng.h"
 #include "vnr/core/value_range_grid.h"
 #include "vnr/api/model_field.h"
@@ -151,6 +151,36 @@ TEST(BrickCache, TheLeastRecentlyReadBrickIsEvictedWhenTheBudgetIsFull) {
   float v;
   cache.query(&x, &y, &z, 1, &v);
   EXPECT_EQ(cache.stats().misses, 0) << "brick 0, read every frame, stayed";
+}
+
+// Images while the pool evicts: two narrow views down -z through opposite columns of bricks, taken in
+// turn under a budget of five bricks (a column is four), so each view's bricks make way for the other's.
+// Every image still equals the grid's bit for bit: what is not cached reads the source exactly.
+TEST(BrickCache, ImagesStayExactWhileThePoolEvicts) {
+  Volume vol = synth(Int3{32, 32, 32});  // 4 x 4 x 4 bricks of 8
+  GridField grid(view_of(vol));
+  BrickCacheSettings s = level0(8, 5 * 9 * 9 * 9 * sizeof(float));
+  s.decode_seconds = 100;
+  CachedField cache(grid, grid_decode(vol), vol.dims, s);
+  TransferFunction tf = tf_preset("ramp");
+  MacroCells mc(value_ranges_from_grid(view_of(vol), 8), box_of(vol));
+  mc.update(tf);
+  RenderOptions o;
+  o.width = 16, o.height = 16;
+  o.strategy = RenderStrategy::InShader;
+  for (int frame = 0; frame < 6; ++frame) {
+    const float c = frame % 2 == 0 ? 4.0f : 28.0f;  // the middle of column (0, 0) or (3, 3)
+    const Camera cam{Vec3f{c, c, 62}, Vec3f{c, c, 0}, Vec3f{0, 1, 0}, 5};
+    for (bool packets : {false, true}) {
+      o.ray_packets = packets;
+      const Image img = CpuRenderer(cache, box_of(vol), mc, tf, cam, o).render(1);
+      ASSERT_TRUE(same_image(img, CpuRenderer(grid, box_of(vol), mc, tf, cam, o).render(1)))
+          << "frame " << frame << " packets " << packets;
+    }
+    EXPECT_LE(cache.stats().pool_bytes, s.budget_bytes);
+  }
+  EXPECT_GT(cache.stats().evicted, 0) << "the views' columns took turns in the pool";
+  EXPECT_GT(cache.stats().decoded, 8) << "bricks came back after they were evicted";
 }
 
 TEST(BrickCache, CoarserMissesReadTheNearestDecodedLevel) {
@@ -400,6 +430,38 @@ TEST(BrickCache, AModelsCacheEqualsItsDecodeAndRendersAsTheDecodedGrid) {
                            CpuRenderer(grid, box_of(vol), mc, tf, cam, o).render(2)))
         << "packets " << packets;
   }
+}
+
+// A coarser level of a model's cache holds the model decoded at that level's dims: with every voxel of
+// every level under the footprint allowed, samples read the root (7 x 6 x 5 of 28 x 24 x 20), exactly
+// as a grid over Decoder's decode at 7 x 6 x 5.
+TEST(BrickCache, AModelsCoarserLevelsEqualItsDecodeAtTheirDims) {
+  Volume vol = synth(Int3{28, 24, 20});
+  Model model = create_model(ModelConfig::from_json(small_hash_config(12, 16, 1)), vol);
+  CpuTrainer trainer(*model.net, std::make_shared<InCoreSampler>(vol), TrainOptions{8192, 3});
+  for (int i = 0; i < 50; ++i) trainer.step();
+  NetworkField field(*model.net, model.dims);
+  BrickCacheSettings s = level0(8);
+  s.lod_pixels = 1e9f;  // a voxel of any level covers fewer pixels: the coarsest level everywhere
+  s.decode_seconds = 100;
+  std::unique_ptr<CachedField> cache = make_model_cache(model, field, s);
+  ASSERT_EQ(cache->stats().levels, 3);  // 28 x 24 x 20, 14 x 12 x 10, 7 x 6 x 5
+  const RenderParams p = params_for(orbit_camera(box_of(vol), 25, 15, 30), model.dims, 40, 32);
+  cache->begin_frame(p);
+  EXPECT_EQ(cache->view().level_at(0.5f, 0.5f, 0.5f), 2);
+  Volume root;
+  root.dims = Int3{7, 6, 5};
+  root.data.resize(size_t(root.dims.count()));
+  Decoder(model, Device::Cpu).slices(root.dims, 0, root.dims.z, root.data.data());
+  Pcg32 rng(8);
+  std::vector<float> x(2000), y(2000), z(2000), v(2000);
+  for (size_t i = 0; i < x.size(); ++i) x[i] = rng.next_float(), y[i] = rng.next_float(), z[i] = rng.next_float();
+  cache->query(x.data(), y.data(), z.data(), int64_t(x.size()), v.data());  // asks for the root
+  cache->decode_pending();
+  cache->begin_frame(p);
+  cache->query(x.data(), y.data(), z.data(), int64_t(x.size()), v.data());
+  EXPECT_EQ(cache->stats().misses, 0);
+  for (size_t i = 0; i < x.size(); ++i) ASSERT_EQ(v[i], grid_lookup(view_of(root), x[i], y[i], z[i])) << i;
 }
 
 TEST(BrickCache, BricksUnderTheCursorAreDecodedFirst) {

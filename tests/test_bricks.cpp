@@ -303,7 +303,7 @@ TEST(BrickTraining, QualityMatchesOneModelOfTheSameSizeWithAccurateFacesAndNoSea
   s.steps = 500;  // the bricks' steps together
   auto session = open_training_session(s);
   session->run(500);
-  session->finish(false, 0);
+  session->finish({.ssim = false});
 
   const Volume truth = open_volume(vol);
   const Model multi = load_model(tmp / "m"), one = load_model(tmp / "one.vnr");
@@ -459,7 +459,7 @@ TEST(BrickModel, TheViewerShowsItAsTheRendererDoes) {
   setup.device = "auto";  // the CPU for a multi-brick model
   ViewerEngine engine(setup);
   EXPECT_FALSE(engine.info().can_train);  // viewed, not retrained
-  EXPECT_EQ(engine.info().n_params, int64_t(model_n_params(load_model(tmp / "m"))));
+  EXPECT_EQ(engine.info().n_params, int64_t(load_model(tmp / "m").n_params()));
   ViewerRender vr = engine.state().render;
   vr.max_frames = 1;
   engine.set_viewport(64, 48);

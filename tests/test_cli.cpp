@@ -6,8 +6,8 @@
 #include <fstream>
 #include <string>
 #include <vector>
-#include "vnr/core/fileio.h"
-#include "vnr/core/json.h"
+#include "vnr/fileio.h"
+#include "vnr/json.h"
 #include "vnr/nn/mlp_bf16.h"
 #include "vnr/train/model_io.h"
 #include "vnr/volume/volume.h"

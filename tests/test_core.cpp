@@ -1,9 +1,9 @@
 #include <gtest/gtest.h>
 #include <cmath>
-#include "vnr/core/dtype.h"
-#include "vnr/core/error.h"
+#include "vnr/dtype.h"
+#include "vnr/error.h"
 #include "vnr/core/half.h"
-#include "vnr/core/progress.h"
+#include "vnr/progress.h"
 #include "vnr/core/rng.h"
 
 using namespace vnr;

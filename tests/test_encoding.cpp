@@ -6,8 +6,8 @@
 #include <cmath>
 #include <cstring>
 #include <random>
-#include "vnr/core/fileio.h"
-#include "vnr/core/json.h"
+#include "vnr/fileio.h"
+#include "vnr/json.h"
 #include "vnr/core/rng.h"
 #include "vnr/nn/network.h"
 #include "test_support.h"
@@ -50,9 +50,10 @@ TEST(GridEncoding, CornersWeightsAndFeaturesBitExact) {
   Json v = vectors();
   for (std::string interp : {"linear", "smoothstep"}) {
     Network net(model(hashgrid(2, 2, 4, 2, interp == "linear" ? "Linear" : "Smoothstep")));
-    float* table = net.grid_table();
-    for (uint64_t k = 0; k < net.grid_params(); ++k) table[k] = float((int64_t(k) * 37) % 101 - 50) / 64.0f;
-    net.sync_half_table();  // multiples of 1/64: exact in fp16
+    net.edit_params([&](float* p, size_t) {  // multiples of 1/64: exact in fp16
+      float* table = p + net.mlp().n_params;
+      for (uint64_t k = 0; k < net.grid_params(); ++k) table[k] = float((int64_t(k) * 37) % 101 - 50) / 64.0f;
+    });
     for (auto& pt : v["points"]) {
       float x[3];
       for (int d = 0; d < 3; ++d) x[d] = pt["input"][d].get<float>();
@@ -158,8 +159,10 @@ TEST(GridEncoding, ParameterGradientMatchesFiniteDifferences) {
         std::mt19937 gen(3);
         std::uniform_real_distribution<float> U(0.f, 1.f);
         // Multiples of 2^-10 in [-0.5, 0.5] and steps of 0.25 stay exact in the fp16 working copy.
-        for (uint64_t k = 0; k < net.grid_params(); ++k) net.grid_table()[k] = std::round((U(gen) - 0.5f) * 1024) / 1024;
-        net.sync_half_table();
+        net.edit_params([&](float* p, size_t) {
+          float* table = p + net.mlp().n_params;
+          for (uint64_t k = 0; k < net.grid_params(); ++k) table[k] = std::round((U(gen) - 0.5f) * 1024) / 1024;
+        });
         const int n = kChunk;
         std::vector<float> x(n), y(n), z(n), dEnc(net.mlp().in_pad * n);
         for (int s = 0; s < n; ++s) x[s] = U(gen), y[s] = U(gen), z[s] = U(gen);
@@ -178,17 +181,15 @@ TEST(GridEncoding, ParameterGradientMatchesFiniteDifferences) {
         std::uniform_int_distribution<uint64_t> pick(0, net.grid_params() - 1);
         for (int trial = 0; trial < 40; ++trial) {
           uint64_t k = pick(gen);
-          float& th = net.grid_table()[k];
-          float keep = th;
+          const uint64_t at = net.mlp().n_params + k;
+          const float keep = net.params()[at];
           const float h = 0.25f;
-          th = keep + h;
-          net.sync_half_table();
+          auto set = [&](float v) { net.edit_params([&](float* p, size_t) { p[at] = v; }); };
+          set(keep + h);
           double fp = objective();
-          th = keep - h;
-          net.sync_half_table();
+          set(keep - h);
           double fm = objective();
-          th = keep;
-          net.sync_half_table();
+          set(keep);
           double fd = (fp - fm) / (2 * h);
           EXPECT_NEAR(grad[k], fd, 1e-4 + 1e-4 * std::fabs(fd)) << otype << " F=" << F << " " << interp << " k=" << k;
         }
@@ -208,8 +209,10 @@ TEST(Encodings, InputGradientMatchesFiniteDifferences) {
     net.init_params(1);
     std::mt19937 gen(11);
     std::uniform_real_distribution<float> U(-1.f, 1.f);
-    for (uint64_t k = 0; k < net.grid_params(); ++k) net.grid_table()[k] = U(gen);
-    net.sync_half_table();
+    net.edit_params([&](float* p, size_t) {
+      float* table = p + net.mlp().n_params;
+      for (uint64_t k = 0; k < net.grid_params(); ++k) table[k] = U(gen);
+    });
     const uint32_t w = net.mlp().enc_width;
     std::vector<float> jac(w * 3), fp(w), fm(w);
     const float pts[3][3] = {{0.31f, 0.47f, 0.59f}, {0.123f, 0.77f, 0.41f}, {0.66f, 0.21f, 0.83f}};
@@ -314,8 +317,10 @@ TEST(GridEncoding, EverySimdTargetIsBitIdentical) {
     net.init_params(3);
     std::mt19937 gen(5);
     std::uniform_real_distribution<float> U(0.f, 1.f);
-    for (uint64_t k = 0; k < net.grid_params(); ++k) net.grid_table()[k] = (U(gen) - 0.5f) * 0.5f;
-    net.sync_half_table();
+    net.edit_params([&](float* p, size_t) {
+      float* table = p + net.mlp().n_params;
+      for (uint64_t k = 0; k < net.grid_params(); ++k) table[k] = (U(gen) - 0.5f) * 0.5f;
+    });
     const int n = kChunk;
     std::vector<float> x(n), y(n), z(n), dEnc(size_t(net.mlp().in_pad) * n);
     for (int s = 0; s < n; ++s) {

@@ -9,7 +9,7 @@
 #include <random>
 #include <string>
 #include <vector>
-#include "vnr/core/error.h"
+#include "vnr/error.h"
 #include "vnr/core/half.h"
 #include "vnr/nn/adam_update.h"
 #include "vnr/nn/cpu_kernels.h"
@@ -120,8 +120,10 @@ TEST(Encodings, PointEvaluationEqualsChunkForward) {
     SCOPED_TRACE(j.dump());
     Network net(model(j));
     net.init_params(3);
-    for (uint64_t k = 0; k < net.grid_params(); ++k) net.grid_table()[k] = float(int64_t(k * 37 % 101) - 50) / 64.0f;
-    net.sync_half_table();
+    net.edit_params([&](float* p, size_t) {
+      float* table = p + net.mlp().n_params;
+      for (uint64_t k = 0; k < net.grid_params(); ++k) table[k] = float(int64_t(k * 37 % 101) - 50) / 64.0f;
+    });
     const MlpLayout& m = net.mlp();
     std::vector<float> X0(size_t(m.in_pad) * n), point(m.enc_width);
     net.encode(x.data(), y.data(), z.data(), n, X0.data());

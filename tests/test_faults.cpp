@@ -13,7 +13,7 @@
 #include <sstream>
 #include <thread>
 #include "test_support.h"
-#include "vnr/core/fileio.h"
+#include "vnr/fileio.h"
 
 namespace vnr::test {
 namespace {

@@ -8,7 +8,7 @@
 #include <string>
 #include <vector>
 #include "test_support.h"
-#include "vnr/core/fileio.h"
+#include "vnr/fileio.h"
 #include "vnr/trainer.h"
 #include "vnr/vnr.h"
 

@@ -8,7 +8,7 @@
 #include <fstream>
 #include <string>
 #include <vector>
-#include "vnr/core/json.h"
+#include "vnr/json.h"
 #include "test_support.h"
 
 using namespace vnr;

@@ -8,7 +8,7 @@
 #include <functional>
 #include <thread>
 #include "test_support.h"
-#include "vnr/core/fileio.h"
+#include "vnr/fileio.h"
 #include "vnr/cuda/cuda.h"
 #include "vnr/model.h"
 #include "vnr/nn/config.h"
@@ -35,7 +35,7 @@ std::string trained_model_file(const TmpDir& dir, const char* preset) {
   Model m = create_model(ModelConfig::from_json(preset_config(preset)), vol, 7);
   auto session = make_training_session(m, vol, Device::Cpu, TrainOptions{16384, 7});
   session->run(200);
-  session->record();
+  session->finish();
   save_model(dir / "model.vnr", m);
   return dir / "model.vnr";
 }

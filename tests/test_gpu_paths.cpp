@@ -78,7 +78,7 @@ TEST(GpuHostFed, OutOfCoreSamplerTrainsOnTheGpu) {
     auto session = open_training_session(s);
     EXPECT_EQ(session->trainer().device(), std::string(device) == "cuda" ? Device::Cuda : Device::Cpu);
     session->run(400);
-    const TrainingResult r = session->finish(false, 1 << 18);  // out of core: a sampled evaluation
+    const TrainingResult r = session->finish({.ssim = false, .eval_samples = 1 << 18});  // out of core: a sampled evaluation
     return r.psnr;
   };
   const double gpu = run("cuda"), cpu = run("cpu");

@@ -7,9 +7,9 @@
 #include <fstream>
 #include <limits>
 #include <numbers>
-#include "vnr/core/error.h"
-#include "vnr/core/fileio.h"
-#include "vnr/core/json.h"
+#include "vnr/error.h"
+#include "vnr/fileio.h"
+#include "vnr/json.h"
 #include "vnr/core/rng.h"
 #include "vnr/render/camera.h"
 #include "vnr/render/image.h"

@@ -9,8 +9,8 @@
 #include <filesystem>
 #include <fstream>
 #include "test_support.h"
-#include "vnr/core/error.h"
-#include "vnr/core/units.h"
+#include "vnr/error.h"
+#include "vnr/units.h"
 #include "vnr/model.h"
 #include "vnr/nn/config.h"
 #include "vnr/nn/network.h"

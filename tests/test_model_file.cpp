@@ -8,8 +8,8 @@
 #include <map>
 #include <random>
 #include <set>
-#include "vnr/core/error.h"
-#include "vnr/core/fileio.h"
+#include "vnr/error.h"
+#include "vnr/fileio.h"
 #include "vnr/core/half.h"
 #include "vnr/nn/model_file.h"
 #include "test_support.h"

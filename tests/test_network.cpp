@@ -42,7 +42,9 @@ TEST(Mlp, BackwardMatchesFiniteDifferences) {
       const MlpLayout& m = net.mlp();
       std::mt19937 gen(9);
       std::uniform_real_distribution<float> U(-1.f, 1.f);
-      for (uint64_t i = 0; i < m.n_params; ++i) net.params[i] = U(gen) * 0.5f;
+      net.edit_params([&](float* p, size_t) {
+        for (uint64_t i = 0; i < m.n_params; ++i) p[i] = U(gen) * 0.5f;
+      });
       const int n = 32;
       std::vector<float> X0(m.in_pad * n), G(n), acts(net.acts_floats(n)), pre(n), out(n), dW(m.n_params, 0.f),
           dX0(m.in_pad * n), scratch(2 * m.width * n);
@@ -71,12 +73,13 @@ TEST(Mlp, BackwardMatchesFiniteDifferences) {
         uint64_t k = pick(gen);
         // Only rows that reach the output (the padded output rows have no gradient by design).
         if (k >= m.offset[m.n_hidden] + m.n_out * m.width) continue;
-        float keep = net.params[k];
-        net.params[k] = keep + h;
+        const float keep = net.params()[k];
+        auto set = [&](float v) { net.edit_params([&](float* p, size_t) { p[k] = v; }); };
+        set(keep + h);
         double fp = objective();
-        net.params[k] = keep - h;
+        set(keep - h);
         double fm = objective();
-        net.params[k] = keep;
+        set(keep);
         if (kinked(fp, objective(), fm)) continue;
         double fd = (fp - fm) / (2 * h);
         EXPECT_NEAR(dW[k], fd, tol_abs + tol_rel * std::fabs(fd)) << hidden_act << "/" << act << " w" << width << " param " << k;
@@ -111,7 +114,7 @@ Bf16TrainResult bf16_training_reference(const Network& net, const std::vector<fl
                                         int n) {
   const MlpLayout& m = net.mlp();
   const int W = int(m.width), H = int(m.n_hidden), K0 = int(m.first_cols), no = int(m.n_out);
-  auto Wb = [&](int k, int r, int c) { return double(round_bf16(net.params[m.offset[k] + size_t(r) * m.cols[k] + c])); };
+  auto Wb = [&](int k, int r, int c) { return double(round_bf16(net.params()[m.offset[k] + size_t(r) * m.cols[k] + c])); };
   auto K = [&](int k) { return k == 0 ? K0 : W; };
   std::vector<std::vector<float>> h(H + 1);
   h[0].resize(size_t(n) * K0);
@@ -252,8 +255,10 @@ TEST(Mlp, ChunkForwardMatchesReferenceEvaluation) {
   net.init_params(1337);
   std::mt19937 gen(1);
   std::uniform_real_distribution<float> U(0.f, 1.f);
-  for (uint64_t k = 0; k < net.grid_params(); ++k) net.grid_table()[k] = (U(gen) - 0.5f) * 0.2f;
-  net.sync_half_table();
+  net.edit_params([&](float* p, size_t) {
+    float* table = p + net.mlp().n_params;
+    for (uint64_t k = 0; k < net.grid_params(); ++k) table[k] = (U(gen) - 0.5f) * 0.2f;
+  });
   std::vector<float> coords(3 * 300), out(300);
   for (auto& c : coords) c = U(gen);
   net.infer(coords.data(), 300, out.data());
@@ -375,7 +380,7 @@ TEST(CpuTrainer, LearnsASmoothVolumeAndIsDeterministic) {
   };
   auto [a, la] = run(150);
   auto [b, lb] = run(150);
-  EXPECT_EQ(a->params, b->params);  // same seed, same thread count: bit-identical
+  EXPECT_EQ(a->params(), b->params());  // same seed, same thread count: bit-identical
   EXPECT_EQ(la, lb);
   EXPECT_LT(la.back(), la.front() * 0.2f);
   // Adam keeps the fp16 working copy equal to fp16(master) for every grid parameter.
@@ -417,7 +422,7 @@ TEST(CpuTrainer, PrivateGridGradientsEqualTheSeparatePass) {
   set_num_threads(1);
   auto [p1, lp1] = run(TrainOptions{}.private_grid_grad_max_bytes, 5);
   auto [s1, ls1] = run(0, 5);
-  EXPECT_EQ(p1->params, s1->params);
+  EXPECT_EQ(p1->params(), s1->params());
   EXPECT_EQ(lp1, ls1);
   set_num_threads(2);
   auto [p2, lp2] = run(TrainOptions{}.private_grid_grad_max_bytes, 40);
@@ -476,7 +481,7 @@ TEST(CpuTrainer, SharedTailChunksGiveTheSameModelWhicheverThreadRunsThem) {
     auto [a, la] = run(0, 32, private_max, &c0_slow);
     auto [b, lb] = run(1, 32, private_max, &c0_fast);
     EXPECT_LT(c0_slow, c0_fast) << "the slowed thread should have claimed fewer shared chunks";
-    EXPECT_EQ(a->params, b->params) << "private grid " << private_max;
+    EXPECT_EQ(a->params(), b->params()) << "private grid " << private_max;
     EXPECT_EQ(la, lb);
     auto [r, lr] = run(-1, 0, private_max, nullptr);
     EXPECT_EQ(la[0], lr[0]);  // the first loss precedes any update

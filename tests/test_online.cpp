@@ -10,9 +10,9 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
-#include "vnr/core/error.h"
-#include "vnr/core/fileio.h"
-#include "vnr/core/json.h"
+#include "vnr/error.h"
+#include "vnr/fileio.h"
+#include "vnr/json.h"
 #include "vnr/core/value_range_grid.h"
 #include "vnr/online/online_loop.h"
 #include "vnr/online/preview.h"

@@ -15,7 +15,7 @@
 #include <random>
 #include <thread>
 #include <fmt/format.h>
-#include "vnr/core/fileio.h"
+#include "vnr/fileio.h"
 #include "vnr/core/parallel.h"
 #include "vnr/nn/config.h"
 #include "vnr/train/model_io.h"

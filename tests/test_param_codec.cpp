@@ -4,10 +4,10 @@
 #include <cstring>
 #include <functional>
 #include <random>
-#include "vnr/core/error.h"
-#include "vnr/core/fileio.h"
+#include "vnr/error.h"
+#include "vnr/fileio.h"
 #include "vnr/core/half.h"
-#include "vnr/core/math.h"
+#include "vnr/math.h"
 #include "vnr/nn/model_file.h"
 #include "vnr/nn/network.h"
 #include "vnr/nn/param_codec.h"

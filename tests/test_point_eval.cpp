@@ -64,10 +64,14 @@ std::vector<Case> cases() {
 void randomise(Network& net, uint32_t seed, float mlp_scale = 1.5f) {
   std::mt19937 gen(seed);
   std::uniform_real_distribution<float> U(-1.f, 1.f);
-  for (uint64_t i = 0; i < net.mlp().n_params; ++i) net.params[i] *= mlp_scale;
+  net.edit_params([&](float* p, size_t) {
+    for (uint64_t i = 0; i < net.mlp().n_params; ++i) p[i] *= mlp_scale;
+  });
   if (net.has_grid()) {
-    for (uint64_t i = 0; i < net.grid_params(); ++i) net.grid_table()[i] = U(gen);
-    net.sync_half_table();
+    net.edit_params([&](float* p, size_t) {
+      float* table = p + net.mlp().n_params;
+      for (uint64_t i = 0; i < net.grid_params(); ++i) table[i] = U(gen);
+    });
   }
 }
 
@@ -186,7 +190,9 @@ TEST(PointEval, LargeAndSparseActivations) {
   net.init_params(4);
   randomise(net, 6);
   // Negative bias-like shift: most hidden pre-activations negative, so compaction removes most inputs.
-  for (uint64_t i = net.mlp().offset[1]; i < net.mlp().offset[net.mlp().n_hidden]; ++i) net.params[i] -= 0.08f;
+  net.edit_params([&](float* p, size_t) {
+    for (uint64_t i = net.mlp().offset[1]; i < net.mlp().offset[net.mlp().n_hidden]; ++i) p[i] -= 0.08f;
+  });
   {  // confirm the hidden activations feeding layers 2.. are mostly exact zeros
     const MlpLayout& m = net.mlp();
     const int n = 256;
@@ -281,7 +287,7 @@ TEST(PointEval, Movable) {
 TEST(PointEval, NonFiniteWeightsDisableSkipping) {
   Network net(preset_config("small"));
   net.init_params(51);
-  net.params[net.mlp().offset[1] + 3] = INFINITY;
+  net.edit_params([&](float* p, size_t) { p[net.mlp().offset[1] + 3] = INFINITY; });
   PointEvaluator pe(net);
   EXPECT_FALSE(pe.skips_zeros());
   std::vector<float> pts = random_points(200, 52), want(200), got(200);

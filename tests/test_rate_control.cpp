@@ -4,7 +4,7 @@
 #include <cmath>
 #include <cstring>
 #include <fmt/format.h>
-#include "vnr/core/fileio.h"
+#include "vnr/fileio.h"
 #include "vnr/core/half.h"
 #include "vnr/core/parallel.h"
 #include "vnr/nn/mlp_layout.h"
@@ -84,7 +84,7 @@ TEST(RateControl, TargetRatioGivesTheFileSize) {
     ASSERT_EQ(o.target_bytes, uint64_t(double(volume_bytes) / c.ratio));
     const Json summary = train_compact(*session, 40, 0, o);
     EXPECT_EQ(summary["qat_steps"].get<int64_t>(), 6);  // the last 15 % of 40 steps
-    const TrainingResult r = session->finish(false, 0);
+    const TrainingResult r = session->finish({.ssim = false});
     const double size = double(file_size(s.session.output));
     EXPECT_LE(size, double(o.target_bytes));
     EXPECT_GE(size, 0.95 * double(o.target_bytes));
@@ -114,7 +114,7 @@ TEST(RateControl, TargetPsnrKeepsTheQualityAtTheSmallestSize) {
     ASSERT_GE(summary["heldback_psnr_unquantized"].get<double>(), 34.0) << summary.dump();
     EXPECT_GE(summary["heldback_psnr"].get<double>(), 32.0) << summary.dump();
     EXPECT_LT(summary["heldback_psnr"].get<double>(), 33.0) << summary.dump();  // the coarsest steps that still reach it
-    const TrainingResult r = session->finish(false, 0);
+    const TrainingResult r = session->finish({.ssim = false});
     EXPECT_NEAR(r.psnr, summary["heldback_psnr"].get<double>(), 0.5);  // random voxels estimate the full PSNR
     EXPECT_LT(double(r.model_bytes), 0.5 * double(session->network().n_params() * 2));
   }
@@ -152,7 +152,7 @@ TEST(RateControl, FinishQuantizesARunOnlySession) {
   s.target_ratio = 16;
   auto session = open_training_session(s);
   session->run(20);
-  const TrainingResult r = session->finish(false, 0);
+  const TrainingResult r = session->finish({.ssim = false});
   const uint64_t target = session->options().compact.target_bytes;
   EXPECT_LE(r.model_bytes, target);
   EXPECT_GE(double(r.model_bytes), 0.95 * double(target));
@@ -180,7 +180,7 @@ TEST(RateControl, PlanPredictsTheCostOfQuantizingEachSegment) {
     Network& net = session->network();
     const ProbeSet probe = draw_voxel_probe(*session->data()->vol, 1 << 15, 11);
     const QuantPlan plan = plan_quantization(net, probe);
-    const std::vector<float> master(net.params.begin(), net.params.end());
+    const std::vector<float> master(net.params().begin(), net.params().end());
     std::vector<ParamSegment> raw = plan.segments;  // steps 0: the fp16 values
     apply_quantization(net, master, raw);
     const double base = probe.mse(net);
@@ -244,7 +244,7 @@ TEST(RateControl, TargetPsnrSearchFindsTheSmallestModelThatReachesIt) {
   const double chosen = double(volume_bytes) / double(found.session->options().compact.target_bytes);
   EXPECT_EQ(chosen, ratio_of(found.tried, true, true)) << found.tried.dump();  // the smallest that reached
   if (chosen < 1024) EXPECT_EQ(ratio_of(found.tried, false, false), chosen * 2) << found.tried.dump();
-  const TrainingResult r = found.session->finish(false, 0);
+  const TrainingResult r = found.session->finish({.ssim = false});
   EXPECT_GE(r.psnr, 29.5);
   EXPECT_LE(r.model_bytes, found.session->options().compact.target_bytes);
 }
@@ -341,7 +341,7 @@ TEST(RateTerm, RateAwareStepsZeroMoreOfTheGrid) {
     auto session = open_training_session(s);
     const Json summary = train_compact(*session, 40, 0, session->options().compact);
     EXPECT_EQ(summary["rate_weight"].get<double>(), weight);
-    session->finish(false, 0);
+    session->finish({.ssim = false});
     const Model m = load_model(s.session.output);
     const size_t first_grid = make_mlp_layout(m.net->config()).n_matrices;
     uint64_t off = 0, zeros = 0, n = 0;
@@ -398,7 +398,7 @@ TEST(RateControl, ResidualsFillTheFileBesideASmallerNetwork) {
     s.session.output = d + "/" + residuals + ".vnr";
     auto session = open_training_session(s);
     train_compact(*session, 20, 0, session->options().compact);
-    return std::make_pair(session->options().compact, session->finish(false, 0));
+    return std::make_pair(session->options().compact, session->finish({.ssim = false}));
   };
   const uint64_t target = dims.count() * 4 / 8;
   const auto [with_opts, with] = train("auto");

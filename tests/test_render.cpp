@@ -7,7 +7,7 @@
 #include <atomic>
 #include <cmath>
 #include <functional>
-#include "vnr/core/error.h"
+#include "vnr/error.h"
 #include "vnr/core/parallel.h"
 #include "vnr/core/rng.h"
 #include "vnr/core/value_range_grid.h"

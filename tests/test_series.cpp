@@ -8,9 +8,9 @@
 #include <limits>
 #include <string>
 #include <vector>
-#include "vnr/core/error.h"
-#include "vnr/core/fileio.h"
-#include "vnr/core/json.h"
+#include "vnr/error.h"
+#include "vnr/fileio.h"
+#include "vnr/json.h"
 #include "vnr/nn/config.h"
 #include "vnr/train/model_io.h"
 #include "vnr/train/series.h"
@@ -201,8 +201,7 @@ TEST(Series, WarmStartBeatsColdStartWithTheSameSteps) {
   auto keep = [&](const TimestepResult&, const Model& m) {
     Model c;
     c.net = std::make_unique<Network>(m.net->config_json());
-    c.net->params = m.net->params;
-    c.net->sync_half_table();
+    c.net->set_params(m.net->params().data(), m.net->params().size());
     c.training = m.training;
     c.macrocells = m.macrocells;
     saved.push_back(std::move(c));
@@ -231,7 +230,7 @@ TEST(Series, WarmStartBeatsColdStartWithTheSameSteps) {
     ASSERT_TRUE(saved[size_t(t)].macrocells.has_value());
   }
   EXPECT_NE(saved[0].macrocells->lo, saved[1].macrocells->lo);
-  EXPECT_NE(saved[0].net->params, saved[1].net->params);
+  EXPECT_NE(saved[0].net->params(), saved[1].net->params());
 }
 
 TEST(Series, FailureMidwayKeepsFinishedModels) {

@@ -13,7 +13,7 @@
 #include <optional>
 #include <string>
 #include <vector>
-#include "vnr/core/error.h"
+#include "vnr/error.h"
 #include "vnr/core/metrics.h"
 #include "vnr/core/rng.h"
 #include "vnr/nn/config.h"
@@ -96,8 +96,10 @@ std::unique_ptr<Network> varied_network(uint32_t seed) {
   auto net = std::make_unique<Network>(preset_config("small"));
   net->init_params(seed);
   Pcg32 rng(seed + 17);
-  for (uint64_t i = 0; i < net->grid_params(); ++i) net->grid_table()[i] = 2 * rng.next_float() - 1;
-  net->sync_half_table();
+  net->edit_params([&](float* p, size_t) {
+    float* table = p + net->mlp().n_params;
+    for (uint64_t i = 0; i < net->grid_params(); ++i) table[i] = 2 * rng.next_float() - 1;
+  });
   return net;
 }
 

@@ -21,11 +21,11 @@
 #include <optional>
 #include <string>
 #include <vector>
-#include "vnr/core/dtype.h"
-#include "vnr/core/error.h"
-#include "vnr/core/fileio.h"
-#include "vnr/core/json.h"
-#include "vnr/core/math.h"
+#include "vnr/dtype.h"
+#include "vnr/error.h"
+#include "vnr/fileio.h"
+#include "vnr/json.h"
+#include "vnr/math.h"
 #include "vnr/volume/volume.h"
 #include "vnr/volume/writer.h"
 

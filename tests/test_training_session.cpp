@@ -9,7 +9,7 @@
 #include <cstring>
 #include <filesystem>
 #include <thread>
-#include "vnr/core/error.h"
+#include "vnr/error.h"
 #include "vnr/cuda/cuda.h"
 #include "vnr/trainer.h"
 #include "test_support.h"
@@ -35,8 +35,8 @@ struct Fixture {
 };
 
 bool same_params(const Network& a, const Network& b) {
-  return a.params.size() == b.params.size() &&
-         std::memcmp(a.params.data(), b.params.data(), a.params.size() * sizeof(float)) == 0;
+  return a.params().size() == b.params().size() &&
+         std::memcmp(a.params().data(), b.params().data(), a.params().size() * sizeof(float)) == 0;
 }
 
 // Throws from the given step on (the data "went away").
@@ -332,7 +332,7 @@ TEST(TrainingSession, OpenFinishAndReportKeys) {
   EXPECT_EQ(lines[0].rfind("volume " + s.volume + ": 16x12x10 float32", 0), 0u) << lines[0];
   EXPECT_EQ(session->trainer().device(), Device::Cpu);
   session->run(5);
-  const TrainingResult r = session->finish(false, 0);
+  const TrainingResult r = session->finish({.ssim = false});
   EXPECT_EQ(r.steps, 5);
   EXPECT_TRUE(std::isfinite(r.psnr));
   EXPECT_FALSE(r.ssim.has_value());
@@ -367,7 +367,7 @@ TEST(TrainingSession, GpuSessionUsesTheSameTrainerInterface) {
   EXPECT_EQ(session.trainer().steps_done(), 20u);
   EXPECT_EQ(session.trainer().losses().size(), 20u);
   EXPECT_TRUE(std::isfinite(session.last_loss()));
-  session.record();  // downloads the parameters and the online ranges into the model
+  session.finish();  // downloads the parameters and the online ranges into the model
   EXPECT_EQ(model.training["device"], "cuda");
   EXPECT_TRUE(model.macrocells.has_value());
 }

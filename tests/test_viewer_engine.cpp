@@ -8,8 +8,8 @@
 #include <cstring>
 #include <functional>
 #include <thread>
-#include "vnr/core/error.h"
-#include "vnr/core/fileio.h"
+#include "vnr/error.h"
+#include "vnr/fileio.h"
 #include "vnr/model.h"
 #include "vnr/renderer.h"
 #include "vnr/train/session.h"
@@ -48,7 +48,7 @@ std::string trained_model_file(const TmpDir& dir) {
   Model m = create_model(ModelConfig::from_json(small_hash_config(14, 16, 1)), vol, 7);
   auto session = make_training_session(m, vol, Device::Cpu, TrainOptions{4096, 7});
   session->run(30);
-  session->record();
+  session->finish();
   save_model(dir / "model.vnr", m);
   return dir / "model.vnr";
 }
@@ -219,6 +219,27 @@ TEST(ViewerEngine, NetworkCacheViewSharpensToTheWarmCachesImage) {
   ASSERT_TRUE(moving);
   EXPECT_EQ(moving->images[0].width, 160);
   EXPECT_GT(moving->cache_bricks, 0);
+}
+
+// vnr view --cache-dims/--cache-budget: the cache decodes the model at 256^3 (a 32^3 model has one
+// brick of 32^3 a level there), so a close view reads more bricks than the model's own dims have, and
+// a budget smaller than a brick is one clear error.
+TEST(ViewerEngine, TheCacheDecodesAtTheDimsAndBudgetGiven) {
+  TmpDir dir("viewer");
+  ViewerSetup setup;
+  setup.input = trained_model_file(dir);
+  setup.device = "cpu";
+  setup.cache_dims = Int3{256, 256, 256};
+  setup.cache_budget = uint64_t(64) << 20;
+  ViewerEngine engine(setup);
+  engine.set_viewport(96, 96);
+  engine.set_camera(orbit_camera(box_of(kDims), 30, 20, 30), false);
+  auto done = wait_for(engine, [](const ViewerFrame& f) { return f.refined && f.cache_bricks > 8 && f.cache_pending == 0; });
+  ASSERT_TRUE(done) << "the view reads bricks of the 256^3 levels";
+
+  setup.cache_dims = Int3{0, 0, 0};
+  setup.cache_budget = 1000;  // less than one brick of 33^3 floats
+  EXPECT_HAS(error_of([&] { ViewerEngine small(setup); }), "holds no brick");
 }
 
 TEST(ViewerEngine, TrainingLossFallsPsnrRisesPauseAndReset) {

@@ -10,9 +10,9 @@
 #include <limits>
 #include <numbers>
 #include <numeric>
-#include "vnr/core/error.h"
-#include "vnr/core/fileio.h"
-#include "vnr/core/json.h"
+#include "vnr/error.h"
+#include "vnr/fileio.h"
+#include "vnr/json.h"
 #include "vnr/volume/volume.h"
 #include "vnr/volume/writer.h"
 #include "test_support.h"

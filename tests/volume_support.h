@@ -6,7 +6,7 @@
 #include <algorithm>
 #include <string>
 #include <vector>
-#include "vnr/core/dtype.h"
+#include "vnr/dtype.h"
 #include "vnr/volume/volume.h"
 
 namespace vnr::test {

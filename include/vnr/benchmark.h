@@ -14,7 +14,7 @@
 #include <functional>
 #include <string>
 #include <vector>
-#include "vnr/core/device.h"
+#include "vnr/device.h"
 #include "vnr/model.h"
 #include "vnr/nn/config.h"
 #include "vnr/volume.h"

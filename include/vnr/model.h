@@ -10,7 +10,7 @@
 #include <optional>
 #include <string>
 #include <vector>
-#include "vnr/core/device.h"
+#include "vnr/device.h"
 #include "vnr/nn/config.h"
 #include "vnr/train/model_io.h"
 #include "vnr/volume.h"

@@ -7,7 +7,7 @@
 #include <functional>
 #include <string>
 #include <vector>
-#include "vnr/core/json.h"
+#include "vnr/json.h"
 #include "vnr/volume.h"
 
 namespace vnr {

@@ -7,7 +7,7 @@
 //   auto session = vnr::open_training_session(setup, [](const std::string& line) { log(line); });
 //   session->add_step_callback([](const vnr::TrainingProgress& p) { show(p.step, p.loss); });
 //   session->run(1000);                   // or run(-1, seconds); request_stop() from any thread
-//   vnr::TrainingResult r = session->finish(/*ssim*/ true, /*eval_samples*/ 1 << 20);
+//   vnr::TrainingResult r = session->finish({.ssim = true, .eval_samples = 1 << 20});  // evaluate, save
 //
 // Lower level: make_trainer(Device, Network&, sampler, volume, options) gives a Trainer backend (CPU or
 // GPU) that a TrainingSession over any Model runs; choose_training_device resolves "auto".

@@ -40,6 +40,10 @@ struct ViewerSetup {
   bool train = false;            // start training at once
   int64_t batch = 65536;
   uint32_t seed = 1337;
+  // The brick cache a model renders from on the CPU (docs/RENDERING.md): its memory (0: a quarter of the
+  // memory available, at most 4 GiB) and the voxels it decodes the model at (0: the model's dims).
+  uint64_t cache_budget = 0;
+  Int3 cache_dims{0, 0, 0};
 };
 
 // What does not change while the engine runs.

@@ -1,10 +1,10 @@
 #pragma once
 #include <CLI/CLI.hpp>
 #include <string>
-#include "vnr/core/device.h"
-#include "vnr/core/json.h"
-#include "vnr/core/math.h"
-#include "vnr/core/units.h"
+#include "vnr/device.h"
+#include "vnr/json.h"
+#include "vnr/math.h"
+#include "vnr/units.h"
 #include "vnr/volume.h"
 
 namespace vnr {

@@ -5,10 +5,10 @@
 #include <fmt/format.h>
 #include "cli.h"
 #include "vnr/benchmark.h"
-#include "vnr/core/parallel.h"
-#include "vnr/core/progress.h"
+#include "vnr/threads.h"
+#include "vnr/progress.h"
 #include "vnr/cuda/cuda.h"
-#include "vnr/core/units.h"
+#include "vnr/units.h"
 
 namespace vnr::cli {
 namespace {

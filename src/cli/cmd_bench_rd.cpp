@@ -8,9 +8,9 @@
 #include <filesystem>
 #include <fmt/format.h>
 #include "cli.h"
-#include "vnr/core/error.h"
-#include "vnr/core/fileio.h"
-#include "vnr/core/parallel.h"
+#include "vnr/error.h"
+#include "vnr/fileio.h"
+#include "vnr/threads.h"
 #include "vnr/rate_distortion.h"
 
 extern char** environ;

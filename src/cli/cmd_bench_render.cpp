@@ -6,9 +6,9 @@
 #include <cstdio>
 #include "cli.h"
 #include "render_setup.h"
-#include "vnr/core/error.h"
-#include "vnr/core/parallel.h"
-#include "vnr/core/progress.h"
+#include "vnr/error.h"
+#include "vnr/threads.h"
+#include "vnr/progress.h"
 
 namespace vnr::cli {
 

@@ -13,9 +13,9 @@
 #include "cli.h"
 #include "mpi_cli.h"
 #include "vnr/bricks.h"
-#include "vnr/core/fileio.h"
-#include "vnr/core/parallel.h"
-#include "vnr/core/units.h"
+#include "vnr/fileio.h"
+#include "vnr/threads.h"
+#include "vnr/units.h"
 #include "vnr/volume/raw_access.h"
 #include "vnr/volume/writer.h"
 

@@ -11,8 +11,8 @@
 #include "mpi_cli.h"
 #include "render_setup.h"
 #include "vnr/bricks.h"
-#include "vnr/core/fileio.h"
-#include "vnr/core/parallel.h"
+#include "vnr/fileio.h"
+#include "vnr/threads.h"
 
 namespace vnr::cli {
 

@@ -11,9 +11,9 @@
 #include "mpi_cli.h"
 #include "train_options.h"
 #include "vnr/bricks.h"
-#include "vnr/core/fileio.h"
-#include "vnr/core/parallel.h"
-#include "vnr/core/units.h"
+#include "vnr/fileio.h"
+#include "vnr/threads.h"
+#include "vnr/units.h"
 
 namespace vnr::cli {
 

@@ -3,11 +3,11 @@
 #include <cstdio>
 #include "cli.h"
 #include "render_setup.h"
-#include "vnr/core/error.h"
-#include "vnr/core/fileio.h"
-#include "vnr/core/parallel.h"
-#include "vnr/core/progress.h"
-#include "vnr/core/units.h"
+#include "vnr/error.h"
+#include "vnr/fileio.h"
+#include "vnr/threads.h"
+#include "vnr/progress.h"
+#include "vnr/units.h"
 
 namespace vnr::cli {
 

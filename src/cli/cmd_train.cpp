@@ -8,10 +8,10 @@
 #include "cli.h"
 #include "train_cli.h"
 #include "train_options.h"
-#include "vnr/core/error.h"
-#include "vnr/core/parallel.h"
-#include "vnr/core/progress.h"
-#include "vnr/core/units.h"
+#include "vnr/error.h"
+#include "vnr/threads.h"
+#include "vnr/progress.h"
+#include "vnr/units.h"
 #include "vnr/online/preview.h"
 #include "vnr/train/psnr_search.h"
 #include "vnr/train/session.h"
@@ -134,7 +134,7 @@ void run_train(const TrainArgs& a) {
   if (session->stop_requested())
     std::fprintf(stderr, "interrupted after %lld steps: evaluating and saving the model (Ctrl-C again to abort)\n",
                  (long long)session->steps_done());
-  TrainingResult r = session->finish(!a.no_ssim, a.eval_samples);
+  TrainingResult r = session->finish({.ssim = !a.no_ssim, .eval_samples = a.eval_samples});
   if (search) {
     r.report["psnr_search"] = {{"target_psnr", setup.target_psnr}, {"reached", search->reached}, {"tried", search->tried}};
     std::printf("--target-psnr %g: %s after %zu model(s)\n", setup.target_psnr,

@@ -5,11 +5,11 @@
 #include <optional>
 #include "train_cli.h"
 #include "train_options.h"
-#include "vnr/core/error.h"
-#include "vnr/core/fileio.h"
-#include "vnr/core/parallel.h"
-#include "vnr/core/progress.h"
-#include "vnr/core/units.h"
+#include "vnr/error.h"
+#include "vnr/fileio.h"
+#include "vnr/threads.h"
+#include "vnr/progress.h"
+#include "vnr/units.h"
 #include "vnr/model.h"
 #include "vnr/train/bricks.h"
 
@@ -42,7 +42,7 @@ void print_summary(const TrainArgs& a, const BricksRunResult& r) {
   std::printf(", max |error| %.4g (%.4g in data units)\n", ev.max_abs_error, ev.max_abs_error_original);
   std::printf("model %s: %s in %zu files, %llu parameters; compression ratio %s\n", a.output.c_str(),
               human_bytes(double(bytes)).c_str(), r.plan.bricks.size() + 1,
-              (unsigned long long)(m.bricks->param_bytes() / 2), format_ratio(ev.compression_ratio).c_str());
+              (unsigned long long)m.n_params(), format_ratio(ev.compression_ratio).c_str());
   Json report = {{"model", a.output},          {"bricks", r.plan.bricks.size()},   {"grid", {r.plan.grid.x, r.plan.grid.y, r.plan.grid.z}},
                  {"ghost", r.plan.ghost},      {"trained_now", r.trained.size()}, {"already_done", r.already_done},
                  {"psnr", ev.psnr},            {"max_abs_error", ev.max_abs_error}, {"model_bytes", bytes},

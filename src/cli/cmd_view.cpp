@@ -5,8 +5,9 @@
 #include <cstdio>
 #include "cli.h"
 #include "view/server.h"
-#include "vnr/core/error.h"
-#include "vnr/core/parallel.h"
+#include "vnr/error.h"
+#include "vnr/threads.h"
+#include "vnr/renderer.h"
 #include "vnr/viewer.h"
 
 namespace vnr::cli {
@@ -19,6 +20,7 @@ struct ViewArgs {
   view::ServerOptions server;
   int threads = 0;
   VolumeArgs vol;
+  std::string cache_budget = "auto", cache_dims;
 };
 
 // Blocked in every thread (the engine's and the server's inherit the mask), taken by sigwait in main:
@@ -38,6 +40,8 @@ void serve(const ViewArgs& a) {
   view::ViewServer server(a.server);  // first: a busy port fails before the input is loaded
   ViewerSetup setup = a.setup;
   setup.volume_options = a.vol.open();
+  setup.cache_budget = parse_cache_budget(a.cache_budget);
+  if (!a.cache_dims.empty()) setup.cache_dims = parse_dims(a.cache_dims, "--cache-dims");
   ViewerEngine engine(setup);
   // Whatever happens below, the server's threads end before the engine they use is destroyed.
   struct StopServerFirst {
@@ -81,6 +85,13 @@ void add_view(CLI::App& app) {
   c->add_option("--seed", a->setup.seed, "seed of the model's initial parameters and the training samples")
       ->capture_default_str();
   c->add_option("--threads", a->threads, "CPU threads (default: all cores)");
+  c->add_option("--cache-budget", a->cache_budget,
+                "memory of the brick cache a model renders from, e.g. 512MiB (auto: a quarter of the available "
+                "memory, at most 4 GiB)")
+      ->capture_default_str();
+  c->add_option("--cache-dims", a->cache_dims,
+                "X,Y,Z: the voxels the cache decodes a model at (default: the model's dims; any size, e.g. "
+                "4096,4096,4096)");
   a->vol.add(c);
   c->callback([a]() { serve(*a); });
 }

@@ -6,9 +6,9 @@
 #include <cstdlib>
 #include "cli.h"
 #include "mpi_cli.h"
-#include "vnr/core/error.h"
-#include "vnr/core/fileio.h"
-#include "vnr/core/parallel.h"
+#include "vnr/error.h"
+#include "vnr/fileio.h"
+#include "vnr/threads.h"
 #include "vnr/cuda/cuda.h"
 #include "vnr/nn/mlp_kernels.h"
 #include "vnr/nn/network.h"

@@ -5,7 +5,7 @@
 #include <memory>
 #include <string>
 #include <CLI/CLI.hpp>
-#include "vnr/core/error.h"
+#include "vnr/error.h"
 
 namespace vnr::cli {
 

@@ -1,6 +1,6 @@
 #include "preview.h"
 #include <cstdio>
-#include "vnr/core/error.h"
+#include "vnr/error.h"
 #include "vnr/render/renderer.h"
 #include "vnr/render/transfer_function.h"
 

@@ -1,7 +1,7 @@
 #include "render_setup.h"
 #include <cmath>
 #include <cstdio>
-#include "vnr/core/error.h"
+#include "vnr/error.h"
 
 namespace vnr::cli {
 

@@ -14,17 +14,18 @@ struct TrainArgs {
   std::string volume, output, config = TrainingSetup{}.config, report;
   double target_ratio = 0, seconds = 0;
   double max_error = 0, max_rel_error = 0;  // error-bound residuals (0: none)
-  double target_psnr = 0, bits_per_param = 4.0, qat_fraction = 0.15;  // compact storage (train/rate_control.h)
+  double target_psnr = 0;  // compact storage (train/rate_control.h)
+  double bits_per_param = TrainingSetup{}.bits_per_param, qat_fraction = TrainingSetup{}.qat_fraction;
   double rate_weight = TrainingSetup{}.rate_weight;
   std::string residuals = TrainingSetup{}.residuals;  // --target-ratio: auto | off
   double cooldown = SessionOptions{}.cooldown;  // fraction of the budget with a falling learning rate
-  int64_t steps = -1, batch = 65536;
-  uint32_t seed = 1337;
+  int64_t steps = -1, batch = TrainingSetup{}.batch;
+  uint32_t seed = TrainingSetup{}.seed;
   int threads = 0;
-  int macrocell_size = 16;
+  int macrocell_size = TrainingSetup{}.macrocell_size;
   bool quiet = false, no_ssim = false;
-  std::string device = "auto", mlp = "auto";  // backend; MLP path on the GPU
-  std::string precision = "auto";             // CPU: the MLP's training arithmetic
+  std::string device = TrainingSetup{}.device, mlp = TrainingSetup{}.mlp;  // backend; MLP path on the GPU
+  std::string precision = TrainingSetup{}.precision;                      // CPU: the MLP's training arithmetic
   VolumeArgs vol;
   PreviewArgs preview;  // --preview-every N --preview-dir DIR [--preview-size/-mode/-tf]
   // Samplers (issue 4): incore | outofcore | mmap; "" = incore when the volume fits the budget.

@@ -1,9 +1,9 @@
 // The options of one training run shared by `vnr train` and `mpirun vnr train` (train_options.h), and the
 // TrainingSetup both build from them.
 #include "train_options.h"
-#include "vnr/core/error.h"
-#include "vnr/core/fileio.h"
-#include "vnr/core/units.h"
+#include "vnr/error.h"
+#include "vnr/fileio.h"
+#include "vnr/units.h"
 #include "vnr/model.h"
 
 namespace vnr::cli {

@@ -8,7 +8,7 @@
 #include <functional>
 #include <string>
 #include <vector>
-#include "vnr/core/error.h"
+#include "vnr/error.h"
 
 namespace vnr::mpi {
 

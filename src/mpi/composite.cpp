@@ -1,7 +1,7 @@
 #include "mpi/composite.h"
 #include <algorithm>
 #include <cstdlib>
-#include "vnr/core/error.h"
+#include "vnr/error.h"
 
 namespace vnr::mpi {
 

@@ -4,7 +4,7 @@
 // single-process reference and the unit tests use exactly the functions the ranks run.
 #include <cstddef>
 #include <vector>
-#include "vnr/core/math.h"
+#include "vnr/math.h"
 #include "vnr/render/image.h"
 
 namespace vnr::mpi {

@@ -5,7 +5,7 @@
 #include <cstdio>
 #include <cstring>
 #include "mpi/comm.h"
-#include "vnr/core/error.h"
+#include "vnr/error.h"
 
 namespace vnr::mpi {
 

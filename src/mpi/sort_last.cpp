@@ -3,7 +3,7 @@
 #include <chrono>
 #include <map>
 #include "mpi/comm.h"
-#include "vnr/core/error.h"
+#include "vnr/error.h"
 
 namespace vnr::mpi {
 

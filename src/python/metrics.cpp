@@ -1,6 +1,6 @@
 // vnr.metrics: `vnr eval`'s PSNR and 3-D SSIM (core/metrics.h) over numpy arrays in original units.
 #include "bindings.h"
-#include "vnr/core/error.h"
+#include "vnr/error.h"
 #include "vnr/core/metrics.h"
 
 namespace vnr::py {

@@ -3,8 +3,8 @@
 #include <algorithm>
 #include <atomic>
 #include "bindings.h"
-#include "vnr/core/error.h"
-#include "vnr/core/fileio.h"
+#include "vnr/error.h"
+#include "vnr/fileio.h"
 #include "vnr/core/parallel.h"
 #include "vnr/train/bricks.h"
 #include "vnr/volume/sample_io.h"
@@ -166,7 +166,7 @@ float64 array of normalised x, y, z in [0, 1] (voxel i's centre is (i + 0.5) / n
 all cores (or the GPU) with the GIL released; a C-ordered float32 array is used without a copy.)");
   c.def_property_readonly("config", [](const ModelHolder& h) { return json_to_python(h.model.net->config_json()); },
                           "The network's tiny-cuda-nn config as a dict.");
-  c.def_property_readonly("n_params", [](const ModelHolder& h) { return model_n_params(h.model); },
+  c.def_property_readonly("n_params", [](const ModelHolder& h) { return h.model.n_params(); },
                           "Number of parameters (stored as fp16).");
   c.def_property_readonly(
       "compression_ratio", [](const ModelHolder& h) { return compression_ratio(h.model, h.file_bytes); },
@@ -185,7 +185,7 @@ all cores (or the GPU) with the GIL released; a C-ordered float32 array is used 
   c.def("__repr__", [](const ModelHolder& h) {
     const Model& md = h.model;
     return fmt::format("vnr.Model({}x{}x{} {}, {} params, value_range=({:g}, {:g}))", md.dims.x, md.dims.y, md.dims.z,
-                       dtype_name(md.source_dtype), model_n_params(md), md.lo, md.hi);
+                       dtype_name(md.source_dtype), md.n_params(), md.lo, md.hi);
   });
 }
 

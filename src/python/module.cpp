@@ -1,8 +1,8 @@
 // The _vnr extension module: library errors become ValueError with the library's (the CLI's) message;
 // each part of the API is bound in its own file.
 #include "bindings.h"
-#include "vnr/core/error.h"
-#include "vnr/core/parallel.h"
+#include "vnr/error.h"
+#include "vnr/threads.h"
 
 PYBIND11_MODULE(_vnr, m) {
   namespace py = vnr::py;

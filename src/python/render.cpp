@@ -1,8 +1,8 @@
 // vnr.render: one image of a model or a volume with vnr::Renderer, set up as `vnr render` sets it up
 // (src/cli/render_setup.cpp) for the same camera, transfer function and options.
 #include "bindings.h"
-#include "vnr/core/error.h"
-#include "vnr/core/json.h"
+#include "vnr/error.h"
+#include "vnr/json.h"
 
 namespace vnr::py {
 

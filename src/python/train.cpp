@@ -2,8 +2,8 @@
 // volume file, run with the GIL released; the step callback takes the GIL to report progress, check
 // for Ctrl-C and let the caller stop.
 #include "bindings.h"
-#include "vnr/core/error.h"
-#include "vnr/core/parallel.h"
+#include "vnr/error.h"
+#include "vnr/threads.h"
 #include "vnr/train/psnr_search.h"
 
 namespace vnr::py {
@@ -124,7 +124,7 @@ ModelPtr train(const TrainArgs& a) {
     TargetTraining trained = train_for_targets(setup, steps, a.seconds.value_or(0), open, say, attach);
     psnr_short = trained.search && !trained.search->reached && !trained.search->interrupted;
     session = std::move(trained.session);
-    session->finalize_model();  // quantized (compact), residuals attached (error bound)
+    session->finish({.evaluate = false, .save = false});  // quantized (compact), residuals attached (error bound)
   }
   if (a.verbose)
     for (const std::string& l : lines) pyb::print(l, pyb::arg("file") = pyb::module_::import("sys").attr("stderr"));

@@ -1,8 +1,8 @@
 // vnr.Volume: numpy arrays and volume files as vnr volumes (normalised float32, x fastest), and the
 // conversions every binding file shares.
 #include "bindings.h"
-#include "vnr/core/error.h"
-#include "vnr/core/fileio.h"
+#include "vnr/error.h"
+#include "vnr/fileio.h"
 
 namespace vnr::py {
 

@@ -1,7 +1,7 @@
 // Access control of the viewer: one random token per server, compared in constant time.
 #include "view/access.h"
 #include <cstdio>
-#include "vnr/core/error.h"
+#include "vnr/error.h"
 
 namespace vnr::view {
 

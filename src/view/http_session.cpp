@@ -4,7 +4,7 @@
 #include "view/access.h"
 #include "view/server_core.h"
 #include "view/web_assets.h"
-#include "vnr/core/error.h"
+#include "vnr/error.h"
 #include "vnr/render/image.h"
 
 namespace vnr::view {

@@ -1,7 +1,7 @@
 // libturbojpeg glue.
 #include "view/jpeg.h"
 #include <turbojpeg.h>
-#include "vnr/core/error.h"
+#include "vnr/error.h"
 
 namespace vnr::view {
 

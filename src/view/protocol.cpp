@@ -1,7 +1,7 @@
 // Server -> client messages: ViewerInfo / ViewerState / frames as the JSON docs/VIEWER.md names.
 #include "view/protocol.h"
-#include "vnr/core/dtype.h"
-#include "vnr/core/error.h"
+#include "vnr/dtype.h"
+#include "vnr/error.h"
 
 namespace vnr::view {
 

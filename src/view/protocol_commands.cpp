@@ -4,7 +4,7 @@
 #include <cmath>
 #include <optional>
 #include "view/protocol.h"
-#include "vnr/core/error.h"
+#include "vnr/error.h"
 
 namespace vnr::view {
 

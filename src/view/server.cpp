@@ -3,7 +3,7 @@
 #include "view/access.h"
 #include "view/protocol.h"
 #include "view/server_core.h"
-#include "vnr/core/error.h"
+#include "vnr/error.h"
 
 namespace vnr::view {
 

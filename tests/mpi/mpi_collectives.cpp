@@ -9,7 +9,7 @@
 #include "mpi/comm.h"
 #include "mpi/parallel_file.h"
 #include "mpi/sort_last.h"
-#include "vnr/core/fileio.h"
+#include "vnr/fileio.h"
 
 using namespace vnr;
 using namespace vnr::mpi;

@@ -8,7 +8,7 @@
 #include "mpi/comm.h"
 #include "mpi/composite.h"
 #include "mpi/sort_last.h"
-#include "vnr/core/error.h"
+#include "vnr/error.h"
 
 using namespace vnr;
 using namespace vnr::mpi;

@@ -5,9 +5,9 @@
 #include <chrono>
 #include <cmath>
 #include <memory>
-#include "vnr/core/error.h"
+#include "vnr/error.h"
 #include "vnr/core/parallel.h"
-#include "vnr/core/progress.h"
+#include "vnr/progress.h"
 #include "vnr/core/rng.h"
 #include "vnr/cuda/cuda.h"
 #include "vnr/nn/mlp_kernels.h"

@@ -3,7 +3,7 @@
 #include <algorithm>
 #include <limits>
 #include "vnr/bricks.h"
-#include "vnr/core/error.h"
+#include "vnr/error.h"
 #include "vnr/core/parallel.h"
 #include "vnr/fields/bricked_field.h"
 #include "vnr/render/integrators.h"

@@ -2,9 +2,9 @@
 // and the whole evaluation `vnr eval` runs.
 #include <algorithm>
 #include <fmt/format.h>
-#include "vnr/core/error.h"
-#include "vnr/core/fileio.h"
-#include "vnr/core/units.h"
+#include "vnr/error.h"
+#include "vnr/fileio.h"
+#include "vnr/units.h"
 #include "vnr/model.h"
 #include "vnr/train/bricks.h"
 #include "vnr/train/training_data.h"
@@ -136,7 +136,7 @@ FileEvaluation evaluate_model_file(const Model& model, const std::string& volume
     note(r, progress,
          fmt::format("model was trained on {}x{}x{}, evaluating at {}x{}x{}", model.dims.x, model.dims.y,
                      model.dims.z, dims.x, dims.y, dims.z));
-  r.model_bytes = o.model_path.empty() ? (model.bricks ? model.bricks->param_bytes() : model.param_bytes()) : model_file_bytes(o.model_path);
+  r.model_bytes = o.model_path.empty() ? model.param_bytes() : model_file_bytes(o.model_path);
   r.volume_bytes = dims.count() * dtype_size(desc.dtype);
   r.compression_ratio = double(r.volume_bytes) / double(r.model_bytes);
   r.plan = plan_file_evaluation(desc, o.samples, o.with_ssim, o.memory_budget);

@@ -1,8 +1,8 @@
 // vnr::Model's constructors, queries and decodes (the train layer's Model, Network and GpuNetwork).
 #include "vnr/model.h"
-#include "vnr/core/error.h"
+#include "vnr/error.h"
 #include "vnr/train/bricks.h"
-#include "vnr/core/units.h"
+#include "vnr/units.h"
 #include "vnr/volume/writer.h"
 
 namespace vnr {
@@ -14,8 +14,7 @@ Model create_model(const ModelConfig& config, const Volume& volume, uint32_t see
 uint64_t source_bytes(const Model& m) { return m.dims.count() * dtype_size(m.source_dtype); }
 
 double compression_ratio(const Model& m, uint64_t model_bytes) {
-  const uint64_t params = m.bricks ? m.bricks->param_bytes() : m.param_bytes();
-  return double(source_bytes(m)) / double(model_bytes ? model_bytes : params);
+  return double(source_bytes(m)) / double(model_bytes ? model_bytes : m.param_bytes());
 }
 
 ModelQuery::ModelQuery(const Model& model, Device device, cuda::MlpPath mlp) : model_(model), device_(device) {

@@ -4,8 +4,8 @@
 #include "vnr/fields/brick_cache.h"
 #include "vnr/fields/bricked_field.h"
 #include "vnr/fields/fields.h"
-#include "vnr/core/error.h"
-#include "vnr/core/units.h"
+#include "vnr/error.h"
+#include "vnr/units.h"
 #include "vnr/train/bricks.h"
 #include "vnr/train/decoder.h"
 
@@ -25,6 +25,11 @@ inline std::string gpu_decode_reason(const std::string& what, Int3 dims) {
 }
 inline std::string bricked_gpu_render_reason(const Model& model) {
   return gpu_decode_reason("a multi-brick model", model.dims);
+}
+// Why the model cannot render on the GPU ("" when it can): a network the GPU kernels do not support, or
+// a multi-brick model whose decode does not fit.
+inline std::string gpu_render_reason(const Model& model) {
+  return model.bricks ? bricked_gpu_render_reason(model) : cuda::unsupported_reason(*model.net);
 }
 
 // A model drawn on the GPU from its decode: decoded once at dims on the GPU (a multi-brick model's bricks

@@ -7,10 +7,10 @@
 #include <fmt/format.h>
 #include <memory>
 #include <unistd.h>
-#include "vnr/core/error.h"
-#include "vnr/core/fileio.h"
+#include "vnr/error.h"
+#include "vnr/fileio.h"
 #include "vnr/core/metrics.h"
-#include "vnr/core/progress.h"
+#include "vnr/progress.h"
 #include "vnr/model.h"
 #include "vnr/trainer.h"
 #include "vnr/train/rate_control.h"
@@ -114,7 +114,7 @@ RdPoint train_point(const std::shared_ptr<const Volume>& vol, const std::string&
     session->set_budget(o.steps > 0 ? o.steps : -1, o.steps > 0 ? 0 : o.seconds);
     session->run(o.steps > 0 ? o.steps : INT64_MAX, o.steps > 0 ? 0 : o.seconds);
   }
-  const TrainingResult r = session->finish(false, 0);
+  const TrainingResult r = session->finish({.ssim = false});
   RdPoint p;
   p.codec = "vnr";
   p.parameter = ratio;

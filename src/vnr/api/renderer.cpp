@@ -4,10 +4,10 @@
 #include <chrono>
 #include <cstring>
 #include <fstream>
-#include "vnr/core/error.h"
-#include "vnr/core/fileio.h"
-#include "vnr/core/json.h"
-#include "vnr/core/progress.h"
+#include "vnr/error.h"
+#include "vnr/fileio.h"
+#include "vnr/json.h"
+#include "vnr/progress.h"
 #include "vnr/core/rng.h"
 #include "vnr/fields/fields.h"
 #include "vnr/api/model_field.h"
@@ -67,7 +67,7 @@ Device choose_render_device(const std::string& name, const Model* model, std::st
   const Device asked = cuda::resolve_device(name);
   if (asked == Device::Cpu) return Device::Cpu;
   const std::string why_not =
-      !model ? "" : (model->bricks ? bricked_gpu_render_reason(*model) : cuda::unsupported_reason(*model->net));
+      model ? gpu_render_reason(*model) : "";
   if (why_not.empty()) return Device::Cuda;
   if (name == "cuda") fail("{}; use --device cpu", why_not);
   if (note) *note = "rendering on the CPU: " + why_not;

@@ -4,8 +4,9 @@
 #include <cmath>
 #include "vnr/api/viewer_impl.h"
 #include "vnr/train/bricks.h"
-#include "vnr/core/error.h"
-#include "vnr/core/fileio.h"
+#include "vnr/error.h"
+#include "vnr/fileio.h"
+#include "vnr/units.h"
 #include "vnr/cuda/cuda.h"
 #include "vnr/train/make_trainer.h"
 
@@ -41,6 +42,9 @@ void check_camera(const Camera& c) {
 void ViewerEngine::Impl::open(const ViewerSetup& s) {
   setup = s;
   if (s.batch <= 0 || s.batch % kChunk != 0) fail("batch must be a positive multiple of {}, got {}", kChunk, s.batch);
+  if (const int64_t b = BrickCacheSettings{}.brick + 1; s.cache_budget > 0 && s.cache_budget < uint64_t(b * b * b) * sizeof(float))
+    fail("a cache budget of {} holds no brick of {}^3 voxels ({})", human_bytes(double(s.cache_budget)), b,
+         human_bytes(double(b * b * b) * sizeof(float)));
   inference = parse_precision("auto");
   input = open_render_input(s.input, s.ground_truth, s.volume_options, inference);
   if (input.volume) volume = std::make_unique<Volume>(std::move(*input.volume));
@@ -49,7 +53,7 @@ void ViewerEngine::Impl::open(const ViewerSetup& s) {
   if (input.model) {
     model = &*input.model;
     config = model->net->config();
-    initial_params.assign(model->net->params.begin(), model->net->params.end());
+    initial_params.assign(model->net->params().begin(), model->net->params().end());
     info.config = basename_of(s.input);
   } else {
     const VolumeDesc desc = describe_volume_file(s.input, s.volume_options);
@@ -71,9 +75,9 @@ void ViewerEngine::Impl::open(const ViewerSetup& s) {
   info.hi = volume ? volume->hi : model->hi;
   info.has_volume = volume != nullptr;
   info.has_model = input.model.has_value();
-  info.can_train = volume != nullptr && !model->bricks;  // a multi-brick model is viewed, not retrained
+  info.can_train = volume != nullptr && model->trainable();  // a multi-brick model is viewed, not retrained
   info.device = device_description(render_device);
-  info.n_params = int64_t(model->bricks ? model->bricks->param_bytes() / 2 : model->net->n_params());
+  info.n_params = int64_t(model->n_params());
   info.colormaps = tf_preset_names();
   info.save_dir = s.save_dir;
   online_available = info.can_train || model->macrocells.has_value();

@@ -3,8 +3,8 @@
 #include <algorithm>
 #include <cmath>
 #include "vnr/api/viewer_impl.h"
-#include "vnr/core/error.h"
-#include "vnr/core/json.h"
+#include "vnr/error.h"
+#include "vnr/json.h"
 
 namespace vnr {
 

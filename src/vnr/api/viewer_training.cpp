@@ -4,8 +4,8 @@
 #include <chrono>
 #include <cmath>
 #include "vnr/api/viewer_impl.h"
-#include "vnr/core/error.h"
-#include "vnr/core/fileio.h"
+#include "vnr/error.h"
+#include "vnr/fileio.h"
 #include "vnr/train/make_trainer.h"
 
 namespace vnr {
@@ -65,8 +65,7 @@ void ViewerEngine::Impl::apply_reset(std::optional<double> learning_rate) {
   if (learning_rate) config.adam.learning_rate = float(*learning_rate);
   auto net = std::make_unique<Network>(config);
   if (input.model) {
-    std::copy(initial_params.begin(), initial_params.end(), net->params.begin());
-    net->sync_half_table();
+    net->set_params(initial_params.data(), initial_params.size());
   } else {
     net->init_params(setup.seed);
     model->macrocells.reset();
@@ -233,8 +232,8 @@ std::string ViewerEngine::Impl::save(const std::string& name) {
   const std::string file = extension_of(name) == ".vnr" ? name : name + ".vnr";
   const std::string path = join_path(setup.save_dir, file);
   std::lock_guard<std::mutex> work(work_mu);
-  if (run.session) run.session->record();
-  vnr::save_model(path, *model);
+  if (run.session) run.session->save(path);
+  else vnr::save_model(path, *model);
   return path;
 }
 

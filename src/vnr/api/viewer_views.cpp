@@ -4,7 +4,7 @@
 #include <cmath>
 #include "vnr/api/model_field.h"
 #include "vnr/api/viewer_impl.h"
-#include "vnr/core/error.h"
+#include "vnr/error.h"
 #include "vnr/render_cuda/gpu_renderer.h"
 #include "vnr/train/decoder.h"
 
@@ -162,6 +162,8 @@ void ViewerEngine::Impl::update_network_content(MacroCellMode mode, bool cache) 
   } else if (!c.cache) {
     BrickCacheSettings s;
     s.misses = CacheMisses::Coarser;  // frames never wait for the network: coarser levels until bricks come in
+    s.budget_bytes = setup.cache_budget;
+    s.dims = setup.cache_dims;
     c.cache = make_model_cache(*model, *c.field, s);
   } else {
     c.cache->replace_source(*c.field, params_changed);

@@ -1,7 +1,7 @@
 // vnr::Volume's constructors: files through the volume layer, arrays with load_volume's normalisation.
 #include "vnr/volume.h"
 #include <new>
-#include "vnr/core/error.h"
+#include "vnr/error.h"
 #include "vnr/volume/sample_io.h"
 
 namespace vnr {

@@ -4,8 +4,8 @@
 #include <algorithm>
 #include <cstdint>
 #include <vector>
-#include "vnr/core/hd.h"
-#include "vnr/core/math.h"
+#include "vnr/hd.h"
+#include "vnr/math.h"
 
 namespace vnr {
 

@@ -1,9 +1,9 @@
-#include "vnr/core/dtype.h"
+#include "vnr/dtype.h"
 #include <cfloat>
 #include <cstdint>
 #include <limits>
-#include "vnr/core/error.h"
-#include "vnr/core/json.h"
+#include "vnr/error.h"
+#include "vnr/json.h"
 
 namespace vnr {
 

@@ -1,12 +1,12 @@
-#include "vnr/core/fileio.h"
+#include "vnr/fileio.h"
 #include <sys/stat.h>
 #include <unistd.h>
 #include <zlib.h>
 #include <atomic>
 #include <cerrno>
 #include <cstring>
-#include "vnr/core/error.h"
-#include "vnr/core/json.h"
+#include "vnr/error.h"
+#include "vnr/json.h"
 
 namespace vnr {
 

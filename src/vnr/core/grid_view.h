@@ -2,7 +2,7 @@
 // The POD view of a normalised grid and its cell-centred trilinear lookup: what per-sample code of
 // every layer reads (training targets, ground-truth rendering on the CPU and the GPU, value ranges).
 #include <cstdint>
-#include "vnr/core/hd.h"
+#include "vnr/hd.h"
 
 namespace vnr {
 

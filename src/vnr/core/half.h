@@ -2,7 +2,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <cstring>
-#include "vnr/core/hd.h"
+#include "vnr/hd.h"
 #if defined(__CUDACC__)
 #include <cuda_fp16.h>
 #endif

@@ -1,8 +1,8 @@
-#include "vnr/core/json.h"
+#include "vnr/json.h"
 #include <algorithm>
 #include <cctype>
-#include "vnr/core/error.h"
-#include "vnr/core/fileio.h"
+#include "vnr/error.h"
+#include "vnr/fileio.h"
 
 namespace vnr {
 

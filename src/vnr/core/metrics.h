@@ -1,6 +1,6 @@
 #pragma once
 #include <cstdint>
-#include "vnr/core/math.h"
+#include "vnr/math.h"
 
 namespace vnr {
 

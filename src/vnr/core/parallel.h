@@ -3,14 +3,13 @@
 #include <atomic>
 #include <cstdint>
 #include <omp.h>
+#include "vnr/threads.h"
 
 namespace vnr {
 
 // The CPU backend's parallel_for: OpenMP with a *static* schedule, so that which thread
 // handles which index is a pure function of (n, thread count): results that reduce per-thread
 // partials in thread order are deterministic for a given thread count.
-int num_threads();
-void set_num_threads(int n);  // n <= 0 means "all cores"
 
 template <typename F>
 void parallel_for(int64_t n, F&& f) {

@@ -1,4 +1,4 @@
-#include "vnr/core/progress.h"
+#include "vnr/progress.h"
 #include <unistd.h>
 #include <algorithm>
 #include <cstdio>

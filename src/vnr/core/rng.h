@@ -1,6 +1,6 @@
 #pragma once
 #include <cstdint>
-#include "vnr/core/hd.h"
+#include "vnr/hd.h"
 
 namespace vnr {
 

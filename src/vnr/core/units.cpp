@@ -1,4 +1,4 @@
-#include "vnr/core/units.h"
+#include "vnr/units.h"
 #include <unistd.h>
 #include <algorithm>
 #include <cctype>
@@ -6,7 +6,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
-#include "vnr/core/error.h"
+#include "vnr/error.h"
 
 namespace vnr {
 

@@ -8,8 +8,8 @@
 #include <cstdint>
 #include <vector>
 #include "vnr/core/grid_view.h"
-#include "vnr/core/hd.h"
-#include "vnr/core/math.h"
+#include "vnr/hd.h"
+#include "vnr/math.h"
 
 namespace vnr {
 

@@ -12,8 +12,8 @@
 #include <memory>
 #include <string>
 #include <vector>
-#include "vnr/core/device.h"
-#include "vnr/core/math.h"
+#include "vnr/device.h"
+#include "vnr/math.h"
 #include "vnr/core/value_range_grid.h"
 #include "vnr/nn/network.h"
 #include "vnr/volume/volume.h"

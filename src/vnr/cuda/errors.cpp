@@ -1,5 +1,5 @@
 // Error reporting for the .cu files, compiled by the host compiler (keeps fmt out of nvcc's way).
-#include "vnr/core/error.h"
+#include "vnr/error.h"
 #include "vnr/cuda/common.h"
 
 namespace vnr::cuda {

@@ -84,7 +84,7 @@ struct GpuTrainer::Impl {
                         std::to_string(free_b >> 20) + " MiB are free: use --device cpu");
     const uint64_t P = net.n_params();
     master.resize(P);
-    master.upload(net.params.data(), P);
+    master.upload(net.params().data(), P);
     for (DeviceBuffer<float>* b : {&grads, &m, &v}) {
       b->resize(P);
       b->zero_async(sb.stream);
@@ -234,8 +234,7 @@ ValueRangeGrid GpuTrainer::online_ranges() {
 
 void GpuTrainer::download() {
   synchronize();
-  impl_->master.download(impl_->net.params.data(), impl_->net.n_params());
-  impl_->net.sync_half_table();
+  impl_->net.edit_params([&](float* p, size_t n) { impl_->master.download(p, n); });
 }
 MlpPath GpuTrainer::mlp_path() const { return impl_->path; }
 uint64_t GpuTrainer::peak_memory_bytes() const { return device_bytes_peak(); }

@@ -1,6 +1,6 @@
 // The CUDA backend's API in a build without CUDA (VNR_CUDA=OFF): no devices, and every GPU object fails
 // with one line that says how to get one.
-#include "vnr/core/error.h"
+#include "vnr/error.h"
 #include "vnr/cuda/cuda.h"
 
 namespace vnr::cuda {

@@ -1,6 +1,6 @@
 // Parts of the CUDA backend's API that need no CUDA: built with or without the backend.
 #include <algorithm>
-#include "vnr/core/error.h"
+#include "vnr/error.h"
 #include "vnr/cuda/cuda.h"
 
 namespace vnr::cuda {

@@ -4,11 +4,11 @@
 #include <chrono>
 #include <cmath>
 #include <new>
-#include "vnr/core/error.h"
+#include "vnr/error.h"
 #include "vnr/core/grid_view.h"
 #include "vnr/core/parallel.h"
-#include "vnr/core/progress.h"
-#include "vnr/core/units.h"
+#include "vnr/progress.h"
+#include "vnr/units.h"
 #include "vnr/fields/grid_packets.h"
 #include "vnr/render/inshader.h"
 

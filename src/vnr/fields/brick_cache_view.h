@@ -4,7 +4,7 @@
 #include <atomic>
 #include <cstdint>
 #include "vnr/core/grid_view.h"
-#include "vnr/core/hd.h"
+#include "vnr/hd.h"
 
 namespace vnr {
 

@@ -1,5 +1,5 @@
 #include "vnr/fields/bricked_field.h"
-#include "vnr/core/error.h"
+#include "vnr/error.h"
 #include "vnr/core/parallel.h"
 #include "vnr/render/inshader.h"
 

@@ -4,7 +4,7 @@
 // factory of a renderer on either backend. render sees them only as the Field interface (the batched
 // query and the in-shader hand-over of their point function), render_cuda as a GpuFieldSource.
 #include <memory>
-#include "vnr/core/device.h"
+#include "vnr/device.h"
 #include "vnr/nn/network.h"
 #include "vnr/nn/point_eval.h"
 #include "vnr/render/field.h"

@@ -6,7 +6,7 @@
 // ray ends takes the next pixel at once, so lanes stay busy. Macro-cell traversal stays scalar per lane.
 #include <cstdint>
 #include "vnr/core/grid_view.h"
-#include "vnr/core/hd.h"
+#include "vnr/hd.h"
 #include "vnr/render/inshader.h"
 #include "vnr/render/integrators.h"
 #include "vnr/render/tiles.h"

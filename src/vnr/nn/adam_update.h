@@ -5,7 +5,7 @@
 // Needs builds without implicit FMA contraction (CMake sets -ffp-contract=off / --fmad=false).
 #include <math.h>
 #include <cstdint>
-#include "vnr/core/hd.h"
+#include "vnr/hd.h"
 
 namespace vnr {
 

@@ -1,8 +1,8 @@
 #include "vnr/nn/config.h"
 #include "vnr/nn/mlp_bf16.h"
 #include <cmath>
-#include "vnr/core/error.h"
-#include "vnr/core/fileio.h"
+#include "vnr/error.h"
+#include "vnr/fileio.h"
 #include "vnr/nn/encoding.h"
 #include "vnr/nn/json_get.h"
 

@@ -1,7 +1,7 @@
 #pragma once
 #include <cstdint>
 #include <string>
-#include "vnr/core/json.h"
+#include "vnr/json.h"
 
 namespace vnr {
 

@@ -15,7 +15,7 @@
 #include <memory>
 #include <string>
 #include <vector>
-#include "vnr/core/json.h"
+#include "vnr/json.h"
 #include "vnr/nn/config.h"
 #include "vnr/nn/grid_encoding.h"
 

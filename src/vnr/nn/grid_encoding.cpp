@@ -1,7 +1,7 @@
 #include "vnr/nn/grid_encoding.h"
 #include <algorithm>
-#include "vnr/core/error.h"
-#include "vnr/core/math.h"
+#include "vnr/error.h"
+#include "vnr/math.h"
 
 namespace vnr {
 

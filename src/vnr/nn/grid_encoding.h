@@ -6,7 +6,7 @@
 #include <cstdint>
 #include <type_traits>
 #include "vnr/core/half.h"
-#include "vnr/core/hd.h"
+#include "vnr/hd.h"
 #include "vnr/nn/config.h"
 
 namespace vnr {

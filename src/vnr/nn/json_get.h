@@ -4,8 +4,8 @@
 #include <cmath>
 #include <string>
 #include <type_traits>
-#include "vnr/core/error.h"
-#include "vnr/core/json.h"
+#include "vnr/error.h"
+#include "vnr/json.h"
 
 namespace vnr {
 

@@ -1,7 +1,7 @@
 #pragma once
 #include <cmath>
 #include <cstring>
-#include "vnr/core/hd.h"
+#include "vnr/hd.h"
 #include "vnr/nn/config.h"
 
 namespace vnr {

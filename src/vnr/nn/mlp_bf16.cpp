@@ -6,7 +6,7 @@
 #include <cstring>
 #include <vector>
 
-#include "vnr/core/error.h"
+#include "vnr/error.h"
 
 #include "vnr/nn/bf16_simd.h"
 

@@ -2,7 +2,7 @@
 // run time by the caller (bf16_supported()).
 #include "vnr/nn/mlp_bf16_train.h"
 
-#include "vnr/core/error.h"
+#include "vnr/error.h"
 #include "vnr/nn/bf16_simd.h"  // VNR_BF16_TARGET, mlp_bf16.h's conversions, pack_pairs
 
 namespace vnr::kernels {

@@ -1,6 +1,6 @@
 #include "vnr/nn/mlp_layout.h"
 #include <numeric>
-#include "vnr/core/math.h"
+#include "vnr/math.h"
 #include "vnr/nn/encoding.h"
 
 namespace vnr {

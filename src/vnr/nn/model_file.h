@@ -2,9 +2,9 @@
 #include <cstdint>
 #include <string>
 #include <vector>
-#include "vnr/core/json.h"
-#include "vnr/core/math.h"
-#include "vnr/core/dtype.h"
+#include "vnr/json.h"
+#include "vnr/math.h"
+#include "vnr/dtype.h"
 #include "vnr/nn/param_codec.h"
 
 namespace vnr {

@@ -1,10 +1,11 @@
 #include "vnr/nn/network.h"
 #include <algorithm>
 #include <cmath>
-#include "vnr/core/error.h"
+#include "vnr/error.h"
 #include "vnr/core/half.h"
 #include "vnr/core/rng.h"
-#include "vnr/core/units.h"
+#include "vnr/units.h"
+#include "vnr/nn/optimizer.h"
 
 namespace vnr {
 
@@ -28,11 +29,20 @@ Network::Network(const ModelConfig& config, uint32_t n_output_dims)
   if (enc_->grid()) grid_ = *enc_->grid();
   mlp_ = make_mlp_layout(cfg_, n_output_dims);
   check_params_fit(n_params(), grid_params());
-  params.assign(n_params(), 0.0f);
+  params_.assign(n_params(), 0.0f);
   grid_half_.assign(grid_params(), 0);
 }
 
 void Network::sync_half_table() { floats_to_halves(grid_table(), grid_half_.data(), grid_params()); }
+
+void Network::set_params(const float* values, size_t n) {
+  if (n != params_.size()) fail("{} parameters for a network of {}", n, params_.size());
+  edit_params([&](float* p, size_t) { std::copy_n(values, n, p); });
+}
+
+void Network::adam_step(Adam& adam, float* grads) {
+  adam.step(params_.data(), grads, has_grid() ? grid_half_.data() : nullptr);
+}
 
 double Network::flops_forward_per_sample() const {
   // The work actually done: the first layer skips zero-padded inputs (first_cols).
@@ -46,11 +56,11 @@ void Network::init_params(uint32_t seed) {
   for (uint32_t k = 0; k < mlp_.n_matrices; ++k) {
     float fan_in = float(mlp_.cols[k]), fan_out = float(mlp_.rows[k]);
     float b = std::sqrt(6.0f / (fan_in + fan_out));
-    float* w = params.data() + mlp_.offset[k];
+    float* w = params_.data() + mlp_.offset[k];
     for (uint64_t i = 0; i < mlp_.rows[k] * mlp_.cols[k]; ++i) w[i] = rng.next_float() * 2.0f * b - b;
   }
   if (!has_grid()) return;
-  tcnn_uniform_fill(rng, grid_table(), grid_params(), -1e-4f, 1e-4f);
+  tcnn_uniform_fill(rng, grid_table_mut(), grid_params(), -1e-4f, 1e-4f);
   sync_half_table();
 }
 
@@ -69,15 +79,15 @@ void tcnn_uniform_fill(Pcg32& rng, float* out, uint64_t n, float lower, float up
 }
 
 std::vector<uint16_t> Network::params_half() const {
-  std::vector<uint16_t> h(params.size());
-  floats_to_halves(params.data(), h.data(), h.size());
+  std::vector<uint16_t> h(params_.size());
+  floats_to_halves(params_.data(), h.data(), h.size());
   return h;
 }
 
 void Network::set_params_half(const std::vector<uint16_t>& h) {
-  if (h.size() != params.size())
-    fail("model has {} parameters but its configuration needs {}", h.size(), params.size());
-  halves_to_floats(h.data(), params.data(), h.size());
+  if (h.size() != params_.size())
+    fail("model has {} parameters but its configuration needs {}", h.size(), params_.size());
+  halves_to_floats(h.data(), params_.data(), h.size());
   std::copy(h.begin() + int64_t(mlp_.n_params), h.end(), grid_half_.begin());
 }
 

@@ -10,7 +10,7 @@
 #include <cstdint>
 #include <type_traits>
 #include <vector>
-#include "vnr/core/json.h"
+#include "vnr/json.h"
 #include "vnr/core/memory.h"
 #include "vnr/core/parallel.h"
 #include "vnr/core/rng.h"
@@ -20,6 +20,8 @@
 #include "vnr/nn/mlp_layout.h"
 
 namespace vnr {
+
+class Adam;
 
 // tiny-cuda-nn's GPU uniform fill (docs/semantics.md A.2.10): element idx = i + T*j takes stream number
 // 4*i + j counted from rng's state, T = 128 * ceil(ceil(n/4)/128); afterwards rng is advanced by n.
@@ -31,6 +33,8 @@ void tcnn_uniform_fill(Pcg32& rng, float* out, uint64_t n, float lower, float up
 constexpr int kChunk = 256;
 
 class Network {
+  big_vector<float> params_;  // first, where the public array was: the training threads read it
+
 public:
   explicit Network(const ModelConfig& config, uint32_t n_output_dims = 1);
   // The same from tiny-cuda-nn JSON (parsed by ModelConfig::from_json): model files and tests.
@@ -47,15 +51,22 @@ public:
   uint64_t grid_params() const { return enc_->n_params(); }
   double flops_forward_per_sample() const;  // 2 * MACs of the unpadded-output MLP
 
-  big_vector<float> params;  // fp32 master copy, size n_params()
-  float* grid_table() { return params.data() + mlp_.n_params; }
-  const float* grid_table() const { return params.data() + mlp_.n_params; }
-  // fp16 working copy of the grid that every forward pass reads (tcnn's model: fp32 master for the
-  // optimizer, half for forward/backward/inference). Adam keeps it in sync; code that writes
-  // grid_table() directly must call sync_half_table() afterwards.
+  // The parameters: an fp32 master copy (size n_params(), the MLP's then the grid's) and the fp16
+  // working copy of the grid that every forward pass reads (tcnn's model: fp32 master for the optimizer,
+  // half for forward/backward/inference). The network keeps the two in step: every write goes through
+  // edit_params, set_params, set_params_half or adam_step.
+  const big_vector<float>& params() const { return params_; }
+  const float* grid_table() const { return params_.data() + mlp_.n_params; }
   const uint16_t* grid_half() const { return grid_half_.data(); }
-  uint16_t* grid_half_mut() { return grid_half_.data(); }
-  void sync_half_table();
+  // fn(float* params, size_t n) writes the master copy; the half copy follows it afterwards.
+  template <typename Fn>
+  void edit_params(Fn&& fn) {
+    fn(params_.data(), params_.size());
+    sync_half_table();
+  }
+  void set_params(const float* values, size_t n);  // n == n_params(), else one error
+  // One step of `adam` with these gradients (n_params() of them): it updates both copies together.
+  void adam_step(Adam& adam, float* grads);
 
   // tiny-cuda-nn initialisation (docs/semantics.md A.4.1, A.2.10, A.8): Xavier-uniform MLP matrices then the
   // grid fill U[-1e-4, 1e-4), all from pcg32 seeded with seed_seq{seed}.
@@ -124,6 +135,8 @@ public:
   void encode_point_input_grad(const float xyz[3], float* jac) const;
 
 private:
+  void sync_half_table();
+  float* grid_table_mut() { return params_.data() + mlp_.n_params; }
   void infer_chunk(const float* x, const float* y, const float* z, int n, float* out, float* ws) const;
   void infer_chunk_bf16(const float* x, const float* y, const float* z, int n, float* out, float* ws,
                         const uint32_t* wp) const;

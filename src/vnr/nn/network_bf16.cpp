@@ -2,7 +2,7 @@
 // forward/backward of bf16 training, with their weight layouts and scratch.
 #include <algorithm>
 #include <utility>
-#include "vnr/core/error.h"
+#include "vnr/error.h"
 #include "vnr/nn/loss.h"
 #include "vnr/nn/mlp_bf16.h"
 #include "vnr/nn/mlp_bf16_train.h"
@@ -18,7 +18,7 @@ std::vector<uint32_t> Network::bf16_weights() const {
   for (uint32_t k = 0; k <= m.n_hidden; ++k) {
     const int rows = k == m.n_hidden ? int(m.n_out) : int(m.width);
     const int K = k == 0 ? int(m.first_cols) : int(m.width);
-    kernels::weights_to_bf16_pairs(params.data() + m.offset[k], rows, K, int(m.cols[k]), w);
+    kernels::weights_to_bf16_pairs(params_.data() + m.offset[k], rows, K, int(m.cols[k]), w);
     w += size_t(rows) * ((K + 1) / 2);
   }
   return wp;
@@ -81,7 +81,7 @@ Network::Bf16TrainWeights Network::bf16_train_weights() const {
   for (uint32_t k = 0; k <= m.n_hidden; ++k) {
     const int R = int(k == m.n_hidden ? m.n_out : m.width), K = int(k == 0 ? m.first_cols : m.width);
     const int LR = bf16_lanes(uint32_t(R)), LK = bf16_lanes(uint32_t(K));
-    const float* Wk = params.data() + m.offset[k];
+    const float* Wk = params_.data() + m.offset[k];
     const size_t ld = m.cols[k];
     auto at = [&](int r, int c) { return r < R && c < K ? Wk[size_t(r) * ld + c] : 0.0f; };
     uint32_t* wt = w.data.data() + w.wt[k];

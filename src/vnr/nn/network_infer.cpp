@@ -50,9 +50,9 @@ void Network::infer_chunk(const float* x, const float* y, const float* z, int n,
   if (fused_16(n)) {
     // 16-wide networks: the whole forward pass in registers (the tiled GEMMs cannot fill the FMA pipes).
     const float* Wh[16];
-    for (uint32_t k = 1; k < m.n_hidden; ++k) Wh[k - 1] = params.data() + m.offset[k];
-    kernels::mlp_forward_16(params.data() + m.offset[0], int(m.first_cols), int(m.in_pad), Wh, int(m.n_hidden - 1),
-                            params.data() + m.offset[m.n_hidden], X0, n, pre);
+    for (uint32_t k = 1; k < m.n_hidden; ++k) Wh[k - 1] = params_.data() + m.offset[k];
+    kernels::mlp_forward_16(params_.data() + m.offset[0], int(m.first_cols), int(m.in_pad), Wh, int(m.n_hidden - 1),
+                            params_.data() + m.offset[m.n_hidden], X0, n, pre);
     activate_n(m.output_activation, pre, n, out);
     return;
   }

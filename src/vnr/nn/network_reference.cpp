@@ -14,7 +14,7 @@ float Network::eval_reference(float x, float y, float z) const {
   for (uint32_t k = 0; k <= m.n_hidden; ++k) {
     uint64_t rows = k == m.n_hidden ? m.n_out : m.rows[k];
     h.assign(rows, 0.0f);
-    const float* W = params.data() + m.offset[k];
+    const float* W = params_.data() + m.offset[k];
     for (uint64_t r = 0; r < rows; ++r) {
       double acc = 0;
       for (uint64_t c = 0; c < m.cols[k]; ++c) acc += double(W[r * m.cols[k] + c]) * in[c];

@@ -7,7 +7,7 @@
 #include <cstdint>
 #include <string>
 #include <vector>
-#include "vnr/core/json.h"
+#include "vnr/json.h"
 #include "vnr/nn/config.h"
 #include "vnr/nn/param_context_coder.h"
 

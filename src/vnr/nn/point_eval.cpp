@@ -400,7 +400,7 @@ void SelectKernels(const PointEvalData& d, PointEvaluator::Kernels* k) {
 HWY_AFTER_NAMESPACE();
 
 #if HWY_ONCE
-#include "vnr/core/error.h"
+#include "vnr/error.h"
 #include "vnr/nn/mlp_bf16.h"
 
 namespace vnr {
@@ -447,7 +447,7 @@ hwy::AlignedFreeUniquePtr<float[]> pack_fp32_panels(const Network& net, PointEva
   total += d.width_pad;
   auto weights = hwy::AllocateAligned<float>(total);
   float* w = weights.get();
-  const float* P = net.params.data();
+  const float* P = net.params().data();
   for (uint32_t k = 0; k < m.n_hidden; ++k) {
     d.layer[k] = w;
     const uint32_t K = K_of(m, k);

@@ -1,7 +1,7 @@
 #include "vnr/online/online_loop.h"
 #include <algorithm>
 #include <chrono>
-#include "vnr/core/error.h"
+#include "vnr/error.h"
 
 namespace vnr {
 

@@ -5,8 +5,8 @@
 #include <cstdio>
 #include <filesystem>
 #include <system_error>
-#include "vnr/core/error.h"
-#include "vnr/core/fileio.h"
+#include "vnr/error.h"
+#include "vnr/fileio.h"
 #include "vnr/render/camera.h"
 
 namespace vnr {

@@ -1,6 +1,6 @@
 #include "vnr/render/camera.h"
 #include <cmath>
-#include "vnr/core/error.h"
+#include "vnr/error.h"
 
 namespace vnr {
 

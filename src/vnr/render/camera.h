@@ -3,8 +3,8 @@
 #include <utility>
 // Pinhole camera (docs/semantics.md B.10) in the world space of B.2: the volume box spans [0, box] with
 // box = dims * spacing (voxel units), so a step of 1 is one voxel.
-#include "vnr/core/hd.h"
-#include "vnr/core/math.h"
+#include "vnr/hd.h"
+#include "vnr/math.h"
 
 namespace vnr {
 

@@ -4,7 +4,7 @@
 // The concrete fields (the ground-truth grid, a trained network) are wired above this layer
 // (online/fields.h), so render knows neither the network nor its evaluator.
 #include <cstdint>
-#include "vnr/core/math.h"
+#include "vnr/math.h"
 
 namespace vnr {
 

@@ -8,8 +8,8 @@
 #include <cstdio>
 #include <cstring>
 #include <limits>
-#include "vnr/core/error.h"
-#include "vnr/core/fileio.h"
+#include "vnr/error.h"
+#include "vnr/fileio.h"
 #include "vnr/core/metrics.h"
 
 namespace vnr {

@@ -6,7 +6,7 @@
 #include <cstdint>
 #include <string>
 #include <vector>
-#include "vnr/core/math.h"
+#include "vnr/math.h"
 
 namespace vnr {
 

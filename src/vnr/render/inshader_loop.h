@@ -11,7 +11,7 @@
 //                                                   the group together (`active`: whose sample counts).
 // Every lane stays in the loops until its whole group is done; an inactive lane only evaluates along.
 #include <cstdint>
-#include "vnr/core/hd.h"
+#include "vnr/hd.h"
 #include "vnr/render/integrators.h"
 
 // The per-pixel templates are __host__ __device__ but may be instantiated with a device-only

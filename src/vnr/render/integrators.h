@@ -9,8 +9,8 @@
 //   *_shade(...) -> consumes the field value at that position; false when the ray terminates.
 #include <cmath>
 #include <cstdint>
-#include "vnr/core/hd.h"
-#include "vnr/core/math.h"
+#include "vnr/hd.h"
+#include "vnr/math.h"
 #include "vnr/core/rng.h"
 #include "vnr/render/camera.h"
 #include "vnr/render/macrocell.h"

@@ -1,7 +1,7 @@
 #include "vnr/render/macrocell.h"
 #include <algorithm>
-#include "vnr/core/error.h"
-#include "vnr/core/json.h"
+#include "vnr/error.h"
+#include "vnr/json.h"
 
 namespace vnr {
 

@@ -7,8 +7,8 @@
 #include <cstdint>
 #include <string>
 #include <vector>
-#include "vnr/core/hd.h"
-#include "vnr/core/math.h"
+#include "vnr/hd.h"
+#include "vnr/math.h"
 #include "vnr/core/value_range_grid.h"
 #include "vnr/render/transfer_function.h"
 

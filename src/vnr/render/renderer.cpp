@@ -3,8 +3,8 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
-#include "vnr/core/error.h"
-#include "vnr/core/json.h"
+#include "vnr/error.h"
+#include "vnr/json.h"
 #include "vnr/core/parallel.h"
 #include "vnr/render/field.h"
 #include "vnr/render/inshader.h"

@@ -13,7 +13,7 @@
 #include <optional>
 #include <string>
 #include <vector>
-#include "vnr/core/device.h"
+#include "vnr/device.h"
 #include "vnr/render/camera.h"
 #include "vnr/render/field.h"
 #include "vnr/render/image.h"

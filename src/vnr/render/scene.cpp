@@ -2,9 +2,9 @@
 // as instantvnr does) and vnr's own scene JSON (unknown keys are errors: typo safety).
 #include "vnr/render/scene.h"
 #include <cmath>
-#include "vnr/core/error.h"
-#include "vnr/core/fileio.h"
-#include "vnr/core/json.h"
+#include "vnr/error.h"
+#include "vnr/fileio.h"
+#include "vnr/json.h"
 
 namespace vnr {
 

@@ -3,7 +3,7 @@
 // JSON. Everything is optional; the renderer fills in defaults (docs/semantics.md B.8, B.10).
 #include <optional>
 #include <string>
-#include "vnr/core/math.h"
+#include "vnr/math.h"
 #include "vnr/render/camera.h"
 #include "vnr/render/transfer_function.h"
 

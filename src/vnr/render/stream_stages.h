@@ -14,7 +14,7 @@
 //   (the backend compacts live by keep)
 // The per-ray work of a pass is an Ops POD (MarchOps: primary rays; ShadowOps: shadow rays).
 #include <cstdint>
-#include "vnr/core/hd.h"
+#include "vnr/hd.h"
 #include "vnr/render/integrators.h"
 
 namespace vnr {

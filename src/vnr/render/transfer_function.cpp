@@ -13,8 +13,8 @@
 #include <cmath>
 #include <cstring>
 #include <fmt/format.h>
-#include "vnr/core/error.h"
-#include "vnr/core/fileio.h"
+#include "vnr/error.h"
+#include "vnr/fileio.h"
 
 namespace vnr {
 

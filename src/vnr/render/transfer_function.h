@@ -4,9 +4,9 @@
 // is straight (not premultiplied); alpha is the opacity per unit step (one voxel).
 #include <string>
 #include <vector>
-#include "vnr/core/hd.h"
-#include "vnr/core/json.h"
-#include "vnr/core/math.h"
+#include "vnr/hd.h"
+#include "vnr/json.h"
+#include "vnr/math.h"
 
 namespace vnr {
 

@@ -1,5 +1,5 @@
 // GpuRenderer in a build without CUDA (VNR_CUDA=OFF): every entry point fails with one line.
-#include "vnr/core/error.h"
+#include "vnr/error.h"
 #include "vnr/render_cuda/gpu_renderer.h"
 
 namespace vnr {

@@ -3,8 +3,8 @@
 #include <algorithm>
 #include <filesystem>
 #include <numeric>
-#include "vnr/core/error.h"
-#include "vnr/core/fileio.h"
+#include "vnr/error.h"
+#include "vnr/fileio.h"
 
 namespace vnr {
 

@@ -15,7 +15,7 @@
 #include <string>
 #include <vector>
 #include "vnr/core/brick_box.h"
-#include "vnr/core/json.h"
+#include "vnr/json.h"
 #include "vnr/cuda/cuda.h"
 #include "vnr/train/model_io.h"
 #include "vnr/train/session.h"
@@ -170,8 +170,6 @@ std::shared_ptr<BrickedModel> load_bricked_model(const std::string& dir, const s
 // whole volume, bricks = m, net = a network of the bricks' config (for its description and precision).
 Model model_of_bricks(std::shared_ptr<BrickedModel> m);
 BrickLayout layout_of(const BrickPlan& plan);
-// Parameters of a model: its network's, or all bricks' of a multi-brick model.
-uint64_t model_n_params(const Model& m);
 // Bricks whose trained box meets `region` (voxels of the model's grid): what must be loaded to answer it.
 std::vector<int> bricks_touching(const BrickPlan& plan, const Box3& region);
 

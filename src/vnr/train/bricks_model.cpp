@@ -2,8 +2,8 @@
 // macro-cells (train/bricks.h).
 #include <algorithm>
 #include <cmath>
-#include "vnr/core/error.h"
-#include "vnr/core/fileio.h"
+#include "vnr/error.h"
+#include "vnr/fileio.h"
 #include "vnr/train/bricks.h"
 
 namespace vnr {
@@ -15,7 +15,7 @@ uint64_t BrickedModel::param_bytes() const {
   return n;
 }
 
-uint64_t model_n_params(const Model& m) { return m.bricks ? m.bricks->param_bytes() / 2 : m.net->n_params(); }
+uint64_t Model::n_params() const { return bricks ? bricks->param_bytes() / 2 : net->n_params(); }
 
 uint64_t BrickedModel::file_bytes() const { return model_file_bytes(dir); }
 

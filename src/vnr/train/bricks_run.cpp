@@ -1,9 +1,9 @@
 // The single-process training of a whole multi-brick model, and its output directory (train/bricks.h).
 #include <chrono>
 #include <filesystem>
-#include "vnr/core/error.h"
-#include "vnr/core/fileio.h"
-#include "vnr/core/progress.h"
+#include "vnr/error.h"
+#include "vnr/fileio.h"
+#include "vnr/progress.h"
 #include "vnr/train/bricks.h"
 
 namespace vnr {

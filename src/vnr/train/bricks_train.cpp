@@ -1,9 +1,9 @@
 // Training one brick of a multi-brick model from its region of the volume (train/bricks.h).
 #include <algorithm>
 #include <chrono>
-#include "vnr/core/error.h"
-#include "vnr/core/fileio.h"
-#include "vnr/core/units.h"
+#include "vnr/error.h"
+#include "vnr/fileio.h"
+#include "vnr/units.h"
 #include "vnr/train/bricks.h"
 #include "vnr/train/evaluate.h"
 #include "vnr/volume/raw_access.h"
@@ -128,7 +128,9 @@ BrickResult train_brick(const TrainingSetup& setup, const BrickPlan& plan, int i
   r.seconds = session->training_seconds();
   r.final_loss = session->last_loss();
   r.interrupted = session->stop_requested();
-  session->record();
+  // Sized for the ratio, stored as trained (docs/MODEL_FORMAT.md "Sizes"); evaluated on its region and
+  // saved with its record below.
+  session->finish({.quantize = false, .evaluate = false, .save = false});
   Model& m = session->model();
   // Out of core the brick is never held: it is evaluated in slabs of a sixteenth of the budget (two or
   // three float copies of a slab, plus the decoder's).

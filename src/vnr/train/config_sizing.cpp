@@ -1,7 +1,7 @@
 #include "vnr/train/config_sizing.h"
 #include <algorithm>
 #include <cmath>
-#include "vnr/core/error.h"
+#include "vnr/error.h"
 #include "vnr/nn/mlp_layout.h"
 #include "vnr/train/residuals.h"
 

@@ -3,8 +3,8 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
-#include "vnr/core/device.h"
-#include "vnr/core/math.h"
+#include "vnr/device.h"
+#include "vnr/math.h"
 #include "vnr/cuda/cuda.h"
 #include "vnr/nn/network.h"
 #include "vnr/train/residuals.h"

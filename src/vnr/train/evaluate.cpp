@@ -5,9 +5,9 @@
 #include <chrono>
 #include <cmath>
 #include <vector>
-#include "vnr/core/error.h"
+#include "vnr/error.h"
 #include "vnr/core/metrics.h"
-#include "vnr/core/progress.h"
+#include "vnr/progress.h"
 #include "vnr/core/rng.h"
 #include "vnr/volume/raw_access.h"
 #include "vnr/volume/stream.h"

@@ -3,7 +3,7 @@
 #include <cstdint>
 #include <functional>
 #include "vnr/core/brick_box.h"
-#include "vnr/core/device.h"
+#include "vnr/device.h"
 #include "vnr/nn/network.h"
 #include "vnr/train/residuals.h"
 #include "vnr/volume/volume.h"

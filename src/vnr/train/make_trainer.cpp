@@ -1,10 +1,10 @@
 #include "vnr/train/make_trainer.h"
 #include <algorithm>
 #include <cmath>
-#include "vnr/core/error.h"
+#include "vnr/error.h"
 #include "vnr/core/parallel.h"
 #include "vnr/train/training_data.h"
-#include "vnr/core/units.h"
+#include "vnr/units.h"
 
 namespace vnr {
 namespace {

@@ -3,7 +3,7 @@
 // device for a user's "auto".
 #include <memory>
 #include <string>
-#include "vnr/core/device.h"
+#include "vnr/device.h"
 #include "vnr/cuda/cuda.h"
 #include "vnr/train/sampler.h"
 #include "vnr/train/trainer.h"

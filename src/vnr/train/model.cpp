@@ -2,8 +2,8 @@
 #include "vnr/nn/mlp_layout.h"
 #include <cstdio>
 #include <cstring>
-#include "vnr/core/error.h"
-#include "vnr/core/fileio.h"
+#include "vnr/error.h"
+#include "vnr/fileio.h"
 #include "vnr/train/bricks.h"
 
 namespace vnr {

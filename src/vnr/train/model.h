@@ -5,9 +5,9 @@
 #include <optional>
 #include <string>
 #include <vector>
-#include "vnr/core/dtype.h"
-#include "vnr/core/json.h"
-#include "vnr/core/math.h"
+#include "vnr/dtype.h"
+#include "vnr/json.h"
+#include "vnr/math.h"
 #include "vnr/core/value_range_grid.h"
 #include "vnr/nn/model_file.h"
 #include "vnr/nn/network.h"
@@ -34,7 +34,12 @@ struct Model {
   // A multi-brick model (a directory, train/bricks.h): net is then a copy of brick 0's network (config,
   // precision); queries, decodes, evaluation and rendering go through the bricks.
   std::shared_ptr<BrickedModel> bricks;
-  uint64_t param_bytes() const { return net->n_params() * 2; }  // fp16, as stored
+  // What a single network and a multi-brick model answer alike (bricks_model.cpp), so that callers need
+  // not ask which it is: parameters (all bricks'), their fp16 bytes as stored, and whether a session can
+  // train it (a multi-brick model is trained brick by brick: train_bricks).
+  uint64_t n_params() const;
+  uint64_t param_bytes() const { return n_params() * 2; }
+  bool trainable() const { return bricks == nullptr; }
 };
 
 // A fresh model of `config` for a volume of dims voxels of source_dtype with value range [lo, hi] in

@@ -1,6 +1,6 @@
 #include "vnr/train/psnr_search.h"
 #include <cmath>
-#include "vnr/core/error.h"
+#include "vnr/error.h"
 #include "vnr/train/rate_control.h"
 
 namespace vnr {

@@ -6,7 +6,7 @@
 #include <functional>
 #include <memory>
 #include <optional>
-#include "vnr/core/json.h"
+#include "vnr/json.h"
 #include "vnr/train/session.h"
 
 namespace vnr {
@@ -36,7 +36,7 @@ PsnrSearch search_size_for_psnr(const TrainingSetup& setup, int64_t steps, doubl
 // (search_size_for_psnr); otherwise one session from `open`, trained compact (train_compact: quantized,
 // its last qat_fraction quantization-aware) when the setup asks for a compact model, else run().
 // steps < 0: until `seconds`. before_training(session) runs before each session trains. The caller then
-// finish()es the session (or finalize_model()s it).
+// finish()es the session.
 struct TargetTraining {
   std::unique_ptr<TrainingSession> session;
   std::optional<PsnrSearch> search;  // target_psnr alone: the search (its session moved to `session`)

@@ -3,7 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
-#include "vnr/core/error.h"
+#include "vnr/error.h"
 #include "vnr/core/half.h"
 #include "vnr/core/rng.h"
 #include "vnr/nn/mlp_layout.h"
@@ -108,7 +108,7 @@ Quantization start_quantization(Network& net, const ProbeSet& probe) {
   Quantization q;
   q.psnr_before = psnr_of_mse(probe.mse(net));
   q.plan = plan_quantization(net, probe);
-  q.master.assign(net.params.begin(), net.params.end());
+  q.master.assign(net.params().begin(), net.params().end());
   zero_unused(net.mlp(), q.master);
   return q;
 }
@@ -197,7 +197,7 @@ std::vector<ParamSegment> QuantPlan::at(double g) const {
 QuantPlan plan_quantization(Network& net, const ProbeSet& probe) {
   QuantPlan plan;
   plan.segments = param_segments(net.config());
-  std::vector<float> master(net.params.begin(), net.params.end());
+  std::vector<float> master(net.params().begin(), net.params().end());
   zero_unused(net.mlp(), master);
   apply_quantization(net, master, plan.segments);  // steps 0: the fp16 values, unused ones zeroed
   const double base = probe.mse(net);
@@ -220,29 +220,30 @@ QuantPlan plan_quantization(Network& net, const ProbeSet& probe) {
     for (float& e : noise) e = float(delta * (rng.next_float() - 0.5));
     double mse_pair = 0;
     for (const float sign : {1.0f, -1.0f}) {
-      for (uint64_t i = off; i < off + s.count; ++i) net.params[i] = master[i] + sign * noise[i - off];
-      net.sync_half_table();
+      net.edit_params([&](float* p, size_t) {
+        for (uint64_t i = off; i < off + s.count; ++i) p[i] = master[i] + sign * noise[i - off];
+      });
       mse_pair += 0.5 * probe.mse(net);
     }
     const double grown = std::max(mse_pair - base, 1e-4 * base + 1e-14);
-    for (uint64_t i = off; i < off + s.count; ++i) net.params[i] = master[i];
+    net.edit_params([&](float* p, size_t) { std::copy_n(master.data() + off, s.count, p + off); });
     const double a = grown / (delta * delta);
     plan.shape.push_back(std::sqrt(double(s.count) / a));
     plan.floor.push_back(max_abs / kMaxQuantIndex);
     off += s.count;
   }
-  net.sync_half_table();
   return plan;
 }
 
 void apply_quantization(Network& net, const std::vector<float>& master, const std::vector<ParamSegment>& segments) {
   uint64_t off = 0;
-  for (const ParamSegment& s : segments) {
-    for (uint64_t i = off; i < off + s.count; ++i) net.params[i] = quantized_value(master[i], s.step);
-    off += s.count;
-  }
+  for (const ParamSegment& s : segments) off += s.count;
   if (off != net.n_params()) fail("quantization segments cover {} of {} parameters", off, net.n_params());
-  net.sync_half_table();
+  net.edit_params([&](float* p, size_t) {
+    uint64_t at = 0;
+    for (const ParamSegment& s : segments)
+      for (const uint64_t end = at + s.count; at < end; ++at) p[at] = quantized_value(master[at], s.step);
+  });
 }
 
 double fit_bytes(const Model& model, const std::vector<float>& master, const QuantPlan& plan, uint64_t target,
@@ -351,10 +352,10 @@ Json compact_session(TrainingSession& session, const CompactOptions& o, int64_t 
     session.set_step_hooks(
         [&] {
           apply_quantization(net, q.master, segs);
-          shown.assign(net.params.begin(), net.params.end());
+          shown.assign(net.params().begin(), net.params().end());
         },
         [&] {
-          for (size_t i = 0; i < q.master.size(); ++i) q.master[i] += net.params[i] - shown[i];
+          for (size_t i = 0; i < q.master.size(); ++i) q.master[i] += net.params()[i] - shown[i];
         });
     rate_aware = o.rate_weight > 0 && set_rate_hook(session, q.master, segs, o.rate_weight);
     if (qat_seconds > 0) {  // the planning counts against a --seconds budget

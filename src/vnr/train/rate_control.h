@@ -7,8 +7,8 @@
 #include <functional>
 #include <string>
 #include <vector>
-#include "vnr/core/error.h"
-#include "vnr/core/json.h"
+#include "vnr/error.h"
+#include "vnr/json.h"
 #include "vnr/nn/network.h"
 #include "vnr/nn/param_codec.h"
 #include "vnr/train/evaluate.h"

@@ -6,7 +6,7 @@
 #include <cstdlib>
 #include <memory>
 #include "vnr/core/binary_coder.h"
-#include "vnr/core/error.h"
+#include "vnr/error.h"
 #include "vnr/train/residual_context_coder.h"
 
 namespace vnr {

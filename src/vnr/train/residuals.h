@@ -7,9 +7,9 @@
 #include <memory>
 #include <optional>
 #include <vector>
-#include "vnr/core/dtype.h"
-#include "vnr/core/json.h"
-#include "vnr/core/math.h"
+#include "vnr/dtype.h"
+#include "vnr/json.h"
+#include "vnr/math.h"
 #include "vnr/core/metrics.h"
 #include "vnr/nn/network.h"
 

@@ -6,9 +6,9 @@
 #include <cmath>
 #include <cstdio>
 #include <set>
-#include "vnr/core/error.h"
+#include "vnr/error.h"
 #include "vnr/core/parallel.h"
-#include "vnr/core/progress.h"
+#include "vnr/progress.h"
 #include "vnr/core/rng.h"
 #include "vnr/nn/config.h"
 #include "vnr/train/make_trainer.h"
@@ -160,7 +160,7 @@ std::vector<TimestepResult> train_series(Model& model, const std::vector<int>& t
     if (trainer.has_online_ranges()) model.macrocells = trainer.online_ranges();
     // The saved model may be quantized and carry residuals; the next timestep warm-starts from the
     // trained parameters, not from those.
-    const std::vector<float> trained(net.params.begin(), net.params.end());
+    const std::vector<float> trained(net.params().begin(), net.params().end());
     if (opts.compact.enabled())
       r.compact = quantize_model(model, draw_voxel_probe(vol, opts.compact.probe_samples, probe_seed(to.seed)),
                                  opts.compact);
@@ -171,8 +171,7 @@ std::vector<TimestepResult> train_series(Model& model, const std::vector<int>& t
     results.push_back(r);
     if (done) done(results.back(), model);
     if (!model.param_segments.empty() || model.residuals) {
-      std::copy(trained.begin(), trained.end(), net.params.begin());
-      net.sync_half_table();
+      net.set_params(trained.data(), trained.size());
       model.param_segments.clear();
       model.residuals.reset();
     }
@@ -289,8 +288,7 @@ ContinuousResult train_continuous(Model& model, const std::vector<int>& timestep
   {
     auto fixed = std::make_unique<Network>(res.config);
     if (fixed->n_params() != model.net->n_params()) fail("train_continuous: parameter layout changed");  // cannot happen
-    std::copy(model.net->params.begin(), model.net->params.end(), fixed->params.begin());
-    fixed->sync_half_table();
+    fixed->set_params(model.net->params().data(), model.net->params().size());
     model.net = std::move(fixed);
   }
   Network& net = *model.net;

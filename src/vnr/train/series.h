@@ -33,8 +33,8 @@
 #include <functional>
 #include <string>
 #include <vector>
-#include "vnr/core/device.h"
-#include "vnr/core/json.h"
+#include "vnr/device.h"
+#include "vnr/json.h"
 #include "vnr/cuda/cuda.h"
 #include "vnr/train/model_io.h"
 #include "vnr/train/rate_control.h"

@@ -2,10 +2,10 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
-#include "vnr/core/error.h"
-#include "vnr/core/fileio.h"
+#include "vnr/error.h"
+#include "vnr/fileio.h"
 #include "vnr/core/parallel.h"
-#include "vnr/core/progress.h"
+#include "vnr/progress.h"
 
 namespace vnr {
 namespace {
@@ -184,8 +184,13 @@ void TrainingSession::record() {
                       {"device", device_name(trainer_->device())},
                       {"precision", precision ? Json(precision_name(*precision)) : Json(nullptr)}};
   if (budgeted_ && opts_.cooldown > 0) model_->training["cooldown"] = opts_.cooldown;
-  if (!params_frozen_) trainer_->download();  // the model file is written from net.params
+  if (!params_frozen_) trainer_->download();  // the model file is written from net.params()
   if (trainer_->has_online_ranges()) model_->macrocells = trainer_->online_ranges();
+}
+
+void TrainingSession::save(const std::string& path) {
+  record();
+  save_model(path, *model_);
 }
 
 void TrainingSession::save_checkpoint() {
@@ -255,30 +260,39 @@ Json TrainingSession::attach_residuals() {
   return attach_error_bound(*model_, *data_->vol, opts_.error_bound);
 }
 
-Json TrainingSession::finalize_model() {
-  if (!data_) fail("finalize_model() needs a session opened on training data (open_training_session)");
+Json TrainingSession::finalize_model(bool quantize) {
+  if (!data_) {  // a model in memory (make_training_session): nothing to quantize for or measure against
+    record();
+    return Json();
+  }
   // A compact session that was only run(): quantize now (post-training), so the file meets the target.
-  if (opts_.compact.enabled() && model_->param_segments.empty()) compact_session(*this, opts_.compact, 0, 0);
+  if (quantize && opts_.compact.enabled() && model_->param_segments.empty()) compact_session(*this, opts_.compact, 0, 0);
   record();
   return attach_residuals();
 }
 
-TrainingResult TrainingSession::finish(bool with_ssim, int64_t eval_samples) {
-  if (!data_) fail("finish() needs a session opened on training data (open_training_session)");
-  if (opts_.output.empty()) fail("finish() needs an output path");
-  const TrainingData& data = *data_;
-  Network& net = *model_->net;
-  const Device dev = trainer_->device();
+TrainingResult TrainingSession::finish(const FinishOptions& o) {
   TrainingResult r;
   r.steps = steps_;
   r.seconds = train_seconds_;
   r.final_loss = loss_;
-  const Json bound = finalize_model();
+  r.samples_per_second = r.seconds > 0 ? double(r.steps) * double(trainer_->batch()) / r.seconds : 0.0;
+  const Json bound = finalize_model(o.quantize);
+  r.psnr = r.max_abs_error = r.max_abs_error_original = std::nan("");
+  if (!data_) return r;
+  const TrainingData& data = *data_;
+  Network& net = *model_->net;
+  const Device dev = trainer_->device();
+  const bool with_ssim = o.ssim;
+  const int64_t eval_samples = o.eval_samples;
   // Exact over the volume in memory; a volume that is not in memory gets a PSNR estimate from random
   // voxels (a full pass can take longer than the training did).
   Json evaluation;
   const Residuals* residuals = model_->residuals ? &*model_->residuals : nullptr;
-  if (data.vol) {
+  if (!o.evaluate) {
+    evaluation = {{"method", "none"}};
+    r.evaluation_note = " (not evaluated)";
+  } else if (data.vol) {
     EvalResult ev = evaluate(net, *data.vol, with_ssim, dev, residuals);
     r.psnr = ev.psnr;
     r.max_abs_error = ev.max_abs_error;
@@ -302,14 +316,17 @@ TrainingResult TrainingSession::finish(bool with_ssim, int64_t eval_samples) {
   }
   if (std::isfinite(r.psnr)) model_->training["psnr"] = r.psnr;
   if (r.ssim) model_->training["ssim"] = *r.ssim;
-  save_model(opts_.output, *model_);
-  r.model_bytes = file_size(opts_.output);
+  if (o.save && !opts_.output.empty()) {
+    save_model(opts_.output, *model_);
+    r.model_bytes = file_size(opts_.output);
+  } else {
+    r.model_bytes = model_file_bytes(*model_);
+  }
   r.compression_ratio = double(data.source_bytes()) / double(r.model_bytes);
-  r.samples_per_second = double(r.steps) * double(trainer_->batch()) / r.seconds;
   r.report = report_json(r, evaluation);
   if (!bound.is_null()) {
     // What renders: the network alone (rendering and point queries do not apply residuals).
-    if (data.vol) r.report["network_psnr"] = evaluate(net, *data.vol, false, dev).psnr;
+    if (data.vol && o.evaluate) r.report["network_psnr"] = evaluate(net, *data.vol, false, dev).psnr;
     r.report["error_bound"] = bound;
     r.report["error_bound"]["holds"] = r.max_abs_error_original <= bound["max_error"].get<double>();
     r.report["error_bound"]["network_bytes"] = r.model_bytes - bound["residual_bytes"].get<uint64_t>();

@@ -22,7 +22,7 @@
 #include <optional>
 #include <string>
 #include <vector>
-#include "vnr/core/json.h"
+#include "vnr/json.h"
 #include "vnr/train/model_io.h"
 #include "vnr/train/rate_control.h"
 #include "vnr/train/trainer.h"
@@ -59,6 +59,18 @@ struct SessionOptions {
   // Compact storage (--target-ratio, --target-psnr): front ends then train with train_compact()
   // (train/rate_control.h) instead of run(), and finish() saves the quantized model.
   CompactOptions compact;
+};
+
+// How finish() ends a run. The model is always finalised (a compact session quantized, the training
+// record and the trainer's parameters and online ranges written into it, an error bound's residuals
+// attached); then, for a session opened on training data, evaluated (exactly over a volume in memory,
+// else from eval_samples random voxels, or not at all with 0) and saved to options().output.
+struct FinishOptions {
+  bool quantize = true;  // false: a compact session only run() keeps its network as trained (bricks)
+  bool evaluate = true;
+  bool ssim = true;
+  int64_t eval_samples = 0;
+  bool save = true;  // where options().output is set
 };
 
 // What finish() measured, and the record of `vnr train --report`.
@@ -128,6 +140,16 @@ public:
   const TrainingData* data() const { return data_.get(); }
   const SessionOptions& options() const { return opts_; }
 
+  // Ends a run (FinishOptions); the report of `vnr train --report` for a session on training data. A
+  // later run() trains on from the model as finished.
+  TrainingResult finish(const FinishOptions& options = {});
+  // The model as it stands, its training record and the trainer's parameters included, written to
+  // `path` while training may go on (the viewer's save).
+  void save(const std::string& path);
+
+private:
+  friend Json compact_session(TrainingSession&, const CompactOptions&, int64_t, double,
+                              const std::function<void(const std::string&)>&);
   // Writes the training record into model().training (steps, seconds, loss, batch, seed, sampler,
   // device, precision, interrupted) and the trainer's parameters and online ranges into the model.
   void record();
@@ -137,16 +159,10 @@ public:
   // The compact-storage summary (rate_control.h) that finish() puts into the report as "compact".
   const Json& note_compact(Json summary) { return compact_summary_ = std::move(summary); }
   void save_checkpoint();  // record() + "checkpoint": true, written to options().output
-  // The model as finish() saves it, without evaluating or saving: a compact session that was only run()
-  // is quantized, the training record written, and the error bound's residuals attached (returns their
-  // summary, null without a bound). For front ends that keep the model in memory (the Python module).
-  Json finalize_model();
-  // The end of `vnr train`: records, evaluates (exactly over a volume in memory, else from
-  // `eval_samples` random voxels, or not at all with 0), saves the model to options().output and
-  // builds the report.
-  TrainingResult finish(bool with_ssim, int64_t eval_samples);
+  // Quantizes a compact session that was only run() (with `quantize`), records, attaches the error
+  // bound's residuals (returns their summary, null without a bound).
+  Json finalize_model(bool quantize);
 
-private:
   void check() const;
   void run_steps(int64_t steps, double seconds, int64_t* done);
   float cooldown_multiplier() const;  // of the next step, from the progress through the budget

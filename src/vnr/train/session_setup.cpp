@@ -1,7 +1,7 @@
 // open_training_session: from `vnr train`'s options to a running session (config, data, model size,
 // device, backend).
-#include "vnr/core/error.h"
-#include "vnr/core/units.h"
+#include "vnr/error.h"
+#include "vnr/units.h"
 #include "vnr/cuda/cuda.h"
 #include "vnr/nn/config.h"
 #include "vnr/train/config_sizing.h"

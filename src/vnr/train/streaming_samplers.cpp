@@ -5,7 +5,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstring>
-#include "vnr/core/error.h"
+#include "vnr/error.h"
 
 namespace vnr {
 

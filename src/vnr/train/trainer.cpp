@@ -3,9 +3,9 @@
 #include <atomic>
 #include <chrono>
 #include <cstring>
-#include "vnr/core/error.h"
+#include "vnr/error.h"
 #include "vnr/core/parallel.h"
-#include "vnr/core/units.h"
+#include "vnr/units.h"
 #include "vnr/nn/loss.h"
 #include "vnr/nn/mlp_bf16.h"
 
@@ -165,7 +165,7 @@ float CpuTrainer::step() {
   auto t2 = std::chrono::steady_clock::now();
   sum_gradients();
   if (gradient_hook_) gradient_hook_(grads_.data());
-  adam_.step(net_.params.data(), grads_.data(), net_.has_grid() ? net_.grid_half_mut() : nullptr);
+  net_.adam_step(adam_, grads_.data());
   auto t3 = std::chrono::steady_clock::now();
   phase_seconds[0] = std::chrono::duration<double>(t1 - t0).count();
   phase_seconds[1] = std::chrono::duration<double>(t2 - t1).count();

@@ -9,8 +9,8 @@
 #include <optional>
 #include <string>
 #include <vector>
-#include "vnr/core/device.h"
-#include "vnr/core/math.h"
+#include "vnr/device.h"
+#include "vnr/math.h"
 #include "vnr/core/value_range_grid.h"
 #include "vnr/nn/network.h"
 
@@ -38,7 +38,7 @@ public:
   virtual void enable_online_ranges(Int3 dims, int cell_size = 16) = 0;
   virtual bool has_online_ranges() const = 0;
   virtual ValueRangeGrid online_ranges() const = 0;
-  // Brings the trained parameters back into network().params (the GPU keeps its own copy; a no-op on
+  // Brings the trained parameters back into network().params() (the GPU keeps its own copy; a no-op on
   // the CPU, which trains the Network in place).
   virtual void download() = 0;
   virtual Network& network() = 0;

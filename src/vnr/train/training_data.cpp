@@ -2,10 +2,10 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
-#include "vnr/core/error.h"
-#include "vnr/core/progress.h"
+#include "vnr/error.h"
+#include "vnr/progress.h"
 #include "vnr/volume/stream.h"
-#include "vnr/core/units.h"
+#include "vnr/units.h"
 
 namespace vnr {
 namespace {

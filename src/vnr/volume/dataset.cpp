@@ -3,8 +3,8 @@
 #include "vnr/volume/dataset.h"
 #include <algorithm>
 #include <bit>
-#include "vnr/core/error.h"
-#include "vnr/core/fileio.h"
+#include "vnr/error.h"
+#include "vnr/fileio.h"
 
 namespace vnr::detail {
 

@@ -2,7 +2,7 @@
 // Internal to the volume layer: the per-format descriptor readers behind describe_volume().
 #include <string>
 #include <vector>
-#include "vnr/core/json.h"
+#include "vnr/json.h"
 #include "vnr/volume/volume.h"
 
 namespace vnr::detail {

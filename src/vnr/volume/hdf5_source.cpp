@@ -4,7 +4,7 @@
 #include <algorithm>
 #include <mutex>
 #include <vector>
-#include "vnr/core/error.h"
+#include "vnr/error.h"
 #include "vnr/volume/dataset.h"
 
 #if VNR_HAVE_HDF5

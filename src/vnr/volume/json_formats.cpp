@@ -3,8 +3,8 @@
 // timestep (same dims, dtype, byte order and offset; the files must all have the same size).
 #include <cmath>
 #include <limits>
-#include "vnr/core/error.h"
-#include "vnr/core/fileio.h"
+#include "vnr/error.h"
+#include "vnr/fileio.h"
 #include "vnr/volume/formats.h"
 
 namespace vnr::detail {

@@ -3,8 +3,8 @@
 // both steps: PivotNormaliser, sample_io.h).
 #include <algorithm>
 #include <new>
-#include "vnr/core/error.h"
-#include "vnr/core/units.h"
+#include "vnr/error.h"
+#include "vnr/units.h"
 #include "vnr/volume/sample_io.h"
 #include "vnr/volume/volume.h"
 

@@ -6,7 +6,7 @@
 #include <mutex>
 #include <tuple>
 #include <vector>
-#include "vnr/core/error.h"
+#include "vnr/error.h"
 #include "vnr/volume/dataset.h"
 
 #if VNR_HAVE_NETCDF

@@ -6,8 +6,8 @@
 #include <cstring>
 #include <map>
 #include <sstream>
-#include "vnr/core/error.h"
-#include "vnr/core/fileio.h"
+#include "vnr/error.h"
+#include "vnr/fileio.h"
 #include "vnr/volume/formats.h"
 
 namespace vnr::detail {

@@ -10,7 +10,7 @@
 #include <numeric>
 #include <type_traits>
 #include <vector>
-#include "vnr/core/error.h"
+#include "vnr/error.h"
 #include "vnr/volume/dataset.h"
 #include "vnr/volume/formats.h"
 

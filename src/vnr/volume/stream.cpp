@@ -11,7 +11,7 @@
 #include <cstdio>
 #include <cstring>
 #include <new>
-#include "vnr/core/error.h"
+#include "vnr/error.h"
 #include "vnr/volume/dataset.h"
 #include "vnr/volume/formats.h"
 #include "vnr/volume/sample_io.h"

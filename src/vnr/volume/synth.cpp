@@ -7,10 +7,10 @@
 #include <memory>
 #include <numbers>
 #include <vector>
-#include "vnr/core/error.h"
+#include "vnr/error.h"
 #include "vnr/core/parallel.h"
-#include "vnr/core/fileio.h"
-#include "vnr/core/json.h"
+#include "vnr/fileio.h"
+#include "vnr/json.h"
 #include "vnr/volume/writer.h"
 
 namespace vnr {

@@ -4,9 +4,9 @@
 #include <cstdio>
 #include <cstring>
 #include <limits>
-#include "vnr/core/error.h"
-#include "vnr/core/fileio.h"
-#include "vnr/core/json.h"
+#include "vnr/error.h"
+#include "vnr/fileio.h"
+#include "vnr/json.h"
 #include "vnr/volume/dataset.h"
 #include "vnr/volume/formats.h"
 #include "vnr/volume/volume.h"

@@ -3,10 +3,10 @@
 #include <optional>
 #include <string>
 #include <vector>
-#include "vnr/core/dtype.h"
+#include "vnr/dtype.h"
 #include "vnr/core/grid_view.h"
-#include "vnr/core/hd.h"
-#include "vnr/core/math.h"
+#include "vnr/hd.h"
+#include "vnr/math.h"
 #include "vnr/core/memory.h"
 
 namespace vnr {

@@ -1,6 +1,6 @@
 #include "vnr/volume/wavelet.h"
 #include <array>
-#include "vnr/core/error.h"
+#include "vnr/error.h"
 #include "vnr/core/parallel.h"
 
 namespace vnr {

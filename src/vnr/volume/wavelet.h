@@ -5,7 +5,7 @@
 // transform packs a smooth field's energy into few of them, as SPERR's and JPEG 2000's do.
 #include <cstdint>
 #include <vector>
-#include "vnr/core/math.h"
+#include "vnr/math.h"
 
 namespace vnr {
 

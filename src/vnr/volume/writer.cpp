@@ -5,8 +5,8 @@
 #include <cstring>
 #include <limits>
 #include <vector>
-#include "vnr/core/error.h"
-#include "vnr/core/json.h"
+#include "vnr/error.h"
+#include "vnr/json.h"
 
 namespace vnr {
 namespace {

@@ -7,8 +7,8 @@
 #include <type_traits>
 #include <string>
 #include <vector>
-#include "vnr/core/fileio.h"
-#include "vnr/core/math.h"
+#include "vnr/fileio.h"
+#include "vnr/math.h"
 #include "vnr/volume/volume.h"
 
 namespace vnr {

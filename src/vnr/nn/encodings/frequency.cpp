@@ -1,6 +1,6 @@
 // Frequency encoding (docs/semantics.md A.3.2): sin and cos of 2^k pi x per axis, parameter-free.
 #include <cmath>
-#include "vnr/core/error.h"
+#include "vnr/error.h"
 #include "vnr/nn/encoding.h"
 #include "vnr/nn/json_get.h"
 

@@ -1,8 +1,8 @@
 // HashGrid / DenseGrid / TiledGrid (docs/semantics.md A.2): the multi-resolution grid. Per-sample code
 // is grid_encoding.h's VNR_HD functions; chunks go through the per-SIMD-target kernels of cpu_kernels.
 #include <cmath>
-#include "vnr/core/error.h"
-#include "vnr/core/fileio.h"
+#include "vnr/error.h"
+#include "vnr/fileio.h"
 #include "vnr/nn/cpu_kernels.h"
 #include "vnr/nn/encoding.h"
 #include "vnr/nn/json_get.h"

@@ -1,8 +1,8 @@
 // OneBlob encoding (docs/semantics.md A.3.3): per axis, n_bins integrals of a quartic kernel centred on
 // x over the bins of the periodic unit interval; parameter-free.
 #include <algorithm>
-#include "vnr/core/error.h"
-#include "vnr/core/math.h"
+#include "vnr/error.h"
+#include "vnr/math.h"
 #include "vnr/nn/encoding.h"
 #include "vnr/nn/json_get.h"
 

@@ -1,7 +1,7 @@
 #pragma once
 #include <cmath>
 #include <cstdint>
-#include "vnr/core/hd.h"
+#include "vnr/hd.h"
 
 namespace vnr {
 
