@@ -33,17 +33,18 @@ constexpr double kRateWindowSeconds = 1.0;
 void ViewerEngine::Impl::create_session() {
   Network& net = *model->net;
   TrainOptions to{setup.batch, setup.seed};
-  std::unique_ptr<Trainer> trainer;
+  std::shared_ptr<Sampler> sampler;
+  const Volume* in_memory = nullptr;
   if (train_device == Device::Cuda && info.n_timesteps < 2) {
-    trainer = make_trainer(Device::Cuda, net, std::make_shared<InCoreSampler>(*volume), volume.get(), to);
+    sampler = std::make_shared<InCoreSampler>(*volume);
+    in_memory = volume.get();
   } else {
     if (train_device == Device::Cpu) to.precision = resolve_training_precision("auto", net);
     run.sampler = std::make_shared<SwitchableSampler>(view_of(*volume));
-    trainer = make_trainer(train_device, net, run.sampler, nullptr, to);
+    sampler = run.sampler;
   }
-  trainer->enable_online_ranges(volume->dims, kOnlineCellSize);
   run.active = nullptr;
-  run.session = std::make_unique<TrainingSession>(*model, std::move(trainer), SessionOptions{});
+  run.session = make_training_session(*model, sampler, in_memory, train_device, to, kOnlineCellSize, SessionOptions{});
   run.active = run.session.get();
   run.losses_published = 0;
   if (!run.probe) run.probe.emplace(volume->dims, kProbeVoxels, kProbeSeed);

@@ -134,10 +134,10 @@ std::vector<TimestepResult> train_series(Model& model, const std::vector<int>& t
       return fmt::format("training diverged at step {} of timestep {} (loss {}); try a smaller learning rate", step,
                          t, loss);
     };
-    TrainingSession session(
-        model, make_trainer(opts.device, net, std::make_shared<InCoreSampler>(vol), &vol, to, opts.mlp), so);
+    const std::unique_ptr<TrainingSession> owned = make_training_session(
+        model, std::make_shared<InCoreSampler>(vol), &vol, opts.device, to, opts.macrocell_size, so, opts.mlp);
+    TrainingSession& session = *owned;
     Trainer& trainer = session.trainer();
-    if (opts.macrocell_size > 0) trainer.enable_online_ranges(vol.dims, opts.macrocell_size);
     const int64_t budget = r.warm_started && opts.warm_steps >= 0 ? opts.warm_steps : opts.steps;
     session.add_step_callback([&](const TrainingProgress& p) {
       if (hooks.on_step) hooks.on_step(t, p.step, p.loss);
@@ -310,7 +310,9 @@ ContinuousResult train_continuous(Model& model, const std::vector<int>& timestep
                        current_timestep, loss);
   };
   so.sync_every = opts.probe_every;  // a GPU's groups of steps end at every probe
-  TrainingSession session(model, make_trainer(opts.device, net, sampler, nullptr, opts.train, opts.mlp), so);
+  const std::unique_ptr<TrainingSession> owned =
+      make_training_session(model, sampler, nullptr, opts.device, opts.train, 0, so, opts.mlp);
+  TrainingSession& session = *owned;
   Trainer& trainer = session.trainer();
   int64_t global = 0;
   double last_probe = 0;  // probe PSNR after the latest step, on the current target

@@ -246,6 +246,14 @@ void check_training_setup(const TrainingSetup& setup);
 std::unique_ptr<TrainingSession> make_training_session(Model& model, const Volume& volume, Device device,
                                                        const TrainOptions& options = {}, int online_cell_size = 16,
                                                        SessionOptions session = {});
+// The same over any sampler (a time series' SwitchableSampler): the one constructor of a session over a
+// model in memory, CPU and GPU alike (make_trainer). `in_memory`, when given, is the volume the GPU
+// samples its own copy of; online macro-cells (over its dims, else the model's) when online_cell_size > 0.
+std::unique_ptr<TrainingSession> make_training_session(Model& model, std::shared_ptr<Sampler> sampler,
+                                                       const Volume* in_memory, Device device,
+                                                       const TrainOptions& options, int online_cell_size,
+                                                       SessionOptions session,
+                                                       cuda::MlpPath mlp = cuda::MlpPath::Auto);
 
 // Loads the config, opens the training data, sizes the model, creates it and the backend on the chosen
 // device. `message` gets every line for people (volume summary, notes, the device).

@@ -35,8 +35,16 @@ std::unique_ptr<TrainingSession> make_training_session(Model& model, const Volum
   if (!(model.dims == volume.dims))
     fail("the model represents {}x{}x{} voxels, the volume has {}x{}x{}", model.dims.x, model.dims.y, model.dims.z,
          volume.dims.x, volume.dims.y, volume.dims.z);
-  auto trainer = make_trainer(device, *model.net, std::make_shared<InCoreSampler>(volume), &volume, options);
-  if (online_cell_size > 0) trainer->enable_online_ranges(volume.dims, online_cell_size);
+  return make_training_session(model, std::make_shared<InCoreSampler>(volume), &volume, device, options,
+                               online_cell_size, std::move(session));
+}
+
+std::unique_ptr<TrainingSession> make_training_session(Model& model, std::shared_ptr<Sampler> sampler,
+                                                       const Volume* in_memory, Device device,
+                                                       const TrainOptions& options, int online_cell_size,
+                                                       SessionOptions session, cuda::MlpPath mlp) {
+  auto trainer = make_trainer(device, *model.net, std::move(sampler), in_memory, options, mlp);
+  if (online_cell_size > 0) trainer->enable_online_ranges(in_memory ? in_memory->dims : model.dims, online_cell_size);
   return std::make_unique<TrainingSession>(model, std::move(trainer), std::move(session));
 }
 
