@@ -56,6 +56,26 @@ bool same_image(const Image& a, const Image& b) {
   return a.pixels.size() == b.pixels.size();
 }
 
+// The ramp transfer function over a volume's macro-cells of 8 voxels, and in-shader options of w x h.
+struct RampScene {
+  TransferFunction tf = tf_preset("ramp");
+  MacroCells mc;
+  RenderOptions o;
+  RampScene(const Volume& vol, int w, int h) : mc(value_ranges_from_grid(view_of(vol), 8), box_of(vol)) {
+    mc.update(tf);
+    o.width = w, o.height = h;
+    o.strategy = RenderStrategy::InShader;
+  }
+};
+
+// A small hash-grid model of vol after 50 steps: a network whose decode is not the volume.
+Model briefly_trained_model(const Volume& vol) {
+  Model model = create_model(ModelConfig::from_json(small_hash_config(12, 16, 1)), vol);
+  CpuTrainer trainer(*model.net, std::make_shared<InCoreSampler>(vol), TrainOptions{8192, 3});
+  for (int i = 0; i < 50; ++i) trainer.step();
+  return model;
+}
+
 RenderParams params_for(const Camera& cam, Int3 dims, int width, int height) {
   RenderParams p;
   p.cam = make_camera_frame(cam, width, height);
@@ -162,12 +182,10 @@ TEST(BrickCache, ImagesStayExactWhileThePoolEvicts) {
   BrickCacheSettings s = level0(8, 5 * 9 * 9 * 9 * sizeof(float));
   s.decode_seconds = 100;
   CachedField cache(grid, grid_decode(vol), vol.dims, s);
-  TransferFunction tf = tf_preset("ramp");
-  MacroCells mc(value_ranges_from_grid(view_of(vol), 8), box_of(vol));
-  mc.update(tf);
-  RenderOptions o;
-  o.width = 16, o.height = 16;
-  o.strategy = RenderStrategy::InShader;
+  RampScene scene(vol, 16, 16);
+  const TransferFunction& tf = scene.tf;
+  const MacroCells& mc = scene.mc;
+  RenderOptions& o = scene.o;
   for (int frame = 0; frame < 6; ++frame) {
     const float c = frame % 2 == 0 ? 4.0f : 28.0f;  // the middle of column (0, 0) or (3, 3)
     const Camera cam{Vec3f{c, c, 62}, Vec3f{c, c, 0}, Vec3f{0, 1, 0}, 5};
@@ -377,12 +395,10 @@ TEST(BrickCache, UnderATinyBudgetCoarserLevelsCoverEverySample) {
   s.misses = CacheMisses::Coarser;
   s.decode_seconds = 100;
   CachedField cache(grid, grid_decode(vol), vol.dims, s);
-  TransferFunction tf = tf_preset("ramp");
-  MacroCells mc(value_ranges_from_grid(view_of(vol), 8), box_of(vol));
-  mc.update(tf);
-  RenderOptions o;
-  o.width = 48, o.height = 40;
-  o.strategy = RenderStrategy::InShader;
+  RampScene scene(vol, 48, 40);
+  const TransferFunction& tf = scene.tf;
+  const MacroCells& mc = scene.mc;
+  const RenderOptions& o = scene.o;
   for (int frame = 0; frame < 4; ++frame) {
     const Camera cam = orbit_camera(box_of(vol), 30.0f + 50.0f * float(frame), 20, 30);
     Image img = CpuRenderer(cache, box_of(vol), mc, tf, cam, o).render(1);
@@ -395,9 +411,7 @@ TEST(BrickCache, UnderATinyBudgetCoarserLevelsCoverEverySample) {
 
 TEST(BrickCache, AModelsCacheEqualsItsDecodeAndRendersAsTheDecodedGrid) {
   Volume vol = synth(Int3{28, 24, 20});
-  Model model = create_model(ModelConfig::from_json(small_hash_config(12, 16, 1)), vol);
-  CpuTrainer trainer(*model.net, std::make_shared<InCoreSampler>(vol), TrainOptions{8192, 3});
-  for (int i = 0; i < 50; ++i) trainer.step();
+  Model model = briefly_trained_model(vol);
   NetworkField field(*model.net, model.dims);
   BrickCacheSettings s = level0(8);
   s.decode_seconds = 100;
@@ -437,9 +451,7 @@ TEST(BrickCache, AModelsCacheEqualsItsDecodeAndRendersAsTheDecodedGrid) {
 // as a grid over Decoder's decode at 7 x 6 x 5.
 TEST(BrickCache, AModelsCoarserLevelsEqualItsDecodeAtTheirDims) {
   Volume vol = synth(Int3{28, 24, 20});
-  Model model = create_model(ModelConfig::from_json(small_hash_config(12, 16, 1)), vol);
-  CpuTrainer trainer(*model.net, std::make_shared<InCoreSampler>(vol), TrainOptions{8192, 3});
-  for (int i = 0; i < 50; ++i) trainer.step();
+  Model model = briefly_trained_model(vol);
   NetworkField field(*model.net, model.dims);
   BrickCacheSettings s = level0(8);
   s.lod_pixels = 1e9f;  // a voxel of any level covers fewer pixels: the coarsest level everywhere
