@@ -272,6 +272,8 @@ Json TrainingSession::finalize_model(bool quantize) {
 }
 
 TrainingResult TrainingSession::finish(const FinishOptions& o) {
+  if (data_ && o.save && opts_.output.empty())
+    fail("finish() needs an output path to save to (FinishOptions::save = false keeps the model in memory)");
   TrainingResult r;
   r.steps = steps_;
   r.seconds = train_seconds_;
@@ -279,7 +281,10 @@ TrainingResult TrainingSession::finish(const FinishOptions& o) {
   r.samples_per_second = r.seconds > 0 ? double(r.steps) * double(trainer_->batch()) / r.seconds : 0.0;
   const Json bound = finalize_model(o.quantize);
   r.psnr = r.max_abs_error = r.max_abs_error_original = std::nan("");
-  if (!data_) return r;
+  if (!data_) {  // a model in memory: saved only where the session was given an output
+    if (o.save && !opts_.output.empty()) save_model(opts_.output, *model_);
+    return r;
+  }
   const TrainingData& data = *data_;
   Network& net = *model_->net;
   const Device dev = trainer_->device();
@@ -316,7 +321,7 @@ TrainingResult TrainingSession::finish(const FinishOptions& o) {
   }
   if (std::isfinite(r.psnr)) model_->training["psnr"] = r.psnr;
   if (r.ssim) model_->training["ssim"] = *r.ssim;
-  if (o.save && !opts_.output.empty()) {
+  if (o.save) {
     save_model(opts_.output, *model_);
     r.model_bytes = file_size(opts_.output);
   } else {

@@ -70,7 +70,7 @@ struct FinishOptions {
   bool evaluate = true;
   bool ssim = true;
   int64_t eval_samples = 0;
-  bool save = true;  // where options().output is set
+  bool save = true;  // to options().output (a session on training data needs one; in memory: no file)
 };
 
 // What finish() measured, and the record of `vnr train --report`.
