@@ -22,6 +22,9 @@ struct VolumeOpenOptions {
 Volume open_volume(const std::string& path, const VolumeOpenOptions& options = {});
 // What open_volume would read, without reading the data (dims, dtype, range overrides, timesteps).
 VolumeDesc describe_volume_file(const std::string& path, const VolumeOpenOptions& options = {});
+// Whether `path` names an HDF5 or NetCDF dataset (FILE.h5:/DATASET, FILE.nc:VARIABLE), or is such a file
+// itself: what `vnr info` reads as a volume rather than a model.
+bool is_dataset_path(const std::string& path);
 
 // A volume from a caller's values (original units, x fastest, dims.count() of them): normalised
 // exactly as open_volume normalises a float32 file holding the same values. `range` overrides the

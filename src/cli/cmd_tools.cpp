@@ -15,7 +15,6 @@
 #include "vnr/cuda/cuda.h"
 #include "vnr/nn/mlp_kernels.h"
 #include "vnr/model.h"
-#include "vnr/volume/dataset.h"
 #include "vnr/volume/stream.h"
 #include "vnr/volume/writer.h"
 
@@ -202,11 +201,6 @@ void print_system_info(bool json) {
 
 // `vnr info FILE.h5:/DATASET` (or FILE.nc:VARIABLE, or the file alone: then the error lists its
 // volumes): what the volume layer reads from the dataset.
-bool is_dataset_argument(const std::string& path) {
-  if (file_exists(path)) return !detail::dataset_encoding_of_extension(extension_of(path)).empty();
-  return path.find(':') != std::string::npos;
-}
-
 void print_dataset_info(const std::string& path, bool json) {
   const VolumeDesc d = describe_volume_file(path);
   if (json) {
@@ -233,7 +227,7 @@ void add_info(CLI::App& app) {
   c->add_flag("--json", a->json, "print JSON");
   c->callback([a]() {
     if (a->model.empty()) return print_system_info(a->json);
-    if (is_dataset_argument(a->model)) return print_dataset_info(a->model, a->json);
+    if (is_dataset_path(a->model)) return print_dataset_info(a->model, a->json);
     Model m = load_model(a->model);
     const Network& n = *m.net;
     const uint64_t bytes = model_file_bytes(a->model);

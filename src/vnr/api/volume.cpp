@@ -2,6 +2,8 @@
 #include "vnr/volume.h"
 #include <new>
 #include "vnr/error.h"
+#include "vnr/fileio.h"
+#include "vnr/volume/dataset.h"
 #include "vnr/volume/sample_io.h"
 
 namespace vnr {
@@ -57,6 +59,11 @@ Volume volume_from_samples(const void* samples, DType dtype, Int3 dims, bool big
 Volume volume_from_array(const float* values, Int3 dims, std::optional<double> range_lo,
                          std::optional<double> range_hi, NonFinitePolicy policy) {
   return volume_from_samples(values, DType::Float32, dims, false, range_lo, range_hi, policy);
+}
+
+bool is_dataset_path(const std::string& path) {
+  if (file_exists(path)) return !detail::dataset_encoding_of_extension(extension_of(path)).empty();
+  return path.find(':') != std::string::npos;
 }
 
 }  // namespace vnr
