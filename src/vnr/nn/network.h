@@ -33,7 +33,7 @@ void tcnn_uniform_fill(Pcg32& rng, float* out, uint64_t n, float lower, float up
 constexpr int kChunk = 256;
 
 class Network {
-  big_vector<float> params_;  // first, where the public array was: the training threads read it
+  big_vector<float> params_;  // the fp32 master copy (first, as the public array was: the same layout)
 
 public:
   explicit Network(const ModelConfig& config, uint32_t n_output_dims = 1);
