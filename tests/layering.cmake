@@ -43,7 +43,7 @@ set(frontend_cli cuda/cuda.h nn/config.h nn/mlp_kernels.h nn/network.h online/pr
     render/renderer.h render/transfer_function.h train/bricks.h train/make_trainer.h train/model_io.h
     train/psnr_search.h train/series.h train/session.h train/training_data.h volume/raw_access.h
     volume/stream.h volume/writer.h)
-set(frontend_python core/metrics.h core/parallel.h train/bricks.h train/psnr_search.h volume/sample_io.h
+set(frontend_python core/parallel.h train/bricks.h train/psnr_search.h volume/sample_io.h
     volume/writer.h)
 set(frontend_view render/image.h)
 set(frontend_mpi render/image.h)

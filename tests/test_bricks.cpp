@@ -10,7 +10,7 @@
 #include "bricks_test_support.h"
 #include "test_support.h"
 #include "vnr/bricks.h"
-#include "vnr/core/metrics.h"
+#include "vnr/metrics.h"
 #include "vnr/fields/bricked_field.h"
 #include "vnr/viewer.h"
 #include "vnr/volume/raw_access.h"

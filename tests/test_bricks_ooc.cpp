@@ -10,7 +10,7 @@
 #include "bricks_test_support.h"
 #include "test_support.h"
 #include "vnr/bricks.h"
-#include "vnr/core/metrics.h"
+#include "vnr/metrics.h"
 #include "vnr/train/evaluate.h"
 #include "vnr/train/streaming_samplers.h"
 

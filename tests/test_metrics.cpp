@@ -1,7 +1,7 @@
 #include <gtest/gtest.h>
 #include <cmath>
 #include <vector>
-#include "vnr/core/metrics.h"
+#include "vnr/metrics.h"
 #include "vnr/core/parallel.h"
 #include "vnr/core/rng.h"
 

@@ -14,7 +14,7 @@
 #include <string>
 #include <vector>
 #include "vnr/error.h"
-#include "vnr/core/metrics.h"
+#include "vnr/metrics.h"
 #include "vnr/core/rng.h"
 #include "vnr/nn/config.h"
 #include "vnr/nn/network.h"

@@ -1,7 +1,7 @@
-// vnr.metrics: `vnr eval`'s PSNR and 3-D SSIM (core/metrics.h) over numpy arrays in original units.
+// vnr.metrics: `vnr eval`'s PSNR and 3-D SSIM (vnr/metrics.h) over numpy arrays in original units.
 #include "bindings.h"
 #include "vnr/error.h"
-#include "vnr/core/metrics.h"
+#include "vnr/metrics.h"
 
 namespace vnr::py {
 

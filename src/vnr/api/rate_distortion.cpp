@@ -9,7 +9,7 @@
 #include <unistd.h>
 #include "vnr/error.h"
 #include "vnr/fileio.h"
-#include "vnr/core/metrics.h"
+#include "vnr/metrics.h"
 #include "vnr/progress.h"
 #include "vnr/model.h"
 #include "vnr/trainer.h"

@@ -1,4 +1,4 @@
-#include "vnr/core/metrics.h"
+#include "vnr/metrics.h"
 #include <algorithm>
 #include <cmath>
 #include <vector>

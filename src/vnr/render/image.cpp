@@ -10,7 +10,7 @@
 #include <limits>
 #include "vnr/error.h"
 #include "vnr/fileio.h"
-#include "vnr/core/metrics.h"
+#include "vnr/metrics.h"
 
 namespace vnr {
 

@@ -36,7 +36,7 @@ Image read_image(const std::string& path);
 // range 1, sample covariance) over the RGB channels clamped to [0,1]; alpha ignored. Sizes must match.
 // mse is over all pixels and the three channels; psnr = 999 when mse == 0 (as for volumes: JSON has
 // no infinity). SSIM is averaged over the 7x7 windows fully inside the image and over R, G, B
-// (core/metrics.h ssim3d with one slice); an image narrower or shorter than 7 uses its whole width or
+// (vnr/metrics.h ssim3d with one slice); an image narrower or shorter than 7 uses its whole width or
 // height as the window.
 struct ImageMetrics {
   double psnr = 0, ssim = 0, mse = 0;

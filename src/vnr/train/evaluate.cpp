@@ -6,7 +6,7 @@
 #include <cmath>
 #include <vector>
 #include "vnr/error.h"
-#include "vnr/core/metrics.h"
+#include "vnr/metrics.h"
 #include "vnr/progress.h"
 #include "vnr/core/rng.h"
 #include "vnr/volume/raw_access.h"

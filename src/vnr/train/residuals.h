@@ -10,7 +10,7 @@
 #include "vnr/dtype.h"
 #include "vnr/json.h"
 #include "vnr/math.h"
-#include "vnr/core/metrics.h"
+#include "vnr/metrics.h"
 #include "vnr/nn/network.h"
 
 namespace vnr {
