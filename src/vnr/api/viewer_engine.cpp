@@ -6,7 +6,6 @@
 #include "vnr/train/bricks.h"
 #include "vnr/error.h"
 #include "vnr/fileio.h"
-#include "vnr/units.h"
 #include "vnr/cuda/cuda.h"
 #include "vnr/train/make_trainer.h"
 
@@ -42,9 +41,7 @@ void check_camera(const Camera& c) {
 void ViewerEngine::Impl::open(const ViewerSetup& s) {
   setup = s;
   if (s.batch <= 0 || s.batch % kChunk != 0) fail("batch must be a positive multiple of {}, got {}", kChunk, s.batch);
-  if (const int64_t b = BrickCacheSettings{}.brick + 1; s.cache_budget > 0 && s.cache_budget < uint64_t(b * b * b) * sizeof(float))
-    fail("a cache budget of {} holds no brick of {}^3 voxels ({})", human_bytes(double(s.cache_budget)), b,
-         human_bytes(double(b * b * b) * sizeof(float)));
+  if (s.cache_budget > 0) check_cache_budget(s.cache_budget, BrickCacheSettings{}.brick);
   inference = parse_precision("auto");
   input = open_render_input(s.input, s.ground_truth, s.volume_options, inference);
   if (input.volume) volume = std::make_unique<Volume>(std::move(*input.volume));

@@ -14,6 +14,13 @@
 
 namespace vnr {
 
+void check_cache_budget(uint64_t budget_bytes, int brick) {
+  const double brick_bytes = std::pow(double(brick + 1), 3) * sizeof(float);
+  if (double(budget_bytes) < brick_bytes)
+    fail("a cache budget of {} holds no brick of {}^3 voxels ({})", human_bytes(double(budget_bytes)), brick + 1,
+         human_bytes(brick_bytes));
+}
+
 uint64_t default_cache_budget() {
   const uint64_t quarter = available_memory_bytes() / 4;
   return std::clamp<uint64_t>(quarter, uint64_t(64) << 20, uint64_t(4) << 30);
@@ -108,9 +115,7 @@ CachedField::CachedField(const RenderableField& source, VoxelDecode decode, Int3
   v.cache = &s;
   v.misses = &s.misses;
   const uint64_t brick_bytes = uint64_t(v.brick_floats) * sizeof(float);
-  if (settings_.budget_bytes < brick_bytes)
-    fail("a cache budget of {} holds no brick of {}^3 voxels ({})", human_bytes(double(settings_.budget_bytes)), B + 1,
-         human_bytes(double(brick_bytes)));
+  check_cache_budget(settings_.budget_bytes, B);
   s.slots = int32_t(std::min<uint64_t>(settings_.budget_bytes / brick_bytes, uint64_t(INT32_MAX) / uint64_t(v.brick_floats)));
   try {  // not touched here: the OS commits the pages as bricks are written
     s.pool.reset(new float[size_t(s.slots) * size_t(v.brick_floats)]);

@@ -39,6 +39,8 @@ struct BrickCacheSettings {
   Int3 dims{0, 0, 0};            // level 0's voxels (Renderer: 0 = the model's dims; any size)
 };
 
+// Fails with the sizes unless `budget_bytes` holds one brick of `brick`^3 cells ((brick + 1)^3 floats).
+void check_cache_budget(uint64_t budget_bytes, int brick);
 // A quarter of the memory available, at most 4 GiB, at least 64 MiB.
 uint64_t default_cache_budget();
 // "512MiB", "2GiB", "100M", plain bytes; 0 or "auto" = default_cache_budget(). Fails on anything else.

@@ -82,12 +82,23 @@ Residuals quantise(const Coefficients& t, Int3 dims, double step) {
   });
   // Each level's offset: the mean of |c| / step - |q| over its non-zero coefficients, to 1e-3 (a
   // Laplacian's bins hold more values near their lower end than a uniform one would).
-  std::vector<double> sum(size_t(t.levels) + 1, 0.0), count(size_t(t.levels) + 1, 0.0);
-  for (size_t i = 0; i < r.q.size(); ++i)
-    if (r.q[i] != 0 && std::abs(r.q[i]) < kMaxContextMagnitude) {
-      sum[t.level[i]] += std::fabs(double(t.c[i])) / step - std::abs(double(r.q[i]));
-      count[t.level[i]] += 1;
-    }
+  // Every search step quantises again: the sums go in chunks of fixed size, added in chunk order (the
+  // same offsets for any thread count).
+  const size_t L = size_t(t.levels) + 1;
+  constexpr int64_t kChunk = 1 << 16;
+  const int64_t chunks = (dims.count() + kChunk - 1) / kChunk;
+  std::vector<double> partial(size_t(chunks) * 2 * L, 0.0);
+  parallel_for(chunks, [&](int64_t k) {
+    double* sum = partial.data() + size_t(k) * 2 * L;
+    for (int64_t i = k * kChunk; i < std::min<int64_t>(dims.count(), (k + 1) * kChunk); ++i)
+      if (r.q[size_t(i)] != 0 && std::abs(r.q[size_t(i)]) < kMaxContextMagnitude) {
+        sum[t.level[size_t(i)]] += std::fabs(double(t.c[size_t(i)])) / step - std::abs(double(r.q[size_t(i)]));
+        sum[L + t.level[size_t(i)]] += 1;
+      }
+  });
+  std::vector<double> sum(L, 0.0), count(L, 0.0);
+  for (int64_t k = 0; k < chunks; ++k)
+    for (size_t l = 0; l < L; ++l) sum[l] += partial[size_t(k) * 2 * L + l], count[l] += partial[size_t(k) * 2 * L + L + l];
   r.wavelet_offsets.assign(sum.size(), 0.0);
   for (size_t l = 0; l < sum.size(); ++l)
     if (count[l] > 0) r.wavelet_offsets[l] = std::nearbyint(1000 * sum[l] / count[l]) / 1000;

@@ -288,8 +288,6 @@ TrainingResult TrainingSession::finish(const FinishOptions& o) {
   const TrainingData& data = *data_;
   Network& net = *model_->net;
   const Device dev = trainer_->device();
-  const bool with_ssim = o.ssim;
-  const int64_t eval_samples = o.eval_samples;
   // Exact over the volume in memory; a volume that is not in memory gets a PSNR estimate from random
   // voxels (a full pass can take longer than the training did).
   Json evaluation;
@@ -298,14 +296,14 @@ TrainingResult TrainingSession::finish(const FinishOptions& o) {
     evaluation = {{"method", "none"}};
     r.evaluation_note = " (not evaluated)";
   } else if (data.vol) {
-    EvalResult ev = evaluate(net, *data.vol, with_ssim, dev, residuals);
+    EvalResult ev = evaluate(net, *data.vol, o.ssim, dev, residuals);
     r.psnr = ev.psnr;
     r.max_abs_error = ev.max_abs_error;
     r.max_abs_error_original = ev.max_abs_error_original;
-    if (with_ssim) r.ssim = ev.ssim;
+    if (o.ssim) r.ssim = ev.ssim;
     evaluation = {{"method", "full"}};
-  } else if (eval_samples > 0) {
-    const int64_t n = std::min<int64_t>(eval_samples, int64_t(data.dims.count()));
+  } else if (o.eval_samples > 0) {
+    const int64_t n = std::min<int64_t>(o.eval_samples, int64_t(data.dims.count()));
     SampledEval ev = evaluate_sampled(net, data.desc, data.lo, data.hi, n, trainer_->seed() + 1, data.load, dev);
     r.psnr = ev.psnr;
     r.max_abs_error = ev.max_abs_error;
