@@ -244,10 +244,10 @@ TEST(VnrFile, WrongMagicAndNewerVersion) {
   EXPECT_EQ(error_of([&] { read_vnr(path); }), fmt::format("'{}' is not a vnr model file", path));
 
   std::string newer = b;
-  newer[8] = 3;  // a future writer would also recompute the CRC; the version check must come first
+  newer[8] = 4;  // a future writer would also recompute the CRC; the version check must come first
   write_bytes(path, newer);
   std::string msg = error_of([&] { read_vnr(path); });
-  EXPECT_TRUE(contains(msg, "written by a newer vnr (format 3 > 2)")) << msg;
+  EXPECT_TRUE(contains(msg, "written by a newer vnr (format 4 > 3)")) << msg;
   EXPECT_EQ(error_of([&] { read_model(path); }), msg);
 
   // Neither format: read_model says so on one line.

@@ -8,6 +8,7 @@
 #include "vnr/fileio.h"
 #include "vnr/core/half.h"
 #include "vnr/math.h"
+#include "vnr/nn/header_codec.h"
 #include "vnr/nn/model_file.h"
 #include "vnr/nn/network.h"
 #include "vnr/nn/param_codec.h"
@@ -65,19 +66,36 @@ uint32_t version_of(const std::string& bytes) {
   return v;
 }
 
+uint64_t header_length(const std::string& file) {
+  uint64_t n;
+  std::memcpy(&n, file.data() + 16, 8);
+  return n;
+}
+
+// Where the first data block starts: format 3 does not pad (docs/MODEL_FORMAT.md 1.6).
+uint64_t first_block(const std::string& file) {
+  const uint64_t end = 24 + header_length(file);
+  return version_of(file) >= 3 ? end : next_multiple(end, 64);
+}
+
+// The header JSON of a .vnr file, coded (format 3) or not.
+Json header_of(const std::string& file) {
+  const std::string stored = file.substr(24, header_length(file));
+  return Json::parse(version_of(file) >= 3 ? decompress_vnr_header("<test>", stored, 1 << 20) : stored);
+}
+
 // Rewrites a .vnr file's header JSON (blocks re-padded behind it, CRC recomputed): damage that the
 // checksum does not catch, as a buggy or hostile writer would produce.
 std::string with_header(const std::string& file, const std::function<void(Json&)>& edit) {
-  uint64_t hlen;
-  std::memcpy(&hlen, file.data() + 16, 8);
-  Json h = Json::parse(file.substr(24, hlen));
-  const uint64_t blocks = next_multiple(24 + hlen, 64), end = file.size() - 12;
+  const uint64_t blocks = first_block(file), end = file.size() - 12;
+  Json h = header_of(file);
   edit(h);
   std::string header = h.dump(), out = file.substr(0, 16);
+  if (version_of(file) >= 3) header = compress_vnr_header(header);
   const uint64_t n = header.size();
   out.append(reinterpret_cast<const char*>(&n), 8);
   out += header;
-  out.resize(next_multiple(out.size(), 64), '\0');
+  if (version_of(file) < 3) out.resize(next_multiple(out.size(), 64), '\0');
   out += file.substr(blocks, end - blocks);
   const uint32_t crc = crc32_of(out.data(), out.size());
   out.append(reinterpret_cast<const char*>(&crc), 4);
@@ -125,7 +143,7 @@ TEST(ParamCodec, QuantizeMatchesAPlainReference) {
   for (const auto& s : fine) EXPECT_GT(s.step, 1e-5f);
 }
 
-TEST(ParamCodec, CompressedRoundTripIsExactAndVersion2) {
+TEST(ParamCodec, CompressedRoundTripIsExactAndVersion3) {
   TmpDir tmp;
   const std::string a = tmp.str() + "/a.vnr", b = tmp.str() + "/b.vnr";
   ModelFile m = make_model(2);
@@ -133,7 +151,7 @@ TEST(ParamCodec, CompressedRoundTripIsExactAndVersion2) {
   quantize_params(m.params, m.param_segments);
   write_vnr(a, m);
   const std::string bytes = read_file(a);
-  EXPECT_EQ(version_of(bytes), 2u);
+  EXPECT_EQ(version_of(bytes), 3u);
   EXPECT_EQ(vnr_file_bytes(m), bytes.size());
   ModelFile r = read_vnr(a);
   EXPECT_EQ(r.params, m.params);
@@ -154,6 +172,60 @@ TEST(ParamCodec, CompressedRoundTripIsExactAndVersion2) {
   EXPECT_EQ(version_of(read_file(b)), 1u);
   EXPECT_LT(bytes.size() * 2, read_file(b).size());
   EXPECT_EQ(read_vnr(b).params, m.params);
+}
+
+// Format 3 codes the header against a fixed dictionary and leaves the blocks unpadded
+// (docs/MODEL_FORMAT.md 1.6); files of format 2 still read.
+TEST(ParamCodec, Version3CodesTheHeaderAndVersion2StillReads) {
+  // Every file of format 3 depends on these exact bytes.
+  EXPECT_EQ(kVnrHeaderDictionary.size(), 8549u);
+  EXPECT_EQ(crc32_of(kVnrHeaderDictionary.data(), kVnrHeaderDictionary.size()), 0xe3543dc2u);
+
+  TmpDir tmp;
+  const std::string path = tmp.str() + "/a.vnr", bad = tmp.str() + "/bad.vnr";
+  ModelFile m = make_model(4);
+  m.param_segments = segments_with_step(m, 0.01f, 0.004f);
+  quantize_params(m.params, m.param_segments);
+  m.residuals_meta = Json{{"codec", "test"}};
+  m.residuals_bytes.assign(10, 7);
+  write_vnr(path, m);
+  const std::string b = read_file(path);
+  ASSERT_EQ(version_of(b), 3u);
+  const Json h = header_of(b);
+  EXPECT_EQ(h["config"], m.config);
+  EXPECT_EQ(h["training"], m.training);
+  EXPECT_LT(header_length(b) * 3, h.dump().size());  // the dictionary knows the keys and the config
+  // No padding: the residual block ends right before the trailer.
+  EXPECT_EQ(b.substr(b.size() - 22, 10), std::string(10, '\7'));
+  const ModelFile r = read_vnr(path);
+  EXPECT_EQ(r.params, m.params);
+  EXPECT_EQ(r.residuals_bytes, m.residuals_bytes);
+
+  // A damaged coded header under a valid checksum: one clear line, never a crash.
+  std::mt19937 rng(5);
+  for (int i = 0; i < 100; ++i) {
+    std::string c = b;
+    const size_t pos = 24 + rng() % header_length(b);
+    c[pos] = char(uint8_t(c[pos]) ^ uint8_t(1 + rng() % 255));
+    const uint32_t crc = crc32_of(c.data(), c.size() - 12);
+    std::memcpy(c.data() + c.size() - 12, &crc, 4);
+    write_bytes(bad, c);
+    try {
+      read_vnr(bad);
+    } catch (const Error& e) {
+      EXPECT_EQ(std::string(e.what()).find('\n'), std::string::npos) << e.what();
+    }
+  }
+  std::string unended = b.substr(0, 24 + header_length(b) / 2);
+  write_bytes(bad, unended);
+  EXPECT_NE(one_line_error_of([&] { read_vnr(bad); }).find("truncated"), std::string::npos);
+
+  // A compact model written before format 3 (tests/data, format 2, padded, plain header) reads.
+  const std::string v2 = read_file(std::string(VNR_TEST_DATA_DIR) + "/compact_quant_zstd.vnr");
+  ASSERT_EQ(version_of(v2), 2u);
+  const ModelFile old = read_vnr(std::string(VNR_TEST_DATA_DIR) + "/compact_quant_zstd.vnr");
+  EXPECT_EQ(Json(old.config), header_of(v2)["config"]);
+  EXPECT_FALSE(old.param_segments.empty());
 }
 
 TEST(ParamCodec, RawSegmentsKeepEveryBitPattern) {
@@ -203,7 +275,7 @@ TEST(ParamCodec, QuantizedInferenceEqualsDequantizeThenInfer) {
   EXPECT_NE(0, std::memcmp(a.data(), c.data(), a.size() * 4));  // quantization did change the model
 }
 
-TEST(ResidualBlock, RoundTripsAlignedAfterTheMacrocells) {
+TEST(ResidualBlock, RoundTripsAfterTheMacrocells) {
   TmpDir tmp;
   const std::string path = tmp.str() + "/m.vnr";
   for (bool compressed : {false, true})
@@ -215,10 +287,9 @@ TEST(ResidualBlock, RoundTripsAlignedAfterTheMacrocells) {
       for (int i = 0; i < 301; ++i) m.residuals_bytes.push_back(uint8_t(i * 7));
       write_vnr(path, m);
       const std::string bytes = read_file(path);
-      EXPECT_EQ(version_of(bytes), 2u);
-      // The block is the last before the trailer and starts on a 64-byte boundary.
+      EXPECT_EQ(version_of(bytes), 3u);
+      // The block is the last before the trailer (format 3: no padding before it).
       const uint64_t start = bytes.size() - 12 - 301;
-      EXPECT_EQ(start % 64, 0u);
       EXPECT_EQ(0, std::memcmp(bytes.data() + start, m.residuals_bytes.data(), 301));
       ModelFile r = read_vnr(path);
       EXPECT_EQ(r.residuals_meta, m.residuals_meta);
@@ -274,9 +345,7 @@ TEST(ParamCodec, DamagedFilesAreClearErrors) {
     std::swap(s[0]["bytes"], s[2]["bytes"]);
   }, "corrupted");
   // Damage inside a compressed frame under a valid checksum never crashes.
-  uint64_t hlen;
-  std::memcpy(&hlen, b.data() + 16, 8);
-  const uint64_t block = next_multiple(24 + hlen, 64);
+  const uint64_t block = first_block(b);
   for (int i = 0; i < 100; ++i) {
     std::string c = b;
     const size_t pos = block + rng() % 200;
@@ -309,7 +378,7 @@ TEST(CompactMacrocells, WidenOutwardsAndKeepEmptyCells) {
   m.macrocell_ranges[6] = 0.0f, m.macrocell_ranges[7] = 1.0f;
   m.compact_macrocells = true;
   write_vnr(path, m);
-  EXPECT_EQ(version_of(read_file(path)), 2u);
+  EXPECT_EQ(version_of(read_file(path)), 3u);
   ModelFile r = read_vnr(path);
   EXPECT_TRUE(r.compact_macrocells);
   ASSERT_EQ(r.macrocell_ranges.size(), m.macrocell_ranges.size());
@@ -390,9 +459,7 @@ TEST(ParamCodec, ContextCodedSegmentsRoundTrip) {
   quantize_params(m.params, m.param_segments);
   write_vnr(a, m);
   const std::string bytes = read_file(a);
-  uint64_t hlen;
-  std::memcpy(&hlen, bytes.data() + 16, 8);
-  const Json h = Json::parse(bytes.substr(24, hlen));
+  const Json h = header_of(bytes);
   EXPECT_EQ(h["params_encoding"]["codec"], kParamsContextCodec);
   const Json& segs = h["params_encoding"]["segments"];
   EXPECT_FALSE(segs[0].contains("coder"));

@@ -375,11 +375,13 @@ TEST(RateControl, ResidualSplitGivesTheNetworkATenthAndAFloor) {
   s = residual_network_split(wmag, wmag / 4, 64, true, nullptr);  // a tenth is 4.7 KB: its own
   EXPECT_DOUBLE_EQ(s.network_ratio, 640.0);
   EXPECT_TRUE(s.small_network);
-  s = residual_network_split(wmag, wmag / 4, 128, true, nullptr);  // a tenth is 2.4 KB: 4 KiB, 17 %
-  EXPECT_DOUBLE_EQ(s.network_ratio, double(wmag) / 4096);
+  s = residual_network_split(wmag, wmag / 4, 128, true, nullptr);  // a tenth is 2.4 KB: its own
+  EXPECT_DOUBLE_EQ(s.network_ratio, 1280.0);
+  s = residual_network_split(wmag, wmag / 4, 256, true, nullptr);  // a tenth is 1.2 KB: 2 KiB, 17 %
+  EXPECT_DOUBLE_EQ(s.network_ratio, double(wmag) / 2048);
   EXPECT_TRUE(s.small_network);
   EXPECT_EQ(residual_network_split(wmag, wmag / 4, 64, false, nullptr).network_ratio, 0.0);  // 32 KiB: 70 %
-  EXPECT_EQ(residual_network_split(wmag, wmag / 4, 512, true, nullptr).network_ratio, 0.0);  // 4 KiB > a half
+  EXPECT_EQ(residual_network_split(wmag, wmag / 4, 1024, true, nullptr).network_ratio, 0.0);  // 2 KiB > a half
 }
 
 // --target-ratio alone on a volume where the file has bits to spare (1 bit per voxel): --residuals auto

@@ -21,22 +21,23 @@ struct ModelFile {
   std::vector<float> macrocell_ranges;  // 2 * macrocell_dims.count() floats: min0, max0, min1, ...
   Json training;                  // optional training summary (steps, seconds, psnr...); may be null
   // Optional error-bound residuals (docs/MODEL_FORMAT.md): an opaque block owned by the train layer,
-  // described by residuals_meta; both empty when absent. A file with them is format version 2.
+  // described by residuals_meta; both empty when absent. A file with them is format version 3 (or 2).
   Json residuals_meta;
   std::vector<uint8_t> residuals_bytes;
   // Optional compact storage (param_codec.h): when non-empty, write_vnr stores `params` quantized
-  // with these per-segment steps and zstd-coded (format version 2); read_vnr fills them back and
+  // with these per-segment steps and zstd-coded (format version 3, or 2); read_vnr fills them back and
   // dequantizes into `params`. Call quantize_params first so that `params` equal what a read returns.
   std::vector<ParamSegment> param_segments;
-  // Store the macro-cell ranges in 8 bits, widened outwards (param_codec.h; format version 2). Set by
+  // Store the macro-cell ranges in 8 bits, widened outwards (param_codec.h; format version 3, or 2). Set by
   // read_vnr when the file stores them so. Ranges outside [0, 1] are then stored as float32 anyway.
   bool compact_macrocells = false;
 };
 
 // Native .vnr format (docs/MODEL_FORMAT.md): magic "VNRMODEL", format version, a JSON header (config,
 // dims, dtype, range, macro-cell dims, param count, training summary), then the fp16 parameter
-// block (or, format 2, the compressed one), the macro-cell block and (format 2) the residual block,
-// then a CRC-32 of everything before it. Written atomically; format 1 unless version 2 is needed.
+// block (or, formats 2 and 3, the compressed one), the macro-cell block and (2, 3) the residual block,
+// then a CRC-32 of everything before it. Written atomically: format 1 for a model that needs nothing
+// more, else format 3 (format 2 plus a zstd-coded header); format 2 is read as before.
 // Loading a truncated, corrupted or newer-version file is a clear error.
 void write_vnr(const std::string& path, const ModelFile& m);
 ModelFile read_vnr(const std::string& path);

@@ -53,7 +53,7 @@ std::vector<uint16_t> decode_params(const std::string& path, const char* block, 
 // not parse leaves them as they are (the model itself then fails to load, with its own error).
 void restore_segment_layouts(const Json& config, std::vector<ParamSegment>& segments);
 
-// Macro-cell ranges in 8 bits (format 2, compact models): each min rounded down and each max rounded
+// Macro-cell ranges in 8 bits (formats 2 and 3, compact models): each min rounded down and each max rounded
 // up to a multiple of 1/255, so a decoded range always contains the stored one and empty-space
 // skipping stays conservative; empty cells (min > max) stay empty. zstd-coded, min and max planes.
 // Only for ranges inside [0, 1] (and empty ones): macrocells_fit_u8 says whether they are.

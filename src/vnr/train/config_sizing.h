@@ -17,11 +17,11 @@ ModelConfig size_config_for_bytes(const ModelConfig& config, uint64_t target_byt
 // The network of an error bound given alone (--max-error/--max-rel-error without --target-ratio, config
 // auto): its file takes kBoundNetworkShare of the bytes the bound costs without a network
 // (predictorless_bytes: the voxels quantised and coded as residuals are), at least 32 KiB for the
-// config's network, or the small preset's of at least 4 KiB where the share is under 32 KiB; as a
+// config's network, or the small preset's of at least 2 KiB where the share is under 32 KiB; as a
 // target ratio of source_bytes, at most 1024; network_ratio 0 (no sizing) when that leaves no ratio
 // above 1. docs/COMPRESSION.md has the runs that fitted the share. `bound` is normalised.
 constexpr double kBoundNetworkShare = 0.1;
-constexpr double kConfigNetworkFloorBytes = 32768, kSmallNetworkFloorBytes = 4096;
+constexpr double kConfigNetworkFloorBytes = 32768, kSmallNetworkFloorBytes = 2048;
 // A network beside residuals: its target ratio (0: no residuals) and whether it is the small preset's.
 struct ResidualSplit {
   double network_ratio = 0;    // the network's target ratio; 0: no residuals
@@ -34,7 +34,7 @@ ResidualSplit bounded_network_split(const Volume& vol, uint64_t source_bytes, do
 // render and answer point queries on its own, and the residuals the rest. The config's network needs
 // kConfigNetworkFloorBytes (a compact paper MLP fits); where a tenth is less and the config is `auto`,
 // the small preset's network (MLP 16 x 2) takes it instead, at least kSmallNetworkFloorBytes (a model
-// file's header, macro-cells and parameters need ~2.5 KB before the parameters say anything); a network
+// file's coded header, macro-cells and zero parameters take ~0.7 KB of it); a network
 // over kResidualNetworkMaxShare of the file leaves no residuals (network_ratio 0: it takes the file).
 // docs/COMPRESSION.md has the runs that fitted it.
 constexpr double kResidualNetworkShare = 0.1, kResidualNetworkMaxShare = 0.5;

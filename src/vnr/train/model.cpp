@@ -42,7 +42,7 @@ ModelFile model_file_without_params(const Model& m) {
 ModelFile model_file(const Model& m) {
   ModelFile f = model_file_without_params(m);
   f.params = m.net->params_half();
-  f.param_segments = m.param_segments;  // compressed storage (format 2) when set
+  f.param_segments = m.param_segments;  // compressed storage (format 3) when set
   f.compact_macrocells = !m.param_segments.empty();
   if (m.residuals) {
     const EncodedResiduals e = m.residuals->encoded ? *m.residuals->encoded : encode_residuals(*m.residuals);

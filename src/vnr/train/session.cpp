@@ -232,9 +232,9 @@ Json attach_residuals_for_budget(Model& model, const Volume& volume, uint64_t fi
   model.residuals.reset();
   const uint64_t network_bytes = model_file_bytes(model);
   // Aimed under the file's size as the network's quantization is (rate_control.cpp), less the block's
-  // description; what the description turns out to take is given back on a second try.
+  // description (about 100 bytes in a format-3 coded header); a larger one is given back on a second try.
   const uint64_t aim = file_bytes - std::min<uint64_t>(file_bytes / 50, 256);
-  uint64_t slack = 1024;
+  uint64_t slack = 256;
   auto guaranteed = [&](double b) { return bound_after_rounding(b, volume.hi - volume.lo, model.source_dtype); };
   for (int attempt = 0; attempt < 3; ++attempt) {
     if (network_bytes + slack + aim / 16 >= aim) return Json();  // next to nothing left for residuals
