@@ -11,6 +11,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <vector>
 #include "vnr/cuda/cuda.h"
 #include "vnr/model.h"
 #include "vnr/render/camera.h"
@@ -21,6 +22,7 @@
 #include "vnr/render/renderer.h"
 #include "vnr/render/scene.h"
 #include "vnr/render/transfer_function.h"
+#include "vnr/render_settings.h"
 #include "vnr/volume.h"
 
 namespace vnr {
@@ -181,6 +183,22 @@ private:
   std::vector<float> m2_;  // per pixel: the frames' squared deviations (accumulate_frame)
   int frames_ = 0;
 };
+
+// A transfer function from a preset name, transfer-function JSON text (instantvnr's or vnr's) or a file.
+TransferFunction transfer_function_of(const std::string& preset_json_or_file);
+
+// A renderer over a model (with `volume` as its ground truth, or null) or a volume (model null), set up
+// as `settings` say: what every front end renders with. `input_scene` (the input's own, e.g. an
+// instantvnr scene; Scene{} for none) fills in what the settings leave out; settings.spp steers strategy
+// auto (Renderer::choose_strategy). notes: what the user should know (a device fallback, residuals the
+// image does not show). orbit_elevation: the camera's elevation in degrees when it orbits.
+struct RenderSetup {
+  std::unique_ptr<Renderer> renderer;
+  float orbit_elevation = 0;
+  std::vector<std::string> notes;
+};
+RenderSetup setup_renderer(const Model* model, const Volume* volume, const Scene& input_scene,
+                           const RenderSettings& settings);
 
 // The field's batched query rate (samples/s) on uniformly random points over about `seconds`: on the
 // CPU the renderer's Field::query, on the GPU the network's resident encoding + MLP; 0 when not

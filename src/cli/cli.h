@@ -4,6 +4,7 @@
 #include "vnr/device.h"
 #include "vnr/json.h"
 #include "vnr/math.h"
+#include "vnr/render_settings.h"
 #include "vnr/units.h"
 #include "vnr/volume.h"
 
@@ -76,15 +77,12 @@ void add_view(CLI::App& app);  // only with VNR_VIEW (cmd_view.cpp)
 void add_bench_render(CLI::App& bench);
 void add_bench_rd(CLI::App& bench);  // cmd_bench_rd.cpp
 
-// Rendering options shared by `vnr render` and `vnr bench render`.
+// Rendering options shared by `vnr render`, `vnr bench render` and `vnr mpi render`: CLI11 writes the
+// library's RenderSettings (vnr/render_settings.h) directly, text forms such as WxH parsed on the way.
 struct RenderArgs {
-  std::string scene, tf, mode = "raymarch", strategy = "auto", macrocells, size = "768x768";
-  std::string orbit, eye, center, up = "0,1,0", light, background, volume, ray_packets = "on";
-  std::string device = "auto", mlp = "auto", precision = "auto", cache_budget = "auto", cache_dims;
-  float step = 1, step_max = 0, fovy = 30, density = 1;
-  uint32_t seed = 0;
-  int k = 0, macrocell_size = 16, threads = 0;
-  bool shade = false;
+  RenderSettings s;    // defaults: RenderSettings's (a command may change them before add)
+  std::string volume;  // a model's ground-truth volume
+  int threads = 0;
   void add(CLI::App* app);
 };
 void parse_size(const std::string& s, int* w, int* h);

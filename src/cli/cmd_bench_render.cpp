@@ -112,7 +112,7 @@ void add_bench_render(CLI::App& bench) {
     VolumeArgs vol;
   };
   auto a = std::make_shared<Args>();
-  a->r.size = "512x512";
+  a->r.s.width = a->r.s.height = 512;
   CLI::App* c = bench.add_subcommand("render", "frames/s of every integrator x strategy x macro-cell setting");
   c->add_option("input", a->input, "model (.vnr, instantvnr BSON) or volume")->required();
   c->add_option("--frames", a->frames, "timed frames per cell (the camera orbits 360 degrees over them)")
@@ -142,16 +142,16 @@ void add_bench_render(CLI::App& bench) {
     if (with == MacroCellMode::Off) with = volume ? MacroCellMode::Grid : MacroCellMode::Off;
     if (with == MacroCellMode::Off)
       fail("no macro-cells to compare with: give a model trained by vnr (online ranges) or --volume");
-    r.set_macrocells(with, a->r.macrocell_size);
+    r.set_macrocells(with, a->r.s.macrocell_size);
     BrickCacheSettings cache = r.cache().value_or(BrickCacheSettings{});  // --cache-budget, --cache-dims
-    cache.budget_bytes = parse_cache_budget(a->r.cache_budget);
+    cache.budget_bytes = a->r.s.cache_budget;
     r.set_cache(std::nullopt);  // the cells choose; the raw rate is the model's own field
     r.prepare();  // a setting that cannot be rendered fails before the table starts
 
     // The raw rate: the CPU's batched query, or on the GPU the network's resident encoding + MLP (what
     // `vnr bench infer --device cuda` reports as resident); 0 = not measured (the grid on the GPU).
     const double raw = field_query_rate(r, 2.0);
-    const CellTimer time_cell{r, RenderOrbit{a->frames, a->warmup, cr.orbit_elevation, a->r.fovy, a->r.macrocell_size},
+    const CellTimer time_cell{r, RenderOrbit{a->frames, a->warmup, cr.orbit_elevation, a->r.s.fovy, a->r.s.macrocell_size},
                               cache};
 
     Json report;

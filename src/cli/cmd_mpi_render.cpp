@@ -33,7 +33,9 @@ void run_render_mpi(const RenderMpiArgs& a) {
     if (!is_bricked_model_dir(a.input))
       fail("'{}' is not a multi-brick model directory: under mpirun, render draws the bricks of a model trained "
            "with --bricks; render anything else without mpirun", a.input);
-    cr = open_cli_render(a.input, a.r, a.vol, 1);  // one frame, each rank its bricks' networks
+    RenderArgs one = a.r;
+    one.s.spp = 1;  // one frame, each rank its bricks' networks
+    cr = open_cli_render(a.input, one, a.vol);
     m = bricked(*cr.input->model);
     if (!m) fail("'{}' opened without its bricks", a.input);
   });

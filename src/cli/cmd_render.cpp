@@ -1,5 +1,6 @@
 // vnr render: renders a model or a volume to an image (paper "Rendering"; docs/semantics.md B.5-B.10).
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include "cli.h"
 #include "render_setup.h"
@@ -17,55 +18,93 @@ void parse_size(const std::string& s, int* w, int* h) {
     fail("--size expects WxH (positive, at most 32768), got '{}'", s);
 }
 
+namespace {
+
+Vec3f parse_vec3(const std::string& s, const char* what) {
+  float v[3];
+  char tail;
+  if (std::sscanf(s.c_str(), "%f,%f,%f%c", &v[0], &v[1], &v[2], &tail) != 3 || !std::isfinite(v[0]) ||
+      !std::isfinite(v[1]) || !std::isfinite(v[2]))
+    fail("{} expects X,Y,Z (three numbers), got '{}'", what, s);
+  return Vec3f{v[0], v[1], v[2]};
+}
+
+std::string vec3_text(const Vec3f& v) { return fmt::format("{},{},{}", v.x, v.y, v.z); }
+
+}  // namespace
+
 void RenderArgs::add(CLI::App* c) {
-  c->add_option("--scene", scene, "scene file: instantvnr scene JSON or vnr scene JSON (camera, TF, light)");
-  c->add_option("--tf", tf, "transfer function: a preset (" + [] {
+  RenderSettings* r = &s;  // the callbacks write into it; RenderArgs lives in the command's shared Args
+  c->add_option("--scene", r->scene, "scene file: instantvnr scene JSON or vnr scene JSON (camera, TF, light)");
+  c->add_option("--tf", r->tf, "transfer function: a preset (" + [] {
     std::string l;
     for (auto& n : tf_preset_names()) l += (l.empty() ? "" : ", ") + n;
     return l;
-  }() + ") or a JSON file");
-  c->add_option("--mode", mode, "raymarch|shadow|pathtrace")->capture_default_str();
-  c->add_option("--strategy", strategy,
+  }() + "), a JSON file or JSON text");
+  c->add_option("--mode", r->mode, "raymarch|shadow|pathtrace")->capture_default_str();
+  c->add_option("--strategy", r->strategy,
                 "auto|cache|streaming|inshader: cache = a model's bricks decoded at the level of detail the view "
                 "needs and ray marched as a grid (CPU; docs/RENDERING.md), streaming and inshader query the field "
                 "for every sample (the same image); auto = the cache for a model on the CPU, then the faster of the "
                 "two for the field, device and mode")
       ->capture_default_str();
-  c->add_option("--cache-budget", cache_budget,
-                "memory of the brick cache's decoded bricks, e.g. 512MiB (auto: a quarter of the available memory, "
-                "at most 4 GiB)")
-      ->capture_default_str();
-  c->add_option("--cache-dims", cache_dims,
-                "X,Y,Z: the voxels the cache decodes a model at (default: the model's dims; any size, e.g. "
-                "4096,4096,4096: only the bricks a view needs are decoded)");
-  c->add_option("--macrocells", macrocells,
-                "grid|online|off (default: online for a vnr-trained model, grid for a volume)");
-  c->add_option("--macrocell-size", macrocell_size, "voxels per macro-cell for --macrocells grid")->capture_default_str();
-  c->add_option("--size", size, "image size WxH")->capture_default_str();
-  c->add_option("--step", step, "base ray-marching step in voxels (s1)")->capture_default_str();
-  c->add_option("--step-max", step_max, "largest adaptive step s2 in voxels (default 16 x step; = step: uniform)");
-  c->add_option("--seed", seed, "seed of the jitter and path-tracing random numbers")->capture_default_str();
-  c->add_option("--samples-per-iteration,-K", k,
-                 fmt::format("streaming: samples per live ray per iteration (default {}, tuned)", kDefaultSamplesPerIteration));
-  c->add_option("--orbit", orbit, "camera AZIMUTH[,ELEVATION] in degrees around the volume (when no scene camera)");
-  c->add_option("--fovy", fovy, "vertical field of view in degrees for --orbit")->capture_default_str();
-  c->add_option("--eye", eye, "camera position X,Y,Z (world = voxel units, box [0, dims])");
-  c->add_option("--center", center, "camera look-at point X,Y,Z");
-  c->add_option("--up", up, "camera up vector X,Y,Z")->capture_default_str();
-  c->add_option("--light", light, "direction toward the directional light X,Y,Z");
-  c->add_option("--background", background, "background colour R,G,B");
-  c->add_option("--density", density, "path tracing: extinction per voxel = opacity x density")->capture_default_str();
-  c->add_option("--ray-packets", ray_packets,
-                "on|off: in-shader ray marching of a volume runs rays in SIMD packets (off: the per-ray "
-                "reference loop; same image)")
+  c->add_option_function<std::string>(
+       "--cache-budget", [r](const std::string& v) { r->cache_budget = parse_cache_budget(v); },
+       "memory of the brick cache's decoded bricks, e.g. 512MiB (auto: a quarter of the available memory, at most "
+       "4 GiB)")
+      ->default_str("auto");
+  c->add_option_function<std::string>(
+      "--cache-dims", [r](const std::string& v) { r->cache_dims = parse_dims(v, "--cache-dims"); },
+      "X,Y,Z: the voxels the cache decodes a model at (default: the model's dims; any size, e.g. 4096,4096,4096: "
+      "only the bricks a view needs are decoded)");
+  c->add_option("--macrocells", r->macrocells, "grid|online|off (default: online for a vnr-trained model, grid for a volume)");
+  c->add_option("--macrocell-size", r->macrocell_size, "voxels per macro-cell for --macrocells grid")->capture_default_str();
+  c->add_option_function<std::string>(
+       "--size", [r](const std::string& v) { parse_size(v, &r->width, &r->height); }, "image size WxH")
+      ->default_str(fmt::format("{}x{}", s.width, s.height));
+  c->add_option("--step", r->step, "base ray-marching step in voxels (s1)")->capture_default_str();
+  c->add_option("--step-max", r->step_max, "largest adaptive step s2 in voxels (default 16 x step; = step: uniform)");
+  c->add_option("--seed", r->seed, "seed of the jitter and path-tracing random numbers")->capture_default_str();
+  c->add_option("--samples-per-iteration,-K", r->samples_per_iteration,
+                fmt::format("streaming: samples per live ray per iteration (default {}, tuned)", kDefaultSamplesPerIteration));
+  c->add_option_function<std::string>(
+      "--orbit",
+      [r](const std::string& v) {
+        float az = 0, el = 0;
+        char tail;
+        const int got = std::sscanf(v.c_str(), "%f,%f%c", &az, &el, &tail);
+        if (got < 1 || got > 2) fail("--orbit expects AZIMUTH[,ELEVATION] in degrees, got '{}'", v);
+        r->orbit = std::make_pair(az, el);
+      },
+      "camera AZIMUTH[,ELEVATION] in degrees around the volume (when no scene camera)");
+  c->add_option("--fovy", r->fovy, "vertical field of view in degrees for --orbit")->capture_default_str();
+  c->add_option_function<std::string>(
+      "--eye", [r](const std::string& v) { r->eye = parse_vec3(v, "--eye"); },
+      "camera position X,Y,Z (world = voxel units, box [0, dims])");
+  c->add_option_function<std::string>(
+      "--center", [r](const std::string& v) { r->center = parse_vec3(v, "--center"); }, "camera look-at point X,Y,Z");
+  c->add_option_function<std::string>(
+       "--up", [r](const std::string& v) { r->up = parse_vec3(v, "--up"); }, "camera up vector X,Y,Z")
+      ->default_str(vec3_text(s.up));
+  c->add_option_function<std::string>(
+      "--light", [r](const std::string& v) { r->light = parse_vec3(v, "--light"); },
+      "direction toward the directional light X,Y,Z");
+  c->add_option_function<std::string>(
+      "--background", [r](const std::string& v) { r->background = parse_vec3(v, "--background"); },
+      "background colour R,G,B");
+  c->add_option("--density", r->density, "path tracing: extinction per voxel = opacity x density")->capture_default_str();
+  c->add_option_function<std::string>(
+       "--ray-packets", [r](const std::string& v) { r->ray_packets = v == "on"; },
+       "on|off: in-shader ray marching of a volume runs rays in SIMD packets (off: the per-ray reference loop; "
+       "same image)")
       ->check(CLI::IsMember({"on", "off"}))
-      ->capture_default_str();
-  c->add_flag("--shade", shade, "gradient (Phong, headlight) shading for ray marching");
+      ->default_str(s.ray_packets ? "on" : "off");
+  c->add_flag("--shade", r->shade, "gradient (Phong, headlight) shading for ray marching");
   c->add_option("--volume", volume, "ground-truth volume of a model (for --macrocells grid)");
   c->add_option("--threads", threads, "CPU threads (default: all cores)");
-  add_device_option(c, device);
-  add_precision_option(c, precision);
-  c->add_option("--mlp", mlp, "cuda: MLP of streaming inference, auto, fused or cublas")
+  add_device_option(c, r->device);
+  add_precision_option(c, r->precision);
+  c->add_option("--mlp", r->mlp, "cuda: MLP of streaming inference, auto, fused or cublas")
       ->check(CLI::IsMember({"auto", "fused", "cublas"}))
       ->capture_default_str();
 }
@@ -74,7 +113,6 @@ void add_render(CLI::App& app) {
   struct Args {
     std::string input, output, report, reference;
     std::string spp = "auto";
-    Convergence converge;
     bool quiet = false;
     RenderArgs r;
     VolumeArgs vol;
@@ -87,9 +125,9 @@ void add_render(CLI::App& app) {
                 "frames accumulated (samples per pixel), or auto: until the image's noise (the RMS standard "
                 "error of its pixels, estimated from the frames) is at most --noise")
       ->capture_default_str();
-  c->add_option("--noise", a->converge.noise, "--spp auto: the noise to reach, in [0, 1] units (one 8-bit step)")
+  c->add_option("--noise", a->r.s.noise, "--spp auto: the noise to reach, in [0, 1] units (one 8-bit step)")
       ->capture_default_str();
-  c->add_option("--max-spp", a->converge.max_frames, "--spp auto: at most this many frames")->capture_default_str();
+  c->add_option("--max-spp", a->r.s.max_spp, "--spp auto: at most this many frames")->capture_default_str();
   c->add_option("--report", a->report, "write a JSON report");
   c->add_option("--reference", a->reference, "compare with this image (PNG or PFM): PSNR and SSIM");
   c->add_flag("-q,--quiet", a->quiet, "no progress output");
@@ -109,10 +147,8 @@ void add_render(CLI::App& app) {
       }
       if (used != a->spp.size() || spp < 1) fail("--spp must be auto or at least 1, got '{}'", a->spp);
     }
-    if (!(a->converge.noise >= 0)) fail("--noise must be at least 0, got {}", a->converge.noise);
-    if (a->converge.max_frames < a->converge.min_frames)
-      fail("--max-spp must be at least {}, got {}", a->converge.min_frames, a->converge.max_frames);
-    CliRender cr = open_cli_render(a->input, a->r, a->vol, spp);
+    a->r.s.spp = spp;
+    CliRender cr = open_cli_render(a->input, a->r, a->vol);
     Renderer& r = *cr.renderer;
     std::optional<Image> reference;
     if (!a->reference.empty()) reference = read_image(a->reference);
@@ -128,14 +164,15 @@ void add_render(CLI::App& app) {
       fail("the --reference image '{}' has size {}x{}, the render is {}x{}", a->reference, reference->width,
            reference->height, r.options().width, r.options().height);
     RenderStats st;
-    Progress bar("render", spp ? spp : a->converge.max_frames, a->quiet || spp == 1);
+    const Convergence converge{a->r.s.noise, Convergence{}.min_frames, a->r.s.max_spp};
+    Progress bar("render", spp ? spp : converge.max_frames, a->quiet || spp == 1);
     if (spp) {
       for (int f = 0; f < spp; ++f) {
         r.render_frame(&st);
         bar.update(f + 1, fmt::format("{:.3f} s/frame", st.seconds / st.frames));
       }
     } else {
-      r.render_until_converged(a->converge, &st, [&](int f, double noise) {
+      r.render_until_converged(converge, &st, [&](int f, double noise) {
         bar.update(f, fmt::format("{:.3f} s/frame, noise {:.5f}", st.seconds / st.frames, noise));
       });
     }

@@ -14,11 +14,8 @@ struct CliRender {
   float orbit_elevation = 0;  // degrees, from --orbit
 };
 
-// Opens the input (with --volume as its ground truth), chooses the device (auto's fallback to the CPU
-// is printed as a note) and applies every rendering option; the scene (--scene, else the input's)
-// fills in what the options leave out.
-// frames: how many will be accumulated (0 = unknown, e.g. --spp auto): --strategy auto takes the brick
-// cache only where it pays (Renderer::choose_strategy).
-CliRender open_cli_render(const std::string& input, const RenderArgs& a, const VolumeArgs& va, int frames = 0);
+// Opens the input (with --volume as its ground truth) and sets up its renderer with the settings
+// (vnr::setup_renderer); the library's notes (e.g. auto's fallback to the CPU) are printed.
+CliRender open_cli_render(const std::string& input, const RenderArgs& a, const VolumeArgs& va);
 
 }  // namespace vnr::cli

@@ -14,7 +14,7 @@ struct TrainArgs {
   pyb::object volume, config, callback;
   std::optional<int64_t> steps;
   std::optional<double> seconds, target_ratio;
-  uint32_t seed = 0;
+  uint32_t seed = TrainingSetup{}.seed;
   std::string device, sampler, precision;
   int64_t batch = 65536;
   int macrocell_size = 16;
@@ -159,7 +159,7 @@ to fp16 as the model file stores them (so decode() equals `vnr decode` of that f
 config: "auto" (the paper's network; with max_error/max_rel_error alone, sized for the bound), a preset
 ("paper", "small"), a tiny-cuda-nn config dict, or a JSON file path.
 steps / seconds: stop after this many steps or seconds of training (default: 1000 steps).
-seed: 0 by default (note: the CLI's --seed defaults to 1337).
+seed: 1337 by default, as the CLI's --seed (TrainingSetup's default).
 device: "auto" (a visible GPU, else the CPU), "cpu" or "cuda".
 sampler: "incore" for arrays and volumes in memory; a path may also use "outofcore" or "mmap".
 target_ratio: a compact model (quantized, entropy-coded parameters) of 1/R of the volume's bytes, as
@@ -196,7 +196,7 @@ void bind_train(pyb::module_& m) {
         return train(a);
       },
       pyb::arg("volume"), pyb::arg("config") = "auto", pyb::arg("steps") = pyb::none(),
-      pyb::arg("seconds") = pyb::none(), pyb::arg("seed") = 0, pyb::arg("device") = "auto",
+      pyb::arg("seconds") = pyb::none(), pyb::arg("seed") = TrainingSetup{}.seed, pyb::arg("device") = "auto",
       pyb::arg("sampler") = "incore", pyb::arg("target_ratio") = pyb::none(), pyb::arg("callback") = pyb::none(),
       pyb::kw_only(), pyb::arg("batch") = 65536, pyb::arg("precision") = "auto", pyb::arg("macrocell_size") = 16,
       pyb::arg("threads") = pyb::none(), pyb::arg("verbose") = false, pyb::arg("target_psnr") = pyb::none(),

@@ -133,10 +133,12 @@ def render(target: Union[Model, Volume], camera: Union[None, Camera, dict, Tuple
     w, h = (int(v) for v in size)
     if (isinstance(spp, str) and spp != "auto") or (not isinstance(spp, str) and int(spp) < 1):
         raise ValueError(f"spp must be 'auto' or at least 1, got {spp!r}")
-    return _render(target, tf=_tf_arg(tf), mode=mode, size=(w, h), spp=0 if spp == "auto" else int(spp),
-                   noise=float(noise), max_spp=int(max_spp), device=device,
-                   strategy=strategy, macrocells=macrocells, step=float(step), seed=int(seed), shade=bool(shade),
-                   background=None if background is None else tuple(float(x) for x in background),
-                   light=None if light is None else tuple(float(x) for x in light), cache_budget=str(cache_budget),
-                   cache_dims=None if cache_dims is None else tuple(int(x) for x in cache_dims),
-                   **_camera_args(camera))
+    settings = dict(tf=_tf_arg(tf), mode=mode, size=[w, h], spp=0 if spp == "auto" else int(spp),
+                    noise=float(noise), max_spp=int(max_spp), device=device, strategy=strategy,
+                    macrocells=macrocells or "", step=float(step), seed=int(seed), shade=bool(shade),
+                    background=None if background is None else [float(x) for x in background],
+                    light=None if light is None else [float(x) for x in light], cache_budget=str(cache_budget),
+                    cache_dims=None if cache_dims is None else [int(x) for x in cache_dims],
+                    **_camera_args(camera))
+    # vnr::RenderSettings as JSON (the library's one settings object; None: the library's default).
+    return _render(target, json.dumps({k: v for k, v in settings.items() if v is not None}))

@@ -119,7 +119,7 @@ class Model:
 
 
 def train(volume: Union[npt.ArrayLike, Volume, PathLike], config: Union[str, dict[str, Any], PathLike] = "auto",
-          steps: Optional[int] = None, seconds: Optional[float] = None, seed: int = 0, device: DeviceName = "auto",
+          steps: Optional[int] = None, seconds: Optional[float] = None, seed: int = 1337, device: DeviceName = "auto",
           sampler: Literal["incore", "outofcore", "mmap"] = "incore", target_ratio: Optional[float] = None,
           callback: Optional[Callable[[int, float, float], Optional[bool]]] = None, *, batch: int = 65536,
           precision: Literal["auto", "fp32", "bf16"] = "auto", macrocell_size: int = 16,
@@ -131,13 +131,8 @@ def train(volume: Union[npt.ArrayLike, Volume, PathLike], config: Union[str, dic
     """Trains a model of the volume (`vnr train`'s session); returns it. Ctrl-C returns the model so far."""
 
 
-def _render(target: Union[Model, Volume], eye: Optional[Sequence[float]], center: Optional[Sequence[float]],
-            up: Sequence[float], fovy: float, orbit: Optional[Tuple[float, float]], tf: str, mode: str,
-            size: Tuple[int, int], spp: int, noise: float, max_spp: int, device: str, strategy: str,
-            macrocells: Optional[str], step: float,
-            seed: int, shade: bool, background: Optional[Sequence[float]],
-            light: Optional[Sequence[float]], cache_budget: str,
-            cache_dims: Optional[Tuple[int, int, int]]) -> npt.NDArray[np.float32]: ...
+def _render(target: Union[Model, Volume], settings_json: str) -> npt.NDArray[np.float32]:
+    """vnr::RenderSettings as JSON (vnr.render builds it)."""
 
 
 def _error_stats(reference: npt.NDArray[Any], test: npt.NDArray[Any],
