@@ -10,6 +10,7 @@
 #include "vnr/json.h"
 #include "vnr/nn/mlp_bf16.h"
 #include "vnr/train/model_io.h"
+#include "vnr/train/session.h"
 #include "vnr/volume/volume.h"
 #include "test_support.h"
 
@@ -32,6 +33,13 @@ TEST(Cli, TrainEvalDecodeInfoConvertRoundTrip) {
   EXPECT_EQ(rep["volume_bytes"], 24 * 20 * 16 * 4);
   EXPECT_EQ(rep["model_bytes"].get<uint64_t>(), file_size(d + "/ml.vnr"));
   EXPECT_NEAR(rep["compression_ratio"].get<double>(), 24.0 * 20 * 16 * 4 / file_size(d + "/ml.vnr"), 1e-9);
+  // The report records the run's settings as TrainingSetup's JSON, which reads back to the same run.
+  const TrainingSetup given = TrainingSetup::from_json(rep["setup"]);
+  EXPECT_EQ(given.config, "small");
+  EXPECT_EQ(given.steps, 60);
+  EXPECT_EQ(given.batch, 8192);
+  EXPECT_EQ(given.seed, 3u);
+  EXPECT_EQ(given.to_json(), rep["setup"]);
 
   // eval reproduces the training report's PSNR (same model, same volume).
   Result e = run("eval " + d + "/ml.vnr " + d + "/ml.json --report " + d + "/eval.json");

@@ -371,3 +371,53 @@ TEST(TrainingSession, GpuSessionUsesTheSameTrainerInterface) {
   EXPECT_EQ(model.training["device"], "cuda");
   EXPECT_TRUE(model.macrocells.has_value());
 }
+
+// TrainingSetup's JSON: the defaults of the struct, every key read back, unknown keys and bad values
+// refused with one line naming them.
+TEST(TrainingSetup, JsonRoundTripsAndRefusesWhatItDoesNotKnow) {
+  EXPECT_EQ(TrainingSetup::from_json(Json::object()).to_json(), TrainingSetup{}.to_json());
+  const Json j = {{"volume", "v.json"},       {"config", {{"encoding", {{"otype", "HashGrid"}}}}},
+                  {"target_ratio", 64},       {"residuals", "off"},        {"bits_per_param", 3},
+                  {"qat_fraction", 0.2},      {"rate_weight", 0.5},        {"batch", 8192},
+                  {"seed", 5},                {"device", "cpu"},           {"precision", "fp32"},
+                  {"macrocell_size", 8},      {"steps", 300},              {"sampler", "outofcore"},
+                  {"memory_budget", "16MiB"}, {"blocks", 64},              {"block_dims", {16, 8, 8}},
+                  {"grid_lr_scale", "auto"},  {"output", "m.vnr"},         {"checkpoint_every", 100},
+                  {"cooldown", 0.1},          {"max_rel_error", 0.01},     {"dims", {40, 30, 20}},
+                  {"dtype", "uint16"},        {"endian", "big"},           {"offset", 12},
+                  {"range", {0, 4095}},       {"nan", "clamp"}};
+  const TrainingSetup s = TrainingSetup::from_json(j);
+  ASSERT_TRUE(s.config_json.has_value());
+  EXPECT_EQ((*s.config_json)["encoding"]["otype"], "HashGrid");
+  EXPECT_EQ(s.data.memory_budget, uint64_t(16) << 20);
+  EXPECT_TRUE(*s.data.block_dims == (Int3{16, 8, 8}));
+  EXPECT_TRUE(*s.raw.dims == (Int3{40, 30, 20}));
+  EXPECT_EQ(*s.raw.range_hi, 4095.0);
+  EXPECT_EQ(s.load.non_finite, NonFinitePolicy::Clamp);
+  EXPECT_EQ(s.session.cooldown, 0.1);
+  EXPECT_EQ(s.session.error_bound.max_rel_error, 0.01);
+  EXPECT_EQ(TrainingSetup::from_json(s.to_json()).to_json(), s.to_json());
+
+  auto error_of_setup = [](const Json& bad) {
+    try {
+      TrainingSetup::from_json(bad);
+    } catch (const Error& e) {
+      return std::string(e.what());
+    }
+    return std::string();
+  };
+  std::string msg = error_of_setup(Json{{"learning_rate", 1e-3}});
+  EXPECT_NE(msg.find("unknown key 'learning_rate'"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("target_ratio"), std::string::npos) << msg;  // the allowed list
+  for (const auto& [bad, needle] : std::vector<std::pair<Json, std::string>>{
+           {{{"batch", 100}}, "--batch must be a positive multiple of 256"},
+           {{{"cooldown", 2}}, "--cooldown must be in [0, 1]"},
+           {{{"seed", "one"}}, "'seed' must be a number"},
+           {{{"config", 3}}, "'config' must be"},
+           {{{"range", {5, 1}}}, "'range' must be [lo, hi]"},
+           {{{"nan", "skip"}}, "nan policy 'skip'"},
+           {{{"memory_budget", 0}}, "'memory_budget' must be positive"}}) {
+    msg = error_of_setup(bad);
+    EXPECT_NE(msg.find(needle), std::string::npos) << bad.dump() << " -> " << msg;
+  }
+}

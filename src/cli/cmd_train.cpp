@@ -145,6 +145,7 @@ void run_train(const TrainArgs& a) {
                            "model; a larger --target-psnr margin or more training closes the gap\n", r.psnr);
   }
   print_result(a, *session, r, preview.get(), preview_opts ? preview_opts->dir : std::string());
+  r.report["setup"] = setup.to_json();  // what the run was given (TrainingSetup::from_json reads it back)
   write_report(a.report, r.report);
 }
 

@@ -45,9 +45,7 @@ RawOptions VolumeArgs::raw() const {
 
 LoadOptions VolumeArgs::load() const {
   LoadOptions o;
-  o.non_finite = nan_policy == "zero" ? NonFinitePolicy::Zero
-                 : nan_policy == "clamp" ? NonFinitePolicy::Clamp
-                                         : NonFinitePolicy::Error;
+  o.non_finite = parse_non_finite_policy(nan_policy);
   return o;
 }
 

@@ -51,34 +51,31 @@ void on_step(TrainingSession& session, CallbackState& st, const TrainingProgress
   }
 }
 
+// The library's TrainingSetup from the keyword arguments (TrainingSetup::from_json: its defaults for what
+// is not given, its checks and messages); the volume is set by opener_of.
 TrainingSetup setup_of(const TrainArgs& a) {
-  TrainingSetup s;
-  s.seed = a.seed;
-  s.device = a.device;
-  s.precision = a.precision;
-  s.batch = a.batch;
-  s.macrocell_size = a.macrocell_size;
-  s.steps = a.steps.value_or(-1);
-  s.target_ratio = a.target_ratio.value_or(0);
-  s.target_psnr = a.target_psnr.value_or(0);
-  if (a.bits_per_param) s.bits_per_param = *a.bits_per_param;
-  if (a.qat_fraction) s.qat_fraction = *a.qat_fraction;
-  if (a.rate_weight) s.rate_weight = *a.rate_weight;
-  s.residuals = a.residuals;
-  if (a.cooldown) {
-    if (!(*a.cooldown >= 0 && *a.cooldown <= 1)) fail("cooldown must be in [0, 1], got {}", *a.cooldown);
-    s.session.cooldown = *a.cooldown;
-  }
-  s.session.error_bound = {a.max_error.value_or(0), a.max_rel_error.value_or(0)};
-  s.data.sampler = a.sampler;
+  Json j = {{"seed", a.seed},       {"device", a.device},     {"precision", a.precision}, {"batch", a.batch},
+            {"macrocell_size", a.macrocell_size}, {"residuals", a.residuals}, {"sampler", a.sampler}};
+  auto put = [&j](const char* key, const auto& value) {
+    if (value) j[key] = *value;
+  };
+  put("steps", a.steps);
+  put("target_ratio", a.target_ratio);
+  put("target_psnr", a.target_psnr);
+  put("bits_per_param", a.bits_per_param);
+  put("qat_fraction", a.qat_fraction);
+  put("rate_weight", a.rate_weight);
+  put("cooldown", a.cooldown);
+  put("max_error", a.max_error);
+  put("max_rel_error", a.max_rel_error);
   if (a.seconds && *a.seconds <= 0) fail("seconds must be positive, got {}", *a.seconds);
-  if (pyb::isinstance<pyb::dict>(a.config)) {
-    s.config_json = Json::parse(pyb::str(pyb::module_::import("json").attr("dumps")(a.config)).cast<std::string>());
-  } else if (pyb::isinstance<pyb::str>(a.config)) {
-    s.config = a.config.cast<std::string>();
-  } else {
-    s.config = pyb::str(pyb::module_::import("os").attr("fspath")(a.config)).cast<std::string>();
-  }
+  if (pyb::isinstance<pyb::dict>(a.config))
+    j["config"] = Json::parse(pyb::str(pyb::module_::import("json").attr("dumps")(a.config)).cast<std::string>());
+  else if (pyb::isinstance<pyb::str>(a.config))
+    j["config"] = a.config.cast<std::string>();
+  else
+    j["config"] = pyb::str(pyb::module_::import("os").attr("fspath")(a.config)).cast<std::string>();
+  TrainingSetup s = TrainingSetup::from_json(j);
   if (!s.config_json && !is_preset(s.config)) require_file(s.config, "config");
   return s;
 }

@@ -72,13 +72,6 @@ bool big_endian_of(const pyb::dtype& dt) {
   return std::endian::native == std::endian::big;  // '=' or '|' (native, or single bytes)
 }
 
-NonFinitePolicy parse_nan_policy(const std::string& name) {
-  if (name == "error") return NonFinitePolicy::Error;
-  if (name == "zero") return NonFinitePolicy::Zero;
-  if (name == "clamp") return NonFinitePolicy::Clamp;
-  fail("unknown nan policy '{}' (allowed: error, zero, clamp)", name);
-}
-
 // A read-only numpy view of count floats owned by `owner` (kept alive by the array).
 template <typename Owner>
 pyb::array_t<float> view_of_floats(const float* data, Int3 dims, std::shared_ptr<Owner> owner) {
@@ -123,7 +116,7 @@ void bind_volume(pyb::module_& m) {
          const std::string& nan) {
         std::optional<double> lo, hi;
         if (range) std::tie(lo, hi) = *range;
-        return std::make_shared<Volume>(volume_from_numpy(a, lo, hi, parse_nan_policy(nan)));
+        return std::make_shared<Volume>(volume_from_numpy(a, lo, hi, parse_non_finite_policy(nan)));
       },
       pyb::arg("array"), pyb::arg("value_range") = pyb::none(), pyb::arg("nan") = "error",
       R"(A volume from a 3-D numpy array of any numeric dtype (int8, uint8, int16, uint16, int32, uint32,
@@ -146,7 +139,7 @@ nan: "error" (NaN/Inf raise ValueError), "zero" or "clamp", as the CLI's --nan.)
         o.raw.endian = endian;
         o.raw.offset = offset;
         if (range) std::tie(o.raw.range_lo, o.raw.range_hi) = *range;
-        o.load.non_finite = parse_nan_policy(nan);
+        o.load.non_finite = parse_non_finite_policy(nan);
         pyb::gil_scoped_release release;
         return std::make_shared<Volume>(open_volume(path, o));
       },

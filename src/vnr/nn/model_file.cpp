@@ -27,7 +27,7 @@ constexpr const char* kMacrocellCodec = "u8-zstd";
 constexpr uint64_t kPreambleBytes = 24;  // magic, version, flags, header length
 constexpr uint64_t kTrailerBytes = 12;   // CRC-32 + end magic
 // Versions 1 and 2 start every data block on a 64-byte boundary (mappable as arrays); version 3's
-// blocks are compressed streams, so they follow one another (the padding was up to 4 % of a 20 kB file).
+// blocks are compressed streams, so they follow one another (the padding took up to 0.2 kB a file).
 constexpr uint64_t block_alignment(uint32_t version) { return version >= kCompressedHeaderVersion ? 1 : 64; }
 constexpr int kMaxHeaderDepth = 256;     // nlohmann parses recursively: refuse absurd nesting
 constexpr int64_t kMaxDim = std::numeric_limits<int32_t>::max();  // instantvnr stores dims as int

@@ -227,6 +227,15 @@ struct TrainingSetup {
   TrainingDataOptions data;     // sampler, budget, out-of-core options (data.seed/steps are set from here)
   int64_t steps = -1;           // planned steps (coverage note only)
   SessionOptions session;
+
+  // The settings a user gives, flat as the CLI's options (volume, config (a name or a tiny-cuda-nn
+  // object), target_ratio, ..., the raw-volume keys dims/dtype/endian/offset/timestep/range, nan, the
+  // sampler keys, output, checkpoint_every, cooldown, max_error, max_rel_error; docs/ARCHITECTURE.md):
+  // every key optional (the defaults above), unknown keys refused with the allowed list, types and
+  // ranges checked (check_training_setup's checks included, but for a CUDA device's presence).
+  static TrainingSetup from_json(const Json& j);
+  // Those keys: what the run was given (the training record of --report); from_json reads it back.
+  Json to_json() const;
 };
 
 // The steps a run is to train, from what a front end was given (steps < 0: none; seconds <= 0: none):

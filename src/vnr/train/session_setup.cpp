@@ -10,25 +10,6 @@
 #include <cmath>
 
 namespace vnr {
-void check_training_setup(const TrainingSetup& s) {
-  if (s.batch <= 0 || s.batch % kChunk != 0) fail("--batch must be a positive multiple of {}, got {}", kChunk, s.batch);
-  if (s.steps < -1) fail("--steps must be non-negative, got {}", s.steps);
-  if (s.macrocell_size < 0) fail("--macrocell-size must be 0 (none) or positive, got {}", s.macrocell_size);
-  if (s.session.checkpoint_every < 0)
-    fail("--checkpoint-every must be non-negative, got {}", s.session.checkpoint_every);
-  if (s.data.blocks < 0 || s.data.refresh < 0) fail("--blocks and --refresh must be positive");
-  if (s.target_ratio < 0 || !std::isfinite(s.target_ratio)) fail("--target-ratio must be positive, got {}", s.target_ratio);
-  if (s.target_psnr < 0 || !std::isfinite(s.target_psnr)) fail("--target-psnr must be positive, got {}", s.target_psnr);
-  if (!(s.qat_fraction >= 0 && s.qat_fraction <= 1))
-    fail("--qat-fraction must be in [0, 1], got {}", s.qat_fraction);
-  if (!(s.rate_weight >= 0 && s.rate_weight <= 100))
-    fail("--rate-weight must be in [0, 100], got {}", s.rate_weight);
-  if (s.residuals != "auto" && s.residuals != "off") fail("--residuals must be auto or off, got '{}'", s.residuals);
-  if (!(s.bits_per_param > 0 && s.bits_per_param <= 16))
-    fail("bits per parameter must be in (0, 16], got {}", s.bits_per_param);
-  if (s.device == "cuda") cuda::require_device();
-}
-
 std::unique_ptr<TrainingSession> make_training_session(Model& model, const Volume& volume, Device device,
                                                        const TrainOptions& options, int online_cell_size,
                                                        SessionOptions session) {

@@ -12,6 +12,17 @@
 #include "vnr/volume/volume.h"
 
 namespace vnr {
+
+NonFinitePolicy parse_non_finite_policy(const std::string& name) {
+  if (name == "error") return NonFinitePolicy::Error;
+  if (name == "zero") return NonFinitePolicy::Zero;
+  if (name == "clamp") return NonFinitePolicy::Clamp;
+  fail("unknown nan policy '{}' (allowed: error, zero, clamp)", name);
+}
+
+const char* non_finite_policy_name(NonFinitePolicy p) {
+  return p == NonFinitePolicy::Zero ? "zero" : p == NonFinitePolicy::Clamp ? "clamp" : "error";
+}
 namespace detail {
 
 std::string dims_string(const Int3& d, int n_timesteps) {

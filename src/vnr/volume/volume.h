@@ -13,6 +13,9 @@ namespace vnr {
 
 // How NaN / Inf in float data are treated when loading. Default: error.
 enum class NonFinitePolicy { Error, Zero, Clamp };
+// "error" | "zero" | "clamp" (the CLI's --nan, Python's nan=); anything else fails with that list.
+NonFinitePolicy parse_non_finite_policy(const std::string& name);
+const char* non_finite_policy_name(NonFinitePolicy p);
 
 // Where a volume comes from, everything needed to read it. Produced by describe_volume().
 struct VolumeDesc {
