@@ -39,12 +39,6 @@ const std::set<std::string>& known_keys() {
   return keys;
 }
 
-std::string allowed_keys() {
-  std::string s;
-  for (const auto& k : known_keys()) s += (s.empty() ? "" : ", ") + k;
-  return s;
-}
-
 void check_one_of(const std::string& value, std::initializer_list<const char*> allowed, const char* key) {
   std::string list;
   for (const char* a : allowed) {
@@ -106,9 +100,7 @@ void RenderSettings::validate(const std::function<std::string(const std::string&
 }
 
 RenderSettings RenderSettings::from_json(const Json& j) {
-  if (!j.is_object()) fail("{} must be a JSON object, got {}", kWhere, j.dump());
-  for (const auto& [key, value] : j.items())
-    if (!known_keys().count(key)) fail("{}: unknown key '{}' (allowed: {})", kWhere, key, allowed_keys());
+  json_check_keys(j, known_keys(), kWhere);
   RenderSettings s;
   s.mode = json_get(j, "mode", s.mode, kWhere);
   s.strategy = json_get(j, "strategy", s.strategy, kWhere);

@@ -2,6 +2,7 @@
 // Typed reads of tiny-cuda-nn JSON keys with the config's error messages ("<where>: '<key>' must be
 // ..."), shared by the config parser and the encoding files.
 #include <cmath>
+#include <set>
 #include <string>
 #include <type_traits>
 #include "vnr/error.h"
@@ -28,6 +29,18 @@ inline T json_get(const Json& j, const char* key, T dflt, const char* where) {
     if (d < 0 || d != std::floor(d) || d > 4294967295.0)
       fail("{}: '{}' must be a non-negative integer, got {}", where, key, v.dump());
     return T(d);
+  }
+}
+
+// Fails on a key of the object j that is not in `known`, with the allowed list (settings objects read
+// from JSON refuse what they do not know rather than ignore a misspelt key).
+inline void json_check_keys(const Json& j, const std::set<std::string>& known, const char* where) {
+  if (!j.is_object()) fail("{} must be a JSON object, got {}", where, j.dump());
+  for (const auto& [key, value] : j.items()) {
+    if (known.count(key)) continue;
+    std::string allowed;
+    for (const auto& k : known) allowed += (allowed.empty() ? "" : ", ") + k;
+    fail("{}: unknown key '{}' (allowed: {})", where, key, allowed);
   }
 }
 

@@ -77,13 +77,7 @@ void check_training_setup(const TrainingSetup& s) {
 }
 
 TrainingSetup TrainingSetup::from_json(const Json& j) {
-  if (!j.is_object()) fail("{} must be a JSON object, got {}", kWhere, j.dump());
-  for (const auto& [key, value] : j.items()) {
-    if (known_keys().count(key)) continue;
-    std::string allowed;
-    for (const auto& k : known_keys()) allowed += (allowed.empty() ? "" : ", ") + k;
-    fail("{}: unknown key '{}' (allowed: {})", kWhere, key, allowed);
-  }
+  json_check_keys(j, known_keys(), kWhere);
   TrainingSetup s;
   s.volume = json_get(j, "volume", s.volume, kWhere);
   if (auto it = j.find("config"); it != j.end()) {
