@@ -142,46 +142,52 @@ std::string residual_coding_name(const std::string& codec, const std::string& pr
 EncodedResiduals encode_residuals(const Residuals& r, const std::string& only, bool search) {
   if (r.q.size() != r.dims.count()) fail("residual field of {} values for {} voxels", r.q.size(), r.dims.count());
   if (r.wavelet()) return encode_wavelet(r, only);
+  // The candidates (zstd, then the context coder, each without and with Lorenzo), coded concurrently:
+  // each coder is serial (zstd at level 19 takes seconds on a large volume), and the smallest is chosen
+  // in this order afterwards, so the bytes do not depend on the thread count.
+  struct Candidate {
+    bool context, predict;
+    std::vector<uint8_t> bytes;
+    uint64_t escapes = 0, raw_bytes = 0;
+  };
+  std::vector<Candidate> candidates;
+  for (bool context : {false, true})
+    for (bool predict : {false, true})
+      if (only.empty() || only == residual_coding_name(context ? "context" : "zstd", predictor_name(r, predict)))
+        candidates.push_back({context, predict, {}});
+  if (candidates.empty()) fail("unknown residual coding '{}'", only);
+  std::vector<std::vector<uint8_t>> raw(candidates.size());
+  std::vector<std::vector<int32_t>> differences(candidates.size());
+  for (size_t i = 0; i < candidates.size(); ++i) {  // the inputs, each built in parallel over z
+    Candidate& c = candidates[i];
+    if (!c.context) raw[i] = byte_layout(r, c.predict, &c.escapes), c.raw_bytes = raw[i].size();
+    else if (c.predict) differences[i] = lorenzo_differences(r);
+  }
+  parallel_for_claimed(int64_t(candidates.size()), 1, [&](int64_t i0, int64_t i1) {
+    for (int64_t i = i0; i < i1; ++i) {
+      Candidate& c = candidates[size_t(i)];
+      if (!c.context) c.bytes = zstd_compress(raw[size_t(i)], search ? kZstdSearchLevel : kZstdLevel);
+      else c.bytes = context_encode(c.predict ? differences[size_t(i)].data() : r.q.data(), r.dims);
+    }
+  });
   EncodedResiduals best;
   Json sizes = Json::object();  // every candidate's size, kept in the description for the record
-  auto wanted = [&](const char* codec, bool predict) {
-    return only.empty() || only == residual_coding_name(codec, predictor_name(r, predict));
-  };
-  for (bool predict : {false, true}) {
-    if (!wanted("zstd", predict)) continue;
-    uint64_t escapes = 0;
-    const std::vector<uint8_t> raw = byte_layout(r, predict, &escapes);
-    std::vector<uint8_t> packed = zstd_compress(raw, search ? kZstdSearchLevel : kZstdLevel);
-    sizes[residual_coding_name("zstd", predictor_name(r, predict))] = packed.size();
-    if (!best.bytes.empty() && packed.size() >= best.bytes.size()) continue;
-    best.bytes = std::move(packed);
-    best.meta = {{"codec", "zstd"},
-                 {"layout", "zigzag-bytes"},
-                 {"predictor", predictor_name(r, predict)},
-                 {"dims", {r.dims.x, r.dims.y, r.dims.z}},
-                 {"bound", r.bound},
-                 {"step", r.step},
-                 {"nonzero", r.nonzero()},
-                 {"escapes", escapes},
-                 {"raw_bytes", raw.size()}};
+  Candidate* chosen = nullptr;
+  for (Candidate& c : candidates) {
+    sizes[residual_coding_name(c.context ? "context" : "zstd", predictor_name(r, c.predict))] = c.bytes.size();
+    if (!chosen || c.bytes.size() < chosen->bytes.size()) chosen = &c;
   }
-  for (bool predict : {false, true}) {
-    if (!wanted("context", predict)) continue;
-    std::vector<uint8_t> ac = context_encode(predict ? lorenzo_differences(r).data() : r.q.data(), r.dims);
-    sizes[residual_coding_name("context", predictor_name(r, predict))] = ac.size();
-    if (!best.bytes.empty() && ac.size() >= best.bytes.size()) continue;
-    best.meta = {{"codec", "context"},
-                 {"layout", "binary-ac"},
-                 {"predictor", predictor_name(r, predict)},
-                 {"dims", {r.dims.x, r.dims.y, r.dims.z}},
-                 {"bound", r.bound},
-                 {"step", r.step},
-                 {"nonzero", r.nonzero()},
-                 {"crc32", values_crc(r.q)}};
-    best.bytes = std::move(ac);
-  }
-  if (best.bytes.empty() && best.meta.is_null()) fail("unknown residual coding '{}'", only);
+  best.meta = {{"codec", chosen->context ? "context" : "zstd"},
+               {"layout", chosen->context ? "binary-ac" : "zigzag-bytes"},
+               {"predictor", predictor_name(r, chosen->predict)},
+               {"dims", {r.dims.x, r.dims.y, r.dims.z}},
+               {"bound", r.bound},
+               {"step", r.step},
+               {"nonzero", r.nonzero()}};
+  if (chosen->context) best.meta["crc32"] = values_crc(r.q);
+  else best.meta["escapes"] = chosen->escapes, best.meta["raw_bytes"] = chosen->raw_bytes;
   best.meta["candidate_bytes"] = sizes;
+  best.bytes = std::move(chosen->bytes);
   return best;
 }
 

@@ -300,7 +300,7 @@ Residuals residuals_for_budget(const Network& net, const float* original, Int3 d
 }
 
 double residual_fill_seconds(Int3 dims) { return 0.55e-6 * double(dims.count()); }
-double residual_bound_seconds(Int3 dims) { return 1.5e-6 * double(dims.count()); }
+double residual_bound_seconds(Int3 dims) { return 1.0e-6 * double(dims.count()); }
 
 Json residual_coding_summary(const Residuals& r) {
   if (!r.encoded) fail("the residuals were not coded");

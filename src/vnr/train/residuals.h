@@ -122,8 +122,9 @@ std::optional<Residuals> bounded_wavelet_residuals(const float* original, const 
 ErrorStats residual_error_stats(const Residuals& r, const float* original, const float* pred);
 
 // What residuals_for_budget is expected to take on `dims` voxels (0.55 us per voxel: 8.8 s measured on
-// bonsai's 16.8 M on 2 cores), and smallest_residuals for a requested bound (1.5 us: 25 s there; zstd at
-// level 19 of both references and the wavelets' probe): what a --seconds budget leaves them after training.
+// bonsai's 16.8 M on 2 cores), and smallest_residuals for a requested bound (1.0 us: 13.6-16.5 s there at
+// 1e-2 and 1e-3, the coders of both references running side by side): what a --seconds budget leaves
+// them after training.
 double residual_fill_seconds(Int3 dims);
 double residual_bound_seconds(Int3 dims);
 
