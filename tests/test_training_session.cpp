@@ -410,8 +410,8 @@ TEST(TrainingSetup, JsonRoundTripsAndRefusesWhatItDoesNotKnow) {
   EXPECT_NE(msg.find("unknown key 'learning_rate'"), std::string::npos) << msg;
   EXPECT_NE(msg.find("target_ratio"), std::string::npos) << msg;  // the allowed list
   for (const auto& [bad, needle] : std::vector<std::pair<Json, std::string>>{
-           {{{"batch", 100}}, "--batch must be a positive multiple of 256"},
-           {{{"cooldown", 2}}, "--cooldown must be in [0, 1]"},
+           {{{"batch", 100}}, "batch must be a positive multiple of 256"},
+           {{{"cooldown", 2}}, "cooldown must be in [0, 1]"},
            {{{"seed", "one"}}, "'seed' must be a number"},
            {{{"config", 3}}, "'config' must be"},
            {{{"range", {5, 1}}}, "'range' must be [lo, hi]"},
@@ -420,4 +420,14 @@ TEST(TrainingSetup, JsonRoundTripsAndRefusesWhatItDoesNotKnow) {
     msg = error_of_setup(bad);
     EXPECT_NE(msg.find(needle), std::string::npos) << bad.dump() << " -> " << msg;
   }
+  // JSON (and Python) name the keys; the command line's check names its options.
+  EXPECT_EQ(error_of_setup(Json{{"qat_fraction", 2}}).find("--"), std::string::npos);
+  TrainingSetup cli;
+  cli.qat_fraction = 2;
+  EXPECT_THROW(
+      try { check_training_setup(cli); } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find("--qat-fraction must be in [0, 1]"), std::string::npos) << e.what();
+        throw;
+      },
+      Error);
 }

@@ -86,11 +86,11 @@ def test_target_psnr_out_of_reach_warns_and_returns_the_largest_model():
 
 def test_bad_compression_options_raise():
     array = smooth_volume((8, 8, 8), "float32")
-    with pytest.raises(ValueError, match="--target-psnr must be positive"):
+    with pytest.raises(ValueError, match="target_psnr must be positive"):
         vnr.train(array, target_psnr=float("nan"), **TRAIN)
-    with pytest.raises(ValueError, match="qat-fraction"):
+    with pytest.raises(ValueError, match="qat_fraction"):
         vnr.train(array, target_ratio=8, qat_fraction=2.0, **TRAIN)
-    with pytest.raises(ValueError, match="rate-weight"):
+    with pytest.raises(ValueError, match="rate_weight"):
         vnr.train(array, target_ratio=8, rate_weight=-1.0, **TRAIN)
 
 
@@ -112,5 +112,5 @@ def test_residuals_fill_a_target_ratio_as_the_cli(tmp_path, cli):
     off = vnr.train(side, target_ratio=8, residuals="off", **dict(TRAIN, steps=20))
     err = np.abs(decoded.astype(np.float64) - array).max()
     assert err < 0.5 * np.abs(off.decode(device="cpu").astype(np.float64) - array).max()
-    with pytest.raises(Exception, match="--residuals must be auto or off"):
+    with pytest.raises(Exception, match="residuals must be auto or off"):
         vnr.train(side, target_ratio=8, residuals="some", **dict(TRAIN, steps=20))

@@ -1,5 +1,6 @@
 // TrainingSetup's checks and its JSON form (train/session.h): the settings of one training run as a
 // user gives them, flat as the CLI's options.
+#include <algorithm>
 #include <cmath>
 #include <set>
 #include "vnr/error.h"
@@ -47,32 +48,42 @@ void read_raw_keys(const Json& j, RawOptions& raw) {
   }
 }
 
-void check_values(const TrainingSetup& s) {
-  if (s.batch <= 0 || s.batch % kChunk != 0) fail("--batch must be a positive multiple of {}, got {}", kChunk, s.batch);
-  if (s.steps < -1) fail("--steps must be non-negative, got {}", s.steps);
-  if (s.macrocell_size < 0) fail("--macrocell-size must be 0 (none) or positive, got {}", s.macrocell_size);
+// A key as the command line spells it (max_rel_error: --max-rel-error).
+std::string option_name(const std::string& key) {
+  std::string option = "--" + key;
+  std::replace(option.begin(), option.end(), '_', '-');
+  return option;
+}
+
+// The checks, naming each setting with name(key): the CLI's options, or the JSON and Python keys.
+void check_values(const TrainingSetup& s, std::string (*name)(const std::string&)) {
+  auto n = [name](const char* key) { return name ? name(key) : std::string(key); };
+  if (s.batch <= 0 || s.batch % kChunk != 0) fail("{} must be a positive multiple of {}, got {}", n("batch"), kChunk, s.batch);
+  if (s.steps < -1) fail("{} must be non-negative, got {}", n("steps"), s.steps);
+  if (s.macrocell_size < 0) fail("{} must be 0 (none) or positive, got {}", n("macrocell_size"), s.macrocell_size);
   if (s.session.checkpoint_every < 0)
-    fail("--checkpoint-every must be non-negative, got {}", s.session.checkpoint_every);
-  if (s.data.blocks < 0 || s.data.refresh < 0) fail("--blocks and --refresh must be positive");
-  if (s.target_ratio < 0 || !std::isfinite(s.target_ratio)) fail("--target-ratio must be positive, got {}", s.target_ratio);
-  if (s.target_psnr < 0 || !std::isfinite(s.target_psnr)) fail("--target-psnr must be positive, got {}", s.target_psnr);
+    fail("{} must be non-negative, got {}", n("checkpoint_every"), s.session.checkpoint_every);
+  if (s.data.blocks < 0 || s.data.refresh < 0) fail("{} and {} must be positive", n("blocks"), n("refresh"));
+  if (s.target_ratio < 0 || !std::isfinite(s.target_ratio))
+    fail("{} must be positive, got {}", n("target_ratio"), s.target_ratio);
+  if (s.target_psnr < 0 || !std::isfinite(s.target_psnr)) fail("{} must be positive, got {}", n("target_psnr"), s.target_psnr);
   if (!(s.qat_fraction >= 0 && s.qat_fraction <= 1))
-    fail("--qat-fraction must be in [0, 1], got {}", s.qat_fraction);
+    fail("{} must be in [0, 1], got {}", n("qat_fraction"), s.qat_fraction);
   if (!(s.rate_weight >= 0 && s.rate_weight <= 100))
-    fail("--rate-weight must be in [0, 100], got {}", s.rate_weight);
-  if (s.residuals != "auto" && s.residuals != "off") fail("--residuals must be auto or off, got '{}'", s.residuals);
+    fail("{} must be in [0, 100], got {}", n("rate_weight"), s.rate_weight);
+  if (s.residuals != "auto" && s.residuals != "off") fail("{} must be auto or off, got '{}'", n("residuals"), s.residuals);
   if (!(s.bits_per_param > 0 && s.bits_per_param <= 16))
-    fail("bits per parameter must be in (0, 16], got {}", s.bits_per_param);
+    fail("{} (bits per parameter) must be in (0, 16], got {}", n("bits_per_param"), s.bits_per_param);
   if (!(s.session.cooldown >= 0 && s.session.cooldown <= 1))
-    fail("--cooldown must be in [0, 1], got {}", s.session.cooldown);
+    fail("{} must be in [0, 1], got {}", n("cooldown"), s.session.cooldown);
   if (!(s.session.error_bound.max_error >= 0 && s.session.error_bound.max_rel_error >= 0))
-    fail("--max-error and --max-rel-error must be positive");
+    fail("{} and {} must be positive", n("max_error"), n("max_rel_error"));
 }
 
 }  // namespace
 
 void check_training_setup(const TrainingSetup& s) {
-  check_values(s);
+  check_values(s, option_name);
   if (s.device == "cuda") cuda::require_device();
 }
 
@@ -115,7 +126,7 @@ TrainingSetup TrainingSetup::from_json(const Json& j) {
   s.session.error_bound.max_rel_error = json_get(j, "max_rel_error", s.session.error_bound.max_rel_error, kWhere);
   read_raw_keys(j, s.raw);
   if (j.contains("nan")) s.load.non_finite = parse_non_finite_policy(json_get<std::string>(j, "nan", "", kWhere));
-  check_values(s);
+  check_values(s, nullptr);
   return s;
 }
 
