@@ -14,5 +14,8 @@ Json parse_json_file(const std::string& path);
 // Case-insensitive string equality (tcnn compares "otype" case-insensitively).
 bool iequals(const std::string& a, const std::string& b);
 std::string to_lower(std::string s);
+// A settings key as the command line spells it (max_rel_error: --max-rel-error): how the CLI names the
+// setting in the library's messages.
+std::string option_name_of(const std::string& key);
 
 }  // namespace vnr

@@ -186,6 +186,8 @@ private:
 
 // A transfer function from a preset name, transfer-function JSON text (instantvnr's or vnr's) or a file.
 TransferFunction transfer_function_of(const std::string& preset_json_or_file);
+// Whether transfer_function_of reads `tf` from a file (neither empty, a preset nor JSON text).
+bool names_a_tf_file(const std::string& tf);
 
 // A renderer over a model (with `volume` as its ground truth, or null) or a volume (model null), set up
 // as `settings` say: what every front end renders with. `input_scene` (the input's own, e.g. an

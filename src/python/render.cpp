@@ -11,12 +11,8 @@ namespace {
 // `model_mutex` (the model's holder's, or null) is locked only once the GIL is released: a query holding
 // it may take the GIL (Model.sample of a strided array).
 pyb::array_t<float> render(const Model* model, const Volume* volume, const RenderSettings& s, std::mutex* model_mutex) {
-  s.validate();
-  // A transfer function that is neither a preset nor JSON text names a file: FileNotFoundError, as for
-  // every other path the module opens.
-  const size_t first = s.tf.find_first_not_of(" \t\r\n");
-  if (!s.tf.empty() && !is_tf_preset(s.tf) && (first == std::string::npos || s.tf[first] != '{'))
-    require_file(s.tf, "transfer function");
+  // A transfer function file that is missing: FileNotFoundError, as for every other path the module opens.
+  if (names_a_tf_file(s.tf)) require_file(s.tf, "transfer function");
   pyb::array_t<float> out({pyb::ssize_t(s.height), pyb::ssize_t(s.width), pyb::ssize_t(4)});
   float* dst = out.mutable_data();
   pyb::gil_scoped_release release;

@@ -50,11 +50,15 @@ void check_one_of(const std::string& value, std::initializer_list<const char*> a
 
 }  // namespace
 
+bool names_a_tf_file(const std::string& tf) {
+  const size_t first = tf.find_first_not_of(" \t\r\n");
+  return !tf.empty() && !is_tf_preset(tf) && (first == std::string::npos || tf[first] != '{');
+}
+
 TransferFunction transfer_function_of(const std::string& tf) {
   if (tf.empty()) return tf_preset("ramp");
   if (is_tf_preset(tf)) return tf_preset(tf);
-  const size_t first = tf.find_first_not_of(" \t\r\n");
-  if (first != std::string::npos && tf[first] == '{') {
+  if (!names_a_tf_file(tf)) {
     Json j;
     try {
       j = Json::parse(tf);
@@ -88,7 +92,7 @@ void RenderSettings::validate(const std::function<std::string(const std::string&
   if (orbit && !(std::isfinite(orbit->first) && std::isfinite(orbit->second)))
     fail("{} must be finite (azimuth, elevation), got ({}, {})", n("orbit"), orbit->first, orbit->second);
   check_one_of(device, {"auto", "cpu", "cuda"}, "device");
-  check_one_of(mlp, {"auto", "fused", "cublas"}, "MLP path");
+  cuda::parse_mlp_path(mlp);
   parse_precision(precision);
   if (!(cache_dims == Int3{0, 0, 0}) && (cache_dims.x < 1 || cache_dims.y < 1 || cache_dims.z < 1))
     fail("{} must be positive (x, y, z), or all 0 for the model's dims, got ({}, {}, {})", n("cache_dims"),

@@ -27,4 +27,10 @@ std::string to_lower(std::string s) {
 
 bool iequals(const std::string& a, const std::string& b) { return to_lower(a) == to_lower(b); }
 
+std::string option_name_of(const std::string& key) {
+  std::string option = "--" + key;
+  std::replace(option.begin(), option.end(), '_', '-');
+  return option;
+}
+
 }  // namespace vnr

@@ -1,6 +1,5 @@
 // TrainingSetup's checks and its JSON form (train/session.h): the settings of one training run as a
 // user gives them, flat as the CLI's options.
-#include <algorithm>
 #include <cmath>
 #include <set>
 #include "vnr/error.h"
@@ -48,13 +47,6 @@ void read_raw_keys(const Json& j, RawOptions& raw) {
   }
 }
 
-// A key as the command line spells it (max_rel_error: --max-rel-error).
-std::string option_name(const std::string& key) {
-  std::string option = "--" + key;
-  std::replace(option.begin(), option.end(), '_', '-');
-  return option;
-}
-
 // The checks, naming each setting with name(key): the CLI's options, or the JSON and Python keys.
 void check_values(const TrainingSetup& s, std::string (*name)(const std::string&)) {
   auto n = [name](const char* key) { return name ? name(key) : std::string(key); };
@@ -83,7 +75,7 @@ void check_values(const TrainingSetup& s, std::string (*name)(const std::string&
 }  // namespace
 
 void check_training_setup(const TrainingSetup& s) {
-  check_values(s, option_name);
+  check_values(s, option_name_of);
   if (s.device == "cuda") cuda::require_device();
 }
 
