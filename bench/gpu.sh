@@ -10,6 +10,8 @@
 #             there for that machine's python3 against the prebuilt static libraries
 #   profile   Nsight Compute's speed-of-light of the training step's and the renderer's kernels
 #   sanitize  compute-sanitizer memcheck and racecheck over the gpu tests
+#   rd        the compression issue's rate-distortion points at the paper's 20k steps on the GPU
+#             (quantization- and rate-aware steps on the device), table in rd_table.md
 #
 #   sh bench/gpu.sh OUTDIR
 #
@@ -19,7 +21,7 @@
 # script configures and builds build-gpu there, as before.
 #
 # Environment (all optional):
-#   VNR_STAGES   which stages to run (default: "tests cli bench render python profile sanitize")
+#   VNR_STAGES   which stages to run (default: "tests cli bench render python profile sanitize rd")
 #   VNR_CUDA_ARCH  CMAKE_CUDA_ARCHITECTURES of a build on the GPU machine (default: the project's list)
 #   VNR_DATA     folder with the real volumes (default: ../shared/data, else .data)
 #   VNR_VOLUME   volume to benchmark on (default: DATA/bonsai.json if present, else a generated
@@ -34,13 +36,16 @@
 #   VNR_RENDER_NAMES volumes of the rendering table (default "bonsai engine chris_t1", those present);
 #                VNR_RENDER_STEPS training steps of their models (default 20000), VNR_RENDER_FRAMES timed
 #                frames per cell (default 12)
+#   VNR_RD_NAMES volumes of the rd stage (default "bonsai chris_t1 wmag91 engine", those present),
+#                VNR_RD_RATIOS its target ratios (default 32,64,128), VNR_RD_BOUNDS its bounds (default
+#                1e-2,1e-3), VNR_RD_STEPS its steps per model (default 20000)
 set -eu
 OUT=${1:?usage: sh bench/gpu.sh OUTDIR}
 mkdir -p "$OUT"
 OUT=$(cd "$OUT" && pwd)
 cd "$(dirname "$0")/.."
 SECONDS_EACH=${VNR_SECONDS:-5}
-STAGES=" ${VNR_STAGES:-tests cli bench render python profile sanitize} "
+STAGES=" ${VNR_STAGES:-tests cli bench render python profile sanitize rd} "
 want() { case "$STAGES" in *" $1 "*) return 0 ;; esac; return 1; }
 DATA=${VNR_DATA:-../shared/data}
 if [ ! -d "$DATA" ] && [ -d .data ]; then DATA=.data; fi
@@ -284,6 +289,31 @@ if want sanitize; then
       echo "$tool $t: $ours reports in vnr's kernels, $theirs in cuBLAS's; $(grep -E 'PASSED|FAILED' "$log" | tail -1)"
     done
   done
+fi
+
+if want rd; then
+  stage "rate-distortion at ${VNR_RD_STEPS:-20000} steps"
+  for name in ${VNR_RD_NAMES:-bonsai chris_t1 wmag91 engine}; do
+    [ -f "$DATA/$name.json" ] || continue
+    timeout 590 $VNR bench rd "$DATA/$name.json" --device cuda --steps "${VNR_RD_STEPS:-20000}" \
+      --ratios "${VNR_RD_RATIOS:-32,64,128}" --bounds "${VNR_RD_BOUNDS:-1e-2,1e-3}" --zfp-rates none \
+      --report "$OUT/rd_$name.json" > "$OUT/rd_$name.log" 2>&1 || status=1
+    grep -E 'vnr' "$OUT/rd_$name.log" | tail -6
+  done
+  python3 - "$OUT" <<'PY' || true
+import glob, json, os, sys
+out = sys.argv[1]
+lines = ["| volume | point | parameter | ratio | PSNR (dB) | bound held | seconds |", "|---|---|---|---|---|---|---|"]
+for f in sorted(glob.glob(os.path.join(out, "rd_*.json"))):
+    rep = json.load(open(f))
+    for p in rep.get("points", []):
+        if not p.get("codec", "").startswith("vnr"): continue
+        lines.append("| {} | {} | {} | {:.2f}x | {:.2f} | {} | {:.1f} |".format(os.path.basename(f)[3:-5], p["codec"],
+                     p.get("parameter"), p.get("ratio", 0), p.get("psnr", 0), p.get("extra", {}).get("bound_holds", ""),
+                     p.get("seconds", 0)))
+open(os.path.join(out, "rd_table.md"), "w").write("\n".join(lines) + "\n")
+print("\n".join(lines))
+PY
 fi
 
 exit $status

@@ -1,17 +1,24 @@
 // The GPU's training and multi-brick paths beyond one in-memory volume (ctest label `gpu`): the GPU
 // trainer fed by a host sampler (the CPU trainer's samples) against the GPU sampling its own copy; the
 // out-of-core sampler feeding the GPU; time series on the GPU, per timestep and continuously (one
-// optimizer across timesteps); a multi-brick model decoded and rendered on the GPU against the CPU.
+// optimizer across timesteps); a multi-brick model decoded and rendered on the GPU against the CPU;
+// quantization-aware and rate-aware training of compact models on the GPU against the CPU.
 // Without a CUDA device every test reports itself skipped with the reason.
 #include <gtest/gtest.h>
 #include <cmath>
+#include <filesystem>
+#include <fmt/format.h>
 #include "bricks_test_support.h"
 #include "test_support.h"
 #include "vnr/cuda/cuda.h"
 #include "vnr/model.h"
+#include "vnr/core/half.h"
+#include "vnr/nn/mlp_layout.h"
 #include "vnr/nn/config.h"
 #include "vnr/renderer.h"
 #include "vnr/train/make_trainer.h"
+#include "vnr/train/model_io.h"
+#include "vnr/train/rate_control.h"
 #include "vnr/train/series.h"
 #include "vnr/train/session.h"
 #include "vnr/volume/writer.h"
@@ -165,4 +172,55 @@ TEST(GpuBricks, DecodeAndRenderMatchTheCpu) {
     std::printf("multi-brick %s, GPU (decoded) vs CPU (networks): %.1f dB\n", render_mode_name(mode), p);
     EXPECT_GT(p, bound);
   }
+}
+
+// `vnr train --device cuda --target-ratio`: quantization-aware and rate-aware steps run on the GPU
+// (GpuTrainer::begin_quantized) as on the CPU (the session's step hooks): the same file size, the
+// quantized network within a dB of the CPU's after the same steps, and the rate term zeroing more of
+// the quantized grid on both.
+TEST(GpuCompact, QuantizedAndRateAwareStepsRunOnTheGpuAsOnTheCpu) {
+  REQUIRE_GPU();
+  TmpDir dir("gpu_qat");
+  synth_volume("marschner-lobb", Int3{48, 48, 48}, dir / "v.json");
+  struct Run {
+    double psnr, zero_share;
+    int64_t qat_steps, bytes;
+  };
+  auto run = [&](const char* device, double rate_weight) {
+    TrainingSetup s;
+    s.volume = dir / "v.json";
+    s.config = "small";
+    s.batch = 16384;
+    s.seed = 4;
+    s.device = device;
+    s.target_ratio = 8;
+    s.qat_fraction = 0.5;
+    s.rate_weight = rate_weight;
+    s.session.output = dir / fmt::format("{}_{}.vnr", device, rate_weight);
+    auto session = open_training_session(s);
+    const Json summary = train_compact(*session, 400, 0, session->options().compact);
+    session->finish({.ssim = false});
+    const Model m = load_model(s.session.output);
+    const size_t first_grid = make_mlp_layout(m.net->config()).n_matrices;
+    const std::vector<uint16_t> p = m.net->params_half();
+    uint64_t off = 0, zeros = 0, n = 0;
+    for (size_t k = 0; k < m.param_segments.size(); ++k) {
+      const ParamSegment& seg = m.param_segments[k];
+      if (k >= first_grid && seg.step > 0)
+        for (uint64_t i = off; i < off + seg.count; ++i, ++n) zeros += half_to_float(p[i]) == 0.0f;
+      off += seg.count;
+    }
+    return Run{summary["heldback_psnr"].get<double>(), double(zeros) / double(std::max<uint64_t>(n, 1)),
+               summary["qat_steps"].get<int64_t>(), int64_t(std::filesystem::file_size(s.session.output))};
+  };
+  const Run gpu = run("cuda", 0), cpu = run("cpu", 0), gpu_rate = run("cuda", 3), cpu_rate = run("cpu", 3);
+  std::printf("compact 8x, 200 QAT steps: held-back PSNR %.2f dB GPU, %.2f CPU; grid zeros %.3f / %.3f, with the "
+              "rate term %.3f / %.3f\n", gpu.psnr, cpu.psnr, gpu.zero_share, cpu.zero_share, gpu_rate.zero_share,
+              cpu_rate.zero_share);
+  EXPECT_EQ(gpu.qat_steps, 200);
+  EXPECT_EQ(gpu_rate.qat_steps, 200);
+  EXPECT_NEAR(double(gpu.bytes), double(cpu.bytes), 0.05 * double(cpu.bytes));
+  EXPECT_NEAR(gpu.psnr, cpu.psnr, 1.0);
+  EXPECT_GT(gpu_rate.zero_share, gpu.zero_share + 0.05);
+  EXPECT_NEAR(gpu_rate.zero_share, cpu_rate.zero_share, 0.1);
 }

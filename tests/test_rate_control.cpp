@@ -262,6 +262,23 @@ TEST(RateControl, TargetPsnrSearchOutOfReachKeepsTheLargestModel) {
 
 // The rate term: bits of a Laplace bin around theta against an independent integration of the
 // density, its gradient against central finite differences, and the masses of all bins summing to 1.
+// nn/quantization_hd.h's stored value, shared by the CPU's quantization-aware steps and the GPU's kernel:
+// the nearest multiple (ties to even), at most kMaxQuantIndex steps out, rounded to fp16, NaN/inf to 0.
+TEST(RateTerm, QuantizedValueIsTheNearestStoredMultiple) {
+  const auto fp16 = [](float v) { return half_to_float(float_to_half(v)); };
+  EXPECT_EQ(quantized_value(0.26f, 0.1f), fp16(3 * 0.1f));
+  EXPECT_EQ(quantized_value(0.75f, 0.5f), 1.0f);  // 1.5 steps: to the even 2
+  EXPECT_EQ(quantized_value(1.25f, 0.5f), 1.0f);  // 2.5 steps: to the even 2
+  EXPECT_EQ(quantized_value(-0.8f, 0.5f), -1.0f);
+  EXPECT_EQ(quantized_value(1e6f, 1.0f), float(kMaxQuantIndex));
+  EXPECT_EQ(quantized_value(-1e6f, 1.0f), -float(kMaxQuantIndex));
+  EXPECT_EQ(quantized_value(std::nanf(""), 0.5f), 0.0f);
+  EXPECT_EQ(quantized_value(INFINITY, 0.5f), 0.0f);
+  EXPECT_FALSE(std::signbit(quantized_value(-0.1f, 1.0f)));  // -0 is stored as +0
+  EXPECT_EQ(quantized_value(1.0001f, 0.0f), 1.0f);            // step 0: fp16 alone
+  EXPECT_EQ(quantized_value(0.3f, 0.0f), fp16(0.3f));
+}
+
 TEST(RateTerm, LaplaceBinBitsMatchTheDensityAndItsGradientFiniteDifferences) {
   for (double step : {0.01, 0.1, 1.0}) {
     for (double scale : {0.003, 0.05, 2.0}) {

@@ -16,6 +16,7 @@
 #include "vnr/math.h"
 #include "vnr/core/value_range_grid.h"
 #include "vnr/nn/network.h"
+#include "vnr/nn/param_codec.h"
 #include "vnr/volume/volume.h"
 
 namespace vnr::cuda {
@@ -103,6 +104,14 @@ public:
   ValueRangeGrid online_ranges();  // synchronises
   // Copies the binary32 master parameters back into the Network (and refreshes its half grid).
   void download();
+  // Quantization-aware steps (Trainer::begin_quantized_steps): the master copy becomes `master`, and
+  // until end_quantized the half parameters every step reads are quantized_value(master, step of its
+  // segment) (nn/quantization_hd.h); rate_weight_per_loss > 0 adds the rate term of the segments from
+  // first_rate_segment on to the gradient, scaled by the previous step's loss, read on the device.
+  void begin_quantized(const std::vector<float>& master, const std::vector<ParamSegment>& segments,
+                       size_t first_rate_segment, double rate_weight_per_loss);
+  // Ends them (synchronises): master receives the master copy; the half parameters are its fp16 again.
+  void end_quantized(std::vector<float>& master);
   MlpPath mlp_path() const;
   // Most bytes of GPU memory the backend's buffers held at once (the volume included; cuBLAS's own
   // workspace not).

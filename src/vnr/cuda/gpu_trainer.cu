@@ -9,10 +9,60 @@
 #include "vnr/cuda/mlp.cuh"
 #include "vnr/cuda/gradient_pass.cuh"
 #include "vnr/cuda/network.cuh"
+#include "vnr/core/parallel.h"
 #include "vnr/nn/optimizer.h"
+#include "vnr/nn/quantization_hd.h"
 
 
 namespace vnr::cuda {
+namespace {
+
+// Quantization-aware steps: what each step's forward pass reads is the stored value of its master.
+struct WriteQuantizedHalf {
+  const float* master;
+  const float* step;  // per parameter
+  __half* half;
+  __device__ void operator()(int64_t i) const { half[i] = __float2half_rn(quantized_value(master[i], step[i])); }
+};
+struct WriteHalf {
+  const float* master;
+  __half* half;
+  __device__ void operator()(int64_t i) const { half[i] = __float2half_rn(master[i]); }
+};
+
+// *sum += sum of |w[i]| over [0, n): a block's partial sums, then one atomic add per block.
+constexpr int kSumThreads = 256;
+__global__ void abs_sum_kernel(const float* __restrict__ w, int64_t n, double* sum) {
+  __shared__ double part[kSumThreads];
+  double local = 0;
+  for (int64_t i = int64_t(blockIdx.x) * blockDim.x + threadIdx.x; i < n; i += int64_t(gridDim.x) * blockDim.x)
+    local += fabs(double(w[i]));
+  part[threadIdx.x] = local;
+  __syncthreads();
+  for (int k = kSumThreads / 2; k > 0; k >>= 1) {
+    if (int(threadIdx.x) < k) part[threadIdx.x] += part[threadIdx.x + k];
+    __syncthreads();
+  }
+  if (threadIdx.x == 0) atomicAdd(sum, part[0]);
+}
+
+// One segment's rate-term gradient, per parameter as train/rate_term.cpp's add_rate_gradient adds it.
+struct AddRateGradient {
+  const float* master;
+  float* grads;
+  const double* abs_sum;  // the segment's sum of |master|
+  const float* loss;      // the previous step's
+  double weight_per_loss;
+  uint64_t count;
+  float step;
+  __device__ void operator()(int64_t i) const {
+    double d;
+    laplace_bin_bits(master[i], step, laplace_scale(*abs_sum, count, step), &d);
+    grads[i] += float(weight_per_loss * double(*loss) * d);
+  }
+};
+
+}  // namespace
 
 // ------------------------------------------------------------------------------------------------
 // GpuTrainer
@@ -44,6 +94,16 @@ struct GpuTrainer::Impl {
   std::shared_ptr<HostBatchSource> source;
   float* staging[2] = {};
   cudaEvent_t staged[2] = {};
+  // Quantization-aware steps (begin_quantized): each parameter's step (empty: off) and the segments
+  // the rate term covers, with their sums of |master|.
+  struct RateSegment {
+    uint64_t begin, count;
+    float step;
+  };
+  DeviceBuffer<float> quant_step;
+  std::vector<RateSegment> rate_segments;
+  DeviceBuffer<double> rate_abs_sum;
+  double rate_weight_per_loss = 0;
 
   Impl(Network& n, GridView vol, GpuTrainOptions o) : net(n), opts(o) {
     check_options();
@@ -164,6 +224,7 @@ struct GpuTrainer::Impl {
     gradient_pass(net, d, path, half.data(), Coords{xs.data(), ys.data(), zs.data(), 1}, target.data(), opts.batch,
                   pass, grads.data(), loss_slots.data() + step, sb, [&](int i) { mark(i); });
     mark(3);
+    if (!rate_segments.empty()) add_rate_gradients(st);
     ++step;
     AdamArgs args{{sc.lr, a.beta1, a.beta2, a.epsilon, a.l2_reg, a.relative_decay, a.absolute_decay, sc.lo, sc.hi}, 1};
     const uint64_t n_mlp = net.mlp().n_params;
@@ -180,7 +241,26 @@ struct GpuTrainer::Impl {
            half.data() + n_mlp, int64_t(P - n_mlp), bias_sqrt.data(), bias_den.data(), st);
     else
       VNR_CUDA_CHECK(cudaMemsetAsync(grads.data() + n_mlp, 0, (P - n_mlp) * sizeof(float), st));
+    if (quant_step.size()) {  // the next step reads the quantized values (Adam wrote their fp16)
+      parallel_for(st, int64_t(P), WriteQuantizedHalf{master.data(), quant_step.data(), half.data()});
+      VNR_CUDA_LAUNCHED();
+    }
     mark(4);
+  }
+
+  void add_rate_gradients(cudaStream_t st) {
+    const float* loss = loss_slots.data() + (step > 0 ? step - 1 : 0);
+    VNR_CUDA_CHECK(cudaMemsetAsync(rate_abs_sum.data(), 0, rate_abs_sum.size() * sizeof(double), st));
+    for (size_t k = 0; k < rate_segments.size(); ++k) {
+      const RateSegment& r = rate_segments[k];
+      const unsigned blocks = std::min(blocks_for(int64_t(r.count), kSumThreads), 1024u);
+      abs_sum_kernel<<<blocks, kSumThreads, 0, st>>>(master.data() + r.begin, int64_t(r.count), rate_abs_sum.data() + k);
+      VNR_CUDA_LAUNCHED();
+      parallel_for(st, int64_t(r.count),
+                   AddRateGradient{master.data() + r.begin, grads.data() + r.begin, rate_abs_sum.data() + k, loss,
+                                   rate_weight_per_loss, r.count, r.step});
+      VNR_CUDA_LAUNCHED();
+    }
   }
 };
 
@@ -236,6 +316,48 @@ void GpuTrainer::download() {
   synchronize();
   impl_->net.edit_params([&](float* p, size_t n) { impl_->master.download(p, n); });
 }
+void GpuTrainer::begin_quantized(const std::vector<float>& master, const std::vector<ParamSegment>& segments,
+                                 size_t first_rate_segment, double rate_weight_per_loss) {
+  Impl& I = *impl_;
+  const uint64_t P = I.net.n_params();
+  if (master.size() != P)
+    cuda_fail_message("quantized steps: a master copy of " + std::to_string(master.size()) + " parameters for a network of " +
+                      std::to_string(P));
+  std::vector<float> steps(P);
+  std::vector<Impl::RateSegment> rate;
+  uint64_t off = 0;
+  for (size_t k = 0; k < segments.size(); ++k) {
+    const ParamSegment& s = segments[k];
+    if (s.count > P - off) cuda_fail_message("quantized steps: the segments cover more than the network's parameters");
+    std::fill(steps.begin() + int64_t(off), steps.begin() + int64_t(off + s.count), s.step);
+    if (rate_weight_per_loss > 0 && k >= first_rate_segment && s.step > 0 && s.count > 0)
+      rate.push_back(Impl::RateSegment{off, s.count, s.step});
+    off += s.count;
+  }
+  if (off != P) cuda_fail_message("quantized steps: the segments cover " + std::to_string(off) + " of " + std::to_string(P) + " parameters");
+  synchronize();  // no queued step may still read the master copy
+  I.master.upload(master.data(), P);
+  I.quant_step.resize(P);
+  I.quant_step.upload(steps.data(), P);
+  I.rate_segments = std::move(rate);
+  I.rate_abs_sum.resize(std::max<size_t>(1, I.rate_segments.size()));
+  I.rate_weight_per_loss = rate_weight_per_loss;
+  parallel_for(I.sb.stream, int64_t(P), WriteQuantizedHalf{I.master.data(), I.quant_step.data(), I.half.data()});
+  VNR_CUDA_LAUNCHED();
+}
+
+void GpuTrainer::end_quantized(std::vector<float>& master) {
+  Impl& I = *impl_;
+  const uint64_t P = I.net.n_params();
+  synchronize();
+  master.resize(P);
+  I.master.download(master.data(), P);
+  I.quant_step = DeviceBuffer<float>();
+  I.rate_segments.clear();
+  parallel_for(I.sb.stream, int64_t(P), WriteHalf{I.master.data(), I.half.data()});
+  VNR_CUDA_LAUNCHED();
+}
+
 MlpPath GpuTrainer::mlp_path() const { return impl_->path; }
 uint64_t GpuTrainer::peak_memory_bytes() const { return device_bytes_peak(); }
 

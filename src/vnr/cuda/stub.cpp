@@ -32,6 +32,10 @@ void GpuTrainer::enable_online_ranges(Int3, int) { not_built(); }
 bool GpuTrainer::has_online_ranges() const { not_built(); }
 ValueRangeGrid GpuTrainer::online_ranges() { not_built(); }
 void GpuTrainer::download() { not_built(); }
+void GpuTrainer::begin_quantized(const std::vector<float>&, const std::vector<ParamSegment>&, size_t, double) {
+  not_built();
+}
+void GpuTrainer::end_quantized(std::vector<float>&) { not_built(); }
 MlpPath GpuTrainer::mlp_path() const { not_built(); }
 uint64_t GpuTrainer::peak_memory_bytes() const { not_built(); }
 void GpuTrainer::set_profiling(bool) { not_built(); }

@@ -57,6 +57,12 @@ public:
   bool has_online_ranges() const override { return gpu_->has_online_ranges(); }
   ValueRangeGrid online_ranges() const override { return gpu_->online_ranges(); }
   void download() override { gpu_->download(); }
+  bool has_quantized_steps() const override { return true; }
+  void begin_quantized_steps(const std::vector<float>& master, const std::vector<ParamSegment>& segments,
+                             size_t first_rate_segment, double rate_weight_per_loss) override {
+    gpu_->begin_quantized(master, segments, first_rate_segment, rate_weight_per_loss);
+  }
+  void end_quantized_steps(std::vector<float>& master) override { gpu_->end_quantized(master); }
   Network& network() override { return net_; }
   int64_t batch() const override { return batch_; }
   uint32_t seed() const override { return seed_; }

@@ -7,6 +7,7 @@
 #include "vnr/core/half.h"
 #include "vnr/core/rng.h"
 #include "vnr/nn/mlp_layout.h"
+#include "vnr/nn/quantization_hd.h"
 #include "vnr/train/residuals.h"
 #include "vnr/train/session.h"
 
@@ -24,13 +25,6 @@ void zero_unused(const MlpLayout& m, std::vector<float>& p) {
   if (m.pad_value == 0.0f)
     for (uint64_t r = 0; r < m.rows[0]; ++r)
       for (uint64_t c = m.first_cols; c < m.cols[0]; ++c) p[m.offset[0] + r * m.cols[0] + c] = 0.0f;
-}
-
-float quantized_value(float v, float step) {
-  if (step == 0) return half_to_float(float_to_half(v));
-  if (!std::isfinite(v)) return 0.0f;
-  const float q = std::clamp(std::nearbyint(v / step), -float(kMaxQuantIndex), float(kMaxQuantIndex));
-  return half_to_float(float_to_half(float(int32_t(q)) * step));  // int: -0 becomes +0, as the codec stores it
 }
 
 ModelFile file_of(const Model& model, const std::vector<float>& master, const std::vector<ParamSegment>& segs) {
@@ -285,22 +279,57 @@ double fit_bytes(const Model& model, const std::vector<float>& master, const Qua
 }
 
 bool can_train_quantized(TrainingSession& session) {
-  return session.trainer().device() == Device::Cpu && !session.trainer().asynchronous();
+  const Trainer& trainer = session.trainer();
+  return trainer.has_quantized_steps() || (trainer.device() == Device::Cpu && !trainer.asynchronous());
 }
 
-// Rate-aware steps: the grid's bits under the quantization `segs` join the loss with the weight
-// `weight` * 2 ln 2 * loss / parameters (the slope of distortion against rate of a uniform quantizer at
-// high rate, from the last step's loss), their gradient taken on the master copy. False when the
-// trainer takes no gradient hook.
-static bool set_rate_hook(TrainingSession& session, const std::vector<float>& master,
-                          const std::vector<ParamSegment>& segs, double weight) {
+// Quantization-aware steps with the segments' steps: each step sees the quantized parameters, its update
+// lands on the master copy (straight-through); with rate_weight > 0 the grid's bits under those steps
+// join the loss (nn/quantization_hd.h rate_weight_per_loss), their gradient taken on the master copy.
+// A trainer with quantized steps of its own (the GPU's) runs them on its parameters; the CPU trainer
+// through the session's step hooks and its gradient hook. Returns whether the rate term was on.
+static bool run_quantized_steps(TrainingSession& session, std::vector<float>& master,
+                                const std::vector<ParamSegment>& segs, double rate_weight, int64_t steps,
+                                double seconds) {
   Trainer& trainer = session.trainer();
-  const size_t first_grid = make_mlp_layout(session.network().config()).n_matrices;
-  const double n = double(master.size());
-  return trainer.set_gradient_hook([&trainer, &master, segs, first_grid, weight, n](float* grads) {
-    const double lambda = weight * 2 * std::log(2.0) * double(trainer.last_loss()) / n;
-    add_rate_gradient(master, segs, first_grid, lambda, grads);
+  Network& net = session.network();
+  const size_t first_grid = make_mlp_layout(net.config()).n_matrices;
+  const double per_loss = rate_weight > 0 ? rate_weight_per_loss(rate_weight, master.size()) : 0.0;
+  if (trainer.has_quantized_steps()) {
+    trainer.begin_quantized_steps(master, segs, first_grid, per_loss);
+    try {
+      session.run(steps, seconds);
+    } catch (...) {
+      trainer.end_quantized_steps(master);
+      throw;
+    }
+    trainer.end_quantized_steps(master);
+    return per_loss > 0;
+  }
+  std::vector<float> shown;
+  session.set_step_hooks(
+      [&] {
+        apply_quantization(net, master, segs);
+        shown.assign(net.params().begin(), net.params().end());
+      },
+      [&] {
+        for (size_t i = 0; i < master.size(); ++i) master[i] += net.params()[i] - shown[i];
+      });
+  const bool rate_aware = per_loss > 0 && trainer.set_gradient_hook([&trainer, &master, segs, first_grid, per_loss](float* grads) {
+    add_rate_gradient(master, segs, first_grid, per_loss * double(trainer.last_loss()), grads);
   });
+  auto unhook = [&] {
+    session.set_step_hooks({}, {});
+    if (rate_aware) trainer.set_gradient_hook({});
+  };
+  try {
+    session.run(steps, seconds);
+  } catch (...) {
+    unhook();
+    throw;
+  }
+  unhook();
+  return rate_aware;
 }
 
 Json train_compact(TrainingSession& session, int64_t steps, double seconds, const CompactOptions& o,
@@ -346,33 +375,13 @@ Json compact_session(TrainingSession& session, const CompactOptions& o, int64_t 
   int64_t qat_steps = 0;
   bool rate_aware = false;
   if (qat) {
-    // Straight-through: each step sees the quantized parameters; its update lands on the master copy.
-    std::vector<float> shown;
-    const std::vector<ParamSegment> segs = q.plan.at(g);
-    session.set_step_hooks(
-        [&] {
-          apply_quantization(net, q.master, segs);
-          shown.assign(net.params().begin(), net.params().end());
-        },
-        [&] {
-          for (size_t i = 0; i < q.master.size(); ++i) q.master[i] += net.params()[i] - shown[i];
-        });
-    rate_aware = o.rate_weight > 0 && set_rate_hook(session, q.master, segs, o.rate_weight);
     if (qat_seconds > 0) {  // the planning counts against a --seconds budget
       const double planning = std::chrono::duration<double>(std::chrono::steady_clock::now() - planning_start).count();
       qat_seconds = std::max(qat_seconds - planning, 0.05 * qat_seconds);
       session.shorten_budget(planning);
     }
     const int64_t before = session.steps_done();
-    try {
-      session.run(qat_steps_planned, qat_seconds);
-    } catch (...) {
-      session.set_step_hooks({}, {});
-      if (rate_aware) session.trainer().set_gradient_hook({});
-      throw;
-    }
-    session.set_step_hooks({}, {});
-    if (rate_aware) session.trainer().set_gradient_hook({});
+    rate_aware = run_quantized_steps(session, q.master, q.plan.at(g), o.rate_weight, qat_steps_planned, qat_seconds);
     qat_steps = session.steps_done() - before;
     zero_unused(net.mlp(), q.master);
     g = choose(g);  // the weights moved a little: meet the target again

@@ -22,9 +22,9 @@ class TrainingSession;
 struct CompactOptions {
   uint64_t target_bytes = 0;   // > 0: the model file's size (aimed just under; within -5 %..+5 %)
   double target_psnr = 0;      // > 0: the coarsest quantization whose held-back PSNR reaches this
-  double qat_fraction = 0.15;  // last part of the run trained on quantized parameters (CPU trainer only)
+  double qat_fraction = 0.15;  // last part of the run trained on quantized parameters
   // Rate-aware training during that part: the grid's bits (rate_term.h) weighted by rate_weight times
-  // the high-rate slope 2 ln 2 * loss / parameters join the loss (0: distortion alone; CPU trainer only).
+  // the high-rate slope 2 ln 2 * loss / parameters join the loss (0: distortion alone).
   double rate_weight = 0;
   int64_t probe_samples = int64_t(1) << 17;  // held-back samples for the rate-distortion choices
   // > target_bytes: the file's size when residuals (train/residuals.h) take what the network's file leaves

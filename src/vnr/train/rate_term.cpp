@@ -5,21 +5,6 @@
 
 namespace vnr {
 
-double laplace_bin_bits(double theta, double step, double scale, double* d) {
-  const double t = std::fabs(theta), h = 0.5 * step, s = theta < 0 ? -1.0 : 1.0;
-  constexpr double kLn2 = 0.69314718055994530942;
-  if (t >= h) {  // the bin lies on one side of 0: mass 0.5 e^{-(t-h)/b} (1 - e^{-step/b}), in closed form
-    *d = s / (scale * kLn2);
-    return (1.0 + (t - h) / (scale * kLn2)) - std::log2(-std::expm1(-step / scale));
-  }
-  // The bin holds 0: mass 1 - 0.5 e^{-(h+t)/b} - 0.5 e^{-(h-t)/b}.
-  const double a = std::exp(-(h + t) / scale), c = std::exp(-(h - t) / scale);
-  const double mass = 1.0 - 0.5 * (a + c);
-  const double dmass = 0.5 * (a - c) / scale;  // d mass / d t
-  *d = -s * dmass / (mass * kLn2);
-  return -std::log2(mass);
-}
-
 constexpr int64_t kGrain = 16384;
 
 double add_rate_gradient(const std::vector<float>& master, const std::vector<ParamSegment>& segments,
@@ -33,7 +18,7 @@ double add_rate_gradient(const std::vector<float>& master, const std::vector<Par
     if (k < first_segment || seg.step <= 0 || seg.count == 0) continue;
     double sum_abs = 0;
     for (uint64_t i = begin; i < off; ++i) sum_abs += std::fabs(master[i]);
-    const double scale = std::max(sum_abs / double(seg.count), 1e-3 * seg.step);
+    const double scale = laplace_scale(sum_abs, seg.count, seg.step);
     std::vector<double> part((seg.count + kGrain - 1) / kGrain, 0.0);  // per range: the sum is deterministic
     parallel_for_range(int64_t(seg.count), kGrain, [&](int64_t b, int64_t e) {
       double local = 0;

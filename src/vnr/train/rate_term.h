@@ -6,11 +6,9 @@
 #include <cstdint>
 #include <vector>
 #include "vnr/nn/param_codec.h"
+#include "vnr/nn/quantization_hd.h"  // laplace_bin_bits, laplace_scale
 
 namespace vnr {
-
-// -log2 of the Laplace(0, scale) mass on [theta - step/2, theta + step/2]; *d receives d/d theta.
-double laplace_bin_bits(double theta, double step, double scale, double* d);
 
 // weight * d(total bits)/d(master) added to grads for the segments with a step (grid levels only,
 // from `first_segment` on); each segment's Laplace scale is its mean |parameter| (the prior's maximum

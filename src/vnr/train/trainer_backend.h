@@ -13,6 +13,7 @@
 #include "vnr/math.h"
 #include "vnr/core/value_range_grid.h"
 #include "vnr/nn/network.h"
+#include "vnr/nn/param_codec.h"
 
 namespace vnr {
 
@@ -63,6 +64,16 @@ public:
   // caller can add a term of its own (rate-aware training); an empty function removes it. False when
   // this trainer cannot (the GPU trainer keeps its gradient on the device).
   virtual bool set_gradient_hook(std::function<void(float* grads)> hook) { return !hook; }
+  // Quantization-aware steps on the trainer's own copy of the parameters (the GPU trainer keeps them on
+  // the device; the CPU trainer's run through the session's step hooks instead, train/rate_control.cpp).
+  // From the next step on, each step's forward pass sees `master` quantized with its segment's step
+  // (straight-through: the update lands on master); rate_weight_per_loss > 0 adds the rate term's
+  // gradient (train/rate_term.h) of the segments from first_rate_segment on, times the last loss.
+  virtual bool has_quantized_steps() const { return false; }
+  virtual void begin_quantized_steps(const std::vector<float>& master, const std::vector<ParamSegment>& segments,
+                                     size_t first_rate_segment, double rate_weight_per_loss) {}
+  // Ends them; master receives the master copy as trained.
+  virtual void end_quantized_steps(std::vector<float>& master) {}
   virtual std::vector<PhaseTime> last_step_phases() const = 0;
 };
 
