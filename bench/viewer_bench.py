@@ -108,6 +108,20 @@ def release_to_refined(b, repeats):
     return out
 
 
+def cold_fill(b, timeout=120):
+    """From the page's first traced network frame to the first whose brick cache waits for nothing: seconds,
+    frames meanwhile, and the bricks then resident (the cold cache filling while the view is still)."""
+    start_trace(b)
+    b.wait("(() => { const h = vnrViewer.lastHeader.network;"
+           " return h && h.cache && h.cache.bricks > 0 && h.cache.pending === 0 && h.cache.stale === 0; })()", timeout)
+    frames = frames_of(take_trace(b))
+    done = next(f for f in frames if f["header"]["cache"] and f["header"]["cache"]["pending"] == 0
+                and f["header"]["cache"]["bricks"] > 0)
+    seconds = (done["t"] - frames[0]["t"]) / 1000
+    n = sum(1 for f in frames if f["t"] <= done["t"])
+    return {"seconds": seconds, "frames": n, "bricks": done["header"]["cache"]["bricks"]}
+
+
 def still_latencies(b, repeats):
     """ms from one still camera change (interacting false) to its first frame."""
     out = []
@@ -160,6 +174,7 @@ def main():
     p.add_argument("--seconds", type=float, default=10, help="orbit (and training) duration")
     p.add_argument("--repeats", type=int, default=5)
     p.add_argument("--train", action="store_true")
+    p.add_argument("--cache-dims", help="X,Y,Z: `vnr view --cache-dims` (the model seen at another resolution)")
     p.add_argument("--config", default="paper", help="config of the `vnr train` comparison")
     args = p.parse_args()
     why = harness.missing_tools()
@@ -169,11 +184,14 @@ def main():
     if args.train and not args.volume:
         sys.exit("viewer_bench: --train needs --volume")
     work = tempfile.mkdtemp(prefix="vnr-viewer-bench-")
-    server = harness.ViewServer(vnr, args.model, *(["--ground-truth", args.volume] if args.volume else []))
+    server = harness.ViewServer(vnr, args.model, *(["--ground-truth", args.volume] if args.volume else []),
+                                *(["--cache-dims", args.cache_dims] if args.cache_dims else []))
     b = harness.Browser()
     results = {"size": args.size}
     try:
         b.open_viewer(server.url)
+        cold = cold_fill(b)
+        results.update(cold_seconds=cold["seconds"], cold_frames=cold["frames"], cold_bricks=cold["bricks"])
         b.js("vnrViewer.send({type: 'view', layout: 'network'});")
         # The page answers a new layout with its own viewport: the benchmark's goes after that one.
         b.wait("vnrViewer.state.view.layout === 'network'", 30)
@@ -197,6 +215,8 @@ def main():
         server.terminate()
     rows = [("frames/s while orbiting", f"{results['orbit_fps']:.1f} ({results['orbit_coarse']} of "
              f"{results['orbit_frames']} coarse)"),
+            ("cold brick cache at the page's first view: complete after (frames meanwhile, bricks)",
+             f"{results['cold_seconds']:.2f} s ({results['cold_frames']} frames, {results['cold_bricks']} bricks)"),
             ("input-to-frame latency while orbiting (median)", f"{results['orbit_latency_ms'] or 0:.0f} ms"),
             ("release to first refined frame (median)", f"{results['release_to_refined_ms']:.0f} ms"),
             ("still camera change to its first frame (median)", f"{results['still_latency_ms'] or 0:.0f} ms")]

@@ -3,11 +3,16 @@
 // grid's bit for bit (cold, partly warm, warm, under a budget that evicts, SIMD packets or per ray);
 // coarser levels equal a grid of the source sampled at the level's voxel centres; the level of detail
 // follows the closed form of a voxel's footprint in pixels; and a trained model renders from its cache
-// within the stated image PSNR of rendering its network directly.
+// within the stated image PSNR of rendering its network directly; bricks decoded by the cache's own thread
+// give the same images.
 #include <gtest/gtest.h>
 #include <hwy/targets.h>
+#include <atomic>
 #include <cmath>
+#include <condition_variable>
+#include <mutex>
 #include <set>
+#include <thread>
 #include "vnr/error.h"
 #include "vnr/core/rng.h"
 #include "vnr/core/value_range_grid.h"
@@ -526,6 +531,13 @@ TEST(BrickCache, PacketsStraddlingLevelsGiveThePerRayImage) {
   for (float z : {0.05f, 0.5f, 0.95f})
     for (float x : {0.05f, 0.95f}) levels.insert(cache.view().level_at(x, 0.5f, z));
   ASSERT_GE(levels.size(), 2u) << "the camera " << p.cam.eye.z << " sees two levels";
+  int blended = 0;  // and samples that mix two levels (the packets' blend against the scalar one)
+  for (int i = 0; i < 1000; ++i) {
+    float t = 0;
+    cache.view().level_at(float(i % 10) / 10 + 0.05f, float(i / 10 % 10) / 10 + 0.05f, float(i / 100) / 10 + 0.05f, &t);
+    blended += t > 0;
+  }
+  ASSERT_GT(blended, 50);
   EXPECT_EQ(cache.stats().misses, 0);
   o.ray_packets = true;
   for (int64_t t : hwy::SupportedAndGeneratedTargets()) {
@@ -533,4 +545,109 @@ TEST(BrickCache, PacketsStraddlingLevelsGiveThePerRayImage) {
     EXPECT_TRUE(same_image(CpuRenderer(cache, box_of(vol), mc, tf, cam, o).render(1), ref)) << hwy::TargetName(t);
   }
   hwy::SetSupportedTargetsForTest(0);
+}
+
+// Asynchronous decoding: begin_frame hands the requests to the cache's decoding thread and returns without
+// decoding (the decode is held at a gate here, so this is not a race with the clock); frames meanwhile
+// read the source (exact images); once the thread is let go, the bricks come in on it, not on the frame's
+// thread, and images equal the grid's. set_asynchronous(false) returns only with no decode in flight.
+TEST(BrickCache, TheDecodingThreadFillsTheCacheWhileFramesRender) {
+  Volume vol = synth(Int3{40, 36, 32});
+  GridField grid(view_of(vol));
+  RampScene scene(vol, 37, 29);
+  std::mutex mu;
+  std::condition_variable cv;
+  bool open = false;
+  std::set<std::thread::id> decoders;
+  std::atomic<int> running{0};
+  const VoxelDecode plain = grid_decode(vol);
+  VoxelDecode gated = [&](Int3 dims, const int64_t* index, int64_t n, float* out) {
+    running += 1;
+    {
+      std::unique_lock<std::mutex> lock(mu);
+      cv.wait(lock, [&] { return open; });
+      decoders.insert(std::this_thread::get_id());
+    }
+    plain(dims, index, n, out);
+    running -= 1;
+  };
+  CachedField cache(grid, gated, vol.dims, level0(8));
+  cache.set_asynchronous(true);
+  const Camera cam = orbit_camera(box_of(vol), 35, 25, 30);
+  const Image ref = CpuRenderer(grid, box_of(vol), scene.mc, scene.tf, cam, scene.o).render(1);
+  CpuRenderer from_cache(cache, box_of(vol), scene.mc, scene.tf, cam, scene.o);
+  for (int frame = 0; frame < 3; ++frame) {  // the thread waits at the gate: no frame decodes a brick
+    ASSERT_TRUE(same_image(from_cache.render(1), ref)) << "frame " << frame;
+    EXPECT_EQ(cache.stats().resident, 0);
+  }
+  EXPECT_GT(cache.stats().requested, 0);
+  {
+    std::lock_guard<std::mutex> lock(mu);
+    open = true;
+  }
+  cv.notify_all();
+  for (int frame = 0; frame < 200 && cache.stats().requested > 0; ++frame) {
+    cache.wait_for_bricks(1.0);
+    ASSERT_TRUE(same_image(from_cache.render(1), ref)) << "frame " << frame;
+  }
+  // The bricks the view reads, as a cache decoding in its frames gets them.
+  CachedField in_frames(grid, plain, vol.dims, level0(8));
+  CpuRenderer(in_frames, box_of(vol), scene.mc, scene.tf, cam, scene.o).render(1);
+  in_frames.decode_pending();
+  const BrickCacheStats st = cache.stats();
+  EXPECT_EQ(st.requested, 0);
+  EXPECT_EQ(st.resident, in_frames.stats().resident) << "every brick the view reads, decoded once";
+  EXPECT_EQ(st.decoded, st.resident);
+  EXPECT_EQ(st.misses, 0) << "the last frame read the cache alone";
+  ASSERT_TRUE(same_image(from_cache.render(1), ref));
+  EXPECT_EQ(decoders.size(), 1u);
+  EXPECT_EQ(decoders.count(std::this_thread::get_id()), 0u) << "decoded on the cache's thread, not the frame's";
+  cache.set_asynchronous(false);
+  EXPECT_EQ(running.load(), 0);
+}
+
+// Levels of detail blend (brick_cache_view.h, kLodBlendStart): as the camera backs away from a point, its
+// value moves from level 0 to level 1 continuously: no jump where the blend starts (footprint 2^(3/4)
+// voxels a pixel) nor where level 1 takes over (2), though the two levels differ there (the seam the
+// per-brick rule showed).
+TEST(BrickCache, LevelsOfDetailBlendWithoutASeam) {
+  Volume vol;  // noise: levels 0 and 1 (bricks of 8: levels of 96, 48, 24, 12 and 6 voxels) differ
+  vol.dims = Int3{96, 80, 64};
+  vol.data.resize(size_t(vol.dims.count()));
+  Pcg32 rng(3);
+  for (float& v : vol.data) v = rng.next_float();
+  GridField grid(view_of(vol));
+  BrickCacheSettings s;
+  s.brick = 8;
+  CachedField cache(grid, grid_decode(vol), vol.dims, s);
+  const int H = 100;
+  const float x = 0.43f, y = 0.57f, z = 0.61f;
+  const Vec3f at{x * 96, y * 80, z * 64};
+  auto value_at = [&](float footprint) {  // level-0 voxels a pixel at the point
+    const float d = footprint * float(H) / (2 * std::tan(15.0f * 3.14159265f / 180));
+    const RenderParams p = params_for(Camera{Vec3f{at.x, at.y, at.z + d}, at, Vec3f{0, 1, 0}, 30}, vol.dims, H, H);
+    float v = 0;
+    for (int pass = 0; pass < 2; ++pass) {  // asks for its bricks, then reads them
+      cache.begin_frame(p);
+      cache.query(&x, &y, &z, 1, &v);
+      cache.decode_pending();
+    }
+    EXPECT_EQ(cache.stats().misses, 0);
+    return v;
+  };
+  const float level0 = grid_lookup(view_of(vol), x, y, z);
+  const float level1 = value_at(2.5f);  // inside level 1's range, before its blend with level 2
+  const float jump = std::fabs(level1 - level0);
+  ASSERT_GT(jump, 0.01f) << "the levels differ at this point";
+  EXPECT_EQ(value_at(1.6f), level0);
+  EXPECT_LT(std::fabs(value_at(kLodBlendStart * 1.0005f) - level0), 0.01f * jump);
+  EXPECT_LT(std::fabs(value_at(1.999f) - level1), 0.01f * jump);
+  EXPECT_EQ(value_at(2.001f), level1);
+  // Between, the value moves monotonically from one level to the other.
+  float last = level0;
+  for (float f = kLodBlendStart; f <= 2.0f; f += (2.0f - kLodBlendStart) / 8) {
+    const float v = value_at(f);
+    EXPECT_GE((v - last) * (level1 - level0), -1e-7f) << f;
+    last = v;
+  }
 }

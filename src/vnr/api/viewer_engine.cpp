@@ -158,6 +158,9 @@ void ViewerEngine::Impl::iterate(const ViewerSnapshot& snap) {
   bool rendered = false;
   {
     std::lock_guard<std::mutex> work(work_mu);
+    // The cache's decoding thread reads the model: it stops before anything changes the model.
+    const bool model_changes = snap.reset || snap.timestep || snap.state.training.state == TrainingState::Running;
+    if (model_changes && net_content.cache) net_content.cache->set_asynchronous(false);
     try {
       if (snap.reset) apply_reset(snap.reset_learning_rate);
       if (snap.timestep) load_timestep(*snap.timestep);

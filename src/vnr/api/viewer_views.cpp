@@ -81,7 +81,10 @@ bool render_pass(ViewPass& pass, const ViewContent& content, const TransferFunct
     if (!content.cache) return false;
     const BrickCacheStats cs = content.cache->stats();
     if (cs.requested == 0 && cs.stale == 0) return false;
-    pass.count = 0;  // a frame more decodes (or refreshes) the bricks the view still waits for
+    // A frame more decodes (or refreshes) the bricks the view still waits for; with a decoding thread,
+    // once it has finished one (or soon: the requests of the next frame go to it).
+    content.cache->wait_for_bricks(0.05);
+    pass.count = 0;
   }
   pass.backend->render_frame(uint32_t(pass.count), pass.frame);
   if (pass.count == 0)
@@ -194,12 +197,15 @@ void ViewerEngine::Impl::update_truth_content() {
   c.tf_epoch = ~uint64_t(0);
 }
 
-// The network view's cache for this frame: decoding's share of the frame (0.1 s while the view is still,
-// to sharpen in few frames; 30 ms while the camera moves, to keep its frame rate; 10 ms while training in
-// the loop, which gets 1.5x a frame's time) and the ray under the cursor, whose bricks come first.
+// The network view's cache for this frame: while the camera moves, decoded by the cache's own thread
+// (one core) so frames come at their rate; while the view is still, by each frame for 0.1 s on every
+// core (on few cores the fastest way to a sharp image), and for 10 ms while training in the loop (the
+// model changes between frames; training gets 1.5x a frame's time); and the ray under the cursor, whose
+// bricks come first.
 static void steer_cache(const CachedField& cache, const ViewerSnapshot& snap, const RenderOptions& opt) {
   const bool training = snap.state.training.state == TrainingState::Running;
-  cache.set_decode_seconds(training ? 0.01 : (snap.interacting ? 0.03 : 0.1));
+  cache.set_decode_seconds(training ? 0.01 : 0.1);
+  cache.set_asynchronous(!training && snap.interacting);
   std::optional<std::pair<Vec3f, Vec3f>> focus;
   if (snap.cursor) {
     const CameraFrame f = make_camera_frame(snap.state.camera, opt.width, opt.height);

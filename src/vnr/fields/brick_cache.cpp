@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cmath>
 #include <new>
+#include <omp.h>
 #include "vnr/error.h"
 #include "vnr/core/grid_view.h"
 #include "vnr/core/parallel.h"
@@ -32,6 +33,12 @@ uint64_t parse_cache_budget(const std::string& text) {
   return b == 0 ? default_cache_budget() : b;
 }
 
+struct BrickKey {
+  int level;
+  int64_t brick;
+  float distance;
+};
+
 namespace {
 // One level of detail's storage (its view: CacheLevelView).
 struct Level {
@@ -41,17 +48,11 @@ struct Level {
   int64_t bricks() const { return int64_t(nb.x) * nb.y * nb.z; }
   Int3 brick_coords(int64_t b) const { return Int3{b % nb.x, (b / nb.x) % nb.y, b / (nb.x * nb.y)}; }  // x fastest
 };
-struct BrickKey {
-  int level;
-  int64_t brick;
-  float distance;
-};
 int64_t ceil_div(int64_t a, int64_t b) { return (a + b - 1) / b; }
 }  // namespace
 
 struct CachedField::State {
   std::vector<Level> levels;
-  std::vector<int32_t> lod;          // per level-0 brick: the level its samples read
   CameraFrame lod_cam{};             // the view lod was computed for
   Vec3f box{1, 1, 1};                // world size of the volume box of that view
   std::optional<std::pair<Vec3f, Vec3f>> focus;  // the cursor's ray: origin, unit direction
@@ -71,6 +72,26 @@ struct CachedField::State {
   BrickCacheView view;
   BrickCacheStats totals;
   std::atomic<int64_t> misses{0};
+  // The decoding thread (set_asynchronous): its jobs in priority order (the back first), the bricks it
+  // finished (begin_frame installs them), whether one is in flight, and the first error it met.
+  // decode_mu serialises calls of the decode (the decoding thread's and the frame's own).
+  struct Job {
+    int level;
+    int64_t brick;
+    uint32_t generation;
+  };
+  struct Decoded {
+    Job job;
+    std::vector<float> voxels;
+  };
+  bool async = false;  // read and written by the thread that renders
+  std::thread worker;
+  std::mutex work_mu, decode_mu;
+  std::condition_variable work_cv, done_cv;
+  std::vector<Job> jobs;
+  std::vector<Decoded> decoded;
+  bool in_flight = false, stopping = false;
+  std::string error;
 
   static void ask(void* self, int l, int64_t b) {
     State& s = *static_cast<State*>(self);
@@ -123,10 +144,10 @@ CachedField::CachedField(const RenderableField& source, VoxelDecode decode, Int3
     fail("cannot reserve {} for the brick cache: give a smaller cache budget", human_bytes(double(settings_.budget_bytes)));
   }
   v.pool = s.pool.get();
-  // The index (per brick of every level: slot and two stamps; per level-0 brick: its level) lives
-  // outside the pool: it must not outgrow it (a resolution far beyond what the budget can show).
+  // The index (per brick of every level: slot and two stamps) lives outside the pool: it must not
+  // outgrow it (a resolution far beyond what the budget can show).
   const double level0_bricks = double(ceil_div(dims.x, B)) * double(ceil_div(dims.y, B)) * double(ceil_div(dims.z, B));
-  const double index_bytes = level0_bricks * (8.0 / 7.0 * 12.0 + 4.0);
+  const double index_bytes = level0_bricks * (8.0 / 7.0 * 12.0);
   if (index_bytes > double(settings_.budget_bytes))
     fail("a brick cache of {}x{}x{} voxels needs {} for its index alone, more than its budget of {}: give a "
          "larger budget or a smaller resolution", dims.x, dims.y, dims.z, human_bytes(index_bytes),
@@ -149,14 +170,21 @@ CachedField::CachedField(const RenderableField& source, VoxelDecode decode, Int3
     if (s.levels.back().bricks() == 1) break;
   }
   v.levels = int(s.levels.size());
-  s.lod.assign(size_t(s.levels[0].bricks()), 0);
-  v.lod = s.lod.data();
   s.totals.levels = v.levels;
   s.box = Vec3f{float(dims.x), float(dims.y), float(dims.z)};
   s.totals.budget_bytes = settings_.budget_bytes;
 }
 
-CachedField::~CachedField() = default;
+CachedField::~CachedField() {
+  State& s = *s_;
+  if (!s.worker.joinable()) return;
+  {
+    std::lock_guard<std::mutex> lock(s.work_mu);
+    s.stopping = true;
+  }
+  s.work_cv.notify_all();
+  s.worker.join();
+}
 
 float CachedField::point(float x, float y, float z) const { return CachePointFn{&s_->view, source_}(x, y, z); }
 
@@ -201,29 +229,31 @@ void CachedField::query(const float* x, const float* y, const float* z, int64_t 
   for (size_t k = 0; k < m; ++k) out[where[k]] = v[k];
 }
 
+int32_t CachedField::take_slot() const {
+  State& s = *s_;
+  if (s.slots_used < s.slots) return s.slots_used++;
+  size_t victim = s.resident.size();
+  uint32_t oldest = s.view.frame;
+  for (size_t r = 0; r < s.resident.size(); ++r) {
+    if (s.resident[r].level + 1 == int(s.levels.size())) continue;  // the root stays
+    const uint32_t u = s.levels[size_t(s.resident[r].level)].used[s.resident[r].brick].load(std::memory_order_relaxed);
+    if (u < oldest) oldest = u, victim = r;
+  }
+  if (victim == s.resident.size()) return -1;
+  const State::Resident gone = s.resident[victim];
+  s.levels[size_t(gone.level)].slot[size_t(gone.brick)] = -1;
+  s.resident[victim] = s.resident.back();
+  s.resident.pop_back();
+  s.totals.evicted += 1;
+  return gone.slot;
+}
+
 bool CachedField::decode_brick(int l, int64_t b) const {
   State& s = *s_;
   Level& L = s.levels[size_t(l)];
   if (L.slot[size_t(b)] >= 0) return true;
-  int32_t slot;
-  if (s.slots_used < s.slots) {
-    slot = s.slots_used++;
-  } else {  // evict the least recently read brick that the frame just rendered did not read
-    size_t victim = s.resident.size();
-    uint32_t oldest = s.view.frame;
-    for (size_t r = 0; r < s.resident.size(); ++r) {
-      if (s.resident[r].level + 1 == int(s.levels.size())) continue;  // the root stays
-      const uint32_t u = s.levels[size_t(s.resident[r].level)].used[s.resident[r].brick].load(std::memory_order_relaxed);
-      if (u < oldest) oldest = u, victim = r;
-    }
-    if (victim == s.resident.size()) return false;
-    const State::Resident gone = s.resident[victim];
-    s.levels[size_t(gone.level)].slot[size_t(gone.brick)] = -1;
-    slot = gone.slot;
-    s.resident[victim] = s.resident.back();
-    s.resident.pop_back();
-    s.totals.evicted += 1;
-  }
+  const int32_t slot = take_slot();
+  if (slot < 0) return false;
   s.resident.push_back(State::Resident{l, b, slot, s.generation});
   refresh_brick(s.resident.size() - 1);
   L.slot[size_t(b)] = slot;
@@ -231,13 +261,12 @@ bool CachedField::decode_brick(int l, int64_t b) const {
   return true;
 }
 
-void CachedField::refresh_brick(size_t r) const {
-  State& s = *s_;
-  State::Resident& res = s.resident[r];
-  const Level& L = s.levels[size_t(res.level)];
+void CachedField::brick_voxels(int l, int64_t b, float* out) const {
+  const State& s = *s_;
+  const Level& L = s.levels[size_t(l)];
   // The brick's voxels with its far faces, clamped to the level (the lookup never reads past them).
   const int B = settings_.brick, side = B + 1;
-  const auto [bx, by, bz] = L.brick_coords(res.brick);
+  const auto [bx, by, bz] = L.brick_coords(b);
   std::vector<int64_t> index(size_t(s.view.brick_floats));
   for (int k = 0; k < side; ++k)
     for (int j = 0; j < side; ++j)
@@ -246,7 +275,14 @@ void CachedField::refresh_brick(size_t r) const {
                       gz = std::min<int64_t>(bz * B + k, L.n.z - 1);
         index[size_t(i + side * (j + int64_t(side) * k))] = gx + L.n.x * (gy + int64_t(L.n.y) * gz);
       }
-  decode_(L.n, index.data(), int64_t(index.size()), s.pool.get() + int64_t(res.slot) * s.view.brick_floats);
+  std::lock_guard<std::mutex> lock(s_->decode_mu);
+  decode_(L.n, index.data(), int64_t(index.size()), out);
+}
+
+void CachedField::refresh_brick(size_t r) const {
+  State& s = *s_;
+  State::Resident& res = s.resident[r];
+  brick_voxels(res.level, res.brick, s.pool.get() + int64_t(res.slot) * s.view.brick_floats);
   res.generation = s.generation;
   s.totals.decoded += 1;
   s.version += 1;
@@ -284,13 +320,7 @@ void CachedField::set_focus(std::optional<std::pair<Vec3f, Vec3f>> origin_and_di
 void CachedField::decode_asked(double seconds, const std::function<void(int64_t, int64_t)>& progress) const {
   State& s = *s_;
   const auto t0 = std::chrono::steady_clock::now();
-  std::vector<BrickKey> todo;
-  {
-    std::lock_guard<std::mutex> lock(s.asked_mutex);
-    todo.swap(s.asked);
-  }
-  for (BrickKey& k : todo) k.distance = brick_distance(k.level, k.brick);  // nearest the camera first
-  std::sort(todo.begin(), todo.end(), [](const BrickKey& a, const BrickKey& b) { return a.distance < b.distance; });
+  const std::vector<BrickKey> todo = take_requests();
   size_t done = 0;
   bool full = false;  // every slot holds a brick the last frame read: the rest keep reading the source
   for (; done < todo.size(); ++done) {  // what is left is asked for again by the next frames that need it
@@ -302,7 +332,16 @@ void CachedField::decode_asked(double seconds, const std::function<void(int64_t,
     if (progress) progress(int64_t(done + 1), int64_t(todo.size()));
   }
   s.totals.requested = full ? 0 : int64_t(todo.size() - done);
-  // Stale bricks in the time left: those the last frame read first, then the nearest.
+  const std::vector<size_t> stale = stale_bricks();
+  for (const size_t r : stale) {  // in the time left; at least one brick a frame, new or refreshed
+    if (seconds >= 0 && (done > 0 || r != stale.front()) && seconds_since(t0) >= seconds) break;
+    refresh_brick(r);
+  }
+  s.totals.decode_seconds += seconds_since(t0);
+}
+
+std::vector<size_t> CachedField::stale_bricks() const {
+  const State& s = *s_;
   std::vector<std::pair<float, size_t>> stale;
   for (size_t r = 0; r < s.resident.size(); ++r) {
     const State::Resident& res = s.resident[r];
@@ -312,36 +351,138 @@ void CachedField::decode_asked(double seconds, const std::function<void(int64_t,
     stale.emplace_back((read ? 0.0f : 1e30f) + brick_distance(res.level, res.brick), r);
   }
   std::sort(stale.begin(), stale.end());
-  for (const auto& [priority, r] : stale) {  // at least one brick a frame, new or refreshed
-    if (seconds >= 0 && (done > 0 || r != stale.front().second) && seconds_since(t0) >= seconds) break;
-    refresh_brick(r);
-  }
-  s.totals.decode_seconds += seconds_since(t0);
+  std::vector<size_t> out;
+  for (const auto& [priority, r] : stale) out.push_back(r);
+  return out;
 }
 
-// Levels of detail for a new view: per level-0 brick, from the distance of its nearest point to the eye,
-// the coarsest level whose voxels cover at most lod_pixels pixels there.
+// The bricks asked for since the last frame, nearest the camera (or the cursor's ray) first.
+std::vector<BrickKey> CachedField::take_requests() const {
+  State& s = *s_;
+  std::vector<BrickKey> todo;
+  {
+    std::lock_guard<std::mutex> lock(s.asked_mutex);
+    todo.swap(s.asked);
+  }
+  for (BrickKey& k : todo) k.distance = brick_distance(k.level, k.brick);
+  std::sort(todo.begin(), todo.end(), [](const BrickKey& a, const BrickKey& b) { return a.distance < b.distance; });
+  return todo;
+}
+
+void CachedField::hand_over_requests() const {
+  State& s = *s_;
+  // New bricks only as many as the pool can take without evicting one the last frame read (the rest
+  // are asked for again), then the stale bricks; the job list is reversed: the thread takes the back.
+  int64_t room = s.slots - s.slots_used;
+  for (const State::Resident& r : s.resident)
+    room += r.level + 1 != int(s.levels.size()) &&
+            s.levels[size_t(r.level)].used[r.brick].load(std::memory_order_relaxed) != s.view.frame;
+  std::vector<State::Job> jobs;
+  for (const BrickKey& k : take_requests())
+    if (s.levels[size_t(k.level)].slot[size_t(k.brick)] < 0 && int64_t(jobs.size()) < room)
+      jobs.push_back(State::Job{k.level, k.brick, s.generation});
+  for (const size_t r : stale_bricks()) jobs.push_back(State::Job{s.resident[r].level, s.resident[r].brick, s.generation});
+  std::reverse(jobs.begin(), jobs.end());
+  {
+    std::lock_guard<std::mutex> lock(s.work_mu);
+    s.jobs = std::move(jobs);
+  }
+  s.work_cv.notify_one();
+}
+
+void CachedField::install_decoded() const {
+  State& s = *s_;
+  std::vector<State::Decoded> done;
+  {
+    std::lock_guard<std::mutex> lock(s.work_mu);
+    if (!s.error.empty()) fail("decoding the brick cache: {}", s.error);
+    done.swap(s.decoded);
+  }
+  for (State::Decoded& d : done) {
+    Level& L = s.levels[size_t(d.job.level)];
+    int32_t slot = L.slot[size_t(d.job.brick)];
+    if (slot >= 0) {  // resident: a stale brick's refresh, unless the frame decoded it meanwhile
+      const auto it = std::find_if(s.resident.begin(), s.resident.end(),
+                                   [&](const State::Resident& r) { return r.slot == slot; });
+      if (it->generation == s.generation) continue;
+      it->generation = d.job.generation;
+    } else {
+      slot = take_slot();
+      if (slot < 0) continue;  // every resident brick still in use: asked for again by the frames
+      s.resident.push_back(State::Resident{d.job.level, d.job.brick, slot, d.job.generation});
+      L.slot[size_t(d.job.brick)] = slot;
+      L.used[d.job.brick].store(s.view.frame, std::memory_order_relaxed);
+    }
+    std::copy(d.voxels.begin(), d.voxels.end(), s.pool.get() + int64_t(slot) * s.view.brick_floats);
+    s.totals.decoded += 1;
+    s.version += 1;
+  }
+}
+
+void CachedField::decoding_thread() const {
+  omp_set_num_threads(1);  // one core decodes; the frames keep the others
+  State& s = *s_;
+  std::unique_lock<std::mutex> lock(s.work_mu);
+  for (;;) {
+    s.work_cv.wait(lock, [&] { return s.stopping || !s.jobs.empty(); });
+    if (s.stopping) return;
+    State::Decoded d{s.jobs.back(), {}};
+    s.jobs.pop_back();
+    s.in_flight = true;
+    lock.unlock();
+    std::string error;
+    try {
+      d.voxels.resize(size_t(s.view.brick_floats));
+      brick_voxels(d.job.level, d.job.brick, d.voxels.data());
+    } catch (const std::exception& e) {
+      error = e.what();
+    }
+    lock.lock();
+    s.in_flight = false;
+    if (!error.empty()) {
+      if (s.error.empty()) s.error = error;
+    } else {
+      s.decoded.push_back(std::move(d));
+    }
+    s.done_cv.notify_all();
+  }
+}
+
+void CachedField::set_asynchronous(bool on) const {
+  State& s = *s_;
+  if (on == s.async) return;
+  s.async = on;
+  if (on) {
+    if (!s.worker.joinable()) s.worker = std::thread([this] { decoding_thread(); });
+    return;
+  }
+  std::unique_lock<std::mutex> lock(s.work_mu);
+  s.jobs.clear();  // the frames ask for them again
+  s.done_cv.wait(lock, [&] { return !s.in_flight; });
+}
+
+bool CachedField::wait_for_bricks(double seconds) const {
+  State& s = *s_;
+  std::unique_lock<std::mutex> lock(s.work_mu);
+  s.done_cv.wait_for(lock, std::chrono::duration<double>(seconds),
+                     [&] { return !s.decoded.empty() || (s.jobs.empty() && !s.in_flight); });
+  return !s.decoded.empty();
+}
+
+// Levels of detail for a new view (BrickCacheView::level_at): a level-0 voxel's width in pixels at unit
+// distance from the eye, over lod_pixels.
 void CachedField::update_levels(const RenderParams& p) const {
   State& s = *s_;
   const CameraFrame& c = p.cam;
   s.lod_cam = c;
   s.box = p.box;
-  const Level& L0 = s.levels[0];
-  const float B = float(settings_.brick);
   const Vec3f cell{p.box.x / float(dims_.x), p.box.y / float(dims_.y), p.box.z / float(dims_.z)};
   const float voxel = std::max(cell.x, std::max(cell.y, cell.z));
   const float pixel_per_distance = length(c.dv) / float(std::max(1, c.height));
-  const int top = int(s.levels.size()) - 1;
-  parallel_for(L0.bricks(), [&](int64_t b) {
-    const auto [bx, by, bz] = L0.brick_coords(b);
-    const Vec3f lo{float(bx) * B * cell.x, float(by) * B * cell.y, float(bz) * B * cell.z};
-    const Vec3f hi{std::min(float(bx + 1) * B * cell.x, p.box.x), std::min(float(by + 1) * B * cell.y, p.box.y),
-                   std::min(float(bz + 1) * B * cell.z, p.box.z)};
-    const Vec3f q{std::clamp(c.eye.x, lo.x, hi.x), std::clamp(c.eye.y, lo.y, hi.y), std::clamp(c.eye.z, lo.z, hi.z)};
-    const float footprint = length(q - c.eye) * pixel_per_distance * settings_.lod_pixels / voxel;  // level-0 voxels
-    const int l = footprint >= 2 ? int(std::floor(std::log2(footprint))) : 0;
-    s.lod[size_t(b)] = std::min(l, top);
-  });
+  BrickCacheView& v = s.view;
+  v.eye[0] = c.eye.x, v.eye[1] = c.eye.y, v.eye[2] = c.eye.z;
+  v.box[0] = p.box.x, v.box[1] = p.box.y, v.box[2] = p.box.z;
+  v.lod_scale = pixel_per_distance * settings_.lod_pixels / voxel;
 }
 
 void CachedField::begin_frame(const RenderParams& p) const {
@@ -351,12 +492,26 @@ void CachedField::begin_frame(const RenderParams& p) const {
     update_levels(p);
   // The root brick first: with it, a Coarser cache answers every sample from the first frame on.
   if (s.view.coarser && s.levels.back().slot[0] < 0) decode_brick(int(s.levels.size()) - 1, 0);
-  decode_asked(settings_.decode_seconds);
+  install_decoded();  // the decoding thread's, also when it was just turned off
+  if (s.async) hand_over_requests();
+  else decode_asked(settings_.decode_seconds);
   s.misses = 0;
   s.view.frame += 1;
 }
 
 void CachedField::decode_pending(const std::function<void(int64_t, int64_t)>& progress) const {
+  State& s = *s_;
+  {  // the decoding thread's jobs are decoded here, with every thread
+    std::unique_lock<std::mutex> lock(s.work_mu);
+    {
+      std::lock_guard<std::mutex> asked(s.asked_mutex);
+      for (const State::Job& j : s.jobs)
+        if (s.levels[size_t(j.level)].slot[size_t(j.brick)] < 0) s.asked.push_back(BrickKey{j.level, j.brick, 0});
+    }
+    s.jobs.clear();
+    s.done_cv.wait(lock, [&] { return !s.in_flight; });
+  }
+  install_decoded();
   decode_asked(-1, progress);
 }
 
@@ -366,6 +521,10 @@ BrickCacheStats CachedField::stats() const {
   st.resident = int64_t(s.resident.size());
   st.pool_bytes = uint64_t(s.slots_used) * uint64_t(s.view.brick_floats) * sizeof(float);
   st.misses = s.misses.load();
+  if (s.async) {
+    std::lock_guard<std::mutex> lock(s_->work_mu);
+    st.requested = int64_t(s.jobs.size() + s.decoded.size()) + int64_t(s.in_flight);
+  }
   for (const State::Resident& r : s.resident) st.stale += r.generation != s.generation;
   return st;
 }

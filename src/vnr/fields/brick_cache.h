@@ -6,14 +6,17 @@
 // most `lod_pixels` pixels), from a bounded pool of bricks (least recently used evicted); a brick not
 // decoded yet is requested, and the sample reads the model's field directly (exact) or the nearest
 // decoded coarser level (interactive: no network query at all once the root brick is in). Between
-// frames (Field::begin_frame) the requested bricks are decoded nearest first within a time budget, so
-// no frame waits for the whole cache. At level 0 a warm cache reads exactly what a GridField over the
+// frames (Field::begin_frame) the requested bricks are decoded nearest first within a time budget, or,
+// asynchronous, by a decoding thread of the cache's own while frames render, so no frame waits for the
+// whole cache. At level 0 a warm cache reads exactly what a GridField over the
 // model's decode reads (the same voxels, the same cell-centred trilinear arithmetic).
+#include <condition_variable>
 #include <cstdint>
 #include <functional>
 #include <memory>
 #include <mutex>
 #include <optional>
+#include <thread>
 #include <vector>
 #include "vnr/fields/brick_cache_view.h"
 #include "vnr/fields/fields.h"
@@ -48,13 +51,16 @@ uint64_t parse_cache_budget(const std::string& text);
 
 struct BrickCacheStats {
   int64_t resident = 0, decoded = 0, evicted = 0;  // bricks in the pool now, decoded and evicted so far
-  int64_t requested = 0;  // bricks asked for and left for later frames (0 when the budget is full)
+  int64_t requested = 0;  // bricks asked for and left for later frames (0 when the budget is full),
+                          // asynchronous: waiting for the decoding thread or decoded and not installed yet
   int64_t misses = 0;  // samples of the current frame (since begin_frame) that read the source
   int64_t stale = 0;   // resident bricks decoded from an earlier model (replace_source)
   uint64_t pool_bytes = 0, budget_bytes = 0;
   int levels = 0;
   double decode_seconds = 0;  // in begin_frame, all frames
 };
+
+struct BrickKey;  // brick_cache.cpp: a brick of a level and its decoding priority
 
 class CachedField final : public RenderableField {
 public:
@@ -85,6 +91,14 @@ public:
   BrickCacheStats stats() const;
   const BrickCacheSettings& settings() const { return settings_; }
   void set_decode_seconds(double seconds) const { settings_.decode_seconds = seconds; }  // per frame from now on
+  // Asynchronous: begin_frame installs the bricks the decoding thread finished and hands it the frame's
+  // requests (nearest first, then stale bricks) instead of decoding them itself; the thread decodes
+  // with one CPU thread while frames render. The model the decode reads must not change meanwhile:
+  // set_asynchronous(false) first (it waits for the brick in flight). Off by default.
+  void set_asynchronous(bool on) const;
+  // Asynchronous: waits up to `seconds` for the decoding thread to finish a brick; false when none came
+  // (it has nothing to do, or the time ran out).
+  bool wait_for_bricks(double seconds) const;
   const BrickCacheView& view() const;  // what lookups read (fields/brick_cache_view.h)
 
   struct State;  // brick_cache.cpp: levels, page tables, pool, requests
@@ -95,6 +109,20 @@ private:
   bool decode_brick(int l, int64_t b) const;
   // Decodes resident brick r (again, when stale).
   void refresh_brick(size_t r) const;
+  // The voxels of brick b of level l with its far faces ((B+1)^3, x fastest) from decode_.
+  void brick_voxels(int l, int64_t b, float* out) const;
+  // A pool slot for a new brick, evicting the least recently read brick the last frame did not read
+  // when the pool is full; -1 when every resident brick is still in use.
+  int32_t take_slot() const;
+  // Asynchronous: moves the bricks the decoding thread finished into the pool, and gives it the
+  // requests of the frame just rendered.
+  void install_decoded() const;
+  void hand_over_requests() const;
+  void decoding_thread() const;
+  // The bricks asked for since the last frame, nearest first; the stale resident bricks (decoded from
+  // an earlier model), those the last frame read first, then the nearest.
+  std::vector<BrickKey> take_requests() const;
+  std::vector<size_t> stale_bricks() const;
   // Decodes the bricks asked for, nearest the camera first, until `seconds` have passed (< 0: all).
   void decode_asked(double seconds, const std::function<void(int64_t, int64_t)>& progress = {}) const;
   void update_levels(const RenderParams& p) const;

@@ -57,8 +57,9 @@ struct GridLanes {
 };
 
 // The brick cache's lanes: BrickCacheView::sample for a vector of points, bit for bit. The lanes of
-// each level (one, or two where the packet straddles a boundary) read their decoded bricks with
-// GridLookupVec's arithmetic (x-neighbours as pairs); misses take the scalar path (the source).
+// each level (one, or more where the packet straddles a boundary, or blends two levels) read their
+// decoded bricks with GridLookupVec's arithmetic (x-neighbours as pairs); misses take the scalar path
+// (the whole sample: its levels, then the source).
 struct CacheLanes {
   static constexpr size_t kMaxLanes = HWY_MAX_BYTES / sizeof(float);
   const BrickCacheView& c;
@@ -83,40 +84,59 @@ struct CacheLanes {
     return hn::Load(df, v);
   }
 
-  // The lanes of one level at a time: all of them but where the packet straddles a level boundary.
   template <class DF, class VF>
   HWY_INLINE VF lookup(DF df, VF ux, VF uy, VF uz, uint64_t active) {
     const hn::RebindToSigned<DF> di;
-    const auto lev = lane_levels(df, ux, uy, uz);
+    VF t;
+    const auto lev = lane_levels(df, ux, uy, uz, &t);
+    uint64_t missed = 0;
+    VF value = from_levels(df, lev, ux, uy, uz, active, &missed);
+    const auto blends = hn::Gt(t, hn::Zero(df));
+    if (const uint64_t blend = lane_bits(df, blends) & active & ~missed) {  // this + (coarser - this) * t
+      const VF coarse = from_levels(df, hn::Add(lev, hn::Set(di, 1)), ux, uy, uz, blend, &missed);
+      value = hn::IfThenElse(blends, hn::Add(value, hn::Mul(hn::Sub(coarse, value), t)), value);
+    }
+    return missed ? scalar(df, ux, uy, uz, missed, value) : value;
+  }
+
+  // The lanes of one level at a time (lev per lane); *missed gains the lanes whose brick is not in.
+  template <class DF, class VF, class VI>
+  HWY_INLINE VF from_levels(DF df, VI lev, VF ux, VF uy, VF uz, uint64_t active, uint64_t* missed) {
+    const hn::RebindToSigned<DF> di;
     VF value = hn::Zero(df);
     for (uint64_t left = active; left;) {
       const int l = hn::ExtractLane(lev, size_t(__builtin_ctzll(left)));
       const auto at_l = hn::RebindMask(df, hn::Eq(lev, hn::Set(di, l)));
       const uint64_t lanes = lane_bits(df, at_l) & left;
-      const VF v = at_level(df, l, ux, uy, uz, lanes);
+      const VF v = at_level(df, l, ux, uy, uz, lanes, missed);
       value = lanes == active ? v : hn::IfThenElse(at_l, v, value);
       left &= ~lanes;
     }
     return value;
   }
 
-  // The level each lane reads (BrickCacheView::level_at).
+  // The level each lane reads and its blend weight t (BrickCacheView::level_at, the same arithmetic).
   template <class DF, class VF>
-  HWY_INLINE hn::Vec<hn::RebindToSigned<DF>> lane_levels(DF df, VF ux, VF uy, VF uz) const {
+  HWY_INLINE hn::Vec<hn::RebindToSigned<DF>> lane_levels(DF df, VF ux, VF uy, VF uz, VF* t) const {
     const hn::RebindToSigned<DF> di;
     using VI = hn::Vec<decltype(di)>;
-    const CacheLevelView& L0 = c.level[0];
-    const int s = c.shift;
-    const VI b0 = hn::Add(hn::ShiftRightSame(hn::ConvertTo(di, CellAxisPos(df, ux, L0.nx)), s),
-                          hn::Mul(hn::Set(di, L0.bx),
-                                  hn::Add(hn::ShiftRightSame(hn::ConvertTo(di, CellAxisPos(df, uy, L0.ny)), s),
-                                          hn::Mul(hn::Set(di, L0.by),
-                                                  hn::ShiftRightSame(hn::ConvertTo(di, CellAxisPos(df, uz, L0.nz)), s)))));
-    return hn::GatherIndex(di, c.lod, b0);
+    const VF dx = hn::Sub(hn::Mul(ux, hn::Set(df, c.box[0])), hn::Set(df, c.eye[0]));
+    const VF dy = hn::Sub(hn::Mul(uy, hn::Set(df, c.box[1])), hn::Set(df, c.eye[1]));
+    const VF dz = hn::Sub(hn::Mul(uz, hn::Set(df, c.box[2])), hn::Set(df, c.eye[2]));
+    const VF m = hn::Mul(hn::Sqrt(hn::Add(hn::Add(hn::Mul(dx, dx), hn::Mul(dy, dy)), hn::Mul(dz, dz))),
+                         hn::Set(df, c.lod_scale));
+    const VI bits = hn::BitCast(di, m);
+    const VI e = hn::Sub(hn::ShiftRight<23>(bits), hn::Set(di, 127));
+    const VI top = hn::Set(di, c.levels - 1);
+    const VF mant = hn::BitCast(df, hn::Or(hn::And(bits, hn::Set(di, 0x7fffff)), hn::Set(di, 0x3f800000)));
+    const auto inner = hn::RebindMask(df, hn::And(hn::Gt(e, hn::Set(di, -1)), hn::Lt(e, top)));
+    *t = hn::IfThenElse(hn::And(inner, hn::Ge(mant, hn::Set(df, kLodBlendStart))),
+                        hn::Mul(hn::Sub(mant, hn::Set(df, kLodBlendStart)), hn::Set(df, kLodBlendInverse)), hn::Zero(df));
+    return hn::Min(hn::Max(e, hn::Zero(di)), top);
   }
 
   template <class DF, class VF>
-  HWY_INLINE VF at_level(DF df, int l, VF ux, VF uy, VF uz, uint64_t active) {
+  HWY_INLINE VF at_level(DF df, int l, VF ux, VF uy, VF uz, uint64_t active, uint64_t* missed) {
     const hn::RebindToSigned<DF> di;
     using VI = hn::Vec<decltype(di)>;
     const int s = c.shift;
@@ -152,8 +172,8 @@ struct CacheLanes {
       const VI row = hn::Add(base, hn::Add(k & 1 ? dy : hn::Zero(di), k & 2 ? dz : hn::Zero(di)));
       GatherPairs(df, c.pool, row, &v[2 * k], &v[2 * k + 1]);
     }
-    const VF value = TrilinearCornersVec(df, v, t);
-    return miss ? scalar(df, ux, uy, uz, miss, value) : value;
+    *missed |= miss;
+    return TrilinearCornersVec(df, v, t);
   }
 };
 
