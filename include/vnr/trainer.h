@@ -11,7 +11,9 @@
 //
 // Lower level: make_trainer(Device, Network&, sampler, volume, options) gives a Trainer backend (CPU or
 // GPU) that a TrainingSession over any Model runs; choose_training_device resolves "auto".
+// A time series into a directory of models, as `vnr train --timesteps`: run_series(SeriesRunSetup, callbacks).
 #include "vnr/train/make_trainer.h"
+#include "vnr/train/series_run.h"
 #include "vnr/train/session.h"
 #include "vnr/train/trainer.h"
 #include "vnr/train/trainer_backend.h"

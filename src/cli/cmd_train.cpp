@@ -77,7 +77,6 @@ void run_train(const TrainArgs& a) {
   set_num_threads(a.threads);
   if (!a.timesteps.empty()) {
     if (a.preview.enabled()) fail("--preview-* options are not supported with --timesteps");
-    if (a.target_psnr > 0) fail("--target-psnr is not supported with --timesteps yet");
     return run_train_series(a);
   }
   if (!a.bricks.empty() || a.resume) return run_train_bricks(a);

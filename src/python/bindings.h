@@ -48,6 +48,7 @@ Volume volume_from_numpy(const pyb::array& array, std::optional<double> lo, std:
 void bind_volume(pyb::module_& m);
 void bind_model(pyb::module_& m);
 void bind_train(pyb::module_& m);
+void bind_train_series(pyb::module_& m);
 void bind_render(pyb::module_& m);
 void bind_metrics(pyb::module_& m);
 

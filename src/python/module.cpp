@@ -21,6 +21,7 @@ PYBIND11_MODULE(_vnr, m) {
   py::bind_volume(m);
   py::bind_model(m);
   py::bind_train(m);
+  py::bind_train_series(m);
   py::bind_render(m);
   py::bind_metrics(m);
 }

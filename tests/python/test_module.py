@@ -1,5 +1,6 @@
 """The vnr Python module against independent references: the `vnr` CLI on the same data (train, decode,
 render, eval), the raw-file loader, and the module's own decode."""
+import json
 import os
 import signal
 import subprocess
@@ -267,6 +268,31 @@ def test_path_trains_like_the_array(trained):
     """vnr.train on a file path (the CLI's loader) and on the array of its values give one model."""
     from_path = vnr.train(trained["side"], **TRAIN)
     np.testing.assert_array_equal(from_path.decode(device="cpu"), trained["model"].decode(device="cpu"))
+
+
+def test_train_series_equals_cli(tmp_path, cli):
+    """vnr.train_series runs `vnr train --timesteps`'s library call: the same models and report rows."""
+    frames = [smooth_volume(seed=k) for k in range(3)]
+    for k, f in enumerate(frames):
+        f.tofile(str(tmp_path / f"f{k}.raw"))
+    side = tmp_path / "s.json"
+    side.write_text(json.dumps({"file": [f"f{k}.raw" for k in range(3)], "dims": [16, 14, 12], "dtype": "uint8"}))
+    cli("train", side, "--timesteps", "0,2", "-o", tmp_path / "cli", "--config", "small", "--steps", 30, "--seed",
+        SEED, "--threads", THREADS, "--device", "cpu", "--no-ssim", "-q")
+    rep = vnr.train_series(side, tmp_path / "py", "0,2", ssim=False, threads=THREADS, config="small", steps=30,
+                           seed=SEED, device="cpu")
+    cli_rep = json.loads((tmp_path / "cli" / "series.json").read_text())
+    assert rep["complete"] and rep["timesteps"] == [0, 2] == cli_rep["timesteps"]
+    assert json.loads((tmp_path / "py" / "series.json").read_text())["rows"] == rep["rows"]
+    for row, cli_row in zip(rep["rows"], cli_rep["rows"]):
+        assert row["timestep"] == cli_row["timestep"] and row["psnr"] == cli_row["psnr"]
+        py_model, cli_model = vnr.Model.load(row["model"]), vnr.Model.load(cli_row["model"])
+        np.testing.assert_array_equal(py_model.decode(device="cpu"), cli_model.decode(device="cpu"))
+    with pytest.raises(Exception, match="switch_every needs continuous"):
+        vnr.train_series(side, tmp_path / "bad", switch_every=5, config="small")
+    with pytest.raises(Exception, match="unknown"):
+        vnr.train_series(side, tmp_path / "bad", config="small", stepz=3)
+    assert not (tmp_path / "bad").exists()
 
 
 def test_stubs_match_the_compiled_signatures():

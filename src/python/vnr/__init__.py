@@ -20,12 +20,12 @@ import os
 from dataclasses import dataclass
 from typing import Any, Optional, Sequence, Tuple, Union
 
-from ._vnr import Model, Volume, __version__, num_threads, set_num_threads, train
+from ._vnr import Model, Volume, __version__, num_threads, set_num_threads, train, train_series
 from ._vnr import _render
 from . import metrics
 
 __all__ = ["Camera", "Model", "TransferFunction", "Volume", "metrics", "num_threads", "render",
-           "set_num_threads", "train", "__version__"]
+           "set_num_threads", "train", "train_series", "__version__"]
 
 
 @dataclass

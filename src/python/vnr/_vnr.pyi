@@ -131,6 +131,12 @@ def train(volume: Union[npt.ArrayLike, Volume, PathLike], config: Union[str, dic
     """Trains a model of the volume (`vnr train`'s session); returns it. Ctrl-C returns the model so far."""
 
 
+def train_series(volume: PathLike, output_dir: PathLike, timesteps: str = "all", *, continuous: bool = False,
+                 switch_every: int = 0, seconds: Optional[float] = None, ssim: bool = True,
+                 report: Optional[PathLike] = None, threads: Optional[int] = None, **kwargs: Any) -> dict[str, Any]:
+    """Trains a time series into output_dir/t0000.vnr, ... (`vnr train --timesteps`); returns the report."""
+
+
 def _render(target: Union[Model, Volume], settings_json: str) -> npt.NDArray[np.float32]:
     """vnr::RenderSettings as JSON (vnr.render builds it)."""
 
