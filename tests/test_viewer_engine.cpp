@@ -132,7 +132,7 @@ TEST(ViewerEngine, TruthViewEqualsTheRenderer) {
   const ViewerState st = engine.state();
   EXPECT_EQ(st.width, 512);
   EXPECT_EQ(st.view.layout, ViewLayout::SideBySide);
-  EXPECT_EQ(st.render.macrocells, MacroCellMode::Online);
+  EXPECT_EQ(st.render.settings.macrocells, "online");
   const RenderInput input = open_render_input(setup.input, "", {}, parse_precision("auto"));
   EXPECT_TRUE(same_camera_for_test(st.camera, orbit_camera(box_of(kDims), 0, 0, 30)));
   auto done = wait_for(engine, [](const ViewerFrame& f) { return f.refined && f.accumulated == 8; });
@@ -158,9 +158,9 @@ TEST(ViewerEngine, NetworkViewEqualsTheRendererAndAccumulationStops) {
   EXPECT_EQ(engine.state().view.layout, ViewLayout::Network);
   EXPECT_EQ(engine.state().training.state, TrainingState::Unavailable);
   ViewerRender r = engine.state().render;
-  EXPECT_EQ(r.macrocells, MacroCellMode::Online);
-  EXPECT_TRUE(r.cache) << "the brick cache by default";
-  r.cache = false;  // the network itself (the cache: NetworkCacheViewSharpensToTheWarmCachesImage)
+  EXPECT_EQ(r.settings.macrocells, "online");
+  EXPECT_EQ(r.settings.strategy, "cache") << "the brick cache by default";
+  r.settings.strategy = "streaming";  // the network itself (the cache: NetworkCacheViewSharpensToTheWarmCachesImage)
   r.max_frames = 3;
   engine.set_viewport(160, 128);
   engine.set_render(r);
@@ -572,10 +572,13 @@ TEST(ViewerEngine, BadSetterValuesThrowAndChangeNothing) {
   tf.hi = 0.2f;
   EXPECT_HAS(error_of([&] { engine.set_tf(tf); }), "[0.7, 0.2]");
   ViewerRender r = engine.state().render;
-  r.step = -1;
+  r.settings.step = -1;
   EXPECT_HAS(error_of([&] { engine.set_render(r); }), "step -1");
   r = engine.state().render;
-  r.macrocells = MacroCellMode::Grid;
+  r.settings.mode = "xray";
+  EXPECT_HAS(error_of([&] { engine.set_render(r); }), "xray");
+  r = engine.state().render;
+  r.settings.macrocells = "grid";
   EXPECT_HAS(error_of([&] { engine.set_render(r); }), "grid");
   r = engine.state().render;
   r.coarse_scale = 0;

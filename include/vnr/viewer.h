@@ -26,6 +26,7 @@
 #include "vnr/render/macrocell.h"
 #include "vnr/render/renderer.h"
 #include "vnr/render/scene.h"
+#include "vnr/render_settings.h"
 #include "vnr/volume.h"
 
 namespace vnr {
@@ -81,19 +82,26 @@ struct ViewerTf {
 };
 TransferFunction to_transfer_function(const ViewerTf& tf);
 
+// The viewer's defaults of what a rendering is: the brick cache, online macro-cells (adjusted to what the
+// input allows), the light from (0.7, 0.9, 0.4).
+inline RenderSettings viewer_render_defaults() {
+  RenderSettings s;
+  s.strategy = "cache";
+  s.macrocells = "online";
+  s.light = normalize(Vec3f{0.7f, 0.9f, 0.4f});
+  return s;
+}
+
+// How the viewer renders (the `render` message): the library's RenderSettings for what a rendering is,
+// with its names and checks -- mode, strategy (cache or auto: a model on the CPU draws from its brick
+// cache, full-resolution frames while the camera moves, docs/RENDERING.md; streaming or inshader: the
+// field itself), step, shade, light, density, macrocells (online, grid, off) -- while the view's size,
+// camera and transfer function are the viewer's own state and RenderSettings' other keys do not apply;
+// then what only an interactive view has.
 struct ViewerRender {
-  RenderMode mode = RenderMode::RayMarch;
-  RenderStrategy strategy = RenderStrategy::Streaming;
-  // A model on the CPU draws from its brick cache (docs/RENDERING.md; misses read coarser levels, bricks
-  // are refreshed while training): full-resolution frames while the camera moves. Else `strategy`.
-  bool cache = true;
-  MacroCellMode macrocells = MacroCellMode::Online;  // adjusted to what the input allows
-  float step = 1;                   // s1 in voxels; s2 = 16 x step
-  bool shade = false;
-  Vec3f light_direction = normalize(Vec3f{0.7f, 0.9f, 0.4f});
-  float density = 1;                // path tracing
-  int max_frames = 0;               // frames accumulated once still; 0 = per mode (8 / 16 / 256)
-  int coarse_scale = 2;             // while interacting: width / coarse_scale x height / coarse_scale, 1 frame
+  RenderSettings settings = viewer_render_defaults();
+  int max_frames = 0;    // frames accumulated once still; 0 = per mode (8 / 16 / 256)
+  int coarse_scale = 2;  // while interacting: width / coarse_scale x height / coarse_scale, 1 frame
 };
 
 enum class TrainingState { Unavailable, Idle, Running, Paused };

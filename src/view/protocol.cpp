@@ -27,13 +27,14 @@ Json tf_json(const ViewerTf& tf) {
 }
 
 Json render_json(const ViewerRender& r) {
-  return {{"mode", render_mode_name(r.mode)},
-          {"strategy", r.cache ? "cache" : render_strategy_name(r.strategy)},
-          {"macrocells", macrocell_mode_name(r.macrocells)},
-          {"step", r.step},
-          {"shade", r.shade},
-          {"light", vec3(r.light_direction)},
-          {"density", r.density},
+  const RenderSettings& s = r.settings;
+  return {{"mode", s.mode},
+          {"strategy", s.strategy},
+          {"macrocells", s.macrocells},
+          {"step", s.step},
+          {"shade", s.shade},
+          {"light", vec3(s.light.value_or(*viewer_render_defaults().light))},
+          {"density", s.density},
           {"max_frames", r.max_frames},
           {"coarse_scale", r.coarse_scale}};
 }

@@ -177,7 +177,7 @@ Run tf_command(const Fields& f) {
 Run render_command(const Fields& f) {
   auto mode = f.choice("mode", std::array{RenderMode::RayMarch, RenderMode::Shadow, RenderMode::PathTrace},
                        render_mode_name);
-  auto strategy = f.choice("strategy", std::array<const char*, 3>{"cache", "streaming", "inshader"},
+  auto strategy = f.choice("strategy", std::array<const char*, 4>{"cache", "auto", "streaming", "inshader"},
                            +[](const char* s) { return s; });
   auto macrocells = f.choice("macrocells", std::array{MacroCellMode::Online, MacroCellMode::Grid, MacroCellMode::Off},
                              macrocell_mode_name);
@@ -186,17 +186,14 @@ Run render_command(const Fields& f) {
   auto light = f.vec3("light");
   auto max_frames = f.integer("max_frames", 0, 1 << 20), coarse = f.integer("coarse_scale", 1, 64);
   return [=](ViewerEngine& e) {
-    ViewerRender r = e.state().render;
-    if (mode) r.mode = *mode;
-    if (strategy) {
-      r.cache = std::string(*strategy) == "cache";
-      if (!r.cache) r.strategy = parse_render_strategy(*strategy);
-    }
-    if (macrocells) r.macrocells = *macrocells;
-    if (step) r.step = float(*step);
-    if (shade) r.shade = *shade;
-    if (light) r.light_direction = *light;
-    if (density) r.density = float(*density);
+    ViewerRender r = e.state().render;  // the library's RenderSettings, and the viewer's own two
+    if (mode) r.settings.mode = render_mode_name(*mode);
+    if (strategy) r.settings.strategy = *strategy;
+    if (macrocells) r.settings.macrocells = macrocell_mode_name(*macrocells);
+    if (step) r.settings.step = float(*step);
+    if (shade) r.settings.shade = *shade;
+    if (light) r.settings.light = *light;
+    if (density) r.settings.density = float(*density);
     if (max_frames) r.max_frames = int(*max_frames);
     if (coarse) r.coarse_scale = int(*coarse);
     e.set_render(r);

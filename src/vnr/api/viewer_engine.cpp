@@ -87,8 +87,9 @@ void ViewerEngine::Impl::open(const ViewerSetup& s) {
   st.camera = camera_for(CameraRequest{}, box, input.scene.camera);
   st.tf = viewer_tf_from_table(input.scene.tf ? *input.scene.tf : tf_preset("ramp"));
   st.view.layout = volume ? ViewLayout::SideBySide : ViewLayout::Network;
-  st.render.macrocells = input.model ? default_macrocell_mode(model, volume.get()) : MacroCellMode::Online;
-  if (input.scene.light) st.render.light_direction = input.scene.light->direction;
+  st.render.settings.macrocells =
+      macrocell_mode_name(input.model ? default_macrocell_mode(model, volume.get()) : MacroCellMode::Online);
+  if (input.scene.light) st.render.settings.light = input.scene.light->direction;
   st.training.state = info.can_train ? TrainingState::Idle : TrainingState::Unavailable;
   st.training.learning_rate = config.adam.learning_rate;
   st.training.timestep = s.volume_options.raw.timestep.value_or(0);
@@ -338,18 +339,23 @@ void ViewerEngine::set_tf(const ViewerTf& tf) {
 
 void ViewerEngine::set_render(const ViewerRender& r) {
   Impl& m = *impl_;
-  if (!(std::isfinite(r.step) && r.step >= 0.01f && r.step <= 64)) fail("step {} is outside [0.01, 64] voxels", r.step);
-  if (!(std::isfinite(r.density) && r.density > 0 && r.density <= 1000)) fail("density {} is outside (0, 1000]", r.density);
+  const RenderSettings& s = r.settings;
+  // Interactive limits beyond RenderSettings' own checks (validate: the names and values vnr renders).
+  if (!(std::isfinite(s.step) && s.step >= 0.01f && s.step <= 64)) fail("step {} is outside [0.01, 64] voxels", s.step);
+  if (!(std::isfinite(s.density) && s.density > 0 && s.density <= 1000)) fail("density {} is outside (0, 1000]", s.density);
+  s.validate();
   if (r.max_frames < 0 || r.max_frames > 65536) fail("max_frames {} is outside 0..65536", r.max_frames);
   if (r.coarse_scale < 1 || r.coarse_scale > 16) fail("coarse_scale {} is outside 1..16", r.coarse_scale);
-  check_finite(r.light_direction, "light direction");
-  if (!(length(r.light_direction) > 0)) fail("light direction (0, 0, 0) has no direction");
-  if (r.macrocells == MacroCellMode::Grid && !m.info.has_volume)
+  const Vec3f light = s.light.value_or(*viewer_render_defaults().light);
+  if (!(length(light) > 0)) fail("light direction (0, 0, 0) has no direction");
+  const MacroCellMode cells = parse_macrocell_mode(s.macrocells.empty() ? "online" : s.macrocells);
+  if (cells == MacroCellMode::Grid && !m.info.has_volume)
     fail("macrocells grid needs the ground-truth volume (use online or off)");
-  if (r.macrocells == MacroCellMode::Online && !m.online_available)
+  if (cells == MacroCellMode::Online && !m.online_available)
     fail("macrocells online needs a model trained by vnr or training (use grid or off)");
   ViewerRender checked = r;
-  checked.light_direction = normalize(r.light_direction);
+  checked.settings.light = normalize(light);
+  checked.settings.macrocells = macrocell_mode_name(cells);
   {
     std::lock_guard<std::mutex> lock(m.mu);
     m.state.render = checked;

@@ -39,7 +39,7 @@ struct ViewerSnapshot {
 // A field to render and its macro-cells, rebuilt when what it shows changes.
 struct ViewContent {
   std::unique_ptr<RenderableField> field;
-  std::unique_ptr<CachedField> cache;  // in front of field (ViewerRender::cache, a model on the CPU)
+  std::unique_ptr<CachedField> cache;  // in front of field (viewer_wants_cache, a model on the CPU)
   const RenderableField& drawn() const { return cache ? *cache : *field; }
   std::unique_ptr<MacroCells> mc;
   uint64_t version = ~uint64_t(0);  // model or volume version it was built for
@@ -171,6 +171,7 @@ void check_viewer_tf(const ViewerTf& tf);
 // viewer_views.cpp
 RenderOptions viewer_render_options(const ViewerRender& r, const Scene& scene, int width, int height);
 int viewer_max_frames(const ViewerRender& r);
+bool viewer_wants_cache(const ViewerRender& r);  // strategy cache or auto
 bool same_camera(const Camera& a, const Camera& b);
 
 }  // namespace vnr

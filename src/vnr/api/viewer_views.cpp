@@ -26,24 +26,28 @@ bool same_camera(const Camera& a, const Camera& b) {
 }
 
 // The RenderOptions `vnr render` would use with these settings (the scene's background and light colour).
+// (A cache strategy draws what it cannot cache -- the truth, a model on the GPU -- by streaming.)
 RenderOptions viewer_render_options(const ViewerRender& r, const Scene& scene, int width, int height) {
+  const RenderSettings& s = r.settings;
   RenderOptions o;
-  o.mode = r.mode;
-  o.strategy = r.strategy;
+  o.mode = parse_render_mode(s.mode);
+  o.strategy = s.strategy == "inshader" ? RenderStrategy::InShader : RenderStrategy::Streaming;
   o.width = width;
   o.height = height;
-  o.step = r.step;
-  o.density_scale = r.density;
-  o.shade = r.shade;
+  o.step = s.step;
+  o.density_scale = s.density;
+  o.shade = s.shade;
   o.background = scene.background.value_or(Vec3f{0, 0, 0});
   o.light = scene.light.value_or(DirectionalLight{});
-  o.light.direction = r.light_direction;
+  o.light.direction = s.light.value_or(*viewer_render_defaults().light);
   return o;
 }
 
+bool viewer_wants_cache(const ViewerRender& r) { return r.settings.strategy == "cache" || r.settings.strategy == "auto"; }
+
 int viewer_max_frames(const ViewerRender& r) {
   if (r.max_frames > 0) return r.max_frames;
-  switch (r.mode) {
+  switch (parse_render_mode(r.settings.mode)) {
     case RenderMode::Shadow: return 16;
     case RenderMode::PathTrace: return 256;
     case RenderMode::RayMarch:
@@ -223,7 +227,7 @@ bool ViewerEngine::Impl::render(const ViewerSnapshot& snap, bool* refined, int* 
     tf = to_transfer_function(st.tf);
     built_tf_epoch = snap.tf_epoch;
   }
-  const bool want_cache = st.render.cache && render_device == Device::Cpu && st.view.layout != ViewLayout::Truth;
+  const bool want_cache = viewer_wants_cache(st.render) && render_device == Device::Cpu && st.view.layout != ViewLayout::Truth;
   const bool coarse = snap.interacting && !want_cache;  // the cache renders full frames while moving
   const int scale = coarse ? st.render.coarse_scale : 1;
   const RenderOptions opt =
@@ -243,7 +247,7 @@ bool ViewerEngine::Impl::render(const ViewerSnapshot& snap, bool* refined, int* 
   };
   bool any = false;
   if (want_net) {
-    update_network_content(st.render.macrocells, want_cache);
+    update_network_content(parse_macrocell_mode(st.render.settings.macrocells), want_cache);
     if (net_content.cache) steer_cache(*net_content.cache, snap, net_opt);
     any |= draw(net_content, net_pass, net_opt);
   }
