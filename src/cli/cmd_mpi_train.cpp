@@ -49,7 +49,7 @@ std::vector<BrickResult> train_my_bricks(const TrainingSetup& setup, const Brick
       if (!a.quiet && line.rfind("note:", 0) == 0) std::fprintf(stderr, "rank %d: %s\n", mpi::rank(), line.c_str());
     };
     try {
-      results.push_back(train_brick(setup, plan, b, a.output, range, o));
+      results.push_back(train_brick(setup, plan, b, a.s.session.output, range, o));
     } catch (const std::exception& e) {
       fail("brick {} ({}): {}", b, describe_box(plan.bricks[size_t(b)].owned), e.what());
     }
@@ -67,13 +67,13 @@ std::string config_text(const TrainingSetup& s) { return s.config_json ? s.confi
 // before training (complete: false, so that --resume finds the plan) and after.
 void write_manifest_now(const TrainArgs& a, const TrainingSetup& setup, const BrickPlan& plan, DType dtype,
                         const ValueRange& range, bool final) {
-  const std::vector<bool> done = bricks_done(a.output, plan, config_text(setup));
-  const std::vector<BrickResult> all = brick_results_on_disk(a.output, plan, done);
+  const std::vector<bool> done = bricks_done(a.s.session.output, plan, config_text(setup));
+  const std::vector<BrickResult> all = brick_results_on_disk(a.s.session.output, plan, done);
   const Json config = setup.config_json ? *setup.config_json : Json(setup.config);
-  if (!final) return write_manifest(a.output, plan, dtype, range, config, all);
+  if (!final) return write_manifest(a.s.session.output, plan, dtype, range, config, all);
   Json training = bricks_training_summary(setup, plan, all, brick_steps(a));
   training["ranks"] = mpi::size();
-  write_manifest(a.output, plan, dtype, range, config, all, training);
+  write_manifest(a.s.session.output, plan, dtype, range, config, all, training);
 }
 
 void run_train_mpi(const TrainArgs& a) {
@@ -83,9 +83,9 @@ void run_train_mpi(const TrainArgs& a) {
   DType dtype = DType::Float32;
   mpi::agree("to plan the bricks", [&] {
     setup = mpi_setup_of(a);
-    const VolumeDesc desc = describe_volume(a.volume, setup.raw);
+    const VolumeDesc desc = describe_volume(a.s.volume, setup.raw);
     dtype = desc.dtype;
-    plan = plan_bricks(desc.dims, parse_brick_grid(a.bricks), a.ghost, a.seed);
+    plan = plan_bricks(desc.dims, parse_brick_grid(a.bricks), a.ghost, a.s.seed);
   });
   // Rank 0 prepares the directory, finds the value range (sidecar, else one scan: every brick normalises
   // with it) and which bricks are done, and writes the first manifest; the others learn range and bricks.
@@ -93,9 +93,9 @@ void run_train_mpi(const TrainArgs& a) {
   std::string done_bits(plan.bricks.size(), '0');
   mpi::agree("to prepare the model directory", [&] {
     if (me != 0) return;
-    prepare_brick_dir(a.output, plan, a.resume);
+    prepare_brick_dir(a.s.session.output, plan, a.resume);
     range = brick_value_range(setup, [&](const std::string& m) { if (!a.quiet) std::fprintf(stderr, "%s\n", m.c_str()); });
-    const std::vector<bool> done = bricks_done(a.output, plan, config_text(setup));
+    const std::vector<bool> done = bricks_done(a.s.session.output, plan, config_text(setup));
     for (size_t i = 0; i < done.size(); ++i) done_bits[i] = done[i] ? '1' : '0';
     write_manifest_now(a, setup, plan, dtype, range, false);
   });
@@ -119,8 +119,8 @@ void run_train_mpi(const TrainArgs& a) {
     if (me != 0) return;
     write_manifest_now(a, setup, plan, dtype, range, true);
     std::printf("trained %zu bricks on %d ranks into %s (longest brick %.1fs)\n", plan.bricks.size(), n,
-                a.output.c_str(), longest);
-    write_report(a.report, Json{{"model", a.output}, {"ranks", n}, {"bricks", plan.bricks.size()},
+                a.s.session.output.c_str(), longest);
+    write_report(a.report, Json{{"model", a.s.session.output}, {"ranks", n}, {"bricks", plan.bricks.size()},
                                 {"grid", {plan.grid.x, plan.grid.y, plan.grid.z}}, {"ghost", plan.ghost}});
   });
 }
@@ -131,8 +131,8 @@ void add_train_mpi(CLI::App& app) {
   auto a = std::make_shared<TrainArgs>();
   a->bricks = "auto";
   CLI::App* c = app.add_subcommand("train", "train a multi-brick model, each rank its bricks (under mpirun; docs/MPI.md)");
-  c->add_option("volume", a->volume, "volume (sidecar, NRRD or raw with --dims --dtype; uncompressed)")->required();
-  c->add_option("-o,--output", a->output, "model directory (manifest.json + one .vnr per brick)")->required();
+  c->add_option("volume", a->s.volume, "volume (sidecar, NRRD or raw with --dims --dtype; uncompressed)")->required();
+  c->add_option("-o,--output", a->s.session.output, "model directory (manifest.json + one .vnr per brick)")->required();
   // The options of `vnr train` (train_options.h): --steps and --seconds apply per brick, --memory-budget
   // per rank (a brick over it trains out of core), --threads per rank (default: the node's cores / its ranks).
   add_training_options(c, *a);

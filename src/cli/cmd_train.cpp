@@ -67,7 +67,7 @@ void print_result(const TrainArgs& a, const TrainingSession& session, const Trai
   std::printf("PSNR %.2f dB%s", r.psnr, r.evaluation_note.c_str());
   if (r.ssim) std::printf(", SSIM %.4f", *r.ssim);
   std::printf(", max |error| %.4g (%.4g in data units)\n", r.max_abs_error, r.max_abs_error_original);
-  std::printf("model %s: %s, %llu parameters; volume %s; compression ratio %s\n", a.output.c_str(),
+  std::printf("model %s: %s, %llu parameters; volume %s; compression ratio %s\n", a.s.session.output.c_str(),
               human_bytes(double(r.model_bytes)).c_str(), (unsigned long long)r.report["n_params"].get<uint64_t>(),
               human_bytes(double(data.source_bytes())).c_str(), format_ratio(r.compression_ratio).c_str());
   print_error_bound(r.report);
@@ -89,7 +89,7 @@ void run_train(const TrainArgs& a) {
   auto say = [&](const std::string& line) {
     if (!a.quiet) std::fprintf(stderr, "%s\n", line.c_str());
   };
-  const int64_t steps = planned_steps(a.steps, a.seconds);
+  const int64_t steps = planned_steps(a.s.steps, a.seconds);
   const bool by_time = steps < 0;
   std::optional<Progress> bar;
   std::optional<StopSignalGuard> guard;
@@ -153,14 +153,14 @@ void run_train(const TrainArgs& a) {
 void add_train(CLI::App& app) {
   auto a = std::make_shared<TrainArgs>();
   CLI::App* c = app.add_subcommand("train", "train a neural representation of a volume");
-  c->add_option("volume", a->volume, "volume: JSON sidecar, instantvnr scene, .nrrd/.nhdr, FILE.h5:/DATASET, FILE.nc:VARIABLE, or raw (with --dims --dtype)")
+  c->add_option("volume", a->s.volume, "volume: JSON sidecar, instantvnr scene, .nrrd/.nhdr, FILE.h5:/DATASET, FILE.nc:VARIABLE, or raw (with --dims --dtype)")
       ->required();
-  c->add_option("-o,--output", a->output, "model file (.vnr; .json/.bson writes instantvnr's BSON)")->required();
+  c->add_option("-o,--output", a->s.session.output, "model file (.vnr; .json/.bson writes instantvnr's BSON)")->required();
   add_training_options(c, *a);
   c->add_option("--eval-samples", a->eval_samples,
                 "when the volume is not in memory: random voxels of the final PSNR estimate (0: no evaluation)")
       ->capture_default_str();
-  c->add_option("--checkpoint-every", a->checkpoint_every,
+  c->add_option("--checkpoint-every", a->s.session.checkpoint_every,
                 "write the model (atomically) every N steps while training, not only at the end");
   c->add_option("--timesteps", a->timesteps,
                  "train a time series: all, A-B or A,B,C; one model per timestep in the -o directory, each "

@@ -26,24 +26,24 @@ extern "C" void on_stop_bricks(int) {
 }
 
 void print_summary(const TrainArgs& a, const BricksRunResult& r) {
-  const Model m = load_model(a.output);
-  const uint64_t bytes = model_file_bytes(a.output);
+  const Model m = load_model(a.s.session.output);
+  const uint64_t bytes = model_file_bytes(a.s.session.output);
   std::printf("%zu bricks (%lldx%lldx%lld, ghost %d): %d trained now, %d already done\n", r.plan.bricks.size(),
               (long long)r.plan.grid.x, (long long)r.plan.grid.y, (long long)r.plan.grid.z, r.plan.ghost,
               int(r.trained.size()), r.already_done);
   FileEvalOptions o;
   o.with_ssim = !a.no_ssim;
   o.open = a.vol.open();
-  o.model_path = a.output;
+  o.model_path = a.s.session.output;
   if (!a.memory_budget.empty()) o.memory_budget = parse_byte_size(a.memory_budget);
-  const FileEvaluation ev = evaluate_model_file(m, a.volume, o);
+  const FileEvaluation ev = evaluate_model_file(m, a.s.volume, o);
   std::printf("PSNR %.2f dB over the whole volume", ev.psnr);
   if (ev.ssim) std::printf(", SSIM %.4f", *ev.ssim);
   std::printf(", max |error| %.4g (%.4g in data units)\n", ev.max_abs_error, ev.max_abs_error_original);
-  std::printf("model %s: %s in %zu files, %llu parameters; compression ratio %s\n", a.output.c_str(),
+  std::printf("model %s: %s in %zu files, %llu parameters; compression ratio %s\n", a.s.session.output.c_str(),
               human_bytes(double(bytes)).c_str(), r.plan.bricks.size() + 1,
               (unsigned long long)m.n_params(), format_ratio(ev.compression_ratio).c_str());
-  Json report = {{"model", a.output},          {"bricks", r.plan.bricks.size()},   {"grid", {r.plan.grid.x, r.plan.grid.y, r.plan.grid.z}},
+  Json report = {{"model", a.s.session.output},          {"bricks", r.plan.bricks.size()},   {"grid", {r.plan.grid.x, r.plan.grid.y, r.plan.grid.z}},
                  {"ghost", r.plan.ghost},      {"trained_now", r.trained.size()}, {"already_done", r.already_done},
                  {"psnr", ev.psnr},            {"max_abs_error", ev.max_abs_error}, {"model_bytes", bytes},
                  {"compression_ratio", ev.compression_ratio}, {"seconds", r.seconds}};
@@ -126,11 +126,11 @@ void run_train_bricks(const TrainArgs& a) {
   {
     g_stop_bricks.store(false);
     StopSignalScope signals(on_stop_bricks);
-    r = train_bricks(setup, grid, a.ghost, a.output, o);
+    r = train_bricks(setup, grid, a.ghost, a.s.session.output, o);
   }
   if (!r.complete) {
     fail("interrupted: {} of {} bricks are done in '{}'; run the same command with --resume to train the rest",
-         r.done, r.plan.bricks.size(), a.output);
+         r.done, r.plan.bricks.size(), a.s.session.output);
   }
   print_summary(a, r);
 }

@@ -76,12 +76,12 @@ void run_train_series(const TrainArgs& a) {
     if (!a.quiet) std::fprintf(stderr, "%s\n", line.c_str());
   };
   std::unique_ptr<Progress> bar;
-  const bool by_time = a.seconds > 0 && a.steps < 0;
+  const bool by_time = a.seconds > 0 && a.s.steps < 0;
   int64_t global = 0;  // continuous: steps of the run
   auto t_start = std::chrono::steady_clock::now();
   cb.on_selection = [&](const VolumeDesc& d, const std::vector<int>& ts) {
     if (!a.quiet)
-      std::fprintf(stderr, "series %s: %lldx%lldx%lld %s x %d timesteps; training %zu (%s)%s\n", a.volume.c_str(),
+      std::fprintf(stderr, "series %s: %lldx%lldx%lld %s x %d timesteps; training %zu (%s)%s\n", a.s.volume.c_str(),
                    (long long)d.dims.x, (long long)d.dims.y, (long long)d.dims.z, dtype_name(d.dtype), d.n_timesteps,
                    ts.size(), a.timesteps.c_str(),
                    a.continuous ? fmt::format(", continuously, {} steps each", a.switch_every).c_str() : "");
@@ -91,7 +91,7 @@ void run_train_series(const TrainArgs& a) {
       std::printf("timestep  start  steps  seconds  final loss  PSNR (dB)%s  model\n", a.no_ssim ? "" : "   SSIM");
   };
   if (!a.continuous) {
-    const int64_t steps = planned_steps(a.steps, a.seconds);
+    const int64_t steps = planned_steps(a.s.steps, a.seconds);
     cb.hooks.on_loaded = [&](int t, double) {
       bar = std::make_unique<Progress>(fmt::format("t{:04d}", t), by_time ? a.seconds : double(steps), a.quiet);
       t_start = std::chrono::steady_clock::now();
@@ -133,7 +133,7 @@ void run_train_series(const TrainArgs& a) {
   }
   if (a.continuous) print_continuous(run, a.switch_every, global);
   const size_t n = run.report.contains("rows") ? run.report["rows"].size() : 0;
-  std::printf("%zu model%s in %s, report %s\n", n, n == 1 ? "" : "s", a.output.c_str(), run.report_path.c_str());
+  std::printf("%zu model%s in %s, report %s\n", n, n == 1 ? "" : "s", a.s.session.output.c_str(), run.report_path.c_str());
 }
 
 }  // namespace vnr::cli

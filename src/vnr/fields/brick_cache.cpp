@@ -395,7 +395,11 @@ void CachedField::install_decoded() const {
   std::vector<State::Decoded> done;
   {
     std::lock_guard<std::mutex> lock(s.work_mu);
-    if (!s.error.empty()) fail("decoding the brick cache: {}", s.error);
+    if (!s.error.empty()) {  // reported once; the bricks it left are asked for again
+      const std::string error = std::move(s.error);
+      s.error.clear();
+      fail("decoding the brick cache: {}", error);
+    }
     done.swap(s.decoded);
   }
   for (State::Decoded& d : done) {
