@@ -39,7 +39,7 @@ inline float to_original_units(const Model& m, float u) { return float(m.lo + do
 // slices voxels) fit the memory available: what a decode checks before allocating its output.
 void check_decode_fits_memory(Int3 dims, int64_t slices);
 
-class BrickGpuNetworks;
+class Decoder;  // train/decoder.h
 
 class ModelQuery {
 public:
@@ -70,14 +70,13 @@ public:
 
   Device device() const { return device_; }
   const Model& model() const { return model_; }
-  // The GPU copy of the network (null on the CPU): what GPU benchmarks time resident.
-  cuda::GpuNetwork* gpu() { return gpu_.get(); }
+  // The GPU copy of a single network (null on the CPU): what GPU benchmarks time resident.
+  cuda::GpuNetwork* gpu();
 
 private:
   const Model& model_;
   Device device_;
-  std::unique_ptr<cuda::GpuNetwork> gpu_;
-  std::unique_ptr<BrickGpuNetworks> brick_gpus_;  // a multi-brick model's networks on the GPU
+  std::unique_ptr<Decoder> decoder_;  // single network or bricks: the one place that tells them apart
 };
 
 // PSNR, SSIM (3-D, optional) and max error of the model decoded at the volume's voxel centres against

@@ -1,7 +1,7 @@
 // vnr::Model's constructors, queries and decodes (the train layer's Model, Network and GpuNetwork).
 #include "vnr/model.h"
 #include "vnr/error.h"
-#include "vnr/train/bricks.h"
+#include "vnr/train/decoder.h"
 #include "vnr/units.h"
 #include "vnr/volume/writer.h"
 
@@ -19,15 +19,11 @@ double compression_ratio(const Model& m, uint64_t model_bytes) {
 
 ModelQuery::ModelQuery(const Model& model, Device device, cuda::MlpPath mlp) : model_(model), device_(device) {
   if (!model.net) fail("the model has no network");
-  if (model.bricks) {  // each brick's network on the device, blended on the host
-    for (auto& b : model.bricks->bricks)
-      if (b) b->net->set_inference_precision(model.net->inference_precision());
-    if (device == Device::Cuda) brick_gpus_ = std::make_unique<BrickGpuNetworks>(*model.bricks, mlp);
-    return;
-  }
-  if (device == Device::Cuda) gpu_ = std::make_unique<cuda::GpuNetwork>(*model.net, mlp);
+  decoder_ = std::make_unique<Decoder>(model, device, mlp);
 }
 ModelQuery::~ModelQuery() = default;
+
+cuda::GpuNetwork* ModelQuery::gpu() { return decoder_->gpu(); }
 
 namespace {
 void convert_units(const Model& m, ValueUnits units, float* v, int64_t n) {
@@ -42,22 +38,14 @@ void check_grid(Int3 dims, int64_t z0, int64_t z1) {
 
 void ModelQuery::points(const float* xyz, int64_t n, float* out, ValueUnits units) {
   if (n <= 0) return;
-  if (model_.bricks) bricked_points(*model_.bricks, xyz, n, out, brick_gpus_ ? brick_gpus_->fn() : BrickInfer{});
-  else if (gpu_) gpu_->infer(xyz, n, out);
-  else model_.net->infer(xyz, n, out);
+  decoder_->points(xyz, n, out);
   convert_units(model_, units, out, n);
 }
 
 void ModelQuery::slab(Int3 dims, int64_t z0, int64_t z1, float* out, ValueUnits units) {
   check_grid(dims, z0, z1);
   if (z1 == z0) return;
-  if (model_.bricks)
-    decode_bricked_region(*model_.bricks, dims, Box3{{0, 0, z0}, {dims.x, dims.y, z1}}, out,
-                          brick_gpus_ ? brick_gpus_->fn() : BrickInfer{});
-  else if (model_.residuals && model_.residuals->dims == dims)  // the bound holds on every device: CPU reference
-    Decoder(*model_.net, Device::Cpu, &*model_.residuals).slices(dims, z0, z1, out);
-  else if (gpu_) gpu_->decode_slices(dims, z0, z1, out);  // the Decoder's two paths
-  else decode_slices(*model_.net, dims, z0, z1, out);
+  decoder_->slices(dims, z0, z1, out);  // residuals at their dims on the CPU reference, whatever the device
   convert_units(model_, units, out, dims.x * dims.y * (z1 - z0));
 }
 

@@ -9,14 +9,17 @@ Decoder::Decoder(const Network& net, Device device, const Residuals* residuals)
     : net_(net), residuals_(residuals), device_(device) {
   if (device == Device::Cuda) gpu_ = std::make_unique<cuda::GpuNetwork>(net);
 }
-Decoder::Decoder(const Model& model, Device device)
+Decoder::Decoder(const Model& model, Device device, cuda::MlpPath mlp)
     : net_(*model.net),
       residuals_(model.residuals ? &*model.residuals : nullptr),
       device_(device),
       bricks_(model.bricks.get()) {
+  if (bricks_)
+    for (const std::optional<Model>& b : bricks_->bricks)
+      if (b) b->net->set_inference_precision(model.net->inference_precision());
   if (device_ != Device::Cuda) return;
-  if (bricks_) brick_gpus_ = std::make_unique<BrickGpuNetworks>(*bricks_);
-  else gpu_ = std::make_unique<cuda::GpuNetwork>(net_);
+  if (bricks_) brick_gpus_ = std::make_unique<BrickGpuNetworks>(*bricks_, mlp);
+  else gpu_ = std::make_unique<cuda::GpuNetwork>(net_, mlp);
 }
 Decoder::~Decoder() = default;
 
@@ -54,6 +57,13 @@ void Decoder::voxels(Int3 dims, const int64_t* voxel_index, int64_t n, float* ou
   }
   net_.infer_fn(
       n, [&](int64_t i, float* x, float* y, float* z) { voxel_centre(dims, voxel_index[i], x, y, z); }, out);
+}
+
+void Decoder::points(const float* xyz, int64_t n, float* out) {
+  if (n <= 0) return;
+  if (bricks_) return bricked_points(*bricks_, xyz, n, out, brick_infer());
+  if (gpu_) return gpu_->infer(xyz, n, out);
+  net_.infer(xyz, n, out);
 }
 
 void decode_slices(const Network& net, Int3 dims, int64_t z0, int64_t z1, float* out) {

@@ -26,13 +26,17 @@ class Decoder {
 public:
   Decoder(const Network& net, Device device, const Residuals* residuals = nullptr);
   // A model's decoder: its residuals apply (error-bound models); a multi-brick model (Model::bricks)
-  // decodes its bricks blended, each brick's network on the device (BrickGpuNetworks on the GPU).
-  Decoder(const Model& model, Device device);
+  // decodes its bricks blended, each brick's network on the device (BrickGpuNetworks on the GPU) at
+  // the model's inference precision. The one place that asks which kind a model is.
+  Decoder(const Model& model, Device device, cuda::MlpPath mlp = cuda::MlpPath::Auto);
   ~Decoder();
   // z-slices [z0, z1) of `dims` into out (normalised units), x fastest.
   void slices(Int3 dims, int64_t z0, int64_t z1, float* out);
   // n voxels given by index (x + dims.x * (y + dims.y * z)): bit-identical to what slices() gives them.
   void voxels(Int3 dims, const int64_t* voxel_index, int64_t n, float* out);
+  // n points, interleaved x, y, z in [0, 1)^3: the network (or blended bricks) alone, no residuals.
+  void points(const float* xyz, int64_t n, float* out);
+  cuda::GpuNetwork* gpu() { return gpu_.get(); }  // the GPU copy of a single network (null otherwise)
   Device device() const { return device_; }
   // Whether a decode at dims applies the residuals.
   bool bounded_at(Int3 dims) const { return residuals_ && residuals_->dims == dims; }
