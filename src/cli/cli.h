@@ -85,6 +85,6 @@ struct RenderArgs {
   int threads = 0;
   void add(CLI::App* app);
 };
-void parse_size(const std::string& s, int* w, int* h);
+void parse_size(const std::string& s, int* w, int* h, const char* option = "--size");
 
 }  // namespace vnr::cli

@@ -12,10 +12,10 @@
 
 namespace vnr::cli {
 
-void parse_size(const std::string& s, int* w, int* h) {
+void parse_size(const std::string& s, int* w, int* h, const char* option) {
   char tail;
   if (std::sscanf(s.c_str(), "%dx%d%c", w, h, &tail) != 2 || *w < 1 || *h < 1 || *w > 32768 || *h > 32768)
-    fail("--size expects WxH (positive, at most 32768), got '{}'", s);
+    fail("{} expects WxH (positive, at most 32768), got '{}'", option, s);
 }
 
 namespace {

@@ -1,8 +1,7 @@
 #include "preview.h"
-#include <cstdio>
+#include "cli.h"
 #include "vnr/error.h"
-#include "vnr/render/renderer.h"
-#include "vnr/render/transfer_function.h"
+#include "vnr/renderer.h"
 
 namespace vnr::cli {
 
@@ -16,7 +15,8 @@ void PreviewArgs::add(CLI::App* c) {
   c->add_option("--preview-mode", mode, "preview integrator: raymarch|shadow|pathtrace (1 sample per pixel)")
       ->capture_default_str()
       ->each(extra);
-  c->add_option("--preview-tf", tf, "preview transfer function: a preset or a JSON file (default: ramp, as vnr render)")
+  c->add_option("--preview-tf", tf,
+                "preview transfer function: a preset, JSON text or a JSON file (default: ramp, as vnr render)")
       ->each(extra);
 }
 
@@ -25,20 +25,24 @@ std::optional<PreviewOptions> PreviewArgs::options() const {
   if (!every_set) fail("--preview-dir, --preview-size, --preview-mode and --preview-tf need --preview-every N");
   if (every <= 0) fail("--preview-every must be a positive number of steps, got {}", every);
   if (dir.empty()) fail("--preview-every needs --preview-dir DIR (where the previews are written)");
+  // The picture as `vnr render` states it (the library's RenderSettings: its parsing and checks).
+  RenderSettings r;
+  parse_size(size, &r.width, &r.height, "--preview-size");
+  r.mode = mode;
+  r.tf = tf;
+  try {
+    r.validate([](const std::string& key) { return "--preview-" + key; });
+  } catch (const Error& e) {
+    fail("--preview-mode: {}", e.what());  // the only setting given here that validate checks
+  }
   PreviewOptions o;
   o.every = every;
   o.dir = dir;
-  char tail;
-  if (std::sscanf(size.c_str(), "%dx%d%c", &o.width, &o.height, &tail) != 2 || o.width < 1 || o.height < 1 ||
-      o.width > 32768 || o.height > 32768)
-    fail("--preview-size expects WxH (positive, at most 32768), got '{}'", size);
+  o.width = r.width;
+  o.height = r.height;
+  o.mode = parse_render_mode(r.mode);
   try {
-    o.mode = parse_render_mode(mode);
-  } catch (const Error& e) {
-    fail("--preview-mode: {}", e.what());
-  }
-  try {
-    o.tf = tf.empty() ? tf_preset("ramp") : load_transfer_function(tf);
+    o.tf = transfer_function_of(r.tf);
   } catch (const Error& e) {
     fail("--preview-tf: {}", e.what());
   }
