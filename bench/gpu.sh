@@ -49,6 +49,8 @@ STAGES=" ${VNR_STAGES:-tests cli bench render python profile sanitize rd} "
 want() { case "$STAGES" in *" $1 "*) return 0 ;; esac; return 1; }
 DATA=${VNR_DATA:-../shared/data}
 if [ ! -d "$DATA" ] && [ -d .data ]; then DATA=.data; fi
+# scripts/gpu_carry.sh carries the raw volumes gzipped: unpacked once, in place
+for gz in "$DATA"/*.raw.gz; do [ -f "$gz" ] && gzip -d -f "$gz"; done
 export PATH="/usr/local/cuda/bin:$PATH"
 (nvidia-smi || true) > "$OUT/nvidia-smi.txt" 2>&1
 stage_start=$(date +%s)

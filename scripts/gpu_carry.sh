@@ -6,11 +6,13 @@
 #   .gpu/lib      their runtime libraries that are not part of glibc, libstdc++ or the CUDA toolkit
 #   .gpu/a        the position-independent static libraries, and .gpu/include the headers of fmt,
 #                 nlohmann-json and Highway: bench/gpu_python.sh links the Python module there
-#   .data         the real volumes of the benchmarks (NAMES, default bonsai; SHARED/data)
+#   .data         the real volumes of the benchmarks (NAMES, default bonsai; SHARED/data), the raw files
+#                 gzipped (bench/gpu.sh unpacks them): the four of the rd stage take 13 MiB, not 36
 #   .peers        the PyTorch reference trainer (SHARED/peers)
 # Then, on the GPU machine: sh bench/gpu.sh OUT (it finds .gpu, .data and .peers by itself).
 #
-#   sh scripts/gpu_carry.sh [SHARED]      (SHARED defaults to ../shared; NAMES="bonsai engine" for more)
+#   sh scripts/gpu_carry.sh [SHARED]      (SHARED defaults to ../shared; NAMES="bonsai engine" for more;
+#                                          NAMES="bonsai chris_t1 wmag91 engine" for the rd stage: 61 MiB in all)
 set -eu
 cd "$(dirname "$0")/.."
 SHARED=${1:-../shared}
@@ -63,5 +65,6 @@ for name in $NAMES; do
     cp "$SHARED/data/$name"_*.raw .data/
   fi
 done
+for raw in .data/*.raw; do [ -f "$raw" ] && chmod u+w "$raw" && gzip -6 "$raw"; done
 [ -f "$SHARED/peers/torch_vnr.py" ] && cp "$SHARED/peers/torch_vnr.py" .peers/
 du -sh .gpu/bin .gpu/lib .gpu/a .gpu/include .data .peers
