@@ -44,8 +44,8 @@ set(frontend_cli cuda/cuda.h nn/mlp_kernels.h nn/network.h online/preview.h trai
     volume/writer.h)
 set(frontend_python core/parallel.h train/bricks.h train/psnr_search.h volume/sample_io.h
     volume/writer.h)
-set(frontend_view render/image.h)
-set(frontend_mpi render/image.h)
+set(frontend_view "")
+set(frontend_mpi "")
 set(frontend_paraview "")
 foreach(frontend cli python view mpi paraview)
   check_includes(${VNR_SOURCE_DIR}/src/${frontend} header "${frontend_${frontend}}"

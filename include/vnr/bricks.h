@@ -5,7 +5,7 @@
 // bricks. The planning, per-brick training, manifest and region decodes live in vnr/train/bricks.h;
 // this header adds what a distributed front end (the MPI layer) needs on top of them.
 #include <string>
-#include "vnr/render/image.h"
+#include "vnr/image.h"
 #include <vector>
 #include "vnr/model.h"
 #include "vnr/renderer.h"

@@ -14,10 +14,11 @@
 #include <vector>
 #include "vnr/cuda/cuda.h"
 #include "vnr/model.h"
+#include "vnr/camera.h"
 #include "vnr/render/camera.h"
 #include "vnr/fields/brick_cache.h"
 #include "vnr/fields/fields.h"
-#include "vnr/render/image.h"
+#include "vnr/image.h"
 #include "vnr/render/macrocell.h"
 #include "vnr/render/renderer.h"
 #include "vnr/render/scene.h"

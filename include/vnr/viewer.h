@@ -21,11 +21,8 @@
 #include <optional>
 #include <string>
 #include <vector>
-#include "vnr/render/camera.h"
-#include "vnr/render/image.h"
-#include "vnr/render/macrocell.h"
-#include "vnr/render/renderer.h"
-#include "vnr/render/scene.h"
+#include "vnr/camera.h"
+#include "vnr/image.h"
 #include "vnr/render_settings.h"
 #include "vnr/volume.h"
 
@@ -80,6 +77,7 @@ struct ViewerTf {
   std::vector<std::array<float, 2>> opacity;  // (x in [0,1] across the window, opacity per voxel step), sorted by x
   float lo = 0, hi = 1;                    // the window over normalised values [0, 1]
 };
+struct TransferFunction;  // vnr/renderer.h
 TransferFunction to_transfer_function(const ViewerTf& tf);
 
 // The viewer's defaults of what a rendering is: the brick cache, online macro-cells (adjusted to what the

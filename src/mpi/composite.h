@@ -5,7 +5,7 @@
 #include <cstddef>
 #include <vector>
 #include "vnr/math.h"
-#include "vnr/render/image.h"
+#include "vnr/image.h"
 
 namespace vnr::mpi {
 

@@ -5,7 +5,7 @@
 #include "view/server_core.h"
 #include "view/web_assets.h"
 #include "vnr/error.h"
-#include "vnr/render/image.h"
+#include "vnr/image.h"
 
 namespace vnr::view {
 

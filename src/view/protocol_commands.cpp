@@ -175,21 +175,19 @@ Run tf_command(const Fields& f) {
 }
 
 Run render_command(const Fields& f) {
-  auto mode = f.choice("mode", std::array{RenderMode::RayMarch, RenderMode::Shadow, RenderMode::PathTrace},
-                       render_mode_name);
-  auto strategy = f.choice("strategy", std::array<const char*, 4>{"cache", "auto", "streaming", "inshader"},
-                           +[](const char* s) { return s; });
-  auto macrocells = f.choice("macrocells", std::array{MacroCellMode::Online, MacroCellMode::Grid, MacroCellMode::Off},
-                             macrocell_mode_name);
+  const auto name = +[](const char* s) { return s; };  // RenderSettings' names
+  auto mode = f.choice("mode", std::array<const char*, 3>{"raymarch", "shadow", "pathtrace"}, name);
+  auto strategy = f.choice("strategy", std::array<const char*, 4>{"cache", "auto", "streaming", "inshader"}, name);
+  auto macrocells = f.choice("macrocells", std::array<const char*, 3>{"online", "grid", "off"}, name);
   auto step = f.number("step", 1e-3, 1e3), density = f.number("density", 0, 1e6);
   auto shade = f.boolean("shade");
   auto light = f.vec3("light");
   auto max_frames = f.integer("max_frames", 0, 1 << 20), coarse = f.integer("coarse_scale", 1, 64);
   return [=](ViewerEngine& e) {
     ViewerRender r = e.state().render;  // the library's RenderSettings, and the viewer's own two
-    if (mode) r.settings.mode = render_mode_name(*mode);
+    if (mode) r.settings.mode = *mode;
     if (strategy) r.settings.strategy = *strategy;
-    if (macrocells) r.settings.macrocells = macrocell_mode_name(*macrocells);
+    if (macrocells) r.settings.macrocells = *macrocells;
     if (step) r.settings.step = float(*step);
     if (shade) r.settings.shade = *shade;
     if (light) r.settings.light = *light;
