@@ -42,8 +42,7 @@ endforeach()
 set(frontend_cli cuda/cuda.h nn/mlp_kernels.h nn/network.h online/preview.h train/bricks.h
     train/psnr_search.h train/session.h train/training_data.h volume/raw_access.h volume/stream.h
     volume/writer.h)
-set(frontend_python core/parallel.h train/bricks.h train/psnr_search.h volume/sample_io.h
-    volume/writer.h)
+set(frontend_python train/bricks.h train/psnr_search.h volume/sample_io.h volume/writer.h)
 set(frontend_view "")
 set(frontend_mpi "")
 set(frontend_paraview "")

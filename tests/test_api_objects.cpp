@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstring>
 #include <fstream>
+#include <fmt/format.h>
 #include "render_support.h"
 #include "test_support.h"
 #include "vnr/render_cuda/gpu_renderer.h"
@@ -108,6 +109,22 @@ TEST(ApiModel, CreateSaveLoadRoundTrip) {
   EXPECT_EQ(l.lo, m.lo);
   EXPECT_EQ(l.hi, m.hi);
   EXPECT_EQ(l.source_dtype, m.source_dtype);
+}
+
+// check_unit_points names the first point outside [0, 1]^3 (or not finite), however the work was split.
+TEST(ApiModel, UnitPointCheckNamesTheFirstBadPoint) {
+  std::vector<float> xyz(3 * 300000, 0.5f);
+  check_unit_points(xyz.data(), 300000);
+  for (const auto& [at, value] : {std::pair{3 * 250000 + 2, 1.5f}, std::pair{3 * 7 + 1, std::nanf("")}}) {
+    xyz[size_t(at)] = value;
+    std::string message;
+    try {
+      check_unit_points(xyz.data(), 300000, 10);
+    } catch (const Error& e) {
+      message = e.what();
+    }
+    EXPECT_NE(message.find(fmt::format("point {} has {}", 10 + at / 3, "xyz"[at % 3])), std::string::npos) << message;
+  }
 }
 
 TEST(ApiModel, QueriesEqualTheDecoderAndSlabsEqualTheFullDecode) {

@@ -39,6 +39,10 @@ inline float to_original_units(const Model& m, float u) { return float(m.lo + do
 // slices voxels) fit the memory available: what a decode checks before allocating its output.
 void check_decode_fits_memory(Int3 dims, int64_t slices);
 
+// Fails naming the first point of n (interleaved x, y, z; numbered from `first`) that is not finite and
+// in [0, 1]^3: the check of points a user gives (Python's Model.sample), one pass on every core.
+void check_unit_points(const float* xyz, int64_t n, int64_t first = 0);
+
 class Decoder;  // train/decoder.h
 
 class ModelQuery {

@@ -1,11 +1,9 @@
 // vnr.Model: a trained network and the volume it represents; decodes and point queries return numpy
 // arrays in original units, computed with the GIL released on all cores (or the GPU).
 #include <algorithm>
-#include <atomic>
 #include "bindings.h"
 #include "vnr/error.h"
 #include "vnr/fileio.h"
-#include "vnr/core/parallel.h"
 #include "vnr/train/bricks.h"
 #include "vnr/volume/sample_io.h"
 #include "vnr/volume/writer.h"
@@ -55,23 +53,6 @@ void gather_points(const pyb::array& a, int64_t b, int64_t e, float* xyz) {
     for (int k = 0; k < 3; ++k) xyz[3 * (i - b) + k] = float(r(i, k));
 }
 
-// In parallel (the check is a pass over the caller's points): the first point outside [0, 1]^3, or NaN.
-void check_points(const float* xyz, int64_t n, int64_t first) {
-  std::atomic<int64_t> bad{INT64_MAX};
-  parallel_for_range(3 * n, int64_t(1) << 18, [&](int64_t b, int64_t e) {
-    for (int64_t i = b; i < e; ++i)
-      if (!(xyz[i] >= 0.f && xyz[i] <= 1.f)) {  // also catches NaN
-        int64_t seen = bad.load();
-        while (i < seen && !bad.compare_exchange_weak(seen, i)) {
-        }
-        return;
-      }
-  });
-  const int64_t i = bad.load();
-  if (i != INT64_MAX)
-    fail("points must be finite and in [0, 1]^3; point {} has {} = {}", first + i / 3, "xyz"[i % 3], xyz[i]);
-}
-
 pyb::array_t<float> sample(ModelHolder& h, const pyb::array& points, const std::string& device) {
   if (points.ndim() != 2 || points.shape(1) != 3) fail("points must be an (N, 3) array of x, y, z in [0, 1]");
   const char kind = points.dtype().kind();
@@ -87,7 +68,7 @@ pyb::array_t<float> sample(ModelHolder& h, const pyb::array& points, const std::
   std::lock_guard lock(h.mutex);
   ModelQuery& q = h.query_on(dev);
   if (direct) {  // the caller's memory as it is
-    check_points(src, n, 0);
+    check_unit_points(src, n, 0);
     q.points(src, n, dst, ValueUnits::Original);
     return out;
   }
@@ -99,7 +80,7 @@ pyb::array_t<float> sample(ModelHolder& h, const pyb::array& points, const std::
       if (size == 4) gather_points<float>(points, b, e, xyz.data());
       else gather_points<double>(points, b, e, xyz.data());
     }
-    check_points(xyz.data(), e - b, b);
+    check_unit_points(xyz.data(), e - b, b);
     q.points(xyz.data(), e - b, dst + b, ValueUnits::Original);
   }
   return out;

@@ -1,6 +1,8 @@
 // vnr::Model's constructors, queries and decodes (the train layer's Model, Network and GpuNetwork).
 #include "vnr/model.h"
+#include <atomic>
 #include "vnr/error.h"
+#include "vnr/core/parallel.h"
 #include "vnr/train/decoder.h"
 #include "vnr/units.h"
 #include "vnr/volume/writer.h"
@@ -47,6 +49,22 @@ void ModelQuery::slab(Int3 dims, int64_t z0, int64_t z1, float* out, ValueUnits 
   if (z1 == z0) return;
   decoder_->slices(dims, z0, z1, out);  // residuals at their dims on the CPU reference, whatever the device
   convert_units(model_, units, out, dims.x * dims.y * (z1 - z0));
+}
+
+void check_unit_points(const float* xyz, int64_t n, int64_t first) {
+  std::atomic<int64_t> bad{INT64_MAX};
+  parallel_for_range(3 * n, int64_t(1) << 18, [&](int64_t b, int64_t e) {
+    for (int64_t i = b; i < e; ++i)
+      if (!(xyz[i] >= 0.f && xyz[i] <= 1.f)) {  // also catches NaN
+        int64_t seen = bad.load();
+        while (i < seen && !bad.compare_exchange_weak(seen, i)) {
+        }
+        return;
+      }
+  });
+  const int64_t i = bad.load();
+  if (i != INT64_MAX)
+    fail("points must be finite and in [0, 1]^3; point {} has {} = {}", first + i / 3, "xyz"[i % 3], xyz[i]);
 }
 
 void check_decode_fits_memory(Int3 dims, int64_t slices) {
