@@ -23,15 +23,16 @@ constexpr unsigned kFullWarp = 0xffffffffu;
 // zeroed.
 __device__ inline void encode_row(const GridLayout& g, const __half* table, float x, float y, float z, __half* row,
                                   int in_pad) {
-  const int F = int(g.n_features), L = int(g.n_levels);
-  for (int l = 0; l < L; ++l) {
-    float out[8];
-    with_feature_count(g.n_features, [&](auto Fc) {
-      grid_level_forward<decltype(Fc)::value>(g.levels[l], g.interpolation, table, x, y, z, out, 1);
-    });
-    for (int f = 0; f < F; ++f) row[l * F + f] = __float2half_rn(out[f]);
-  }
-  for (int k = L * F; k < in_pad; ++k) row[k] = __float2half_rn(0.0f);
+  const int L = int(g.n_levels);
+  with_feature_count(g.n_features, [&](auto Fc) {  // once per point, not per level
+    constexpr int F = decltype(Fc)::value;
+    for (int l = 0; l < L; ++l) {
+      float out[F];
+      grid_level_forward<F>(g.levels[l], g.interpolation, table, x, y, z, out, 1);
+      for (int f = 0; f < F; ++f) row[l * F + f] = __float2half_rn(out[f]);
+    }
+  });
+  for (int k = L * int(g.n_features); k < in_pad; ++k) row[k] = __float2half_rn(0.0f);
 }
 
 // A network as the in-shader kernels evaluate it: kept in GPU memory (WarpNetworkRef below), bound
