@@ -82,11 +82,12 @@ TransferFunction to_transfer_function(const ViewerTf& tf);
 
 // The viewer's defaults of what a rendering is: the brick cache, online macro-cells (adjusted to what the
 // input allows), the light from (0.7, 0.9, 0.4).
+inline Vec3f viewer_default_light() { return normalize(Vec3f{0.7f, 0.9f, 0.4f}); }
 inline RenderSettings viewer_render_defaults() {
   RenderSettings s;
   s.strategy = "cache";
   s.macrocells = "online";
-  s.light = normalize(Vec3f{0.7f, 0.9f, 0.4f});
+  s.light = viewer_default_light();
   return s;
 }
 

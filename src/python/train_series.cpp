@@ -43,8 +43,6 @@ Json series_report(const pyb::kwargs& kw, const std::string& volume, const std::
   s.switch_every = switch_every;
   s.report = report;
   s.ssim = ssim;
-  const auto name = [](const std::string& key) { return key; };  // the keywords' own names
-  check_series_setup(s, name);
   if (threads) set_num_threads(*threads);
   bool interrupted = false;
   SeriesRunCallbacks cb;
@@ -60,7 +58,7 @@ Json series_report(const pyb::kwargs& kw, const std::string& volume, const std::
   SeriesRunResult r;
   {
     pyb::gil_scoped_release release;
-    r = run_series(s, cb);
+    r = run_series(s, cb, [](const std::string& key) { return key; });  // errors name the keywords
   }
   if (interrupted)
     PyErr_WarnFormat(PyExc_RuntimeWarning, 1, "vnr.train_series interrupted: the models so far are in %s",

@@ -33,7 +33,7 @@ Json render_json(const ViewerRender& r) {
           {"macrocells", s.macrocells},
           {"step", s.step},
           {"shade", s.shade},
-          {"light", vec3(s.light.value_or(*viewer_render_defaults().light))},
+          {"light", vec3(s.light.value_or(viewer_default_light()))},
           {"density", s.density},
           {"max_frames", r.max_frames},
           {"coarse_scale", r.coarse_scale}};

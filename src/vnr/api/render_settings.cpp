@@ -30,12 +30,25 @@ std::optional<Vec3f> optional_vec(const Json& j, const char* key) {
   return vec_of(*it, key);
 }
 
+// The keys read with json_get and written as they are: f(key, field) for each, the one list of them.
+template <class Settings, class F>
+void for_each_plain_key(Settings& s, F&& f) {
+  f("mode", s.mode), f("strategy", s.strategy), f("step", s.step), f("step_max", s.step_max);
+  f("density", s.density), f("shade", s.shade), f("seed", s.seed);
+  f("samples_per_iteration", s.samples_per_iteration), f("ray_packets", s.ray_packets), f("tf", s.tf);
+  f("scene", s.scene), f("macrocells", s.macrocells), f("macrocell_size", s.macrocell_size), f("fovy", s.fovy);
+  f("device", s.device), f("mlp", s.mlp), f("precision", s.precision), f("spp", s.spp), f("noise", s.noise);
+  f("max_spp", s.max_spp);
+}
+
 const std::set<std::string>& known_keys() {
-  static const std::set<std::string> keys = {
-      "mode",   "strategy", "size",   "step",   "step_max",       "density",      "shade",      "seed",
-      "samples_per_iteration", "ray_packets", "light", "background", "tf",  "scene", "macrocells",
-      "macrocell_size", "eye", "center", "up",  "fovy", "orbit",  "device", "mlp",  "precision",
-      "cache_budget", "cache_dims", "spp", "noise", "max_spp"};
+  static const std::set<std::string> keys = [] {
+    std::set<std::string> k = {"size",  "light", "background", "eye",          "center",
+                               "up",    "orbit", "cache_budget", "cache_dims"};  // read below, by hand
+    RenderSettings s;
+    for_each_plain_key(s, [&k](const char* key, const auto&) { k.insert(key); });
+    return k;
+  }();
   return keys;
 }
 
@@ -106,40 +119,24 @@ void RenderSettings::validate(const std::function<std::string(const std::string&
 RenderSettings RenderSettings::from_json(const Json& j) {
   json_check_keys(j, known_keys(), kWhere);
   RenderSettings s;
-  s.mode = json_get(j, "mode", s.mode, kWhere);
-  s.strategy = json_get(j, "strategy", s.strategy, kWhere);
+  for_each_plain_key(s, [&j](const char* key, auto& field) { field = json_get(j, key, field, kWhere); });
   if (auto it = j.find("size"); it != j.end()) {
     if (!it->is_array() || it->size() != 2 || !(*it)[0].is_number_integer() || !(*it)[1].is_number_integer())
       fail("{}: 'size' must be [width, height] (integers), got {}", kWhere, it->dump());
     s.width = (*it)[0].get<int>();
     s.height = (*it)[1].get<int>();
   }
-  s.step = json_get(j, "step", s.step, kWhere);
-  s.step_max = json_get(j, "step_max", s.step_max, kWhere);
-  s.density = json_get(j, "density", s.density, kWhere);
-  s.shade = json_get(j, "shade", s.shade, kWhere);
-  s.seed = json_get(j, "seed", s.seed, kWhere);
-  s.samples_per_iteration = json_get(j, "samples_per_iteration", s.samples_per_iteration, kWhere);
-  s.ray_packets = json_get(j, "ray_packets", s.ray_packets, kWhere);
   s.light = optional_vec(j, "light");
   s.background = optional_vec(j, "background");
-  s.tf = json_get(j, "tf", s.tf, kWhere);
-  s.scene = json_get(j, "scene", s.scene, kWhere);
-  s.macrocells = json_get(j, "macrocells", s.macrocells, kWhere);
-  s.macrocell_size = json_get(j, "macrocell_size", s.macrocell_size, kWhere);
   s.eye = optional_vec(j, "eye");
   s.center = optional_vec(j, "center");
   if (auto up = optional_vec(j, "up")) s.up = *up;
-  s.fovy = json_get(j, "fovy", s.fovy, kWhere);
   if (auto it = j.find("orbit"); it != j.end() && !it->is_null()) {
     if (!it->is_array() || it->empty() || it->size() > 2 || !(*it)[0].is_number() ||
         (it->size() == 2 && !(*it)[1].is_number()))
       fail("{}: 'orbit' must be [azimuth, elevation] in degrees, got {}", kWhere, it->dump());
     s.orbit = std::make_pair((*it)[0].get<float>(), it->size() == 2 ? (*it)[1].get<float>() : 0.0f);
   }
-  s.device = json_get(j, "device", s.device, kWhere);
-  s.mlp = json_get(j, "mlp", s.mlp, kWhere);
-  s.precision = json_get(j, "precision", s.precision, kWhere);
   if (auto it = j.find("cache_budget"); it != j.end()) {
     if (it->is_string()) s.cache_budget = parse_cache_budget(it->get<std::string>());
     else if (it->is_number_unsigned()) s.cache_budget = it->get<uint64_t>();
@@ -151,38 +148,16 @@ RenderSettings RenderSettings::from_json(const Json& j) {
       fail("{}: 'cache_dims' must be [x, y, z] (integers), got {}", kWhere, it->dump());
     s.cache_dims = Int3{(*it)[0].get<int64_t>(), (*it)[1].get<int64_t>(), (*it)[2].get<int64_t>()};
   }
-  s.spp = json_get(j, "spp", s.spp, kWhere);
-  s.noise = json_get(j, "noise", s.noise, kWhere);
-  s.max_spp = json_get(j, "max_spp", s.max_spp, kWhere);
   s.validate();
   return s;
 }
 
 Json RenderSettings::to_json() const {
-  Json j = {{"mode", mode},
-            {"strategy", strategy},
-            {"size", {width, height}},
-            {"step", step},
-            {"step_max", step_max},
-            {"density", density},
-            {"shade", shade},
-            {"seed", seed},
-            {"samples_per_iteration", samples_per_iteration},
-            {"ray_packets", ray_packets},
-            {"tf", tf},
-            {"scene", scene},
-            {"macrocells", macrocells},
-            {"macrocell_size", macrocell_size},
+  Json j = {{"size", {width, height}},
             {"up", vec_json(up)},
-            {"fovy", fovy},
-            {"device", device},
-            {"mlp", mlp},
-            {"precision", precision},
             {"cache_budget", cache_budget},
-            {"cache_dims", {cache_dims.x, cache_dims.y, cache_dims.z}},
-            {"spp", spp},
-            {"noise", noise},
-            {"max_spp", max_spp}};
+            {"cache_dims", {cache_dims.x, cache_dims.y, cache_dims.z}}};
+  for_each_plain_key(*this, [&j](const char* key, const auto& field) { j[key] = field; });
   if (light) j["light"] = vec_json(*light);
   if (background) j["background"] = vec_json(*background);
   if (eye) j["eye"] = vec_json(*eye);

@@ -346,7 +346,7 @@ void ViewerEngine::set_render(const ViewerRender& r) {
   s.validate();
   if (r.max_frames < 0 || r.max_frames > 65536) fail("max_frames {} is outside 0..65536", r.max_frames);
   if (r.coarse_scale < 1 || r.coarse_scale > 16) fail("coarse_scale {} is outside 1..16", r.coarse_scale);
-  const Vec3f light = s.light.value_or(*viewer_render_defaults().light);
+  const Vec3f light = s.light.value_or(viewer_default_light());
   if (!(length(light) > 0)) fail("light direction (0, 0, 0) has no direction");
   const MacroCellMode cells = parse_macrocell_mode(s.macrocells.empty() ? "online" : s.macrocells);
   if (cells == MacroCellMode::Grid && !m.info.has_volume)

@@ -39,7 +39,7 @@ RenderOptions viewer_render_options(const ViewerRender& r, const Scene& scene, i
   o.shade = s.shade;
   o.background = scene.background.value_or(Vec3f{0, 0, 0});
   o.light = scene.light.value_or(DirectionalLight{});
-  o.light.direction = s.light.value_or(*viewer_render_defaults().light);
+  o.light.direction = s.light.value_or(viewer_default_light());
   return o;
 }
 

@@ -32,17 +32,13 @@ int64_t lorenzo(const int32_t* q, Int3 d, int64_t x, int64_t y, int64_t z) {
 uint32_t zigzag(int64_t v) { return uint32_t((uint64_t(v) << 1) ^ uint64_t(v >> 63)); }
 int64_t unzigzag(uint32_t u) { return int64_t(u >> 1) ^ -int64_t(u & 1); }
 
-// Symbols (one byte per voxel) followed by the escaped values, 4 bytes little-endian each.
-std::vector<uint8_t> byte_layout(const Residuals& r, bool predict, uint64_t* escapes) {
-  const Int3 d = r.dims;
-  const int64_t n = d.count();
+// Symbols of the values (q, or its Lorenzo differences), one byte per voxel, followed by the escaped
+// values, 4 bytes little-endian each.
+std::vector<uint8_t> byte_layout(const std::vector<int32_t>& values, uint64_t* escapes) {
+  const int64_t n = int64_t(values.size());
   std::vector<uint32_t> z(static_cast<size_t>(n));
-  parallel_for(d.z, [&](int64_t k) {
-    for (int64_t j = 0; j < d.y; ++j)
-      for (int64_t i = 0; i < d.x; ++i) {
-        const int64_t v = i + d.x * (j + d.y * k);
-        z[size_t(v)] = zigzag(int64_t(r.q[size_t(v)]) - (predict ? lorenzo(r.q.data(), d, i, j, k) : 0));
-      }
+  parallel_for_range(n, int64_t(1) << 16, [&](int64_t b, int64_t e) {
+    for (int64_t v = b; v < e; ++v) z[size_t(v)] = zigzag(values[size_t(v)]);
   });
   std::vector<uint8_t> out(static_cast<size_t>(n));
   *escapes = 0;
@@ -156,18 +152,20 @@ EncodedResiduals encode_residuals(const Residuals& r, const std::string& only, b
       if (only.empty() || only == residual_coding_name(context ? "context" : "zstd", predictor_name(r, predict)))
         candidates.push_back({context, predict, {}});
   if (candidates.empty()) fail("unknown residual coding '{}'", only);
+  // The inputs, each built in parallel: the Lorenzo differences once, for both coders that predict.
+  std::vector<int32_t> differences;
+  for (const Candidate& c : candidates)
+    if (c.predict && differences.empty()) differences = lorenzo_differences(r);
   std::vector<std::vector<uint8_t>> raw(candidates.size());
-  std::vector<std::vector<int32_t>> differences(candidates.size());
-  for (size_t i = 0; i < candidates.size(); ++i) {  // the inputs, each built in parallel over z
+  for (size_t i = 0; i < candidates.size(); ++i) {
     Candidate& c = candidates[i];
-    if (!c.context) raw[i] = byte_layout(r, c.predict, &c.escapes), c.raw_bytes = raw[i].size();
-    else if (c.predict) differences[i] = lorenzo_differences(r);
+    if (!c.context) raw[i] = byte_layout(c.predict ? differences : r.q, &c.escapes), c.raw_bytes = raw[i].size();
   }
   parallel_for_claimed(int64_t(candidates.size()), 1, [&](int64_t i0, int64_t i1) {
     for (int64_t i = i0; i < i1; ++i) {
       Candidate& c = candidates[size_t(i)];
       if (!c.context) c.bytes = zstd_compress(raw[size_t(i)], search ? kZstdSearchLevel : kZstdLevel);
-      else c.bytes = context_encode(c.predict ? differences[size_t(i)].data() : r.q.data(), r.dims);
+      else c.bytes = context_encode(c.predict ? differences.data() : r.q.data(), r.dims);
     }
   });
   EncodedResiduals best;

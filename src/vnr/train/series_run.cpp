@@ -209,8 +209,9 @@ void check_series_setup(const SeriesRunSetup& s, const std::function<std::string
          out, name("timesteps"));
 }
 
-SeriesRunResult run_series(const SeriesRunSetup& s, const SeriesRunCallbacks& callbacks) {
-  check_series_setup(s);
+SeriesRunResult run_series(const SeriesRunSetup& s, const SeriesRunCallbacks& callbacks,
+                           const std::function<std::string(const std::string&)>& name) {
+  check_series_setup(s, name);
   const TrainingSetup& t = s.train;
   ModelConfig config = load_config(t.config);
   // The series and the selection, every selected timestep described (validated) before training.

@@ -51,8 +51,10 @@ struct SeriesRunResult {
 void check_series_setup(const SeriesRunSetup& s,
                         const std::function<std::string(const std::string&)>& name = option_name_of);
 
-// Checks, describes every selected timestep, creates the directory and trains. A failure after some
-// models were saved names them ("N finished models kept in DIR").
-SeriesRunResult run_series(const SeriesRunSetup& s, const SeriesRunCallbacks& callbacks);
+// Checks (check_series_setup, naming settings with `name`), describes every selected timestep, creates
+// the directory and trains. A failure after some models were saved names them ("N finished models kept
+// in DIR").
+SeriesRunResult run_series(const SeriesRunSetup& s, const SeriesRunCallbacks& callbacks,
+                           const std::function<std::string(const std::string&)>& name = option_name_of);
 
 }  // namespace vnr

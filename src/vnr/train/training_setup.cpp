@@ -15,12 +15,26 @@ namespace {
 
 const char* const kWhere = "training settings";
 
+// The keys read with json_get and written as they are: f(key, field) for each, the one list of them.
+template <class Setup, class F>
+void for_each_plain_key(Setup& s, F&& f) {
+  f("volume", s.volume), f("target_ratio", s.target_ratio), f("target_psnr", s.target_psnr);
+  f("residuals", s.residuals), f("bits_per_param", s.bits_per_param), f("qat_fraction", s.qat_fraction);
+  f("rate_weight", s.rate_weight), f("batch", s.batch), f("seed", s.seed), f("device", s.device), f("mlp", s.mlp);
+  f("precision", s.precision), f("macrocell_size", s.macrocell_size), f("sampler", s.data.sampler);
+  f("blocks", s.data.blocks), f("refresh", s.data.refresh), f("output", s.session.output);
+  f("checkpoint_every", s.session.checkpoint_every), f("cooldown", s.session.cooldown);
+  f("max_error", s.session.error_bound.max_error), f("max_rel_error", s.session.error_bound.max_rel_error);
+}
+
 const std::set<std::string>& known_keys() {
-  static const std::set<std::string> keys = {
-      "volume", "config", "target_ratio", "target_psnr", "residuals", "bits_per_param", "qat_fraction",
-      "rate_weight", "batch", "seed", "device", "mlp", "precision", "macrocell_size", "steps", "sampler",
-      "memory_budget", "blocks", "refresh", "block_dims", "grid_lr_scale", "output", "checkpoint_every",
-      "cooldown", "max_error", "max_rel_error", "dims", "dtype", "endian", "offset", "timestep", "range", "nan"};
+  static const std::set<std::string> keys = [] {
+    std::set<std::string> k = {"config", "steps",  "memory_budget", "block_dims", "grid_lr_scale", "nan",  // by hand
+                               "dims",   "dtype",  "endian",        "offset",     "timestep",      "range"};
+    TrainingSetup s;
+    for_each_plain_key(s, [&k](const char* key, const auto&) { k.insert(key); });
+    return k;
+  }();
   return keys;
 }
 
@@ -82,40 +96,20 @@ void check_training_setup(const TrainingSetup& s) {
 TrainingSetup TrainingSetup::from_json(const Json& j) {
   json_check_keys(j, known_keys(), kWhere);
   TrainingSetup s;
-  s.volume = json_get(j, "volume", s.volume, kWhere);
+  for_each_plain_key(s, [&j](const char* key, auto& field) { field = json_get(j, key, field, kWhere); });
   if (auto it = j.find("config"); it != j.end()) {
     if (it->is_object()) s.config_json = *it;
     else if (it->is_string()) s.config = it->get<std::string>();
     else fail("{}: 'config' must be a preset name, a file or a tiny-cuda-nn config object, got {}", kWhere, it->dump());
   }
-  s.target_ratio = json_get(j, "target_ratio", s.target_ratio, kWhere);
-  s.target_psnr = json_get(j, "target_psnr", s.target_psnr, kWhere);
-  s.residuals = json_get(j, "residuals", s.residuals, kWhere);
-  s.bits_per_param = json_get(j, "bits_per_param", s.bits_per_param, kWhere);
-  s.qat_fraction = json_get(j, "qat_fraction", s.qat_fraction, kWhere);
-  s.rate_weight = json_get(j, "rate_weight", s.rate_weight, kWhere);
-  s.batch = json_get<int64_t>(j, "batch", s.batch, kWhere);
-  s.seed = json_get(j, "seed", s.seed, kWhere);
-  s.device = json_get(j, "device", s.device, kWhere);
-  s.mlp = json_get(j, "mlp", s.mlp, kWhere);
-  s.precision = json_get(j, "precision", s.precision, kWhere);
-  s.macrocell_size = json_get(j, "macrocell_size", s.macrocell_size, kWhere);
   s.steps = j.contains("steps") ? json_get<int64_t>(j, "steps", 0, kWhere) : s.steps;
-  s.data.sampler = json_get(j, "sampler", s.data.sampler, kWhere);
   if (auto it = j.find("memory_budget"); it != j.end()) {
     s.data.memory_budget = it->is_string() ? parse_byte_size(it->get<std::string>()) : json_get<uint64_t>(j, "memory_budget", 0, kWhere);
     if (s.data.memory_budget == 0) fail("{}: 'memory_budget' must be positive", kWhere);
   }
-  s.data.blocks = json_get<int64_t>(j, "blocks", s.data.blocks, kWhere);
-  s.data.refresh = json_get<int64_t>(j, "refresh", s.data.refresh, kWhere);
   if (auto it = j.find("block_dims"); it != j.end()) s.data.block_dims = int3_of(*it, "block_dims");
   if (auto it = j.find("grid_lr_scale"); it != j.end())
     s.data.grid_lr_scale = it->is_number() ? fmt::format("{}", it->get<double>()) : json_get<std::string>(j, "grid_lr_scale", "", kWhere);
-  s.session.output = json_get(j, "output", s.session.output, kWhere);
-  s.session.checkpoint_every = json_get<int64_t>(j, "checkpoint_every", s.session.checkpoint_every, kWhere);
-  s.session.cooldown = json_get(j, "cooldown", s.session.cooldown, kWhere);
-  s.session.error_bound.max_error = json_get(j, "max_error", s.session.error_bound.max_error, kWhere);
-  s.session.error_bound.max_rel_error = json_get(j, "max_rel_error", s.session.error_bound.max_rel_error, kWhere);
   read_raw_keys(j, s.raw);
   if (j.contains("nan")) s.load.non_finite = parse_non_finite_policy(json_get<std::string>(j, "nan", "", kWhere));
   check_values(s, nullptr);
@@ -123,30 +117,10 @@ TrainingSetup TrainingSetup::from_json(const Json& j) {
 }
 
 Json TrainingSetup::to_json() const {
-  Json j = {{"volume", volume},
-            {"config", config_json ? *config_json : Json(config)},
-            {"target_ratio", target_ratio},
-            {"target_psnr", target_psnr},
-            {"residuals", residuals},
-            {"bits_per_param", bits_per_param},
-            {"qat_fraction", qat_fraction},
-            {"rate_weight", rate_weight},
-            {"batch", batch},
-            {"seed", seed},
-            {"device", device},
-            {"mlp", mlp},
-            {"precision", precision},
-            {"macrocell_size", macrocell_size},
-            {"sampler", data.sampler},
-            {"blocks", data.blocks},
-            {"refresh", data.refresh},
+  Json j = {{"config", config_json ? *config_json : Json(config)},
             {"grid_lr_scale", data.grid_lr_scale},
-            {"output", session.output},
-            {"checkpoint_every", session.checkpoint_every},
-            {"cooldown", session.cooldown},
-            {"max_error", session.error_bound.max_error},
-            {"max_rel_error", session.error_bound.max_rel_error},
             {"nan", non_finite_policy_name(load.non_finite)}};
+  for_each_plain_key(*this, [&j](const char* key, const auto& field) { j[key] = field; });
   if (steps >= 0) j["steps"] = steps;
   if (data.memory_budget > 0) j["memory_budget"] = data.memory_budget;
   if (data.block_dims) j["block_dims"] = {data.block_dims->x, data.block_dims->y, data.block_dims->z};
