@@ -4,14 +4,14 @@
 # profile.md). Stages, in order of what a short lease needs most:
 #   tests     the gpu test executables (test_gpu*)
 #   cli       the CLI's --device cuda paths against --device cpu (bench/gpu_cli.sh)
+#   rd        the compression issue's rate-distortion points at the paper's 20k steps on the GPU
+#             (quantization- and rate-aware steps on the device), table in rd_table.md
 #   bench     training/inference throughput, 20k paper-config steps, the PyTorch peer on the same GPU
 #   render    the rendering table (bonsai, engine, chris_t1 at 768x768, neural and grid)
 #   python    the Python module's device="cuda" tests (tests/python/test_cuda.py), the module compiled
 #             there for that machine's python3 against the prebuilt static libraries
 #   profile   Nsight Compute's speed-of-light of the training step's and the renderer's kernels
 #   sanitize  compute-sanitizer memcheck and racecheck over the gpu tests
-#   rd        the compression issue's rate-distortion points at the paper's 20k steps on the GPU
-#             (quantization- and rate-aware steps on the device), table in rd_table.md
 #
 #   sh bench/gpu.sh OUTDIR
 #
@@ -21,7 +21,8 @@
 # script configures and builds build-gpu there, as before.
 #
 # Environment (all optional):
-#   VNR_STAGES   which stages to run (default: "tests cli bench render python profile sanitize rd")
+#   VNR_STAGES   which stages to run (default: "tests cli rd bench render python profile sanitize")
+#   VNR_DEADLINE seconds after the start past which rd and render begin no further volume (a short lease)
 #   VNR_CUDA_ARCH  CMAKE_CUDA_ARCHITECTURES of a build on the GPU machine (default: the project's list)
 #   VNR_DATA     folder with the real volumes (default: ../shared/data, else .data)
 #   VNR_VOLUME   volume to benchmark on (default: DATA/bonsai.json if present, else a generated
@@ -45,7 +46,7 @@ mkdir -p "$OUT"
 OUT=$(cd "$OUT" && pwd)
 cd "$(dirname "$0")/.."
 SECONDS_EACH=${VNR_SECONDS:-5}
-STAGES=" ${VNR_STAGES:-tests cli bench render python profile sanitize rd} "
+STAGES=" ${VNR_STAGES:-tests cli rd bench render python profile sanitize} "
 want() { case "$STAGES" in *" $1 "*) return 0 ;; esac; return 1; }
 DATA=${VNR_DATA:-../shared/data}
 if [ ! -d "$DATA" ] && [ -d .data ]; then DATA=.data; fi
@@ -55,6 +56,8 @@ export PATH="/usr/local/cuda/bin:$PATH"
 (nvidia-smi || true) > "$OUT/nvidia-smi.txt" 2>&1
 stage_start=$(date +%s)
 stage() { echo "== $1 ($(( $(date +%s) - stage_start ))s so far)"; }
+# VNR_DEADLINE: seconds after the start past which the rd and render stages start no further volume
+past_deadline() { [ -n "${VNR_DEADLINE:-}" ] && [ $(( $(date +%s) - stage_start )) -ge "$VNR_DEADLINE" ]; }
 if [ -x .gpu/bin/vnr ]; then
   BIN=.gpu/bin
   # the runtime libraries Debian 12 has and a CUDA image may not, and cuBLAS wherever this machine keeps it
@@ -148,6 +151,32 @@ if [ -f "$PEERS/torch_vnr.py" ]; then
 fi
 fi  # bench
 
+if want rd; then
+  stage "rate-distortion at ${VNR_RD_STEPS:-20000} steps"
+  for name in ${VNR_RD_NAMES:-bonsai chris_t1 wmag91 engine}; do
+    [ -f "$DATA/$name.json" ] || continue
+    if past_deadline; then echo "rd: $name skipped, past VNR_DEADLINE"; continue; fi
+    timeout 590 $VNR bench rd "$DATA/$name.json" --device cuda --steps "${VNR_RD_STEPS:-20000}" \
+      --ratios "${VNR_RD_RATIOS:-32,64,128}" --bounds "${VNR_RD_BOUNDS:-1e-2,1e-3}" --zfp-rates none \
+      --report "$OUT/rd_$name.json" > "$OUT/rd_$name.log" 2>&1 || status=1
+    grep -E 'vnr' "$OUT/rd_$name.log" | tail -6
+  done
+  python3 - "$OUT" <<'PY' || true
+import glob, json, os, sys
+out = sys.argv[1]
+lines = ["| volume | point | parameter | ratio | PSNR (dB) | bound held | seconds |", "|---|---|---|---|---|---|---|"]
+for f in sorted(glob.glob(os.path.join(out, "rd_*.json"))):
+    rep = json.load(open(f))
+    for p in rep.get("points", []):
+        if not p.get("codec", "").startswith("vnr"): continue
+        lines.append("| {} | {} | {} | {:.2f}x | {:.2f} | {} | {:.1f} |".format(os.path.basename(f)[3:-5], p["codec"],
+                     p.get("parameter"), p.get("ratio", 0), p.get("psnr", 0), p.get("extra", {}).get("bound_holds", ""),
+                     p.get("seconds", 0)))
+open(os.path.join(out, "rd_table.md"), "w").write("\n".join(lines) + "\n")
+print("\n".join(lines))
+PY
+fi
+
 if want render && [ "${VNR_RENDER:-1}" != 0 ]; then
   stage "render (768x768, paper config models with online macro-cells, and the grids)"
   STEPS=${VNR_RENDER_STEPS:-20000}
@@ -161,6 +190,7 @@ if want render && [ "${VNR_RENDER:-1}" != 0 ]; then
     NAMES=synthetic
   fi
   for name in $NAMES; do
+    if past_deadline; then echo "render: $name skipped, past VNR_DEADLINE"; continue; fi
     V=$DATA/$name.json
     [ -f "$V" ] || V=$VOL
     $VNR train "$V" -o "$OUT/render_$name.vnr" --config paper --steps "$STEPS" --device cuda --macrocell-size 16 \
@@ -175,11 +205,12 @@ if want render && [ "${VNR_RENDER:-1}" != 0 ]; then
     cat "$OUT/render_grid_$name.log"
   done
   first=$(echo $NAMES | cut -d' ' -f1)
+  [ -f "$OUT/render_$first.vnr" ] || VNR_TUNE_K=0 VNR_CPU_RENDER=0
   [ "${VNR_TUNE_K:-1}" = 0 ] || $VNR bench render "$OUT/render_$first.vnr" --device cuda --size 768x768 --frames "$FRAMES" \
     --tune-k 1,2,4,8,16,32,64 --report "$OUT/render_tune_k.json" > "$OUT/render_tune_k.log" 2>&1 || status=1
   [ ! -f "$OUT/render_tune_k.log" ] || cat "$OUT/render_tune_k.log"
   # the same model on the CPU (this machine's cores), for the GPU/CPU ratio
-  $VNR bench render "$OUT/render_$first.vnr" --device cpu --size 768x768 --frames 2 --modes raymarch \
+  [ "${VNR_CPU_RENDER:-1}" = 0 ] || $VNR bench render "$OUT/render_$first.vnr" --device cpu --size 768x768 --frames 2 --modes raymarch \
     --report "$OUT/render_cpu_$first.json" > "$OUT/render_cpu_$first.log" 2>&1 || true
   python3 - "$OUT" <<'PY'
 import glob, json, os, sys
@@ -291,31 +322,6 @@ if want sanitize; then
       echo "$tool $t: $ours reports in vnr's kernels, $theirs in cuBLAS's; $(grep -E 'PASSED|FAILED' "$log" | tail -1)"
     done
   done
-fi
-
-if want rd; then
-  stage "rate-distortion at ${VNR_RD_STEPS:-20000} steps"
-  for name in ${VNR_RD_NAMES:-bonsai chris_t1 wmag91 engine}; do
-    [ -f "$DATA/$name.json" ] || continue
-    timeout 590 $VNR bench rd "$DATA/$name.json" --device cuda --steps "${VNR_RD_STEPS:-20000}" \
-      --ratios "${VNR_RD_RATIOS:-32,64,128}" --bounds "${VNR_RD_BOUNDS:-1e-2,1e-3}" --zfp-rates none \
-      --report "$OUT/rd_$name.json" > "$OUT/rd_$name.log" 2>&1 || status=1
-    grep -E 'vnr' "$OUT/rd_$name.log" | tail -6
-  done
-  python3 - "$OUT" <<'PY' || true
-import glob, json, os, sys
-out = sys.argv[1]
-lines = ["| volume | point | parameter | ratio | PSNR (dB) | bound held | seconds |", "|---|---|---|---|---|---|---|"]
-for f in sorted(glob.glob(os.path.join(out, "rd_*.json"))):
-    rep = json.load(open(f))
-    for p in rep.get("points", []):
-        if not p.get("codec", "").startswith("vnr"): continue
-        lines.append("| {} | {} | {} | {:.2f}x | {:.2f} | {} | {:.1f} |".format(os.path.basename(f)[3:-5], p["codec"],
-                     p.get("parameter"), p.get("ratio", 0), p.get("psnr", 0), p.get("extra", {}).get("bound_holds", ""),
-                     p.get("seconds", 0)))
-open(os.path.join(out, "rd_table.md"), "w").write("\n".join(lines) + "\n")
-print("\n".join(lines))
-PY
 fi
 
 exit $status
