@@ -253,4 +253,13 @@ TEST(GpuRender, CacheDecodedOnTheDeviceMatchesTheCpusCache) {
               image_psnr(gpu_cache, gpu_network));
   EXPECT_GT(image_psnr(gpu_cache, cpu_cache), 40.0);
   EXPECT_GT(image_psnr(gpu_cache, gpu_network), 35.0);
+  // `auto` takes the device's cache where the whole decode fits, and the network where it does not.
+  Renderer r(model, Device::Cuda);
+  r.choose_strategy("auto");
+  EXPECT_STREQ(r.field().kind(), "cache");
+  r.choose_strategy("auto", 4096);  // 32^3 floats are 128 KiB
+  EXPECT_STREQ(r.field().kind(), "network");
+  EXPECT_THROW(r.choose_strategy("cache", 4096), Error);
+  r.choose_strategy("auto", 0, {0, 0, 0}, 2);  // two frames: warming does not pay
+  EXPECT_STREQ(r.field().kind(), "network");
 }

@@ -96,9 +96,10 @@ public:
   // across every other setting.
   void set_cache(std::optional<BrickCacheSettings> settings);
   const std::optional<BrickCacheSettings>& cache() const { return cache_settings_; }
-  // A front end's --strategy: "auto" (the brick cache for a model on the CPU when `frames` will be
-  // accumulated, 0 = unknown, at least kCacheFrames: warming it costs about ten network frames; then
-  // the faster execution strategy for the field), "cache" (the cache with that), "streaming" or
+  // A front end's --strategy: "auto" (the brick cache for a model when `frames` will be accumulated,
+  // 0 = unknown, at least kCacheFrames: warming it costs about ten network frames; on the GPU only where
+  // the whole decode fits, see set_cache; then the faster execution strategy for the field), "cache"
+  // (the cache with that, or an error where the GPU's does not fit), "streaming" or
   // "inshader" (no cache). cache_budget: bytes of the cache's pool (0 = default_cache_budget());
   // cache_dims: the voxels the cache decodes the model at (0 = the model's dims; any size).
   static constexpr int kCacheFrames = 8;

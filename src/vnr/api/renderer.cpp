@@ -110,6 +110,19 @@ Renderer::Renderer(const RenderInput& input, Device device)
 }
 Renderer::~Renderer() = default;
 
+// Why the GPU's cache, the model's whole decode at the cache's dims, cannot be had ("" when it can): it
+// must fit the cache's budget and a quarter of the GPU's free memory.
+static std::string gpu_cache_reason(const Model& model, const BrickCacheSettings& settings) {
+  const Int3 dims = settings.dims.count() > 0 ? settings.dims : model.dims;
+  const uint64_t budget = settings.budget_bytes ? settings.budget_bytes : default_cache_budget();
+  if (double(dims.count()) * sizeof(float) > double(budget))
+    return fmt::format("on the GPU the cache holds the whole decode, {} at {}x{}x{}, more than its budget of {}: give a "
+                       "larger --cache-budget, smaller --cache-dims, or another --strategy",
+                       human_bytes(double(dims.count()) * sizeof(float)), dims.x, dims.y, dims.z,
+                       human_bytes(double(budget)));
+  return gpu_decode_reason("the cache", dims);
+}
+
 void Renderer::set_cache(std::optional<BrickCacheSettings> settings) {
   cached_.reset();
   brick_cache_ = nullptr;
@@ -117,13 +130,8 @@ void Renderer::set_cache(std::optional<BrickCacheSettings> settings) {
   if (settings) {
     if (!model_) fail("the brick cache is for models: a volume is drawn directly");
     if (device_ == Device::Cuda) {  // all of level 0, decoded once on the device
+      if (const std::string why = gpu_cache_reason(*model_, *settings); !why.empty()) fail("{}", why);
       const Int3 dims = settings->dims.count() > 0 ? settings->dims : model_->dims;
-      const uint64_t budget = settings->budget_bytes ? settings->budget_bytes : default_cache_budget();
-      if (double(dims.count()) * sizeof(float) > double(budget))
-        fail("on the GPU the cache holds the whole decode, {} at {}x{}x{}, more than its budget of {}: give a "
-             "larger --cache-budget, smaller --cache-dims, or another --strategy",
-             human_bytes(double(dims.count()) * sizeof(float)), dims.x, dims.y, dims.z, human_bytes(double(budget)));
-      if (const std::string why = gpu_decode_reason("the cache", dims); !why.empty()) fail("{}", why);
       cached_ = std::make_unique<DecodedModelField>(*model_, dims, "cache");
     } else {
       auto cache = make_model_cache(*model_, *field_, *settings);
@@ -146,7 +154,10 @@ void Renderer::choose_strategy(const std::string& choice, uint64_t cache_budget,
   cache.budget_bytes = cache_budget;
   cache.dims = cache_dims;
   const bool pays = frames == 0 || frames >= kCacheFrames || cache_dims.count() > 0;
-  if (c == "cache" || (model_ && device_ == Device::Cpu && pays)) set_cache(cache);
+  // On the GPU, `auto` takes the cache where the whole decode fits (bonsai at 768²: 39x the network's
+  // frames, docs/benchmarks.md "CUDA backend"), and the network where it does not.
+  const bool fits = model_ && (device_ == Device::Cpu || gpu_cache_reason(*model_, cache).empty());
+  if (c == "cache" || (pays && fits)) set_cache(cache);
   else set_cache(std::nullopt);
   set_strategy(automatic_strategy());
 }
