@@ -449,3 +449,26 @@ TEST(RateControl, ResidualsFillTheFileBesideASmallerNetwork) {
   EXPECT_NE(one_line_error_of([&] { check_training_setup(bad); }).find("--residuals must be auto or off"),
             std::string::npos);
 }
+
+// --learn-steps: the steps train over the quantization-aware part and the file still meets the target
+// within 5 %; its segments' steps are no longer the plan's shape times one scale.
+TEST(RateControl, LearnedStepsMeetTheTarget) {
+  const std::string d = temp_dir("rate_learned");
+  const Int3 dims{40, 40, 40};
+  const std::string volume = write_volume(d, dims, "uint8");
+  TrainingSetup s = setup_for(d, volume, dims, "uint8");
+  s.target_ratio = 8;
+  s.residuals = "off";
+  s.qat_fraction = 0.5;
+  s.learn_steps = true;
+  auto session = open_training_session(s);
+  std::vector<std::string> notes;
+  train_compact(*session, 60, 0, session->options().compact, [&](const std::string& m) { notes.push_back(m); });
+  session->finish({.ssim = false});
+  const double target = double(dims.count()) / 8;
+  EXPECT_NEAR(double(file_size(s.session.output)), target, 0.05 * target);
+  bool noted = false;
+  for (const std::string& m : notes) noted |= m.rfind("learned steps:", 0) == 0;
+  EXPECT_TRUE(noted);
+  EXPECT_FALSE(load_model(s.session.output).param_segments.empty());
+}

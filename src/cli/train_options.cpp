@@ -64,6 +64,9 @@ void add_training_options(CLI::App* c, TrainArgs& a) {
                  "compact models: weight of the grid's bits in the loss over the quantization-aware steps "
                  "(rate-aware training; 0: distortion alone)")
       ->capture_default_str();
+  c->add_flag("--learn-steps", a.s.learn_steps,
+              "compact models: train each segment's quantization step over the quantization-aware steps, the bits' "
+              "weight following the byte budget (CPU trainer)");
   c->add_option("--steps", a.s.steps, "training steps (default 1000, or unlimited with --seconds)");
   c->add_option("--cooldown", a.s.session.cooldown,
                 "last fraction of --steps/--seconds over which the learning rate falls linearly to 0 (0: tcnn's "

@@ -38,6 +38,20 @@ VNR_HD inline double laplace_bin_bits(double theta, double step, double scale, d
   return -log2(mass);
 }
 
+// d/d step of laplace_bin_bits(theta, step, scale): how a parameter's bits fall as its segment's step
+// grows (learned steps, train/step_learning.h).
+VNR_HD inline double laplace_bin_bits_dstep(double theta, double step, double scale) {
+  const double t = fabs(theta), h = 0.5 * step;
+  constexpr double kLn2 = 0.69314718055994530942;
+  if (t >= h) {  // d/d step of (t - h) / (b ln 2) - log2(1 - e^{-step/b})
+    const double e = exp(-step / scale);
+    return -0.5 / (scale * kLn2) - e / (scale * -expm1(-step / scale) * kLn2);
+  }
+  const double a = exp(-(h + t) / scale), c = exp(-(h - t) / scale);
+  const double mass = 1.0 - 0.5 * (a + c);
+  return -(a + c) / (4 * scale) / (mass * kLn2);  // d mass / d step = (a + c) / (4 b)
+}
+
 // A segment's Laplace scale: its mean |parameter| (the prior's maximum-likelihood fit), at least a
 // thousandth of its step.
 VNR_HD inline double laplace_scale(double sum_abs, uint64_t count, float step) {

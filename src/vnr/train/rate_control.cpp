@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <optional>
 #include "vnr/error.h"
 #include "vnr/core/half.h"
 #include "vnr/core/rng.h"
@@ -10,6 +11,7 @@
 #include "vnr/nn/quantization_hd.h"
 #include "vnr/train/residuals.h"
 #include "vnr/train/session.h"
+#include "vnr/train/step_learning.h"
 
 namespace vnr {
 namespace {
@@ -285,17 +287,19 @@ bool can_train_quantized(TrainingSession& session) {
 
 // Quantization-aware steps with the segments' steps: each step sees the quantized parameters, its update
 // lands on the master copy (straight-through); with rate_weight > 0 the grid's bits under those steps
-// join the loss (nn/quantization_hd.h rate_weight_per_loss), their gradient taken on the master copy.
-// A trainer with quantized steps of its own (the GPU's) runs them on its parameters; the CPU trainer
-// through the session's step hooks and its gradient hook. Returns whether the rate term was on.
-static bool run_quantized_steps(TrainingSession& session, std::vector<float>& master,
-                                const std::vector<ParamSegment>& segs, double rate_weight, int64_t steps,
-                                double seconds) {
+// join the loss (nn/quantization_hd.h rate_weight_per_loss), their gradient taken on the master copy;
+// with a StepLearner the steps train too (written into segs) and the bits of every stepped segment join
+// the loss with its multiplier. A trainer with quantized steps of its own (the GPU's) runs them on its
+// parameters; the CPU trainer through the session's step hooks and its gradient hook. Returns whether
+// the rate term was on.
+static bool run_quantized_steps(TrainingSession& session, std::vector<float>& master, std::vector<ParamSegment>& segs,
+                                double rate_weight, StepLearner* learner, int64_t steps, double seconds) {
   Trainer& trainer = session.trainer();
   Network& net = session.network();
   const size_t first_grid = make_mlp_layout(net.config()).n_matrices;
   const double per_loss = rate_weight > 0 ? rate_weight_per_loss(rate_weight, master.size()) : 0.0;
   if (trainer.has_quantized_steps()) {
+    if (learner) fail("learned quantization steps run on the CPU trainer only");
     trainer.begin_quantized_steps(master, segs, first_grid, per_loss);
     try {
       session.run(steps, seconds);
@@ -315,8 +319,11 @@ static bool run_quantized_steps(TrainingSession& session, std::vector<float>& ma
       [&] {
         for (size_t i = 0; i < master.size(); ++i) master[i] += net.params()[i] - shown[i];
       });
-  const bool rate_aware = per_loss > 0 && trainer.set_gradient_hook([&trainer, &master, segs, first_grid, per_loss](float* grads) {
-    add_rate_gradient(master, segs, first_grid, per_loss * double(trainer.last_loss()), grads);
+  const bool rate_aware = (per_loss > 0 || learner) && trainer.set_gradient_hook([&](float* grads) {
+    if (learner)
+      learner->update(master, segs, grads);
+    else
+      add_rate_gradient(master, segs, first_grid, per_loss * double(trainer.last_loss()), grads);
   });
   auto unhook = [&] {
     session.set_step_hooks({}, {});
@@ -335,6 +342,9 @@ static bool run_quantized_steps(TrainingSession& session, std::vector<float>& ma
 Json train_compact(TrainingSession& session, int64_t steps, double seconds, const CompactOptions& o,
                    const std::function<void(const std::string&)>& message) {
   if (!session.data() || !session.data()->sampler) fail("compact storage needs a session opened on training data");
+  if (o.learn_steps && session.trainer().has_quantized_steps())
+    fail("learned quantization steps (--learn-steps) run on the CPU trainer only; the GPU trainer keeps the planned "
+         "steps: leave it off, or train with --device cpu");
   const double f = can_train_quantized(session) ? std::clamp(o.qat_fraction, 0.0, 1.0) : 0.0;
   const bool by_time = steps < 0 && seconds > 0;
   // --seconds covers every phase: the residuals that fill the file or keep a bound after training get
@@ -381,7 +391,20 @@ Json compact_session(TrainingSession& session, const CompactOptions& o, int64_t 
       session.shorten_budget(planning);
     }
     const int64_t before = session.steps_done();
-    rate_aware = run_quantized_steps(session, q.master, q.plan.at(g), o.rate_weight, qat_steps_planned, qat_seconds);
+    std::vector<ParamSegment> segs = q.plan.at(g);
+    std::optional<StepLearner> learner;
+    if (o.learn_steps)  // the bits start at the quantizer's own slope, 2 ln 2 loss / parameters per bit
+      learner.emplace(q.master, segs, make_mlp_layout(net.config()).n_matrices, q.plan.floor,
+                      rate_weight_per_loss(1, q.master.size()) * double(session.trainer().last_loss()));
+    rate_aware = run_quantized_steps(session, q.master, segs, o.rate_weight, learner ? &*learner : nullptr,
+                                     qat_steps_planned, qat_seconds);
+    if (learner) {  // the learned ratios between the steps; the size search scales them to the budget
+      for (size_t k = 0; k < segs.size(); ++k)
+        if (segs[k].step > 0) q.plan.shape[k] = double(segs[k].step) / g;
+      if (message)
+        message(fmt::format("learned steps: multiplier {:.3g} per bit, {:.0f} bits against {:.0f} planned",
+                            learner->lambda(), learner->bits(), learner->target_bits()));
+    }
     qat_steps = session.steps_done() - before;
     zero_unused(net.mlp(), q.master);
     g = choose(g);  // the weights moved a little: meet the target again

@@ -7,6 +7,34 @@ namespace vnr {
 
 constexpr int64_t kGrain = 16384;
 
+SegmentRate segment_rate(const float* master, uint64_t n, float step, double weight, float* grads) {
+  double sum_abs = 0;
+  for (uint64_t i = 0; i < n; ++i) sum_abs += std::fabs(master[i]);
+  const double scale = laplace_scale(sum_abs, n, step);
+  std::vector<SegmentRate> part((n + kGrain - 1) / kGrain);  // per range: the sums are deterministic
+  parallel_for_range(int64_t(n), kGrain, [&](int64_t b, int64_t e) {
+    SegmentRate local;
+    for (int64_t i = b; i < e; ++i) {
+      const double u = double(master[i]) / step;
+      const double q = std::clamp(std::nearbyint(u), -double(kMaxQuantIndex), double(kMaxQuantIndex));
+      // d(q step)/d step: q - u inside the range (round passes gradients straight through), q where clamped
+      local.dloss_dstep += double(grads[i]) * (std::fabs(u) <= kMaxQuantIndex ? q - u : q);
+      double d;
+      local.bits += laplace_bin_bits(master[i], step, scale, &d);
+      local.dbits_dstep += laplace_bin_bits_dstep(master[i], step, scale);
+      grads[i] += float(weight * d);
+    }
+    part[size_t(b / kGrain)] = local;
+  });
+  SegmentRate total;
+  for (const SegmentRate& p : part) {
+    total.bits += p.bits;
+    total.dbits_dstep += p.dbits_dstep;
+    total.dloss_dstep += p.dloss_dstep;
+  }
+  return total;
+}
+
 double add_rate_gradient(const std::vector<float>& master, const std::vector<ParamSegment>& segments,
                          size_t first_segment, double weight, float* grads) {
   uint64_t off = 0;
@@ -16,20 +44,7 @@ double add_rate_gradient(const std::vector<float>& master, const std::vector<Par
     const uint64_t begin = off;
     off += seg.count;
     if (k < first_segment || seg.step <= 0 || seg.count == 0) continue;
-    double sum_abs = 0;
-    for (uint64_t i = begin; i < off; ++i) sum_abs += std::fabs(master[i]);
-    const double scale = laplace_scale(sum_abs, seg.count, seg.step);
-    std::vector<double> part((seg.count + kGrain - 1) / kGrain, 0.0);  // per range: the sum is deterministic
-    parallel_for_range(int64_t(seg.count), kGrain, [&](int64_t b, int64_t e) {
-      double local = 0;
-      for (int64_t i = begin + b; i < int64_t(begin) + e; ++i) {
-        double d;
-        local += laplace_bin_bits(master[i], seg.step, scale, &d);
-        grads[i] += float(weight * d);
-      }
-      part[size_t(b / kGrain)] = local;
-    });
-    for (double p : part) bits += p;
+    bits += segment_rate(master.data() + begin, seg.count, seg.step, weight, grads + begin).bits;
   }
   return bits;
 }

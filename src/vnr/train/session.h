@@ -219,6 +219,7 @@ struct TrainingSetup {
   double bits_per_param = kDefaultBitsPerParam;  // --target-ratio: grid sized for this many bits per parameter
   double qat_fraction = 0.15;    // compact models: last part of the steps trained quantization-aware
   double rate_weight = 0;        // compact models: weight of the rate term in that part (rate_control.h)
+  bool learn_steps = false;      // compact models: the steps train in that part (train/step_learning.h; CPU)
   int64_t batch = 65536;
   uint32_t seed = 1337;
   std::string device = "auto", mlp = "auto", precision = "auto";

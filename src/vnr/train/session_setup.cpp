@@ -84,6 +84,7 @@ std::unique_ptr<TrainingSession> session_on_data(const TrainingSetup& s, ModelCo
   session_opts.compact.target_psnr = s.target_psnr;
   session_opts.compact.qat_fraction = s.qat_fraction;
   session_opts.compact.rate_weight = s.rate_weight;
+  session_opts.compact.learn_steps = s.learn_steps;
   if (data->out_of_core) {
     config = scale_grid_learning_rate(config, s.data.grid_lr_scale, *data->out_of_core, &note);
     if (!note.empty()) say(note);
