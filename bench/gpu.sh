@@ -101,6 +101,8 @@ $VNR info | tee "$OUT/info.txt"
 status=0
 if want tests; then
   stage tests
+  # GpuViewer.FramesWhileTrainingAt768 measures the viewer on bonsai when it is here
+  [ -f "$DATA/bonsai.json" ] && export VNR_VIEWER_VOLUME="$DATA/bonsai.json"
   for t in "$BIN"/test_gpu*; do
     log="$OUT/$(basename "$t").log"
     timeout 300 "$t" > "$log" 2>&1 || status=1
