@@ -73,6 +73,7 @@ struct ViewerRun {
   std::vector<std::array<double, 2>> new_psnr;  // probes not yet published
   bool continuous = false;
   int64_t switch_every = 0, switch_at = 0;
+  double budget_carry = 0;  // seconds of earlier chunks' budgets that whole steps left over (or overdrew)
   int64_t steps() const { return step_base + (session ? session->steps_done() : 0); }
   double seconds() const { return seconds_base + (session ? session->training_seconds() : 0); }
 };

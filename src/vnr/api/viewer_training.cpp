@@ -20,8 +20,9 @@ constexpr double kProbeEverySeconds = 0.5;
 constexpr int64_t kProbeEverySteps = 50;
 // A training budget is run in slices of at most this long, so pause/reset/stop take effect soon.
 constexpr double kSliceSeconds = 0.05;
-// The automatic budget (budget_seconds = 0): training gets 1.5x the time the last frame took to render.
-constexpr double kAutoBudgetFactor = 1.5, kAutoBudgetMin = 0.03;
+// The automatic budget (budget_seconds = 0): training gets 1.4x the time the last frame took to render
+// (docs/VIEWER.md: about half the machine with 10 frames/s on 2 cores).
+constexpr double kAutoBudgetFactor = 1.4, kAutoBudgetMin = 0.03;
 // samples_per_second averages the steps of about the last this many training seconds.
 constexpr double kRateWindowSeconds = 1.0;
 
@@ -145,25 +146,28 @@ double ViewerEngine::Impl::train_chunk(const ViewerSnapshot& snap) {
   const double budget = want.budget_seconds > 0 ? want.budget_seconds : std::max(kAutoBudgetMin, kAutoBudgetFactor * last_render_seconds);
   try {
     if (run.probe_step < 0) take_probe();
-    // Whole steps that fit the budget, at least one (a step of a large batch is a good part of it: a
-    // budget overshot by a step would take frames from the viewer).
+    // Whole steps, the nearest count to the budget plus what earlier chunks left over or overdrew, at
+    // least one: a step of a large batch is a good part of a budget, and rounding alone would keep
+    // training below it (1.3 budgets of steps always gave one) or swing between one and two.
     const TrainingSession& s = *run.session;
     const double step_seconds = s.steps_done() > 0 ? s.training_seconds() / double(s.steps_done()) : 0;
+    const double allowance = budget + run.budget_carry;
     double spent = 0;
     do {
       int64_t limit = -1;
       if (run.continuous) limit = std::max<int64_t>(1, run.switch_at - run.steps());
       if (step_seconds > 0) {
-        const int64_t fit = std::max<int64_t>(1, int64_t((budget - spent) / step_seconds));
+        const int64_t fit = std::max<int64_t>(1, std::llround((allowance - spent) / step_seconds));
         limit = limit < 0 ? fit : std::min(limit, fit);
       }
-      run.session->run(limit, std::min(budget - spent, kSliceSeconds));
+      run.session->run(limit, std::clamp(allowance - spent, 1e-3, kSliceSeconds));
       spent = run.seconds() - t0;
       if (run.continuous && run.steps() >= run.switch_at) {
         load_timestep((snap.state.training.timestep + 1) % info.n_timesteps);
         break;
       }
-    } while (spent + step_seconds <= budget && keep_training());
+    } while (spent + 0.5 * step_seconds <= allowance && keep_training());
+    run.budget_carry = step_seconds > 0 ? std::clamp(allowance - spent, -step_seconds, step_seconds) : 0;
     if (run.steps() - run.probe_step >= kProbeEverySteps && run.seconds() - run.probe_seconds >= kProbeEverySeconds)
       take_probe();
   } catch (const std::exception& e) {
