@@ -249,7 +249,14 @@ TEST(BrickCache, LevelOfDetailFollowsTheVoxelFootprint) {
     cache.begin_frame(params_for(cam, dims, H, H));
     const int expect = std::min(4, pixel_voxels < 2 ? 0 : int(std::floor(std::log2(pixel_voxels))));
     EXPECT_EQ(cache.view().level_at(0.5f, 0.5f, 0.999f), expect) << pixel_voxels << " voxels a pixel";
+    // The GPU's whole-volume cache asks for the level of the box's nearest point, the same rule uncapped.
+    const int nearest = pixel_voxels < 2 ? 0 : int(std::floor(std::log2(pixel_voxels)));
+    EXPECT_EQ(finest_view_level(make_camera_frame(cam, H, H), Vec3f{128, 128, 128}, dims, 1), nearest) << pixel_voxels;
   }
+  const Camera inside{Vec3f{64, 64, 100}, Vec3f{64, 64, 0}, Vec3f{0, 1, 0}, 30};
+  EXPECT_EQ(finest_view_level(make_camera_frame(inside, 4, 4), Vec3f{128, 128, 128}, dims, 1), 0);
+  EXPECT_EQ(cache_level_dims(Int3{100, 64, 1}, 3), (Int3{13, 8, 1}));
+  EXPECT_EQ(cache_level_dims(Int3{100, 64, 1}, 40), (Int3{1, 1, 1}));
 }
 
 TEST(BrickCache, RejectsBadSettingsWithOneClearError) {

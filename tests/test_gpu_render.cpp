@@ -257,9 +257,16 @@ TEST(GpuRender, CacheDecodedOnTheDeviceMatchesTheCpusCache) {
   Renderer r(model, Device::Cuda);
   r.choose_strategy("auto");
   EXPECT_STREQ(r.field().kind(), "cache");
-  r.choose_strategy("auto", 4096);  // 32^3 floats are 128 KiB
+  EXPECT_EQ(r.field().dims(), model.dims);  // level 0: at 768x768 a pixel spans 0.06 voxels
+  r.choose_strategy("auto", 4096);  // 32^3 floats are 128 KiB, 8^3 (level 2) 2 KiB
   EXPECT_STREQ(r.field().kind(), "network");
-  EXPECT_THROW(r.choose_strategy("cache", 4096), Error);
+  r.choose_strategy("cache", 4096);  // asked for: the finest level that fits
+  EXPECT_STREQ(r.field().kind(), "cache");
+  EXPECT_EQ(r.field().dims(), (Int3{8, 8, 8}));
   r.choose_strategy("auto", 0, {0, 0, 0}, 2);  // two frames: warming does not pay
   EXPECT_STREQ(r.field().kind(), "network");
+  r.choose_strategy("cache");
+  r.set_size(12, 12);  // a pixel now spans 3.9 voxels: level 1 is decoded for the next frame
+  r.render_frame();
+  EXPECT_EQ(r.field().dims(), (Int3{16, 16, 16}));
 }

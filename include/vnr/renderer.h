@@ -90,16 +90,17 @@ public:
     return fastest_render_strategy(field().kind(), device_ == Device::Cuda, options_.mode);
   }
   // The brick cache in front of a model's field (fields/brick_cache.h, docs/RENDERING.md): decoded
-  // bricks at the level of detail the view needs; nullopt = off (the default). On the GPU, the cache
-  // with all of level 0 in: the model decoded once on the device at the cache's dims, when that fits
-  // the budget and a quarter of the GPU's free memory. A volume has nothing to cache. The cache is kept
-  // across every other setting.
+  // bricks at the level of detail the view needs; nullopt = off (the default). On the GPU, the whole
+  // model decoded on the device at one level: the finest the view asks for anywhere (its nearest point),
+  // or, where that does not fit the budget and a quarter of the GPU's free memory, the finest that does;
+  // decoded again when the camera or the image size asks for another. A volume has nothing to cache.
+  // The cache is kept across every other setting.
   void set_cache(std::optional<BrickCacheSettings> settings);
   const std::optional<BrickCacheSettings>& cache() const { return cache_settings_; }
   // A front end's --strategy: "auto" (the brick cache for a model when `frames` will be accumulated,
   // 0 = unknown, at least kCacheFrames: warming it costs about ten network frames; on the GPU only where
-  // the whole decode fits, see set_cache; then the faster execution strategy for the field), "cache"
-  // (the cache with that, or an error where the GPU's does not fit), "streaming" or
+  // the level the view asks for fits, see set_cache; then the faster execution strategy for the field),
+  // "cache" (the cache with that), "streaming" or
   // "inshader" (no cache). cache_budget: bytes of the cache's pool (0 = default_cache_budget());
   // cache_dims: the voxels the cache decodes the model at (0 = the model's dims; any size).
   static constexpr int kCacheFrames = 8;
@@ -160,6 +161,7 @@ private:
   Renderer(const Model* model, const Volume* volume, Device device);
   void restart() { frames_ = 0; }
   void invalidate() { backend_.reset(); restart(); }
+  void follow_gpu_cache_level();
   FrameRenderer& backend();
   const MacroCells& macrocells();
 
@@ -170,6 +172,7 @@ private:
   std::optional<BrickCacheSettings> cache_settings_;
   std::unique_ptr<RenderableField> cached_;  // the brick cache (CPU) or the model's decode (GPU)
   const CachedField* brick_cache_ = nullptr;  // cached_ on the CPU
+  int gpu_cache_level_ = -1, gpu_cache_fit_ = -1;  // on the GPU: the level cached_ holds, the finest that fit
   Vec3f box_;
   RenderOptions options_;
   Camera camera_;

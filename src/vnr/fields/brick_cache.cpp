@@ -22,6 +22,26 @@ void check_cache_budget(uint64_t budget_bytes, int brick) {
          human_bytes(brick_bytes));
 }
 
+float cache_lod_scale(const CameraFrame& c, Vec3f box, Int3 dims, float lod_pixels) {
+  const Vec3f cell{box.x / float(dims.x), box.y / float(dims.y), box.z / float(dims.z)};
+  const float voxel = std::max(cell.x, std::max(cell.y, cell.z));
+  const float pixel_per_distance = length(c.dv) / float(std::max(1, c.height));
+  return pixel_per_distance * lod_pixels / voxel;
+}
+
+int finest_view_level(const CameraFrame& c, Vec3f box, Int3 dims, float lod_pixels) {
+  const Vec3f out{std::max({0.0f, -c.eye.x, c.eye.x - box.x}), std::max({0.0f, -c.eye.y, c.eye.y - box.y}),
+                  std::max({0.0f, -c.eye.z, c.eye.z - box.z})};
+  const float m = length(out) * cache_lod_scale(c, box, dims, lod_pixels);
+  return m >= 1 ? int(std::floor(std::log2(m))) : 0;
+}
+
+Int3 cache_level_dims(Int3 dims, int level) {
+  const int64_t k = int64_t(1) << std::min(level, 62);
+  auto halved = [k](int64_t n) { return std::max<int64_t>(1, (n + k - 1) / k); };
+  return Int3{halved(dims.x), halved(dims.y), halved(dims.z)};
+}
+
 uint64_t default_cache_budget() {
   const uint64_t quarter = available_memory_bytes() / 4;
   return std::clamp<uint64_t>(quarter, uint64_t(64) << 20, uint64_t(4) << 30);
@@ -155,9 +175,7 @@ CachedField::CachedField(const RenderableField& source, VoxelDecode decode, Int3
   for (int l = 0;; ++l) {  // down to a level that is one brick
     if (l == BrickCacheView::kMaxLevels) fail("a brick cache of {}x{}x{} voxels needs too many levels", dims.x, dims.y, dims.z);
     Level L;
-    L.n = Int3{int32_t(std::max<int64_t>(1, ceil_div(dims.x, int64_t(1) << l))),
-               int32_t(std::max<int64_t>(1, ceil_div(dims.y, int64_t(1) << l))),
-               int32_t(std::max<int64_t>(1, ceil_div(dims.z, int64_t(1) << l)))};
+    L.n = cache_level_dims(dims, l);
     L.nb = Int3{int32_t((L.n.x - 1) / B + 1), int32_t((L.n.y - 1) / B + 1), int32_t((L.n.z - 1) / B + 1)};
     L.slot.assign(size_t(L.bricks()), -1);
     L.used.reset(new std::atomic<uint32_t>[size_t(L.bricks())]());
@@ -480,13 +498,10 @@ void CachedField::update_levels(const RenderParams& p) const {
   const CameraFrame& c = p.cam;
   s.lod_cam = c;
   s.box = p.box;
-  const Vec3f cell{p.box.x / float(dims_.x), p.box.y / float(dims_.y), p.box.z / float(dims_.z)};
-  const float voxel = std::max(cell.x, std::max(cell.y, cell.z));
-  const float pixel_per_distance = length(c.dv) / float(std::max(1, c.height));
   BrickCacheView& v = s.view;
   v.eye[0] = c.eye.x, v.eye[1] = c.eye.y, v.eye[2] = c.eye.z;
   v.box[0] = p.box.x, v.box[1] = p.box.y, v.box[2] = p.box.z;
-  v.lod_scale = pixel_per_distance * settings_.lod_pixels / voxel;
+  v.lod_scale = cache_lod_scale(c, p.box, dims_, settings_.lod_pixels);
 }
 
 void CachedField::begin_frame(const RenderParams& p) const {

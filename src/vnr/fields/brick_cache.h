@@ -19,6 +19,7 @@
 #include <thread>
 #include <vector>
 #include "vnr/fields/brick_cache_view.h"
+#include "vnr/render/camera.h"
 #include "vnr/fields/fields.h"
 
 namespace vnr {
@@ -41,6 +42,16 @@ struct BrickCacheSettings {
   CacheMisses misses = CacheMisses::Exact;
   Int3 dims{0, 0, 0};            // level 0's voxels (Renderer: 0 = the model's dims; any size)
 };
+
+// The levels of detail as a view asks for them (CachedField's rule, also the GPU's whole-volume cache):
+// a sample at distance d from the eye covers d * lod_scale level-0 voxels per lod_pixels pixels, of a
+// cache of `dims` voxels over the box [0, box] seen through camera frame c.
+float cache_lod_scale(const CameraFrame& c, Vec3f box, Int3 dims, float lod_pixels);
+// The finest level any sample of the box asks for: floor(log2) of the nearest point's footprint (0 when
+// the eye is inside the box or closer than one voxel a pixel).
+int finest_view_level(const CameraFrame& c, Vec3f box, Int3 dims, float lod_pixels);
+// Level l's voxels: dims halved l times, rounded up, at least one.
+Int3 cache_level_dims(Int3 dims, int level);
 
 // Fails with the sizes unless `budget_bytes` holds one brick of `brick`^3 cells ((brick + 1)^3 floats).
 void check_cache_budget(uint64_t budget_bytes, int brick);
