@@ -7,7 +7,7 @@
 #include "vnr/benchmark.h"
 #include "vnr/threads.h"
 #include "vnr/progress.h"
-#include "vnr/cuda/cuda.h"
+#include "vnr/device.h"
 #include "vnr/units.h"
 
 namespace vnr::cli {

@@ -9,9 +9,8 @@
 #include "vnr/error.h"
 #include "vnr/fileio.h"
 #include "vnr/threads.h"
-#include "vnr/cuda/cuda.h"
-#include "vnr/nn/mlp_kernels.h"
-#include "vnr/nn/network.h"
+#include "vnr/device.h"
+#include "vnr/model.h"
 
 namespace vnr::cli {
 

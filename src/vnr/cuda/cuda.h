@@ -21,35 +21,7 @@
 
 namespace vnr::cuda {
 
-bool built();  // compiled with the CUDA backend
-
-struct DeviceInfo {
-  int index = 0;
-  std::string name;
-  int cc_major = 0, cc_minor = 0;
-  uint64_t memory_bytes = 0;
-  int sm_count = 0;
-};
-// Visible CUDA devices; empty when built without CUDA, with no driver, or with no device.
-std::vector<DeviceInfo> devices();
-// Why devices() is empty, in words.
-std::string no_device_reason();
-// Fails with one line (the reason) when there is no device.
-void require_device();
-// Free memory of the current device in bytes (0 without one).
-uint64_t free_memory_bytes();
-// "cpu", "cuda" (fails without a device) or "auto" (cuda when a device is visible, else cpu).
-Device resolve_device(const std::string& name);
-// One line for --version / vnr info: "cuda (NVIDIA H100 80GB HBM3, sm_90, 79.1 GiB)", "cuda: built, no CUDA
-// device (...)" or "cuda: not built".
-std::string backend_summary();
-
-// The MLP implementation: the fully fused tensor-core kernels (widths 16/32/64/128, activations and the
-// current layer's weights in shared memory), or one cuBLAS GEMM per layer (any width; also the fallback
-// when a fused kernel's shared memory does not fit the device).
-enum class MlpPath { Auto, Fused, Cublas };
-const char* mlp_path_name(MlpPath p);
-MlpPath parse_mlp_path(const std::string& s);  // auto | fused | cublas
+// built(), devices(), resolve_device(), MlpPath ...: vnr/device.h (public).
 
 // Why the network cannot run on the GPU (it needs a grid encoding, ReLU hidden layers, at most 16
 // outputs); empty when it can. check_supported fails with that line.

@@ -4,6 +4,7 @@
 // rows = outputs (tcnn layout): W[r * cols + c].
 // The dispatching versions pick the best SIMD target at run time (Highway); kernels::ref holds
 // the portable scalar reference they are tested against.
+#include "vnr/device.h"  // simd_target_name
 
 namespace vnr::kernels {
 
@@ -21,8 +22,7 @@ void matmul_bwd_weights(const float* dY, int rows, const float* X, int cols, int
 // are used; Wh[0..n_mid) are the 16 x 16 hidden matrices; Wout the 16 weights of output row 0.
 void mlp_forward_16(const float* W0, int k0, int ldw0, const float* const* Wh, int n_mid, const float* Wout,
                     const float* X0, int n, float* out);
-// Name of the SIMD target chosen at run time (e.g. "AVX3", "AVX2", "SSE4", "EMU128").
-const char* simd_target_name();
+// simd_target_name(): vnr/device.h (public).
 
 namespace ref {
 void matmul_fwd(const float* W, int rows, int cols, const float* X, float* Y, int n, bool relu, int ldw = 0);
