@@ -22,6 +22,7 @@ struct TrainArgs {
   bool verbose = false;
   std::optional<double> target_psnr, bits_per_param, qat_fraction, max_error, max_rel_error, cooldown, rate_weight;
   std::string residuals = "auto";
+  bool learn_steps = false;
 };
 
 // What happened in the step callback that the session must not see as its own error.
@@ -65,6 +66,7 @@ TrainingSetup setup_of(const TrainArgs& a) {
   put("bits_per_param", a.bits_per_param);
   put("qat_fraction", a.qat_fraction);
   put("rate_weight", a.rate_weight);
+  if (a.learn_steps) j["learn_steps"] = true;
   put("cooldown", a.cooldown);
   put("max_error", a.max_error);
   put("max_rel_error", a.max_rel_error);
@@ -162,6 +164,7 @@ sampler: "incore" for arrays and volumes in memory; a path may also use "outofco
 target_ratio: a compact model (quantized, entropy-coded parameters) of 1/R of the volume's bytes, as
 `vnr train --target-ratio` writes it (bits_per_param sizes its grid; the last qat_fraction of the steps
 train quantization-aware; rate_weight > 0 adds the grid's bits to their loss, as --rate-weight;
+learn_steps=True trains the grid levels' quantization steps in that part too, as --learn-steps;
 residuals="auto" spends part of the file on residuals where that decodes better, as --residuals: decode()
 applies them, sample() and render() see the network alone; "off" keeps the whole file for the network).
 target_psnr: the smallest compact model whose PSNR on held-back voxels reaches this (dB): several
@@ -185,11 +188,11 @@ void bind_train(pyb::module_& m) {
          std::optional<int> threads, bool verbose, std::optional<double> target_psnr,
          std::optional<double> bits_per_param, std::optional<double> qat_fraction, std::optional<double> max_error,
          std::optional<double> max_rel_error, std::optional<double> cooldown, std::optional<double> rate_weight,
-         const std::string& residuals) {
+         const std::string& residuals, bool learn_steps) {
         TrainArgs a{volume,   config,         callback,     steps,     seconds,      target_ratio,  seed,
                     device,   sampler,        precision,    batch,     macrocell_size, threads,      verbose,
                     target_psnr, bits_per_param, qat_fraction, max_error, max_rel_error, cooldown, rate_weight,
-                    residuals};
+                    residuals, learn_steps};
         return train(a);
       },
       pyb::arg("volume"), pyb::arg("config") = "auto", pyb::arg("steps") = pyb::none(),
@@ -200,7 +203,7 @@ void bind_train(pyb::module_& m) {
       pyb::arg("bits_per_param") = pyb::none(), pyb::arg("qat_fraction") = pyb::none(),
       pyb::arg("max_error") = pyb::none(), pyb::arg("max_rel_error") = pyb::none(),
       pyb::arg("cooldown") = pyb::none(), pyb::arg("rate_weight") = pyb::none(),
-      pyb::arg("residuals") = "auto", kTrainDoc);
+      pyb::arg("residuals") = "auto", pyb::arg("learn_steps") = false, kTrainDoc);
 }
 
 }  // namespace vnr::py

@@ -65,6 +65,18 @@ def test_rate_weight_equals_the_cli(tmp_path, cli):
     assert not np.array_equal(model.decode(device="cpu"), plain.decode(device="cpu"))  # the term changed the run
 
 
+def test_learn_steps_equals_the_cli(tmp_path, cli):
+    array = smooth_volume(SHAPE, "float32", seed=9)
+    side = write_raw(array, str(tmp_path / "v.json"))
+    cli("train", side, "-o", tmp_path / "cli.vnr", "--config", "small", "--steps", 60, "--seed", 3, "--threads", 2,
+        "--device", "cpu", "--target-ratio", 16, "--residuals", "off", "--learn-steps", "-q")
+    model = vnr.train(side, target_ratio=16, residuals="off", learn_steps=True, **TRAIN)
+    plain = vnr.train(side, target_ratio=16, residuals="off", **TRAIN)
+    cli("decode", tmp_path / "cli.vnr", "-o", tmp_path / "cli.raw", "--device", "cpu", "--threads", 2, "-q")
+    np.testing.assert_array_equal(model.decode(device="cpu"), read_raw_json(str(tmp_path / "cli.json")))
+    assert not np.array_equal(model.decode(device="cpu"), plain.decode(device="cpu"))  # the steps moved
+
+
 def test_target_psnr_search_reaches_the_target(tmp_path):
     array = smooth_volume(SHAPE, "float32", seed=7)
     model = vnr.train(array, target_psnr=26, **dict(TRAIN, steps=150))

@@ -127,7 +127,7 @@ def train(volume: Union[npt.ArrayLike, Volume, PathLike], config: Union[str, dic
           bits_per_param: Optional[float] = None, qat_fraction: Optional[float] = None,
           max_error: Optional[float] = None, max_rel_error: Optional[float] = None,
           cooldown: Optional[float] = None, rate_weight: Optional[float] = None,
-          residuals: str = "auto") -> Model:
+          residuals: str = "auto", learn_steps: bool = False) -> Model:
     """Trains a model of the volume (`vnr train`'s session); returns it. Ctrl-C returns the model so far."""
 
 
