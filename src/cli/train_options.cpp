@@ -65,7 +65,7 @@ void add_training_options(CLI::App* c, TrainArgs& a) {
                  "(rate-aware training; 0: distortion alone)")
       ->capture_default_str();
   c->add_flag("--learn-steps", a.s.learn_steps,
-              "compact models: train each segment's quantization step over the quantization-aware steps, the bits' "
+              "compact models: train each grid level's quantization step over the quantization-aware steps, the bits' "
               "weight following the byte budget (CPU trainer)");
   c->add_option("--steps", a.s.steps, "training steps (default 1000, or unlimited with --seconds)");
   c->add_option("--cooldown", a.s.session.cooldown,

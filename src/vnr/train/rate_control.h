@@ -26,8 +26,8 @@ struct CompactOptions {
   // Rate-aware training during that part: the grid's bits (rate_term.h) weighted by rate_weight times
   // the high-rate slope 2 ln 2 * loss / parameters join the loss (0: distortion alone).
   double rate_weight = 0;
-  // Learned steps during that part (train/step_learning.h): each segment's step trains with the
-  // parameters, the bits' weight following the budget; the CPU trainer only.
+  // Learned steps during that part (train/step_learning.h): each grid level's step trains with the
+  // parameters, the bits' weight following the budget; the CPU trainer only (off: it did not pay).
   bool learn_steps = false;
   int64_t probe_samples = int64_t(1) << 17;  // held-back samples for the rate-distortion choices
   // > target_bytes: the file's size when residuals (train/residuals.h) take what the network's file leaves

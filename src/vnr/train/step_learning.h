@@ -1,7 +1,7 @@
 #pragma once
 // Learned quantization steps (docs/COMPRESSION.md, "Learned steps", --learn-steps): over the
-// quantization-aware steps each segment's step trains with the parameters, on the loss plus lambda
-// times the segments' bits under their Laplace priors (rate_term.h), and lambda, the Lagrange
+// quantization-aware steps each grid level's step trains with the parameters, on the loss plus lambda
+// times the levels' bits under their Laplace priors (rate_term.h), and lambda, the Lagrange
 // multiplier, follows the byte budget: it rises while those bits are above what the planned steps
 // (which met the budget) gave and falls while below. The final size search keeps the learned ratios
 // between the steps and scales them all to the exact budget.

@@ -20,7 +20,8 @@ template <class Setup, class F>
 void for_each_plain_key(Setup& s, F&& f) {
   f("volume", s.volume), f("target_ratio", s.target_ratio), f("target_psnr", s.target_psnr);
   f("residuals", s.residuals), f("bits_per_param", s.bits_per_param), f("qat_fraction", s.qat_fraction);
-  f("rate_weight", s.rate_weight), f("learn_steps", s.learn_steps), f("batch", s.batch), f("seed", s.seed), f("device", s.device), f("mlp", s.mlp);
+  f("rate_weight", s.rate_weight), f("learn_steps", s.learn_steps), f("batch", s.batch), f("seed", s.seed);
+  f("device", s.device), f("mlp", s.mlp);
   f("precision", s.precision), f("macrocell_size", s.macrocell_size), f("sampler", s.data.sampler);
   f("blocks", s.data.blocks), f("refresh", s.data.refresh), f("output", s.session.output);
   f("checkpoint_every", s.session.checkpoint_every), f("cooldown", s.session.cooldown);
