@@ -14,7 +14,7 @@
 #include "vnr/units.h"
 #include "vnr/device.h"
 #include "vnr/model.h"
-#include "vnr/volume/stream.h"
+#include "vnr/volume.h"
 #include "vnr/volume/writer.h"
 
 namespace vnr::cli {

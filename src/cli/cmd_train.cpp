@@ -12,9 +12,9 @@
 #include "vnr/threads.h"
 #include "vnr/progress.h"
 #include "vnr/units.h"
-#include "vnr/online/preview.h"
+#include "vnr/online.h"
 #include "vnr/train/psnr_search.h"
-#include "vnr/train/session.h"
+#include "vnr/trainer.h"
 
 namespace vnr::cli {
 

@@ -11,7 +11,7 @@
 #include "vnr/progress.h"
 #include "vnr/units.h"
 #include "vnr/model.h"
-#include "vnr/train/bricks.h"
+#include "vnr/bricks.h"
 
 namespace vnr::cli {
 

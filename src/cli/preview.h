@@ -6,7 +6,7 @@
 #include <cstdint>
 #include <optional>
 #include <string>
-#include "vnr/online/preview.h"
+#include "vnr/online.h"
 
 namespace vnr::cli {
 

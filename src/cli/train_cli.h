@@ -4,9 +4,8 @@
 #include <string>
 #include "cli.h"
 #include "preview.h"
-#include "vnr/train/bricks.h"
-#include "vnr/train/session.h"
-#include "vnr/train/training_data.h"
+#include "vnr/bricks.h"
+#include "vnr/trainer.h"
 
 namespace vnr::cli {
 

@@ -4,7 +4,7 @@
 #include "bindings.h"
 #include "vnr/error.h"
 #include "vnr/fileio.h"
-#include "vnr/train/bricks.h"
+#include "vnr/bricks.h"
 #include "vnr/volume/sample_io.h"
 #include "vnr/volume/writer.h"
 
