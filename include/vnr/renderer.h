@@ -12,7 +12,7 @@
 #include <optional>
 #include <string>
 #include <vector>
-#include "vnr/cuda/cuda.h"
+#include "vnr/device.h"
 #include "vnr/model.h"
 #include "vnr/camera.h"
 #include "vnr/render/camera.h"
