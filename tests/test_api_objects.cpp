@@ -253,6 +253,36 @@ TEST(ApiRenderer, MacroCellsSwitchedOffAndBackRenderAsBefore) {
   EXPECT_EQ(r.macrocell_mode(), MacroCellMode::Grid);
 }
 
+// vnr bench render's table through the library: every mode x strategy, macro-cells off then on, in
+// order; a bad strategy fails before anything is timed; the renderer keeps its options.
+TEST(ApiRenderer, RenderBenchmarkTimesEveryCellInOrder) {
+  GridScene s;
+  Renderer r(s.vol, Device::Cpu);
+  r.set_options(small_options());
+  const RenderOrbit orbit{1, 0, 20, 30, 8};
+  int calls = 0;
+  const std::vector<RenderBenchRow> rows =
+      render_benchmark(r, {RenderMode::RayMarch, RenderMode::Shadow}, {"inshader", "streaming"}, MacroCellMode::Grid,
+                       orbit, BrickCacheSettings{}, [&](const RenderBenchRow&) { ++calls; });
+  ASSERT_EQ(rows.size(), 8u);
+  EXPECT_EQ(calls, 8);
+  for (size_t i = 0; i < rows.size(); ++i) {
+    EXPECT_EQ(rows[i].mode, i < 4 ? RenderMode::RayMarch : RenderMode::Shadow);
+    EXPECT_EQ(rows[i].strategy, (i / 2) % 2 ? "streaming" : "inshader");
+    EXPECT_EQ(rows[i].macrocells, i % 2 ? MacroCellMode::Grid : MacroCellMode::Off);
+    EXPECT_GT(rows[i].fps, 0);
+    EXPECT_GT(rows[i].field_samples_per_second, 0);
+  }
+  EXPECT_EQ(r.options().mode, small_options().mode);
+  EXPECT_EQ(r.options().strategy, small_options().strategy);
+  expect_error([&] { render_benchmark(r, {RenderMode::RayMarch}, {"sideways"}, MacroCellMode::Grid, orbit, {}); },
+               {"sideways"});
+  const std::vector<TuneKRow> ks = tune_samples_per_iteration(r, {1, 4}, MacroCellMode::Grid, orbit);
+  ASSERT_EQ(ks.size(), 2u);
+  EXPECT_EQ(ks[1].k, 4);
+  EXPECT_GT(ks[0].samples_per_frame, 0);
+}
+
 TEST(ApiRenderer, AnEmptyRenderInputFailsWithOneError) {
   expect_error([] { Renderer r(RenderInput{}, Device::Cpu); }, {"neither a model nor a volume"});
 }

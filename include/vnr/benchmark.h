@@ -1,6 +1,7 @@
 #pragma once
 // vnr's benchmarking API: training and batched-inference throughput of a model configuration on a
-// volume, on one device, as `vnr bench train|infer` measures it.
+// volume, on one device, as `vnr bench train|infer` measures it; and `vnr bench render`'s frame-rate
+// table of a renderer (render_benchmark, below).
 //
 //   vnr::BenchOptions opts;                  // device, seconds, batch, precision, GPU MLP path
 //   opts.seconds = 2;
@@ -17,6 +18,7 @@
 #include "vnr/device.h"
 #include "vnr/model.h"
 #include "vnr/nn/config.h"
+#include "vnr/renderer.h"
 #include "vnr/volume.h"
 
 namespace vnr {
@@ -75,5 +77,29 @@ BenchResult benchmark_training(const Volume& volume, const ModelConfig& config, 
 // through `model` (the CPU sets its inference precision to options.precision).
 BenchResult benchmark_inference(const Volume& volume, const ModelConfig& config, const BenchOptions& options);
 BenchResult benchmark_inference(Model& model, const BenchOptions& options);
+
+// `vnr bench render`'s table, the paper's frame rates: one row per mode x strategy x macro-cells (off,
+// then `with`), in that order, each timed over `orbit` (orbit_frame_rate) from the renderer's options
+// as they are on entry (the renderer is left with those and no cache). Strategies: "inshader", "streaming", or "cache": a warm brick
+// cache of `cache`'s settings, drawn with the execution strategy auto picks for it (the row's strategy
+// reads "cache (inshader)"). row(r) is called after each cell.
+struct RenderBenchRow {
+  RenderMode mode = RenderMode::RayMarch;
+  std::string strategy;
+  MacroCellMode macrocells = MacroCellMode::Off;
+  double fps = 0, field_samples_per_second = 0, host_syncs_per_frame = 0, iterations_per_frame = 0;
+};
+std::vector<RenderBenchRow> render_benchmark(Renderer& renderer, const std::vector<RenderMode>& modes,
+                                             const std::vector<std::string>& strategies, MacroCellMode with,
+                                             const RenderOrbit& orbit, const BrickCacheSettings& cache,
+                                             const std::function<void(const RenderBenchRow&)>& row = {});
+// Streaming ray marching at each K (samples per live ray per iteration), macro-cells `with`.
+struct TuneKRow {
+  int k = 0;
+  double fps = 0, field_samples_per_second = 0, samples_per_frame = 0;
+};
+std::vector<TuneKRow> tune_samples_per_iteration(Renderer& renderer, const std::vector<int>& ks, MacroCellMode with,
+                                                 const RenderOrbit& orbit,
+                                                 const std::function<void(const TuneKRow&)>& row = {});
 
 }  // namespace vnr

@@ -6,6 +6,7 @@
 #include <cstdio>
 #include "cli.h"
 #include "render_setup.h"
+#include "vnr/benchmark.h"
 #include "vnr/error.h"
 #include "vnr/threads.h"
 #include "vnr/progress.h"
@@ -26,78 +27,52 @@ std::vector<std::string> split_list(const std::string& s) {
   return out;
 }
 
-struct Cell {
-  RenderMode mode;
-  RenderStrategy strategy;
-  MacroCellMode mc;
-  bool cache;  // "cache": the brick cache, warm, with the execution strategy auto picks for it
-};
-
-// One cell's frames/s (orbit_frame_rate) with this run's renderer, orbit and cache settings.
-struct CellTimer {
-  Renderer& r;
-  RenderOrbit orbit;
-  BrickCacheSettings cache_settings;  // of the cache cells
-  double operator()(const RenderOptions& o, MacroCellMode mc, RenderStats* total, bool cache = false) const {
-    return orbit_frame_rate(r, o, mc, orbit, cache ? std::optional(cache_settings) : std::nullopt, total);
-  }
-};
-
 // --tune-k: streaming ray-marching frames/s for each K, printed as a table and returned as report rows.
-Json tune_k_rows(const CellTimer& time_cell, const RenderOptions& options, MacroCellMode with,
-                 const std::vector<std::string>& ks) {
+Json tune_k_rows(Renderer& r, MacroCellMode with, const RenderOrbit& orbit, const std::vector<std::string>& list) {
+  std::vector<int> ks;
+  for (const std::string& k : list) {
+    size_t used = 0;
+    int v = 0;
+    try {
+      v = std::stoi(k, &used);
+    } catch (const std::exception&) {
+      used = 0;
+    }
+    if (used == 0 || used != k.size()) fail("--tune-k expects a list of whole numbers, got '{}'", k);
+    ks.push_back(v);
+  }
   std::printf("| K | frames/s | field samples/s (M) | samples/frame (M) |\n|---|---|---|---|\n");
   Json rows = Json::array();
-  for (const std::string& k : ks) {
-    RenderOptions o = options;
-    o.mode = RenderMode::RayMarch;
-    o.strategy = RenderStrategy::Streaming;
-    o.samples_per_iteration = std::stoi(k);
-    RenderStats tot;
-    double fps = time_cell(o, with, &tot);
-    double sps = double(tot.field_samples) / tot.seconds;
-    std::printf("| %s | %.2f | %.2f | %.2f |\n", k.c_str(), fps, sps / 1e6, double(tot.field_samples) / tot.frames / 1e6);
+  tune_samples_per_iteration(r, ks, with, orbit, [&](const TuneKRow& t) {
+    std::printf("| %d | %.2f | %.2f | %.2f |\n", t.k, t.fps, t.field_samples_per_second / 1e6, t.samples_per_frame / 1e6);
     std::fflush(stdout);
-    rows.push_back({{"k", std::stoi(k)}, {"fps", fps}, {"field_samples_per_second", sps}});
-  }
+    rows.push_back({{"k", t.k}, {"fps", t.fps}, {"field_samples_per_second", t.field_samples_per_second}});
+  });
   return rows;
 }
 
 // The table: every mode x strategy, without and with macro-cells; `raw` = the field's batched query rate.
-Json table_rows(const CellTimer& time_cell, const RenderOptions& options, MacroCellMode with, double raw,
-                const std::vector<std::string>& modes, const std::vector<std::string>& strategies) {
-  std::vector<Cell> cells;
-  for (const std::string& m : modes)
-    for (const std::string& s : strategies)
-      for (MacroCellMode mc : {MacroCellMode::Off, with})
-        cells.push_back(s == "cache" ? Cell{parse_render_mode(m), RenderStrategy::InShader, mc, true}
-                                     : Cell{parse_render_mode(m), parse_render_strategy(s), mc, false});
+Json table_rows(Renderer& r, MacroCellMode with, const RenderOrbit& orbit, const BrickCacheSettings& cache,
+                double raw, const std::vector<std::string>& modes, const std::vector<std::string>& strategies) {
+  std::vector<RenderMode> parsed;
+  for (const std::string& m : modes) parsed.push_back(parse_render_mode(m));
   std::printf("| mode | strategy | macro-cells | frames/s | field samples/s (M) | of raw query rate | host syncs/frame |\n"
               "|---|---|---|---|---|---|---|\n");
   Json rows = Json::array();
-  for (const Cell& cell : cells) {
-    RenderOptions o = options;
-    o.mode = cell.mode;
-    o.strategy =
-        cell.cache ? fastest_render_strategy("cache", time_cell.r.device() == Device::Cuda, cell.mode) : cell.strategy;
-    RenderStats tot;
-    double fps = time_cell(o, cell.mc, &tot, cell.cache);
-    const std::string strategy =
-        cell.cache ? fmt::format("cache ({})", render_strategy_name(o.strategy)) : render_strategy_name(o.strategy);
-    double sps = double(tot.field_samples) / tot.seconds;
-    const double syncs = double(tot.host_syncs) / tot.frames;
-    std::printf("| %s | %s | %s | %.2f | %.2f | %s | %.0f |\n", render_mode_name(cell.mode), strategy.c_str(),
-                macrocell_mode_name(cell.mc), fps, sps / 1e6,
-                raw > 0 ? fmt::format("{:.0f}%", 100 * sps / raw).c_str() : "-", syncs);
+  render_benchmark(r, parsed, strategies, with, orbit, cache, [&](const RenderBenchRow& b) {
+    const double sps = b.field_samples_per_second;
+    std::printf("| %s | %s | %s | %.2f | %.2f | %s | %.0f |\n", render_mode_name(b.mode), b.strategy.c_str(),
+                macrocell_mode_name(b.macrocells), b.fps, sps / 1e6,
+                raw > 0 ? fmt::format("{:.0f}%", 100 * sps / raw).c_str() : "-", b.host_syncs_per_frame);
     std::fflush(stdout);
-    rows.push_back({{"mode", render_mode_name(cell.mode)},
-                    {"strategy", strategy},
-                    {"macrocells", macrocell_mode_name(cell.mc)},
-                    {"fps", fps},
+    rows.push_back({{"mode", render_mode_name(b.mode)},
+                    {"strategy", b.strategy},
+                    {"macrocells", macrocell_mode_name(b.macrocells)},
+                    {"fps", b.fps},
                     {"field_samples_per_second", sps},
-                    {"host_syncs_per_frame", syncs},
-                    {"iterations_per_frame", double(tot.iterations) / tot.frames}});
-  }
+                    {"host_syncs_per_frame", b.host_syncs_per_frame},
+                    {"iterations_per_frame", b.iterations_per_frame}});
+  });
   return rows;
 }
 
@@ -151,8 +126,7 @@ void add_bench_render(CLI::App& bench) {
     // The raw rate: the CPU's batched query, or on the GPU the network's resident encoding + MLP (what
     // `vnr bench infer --device cuda` reports as resident); 0 = not measured (the grid on the GPU).
     const double raw = field_query_rate(r, 2.0);
-    const CellTimer time_cell{r, RenderOrbit{a->frames, a->warmup, cr.orbit_elevation, a->r.s.fovy, a->r.s.macrocell_size},
-                              cache};
+    const RenderOrbit orbit{a->frames, a->warmup, cr.orbit_elevation, a->r.s.fovy, a->r.s.macrocell_size};
 
     Json report;
     report["input"] = cr.input->description;
@@ -174,11 +148,11 @@ void add_bench_render(CLI::App& bench) {
                 raw > 0 ? fmt::format("{:.2f} M samples/s", raw / 1e6).c_str() : "not measured");
 
     if (!a->tune_k.empty()) {
-      report["tune_k"] = tune_k_rows(time_cell, options, with, split_list(a->tune_k));
+      report["tune_k"] = tune_k_rows(r, with, orbit, split_list(a->tune_k));
     } else {
       const std::string strategies =
           !a->strategies.empty() ? a->strategies : (model ? "inshader,streaming,cache" : "inshader,streaming");
-      report["rows"] = table_rows(time_cell, options, with, raw, split_list(a->modes), split_list(strategies));
+      report["rows"] = table_rows(r, with, orbit, cache, raw, split_list(a->modes), split_list(strategies));
     }
     write_report(a->report, report);
   });
