@@ -7,7 +7,7 @@
 #include <atomic>
 #include <cstring>
 #include "test_support.h"
-#include "vnr/core/grid_view.h"
+#include "vnr/grid_view.h"
 #include "vnr/core/value_range_grid.h"
 #include "vnr/render/field.h"
 #include "vnr/render/inshader.h"

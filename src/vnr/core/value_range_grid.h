@@ -7,7 +7,7 @@
 #include <cmath>
 #include <cstdint>
 #include <vector>
-#include "vnr/core/grid_view.h"
+#include "vnr/grid_view.h"
 #include "vnr/hd.h"
 #include "vnr/math.h"
 

@@ -6,7 +6,7 @@
 #include <new>
 #include <omp.h>
 #include "vnr/error.h"
-#include "vnr/core/grid_view.h"
+#include "vnr/grid_view.h"
 #include "vnr/core/parallel.h"
 #include "vnr/progress.h"
 #include "vnr/units.h"

@@ -5,7 +5,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstring>
-#include "vnr/core/grid_view.h"
+#include "vnr/grid_view.h"
 #include "vnr/hd.h"
 
 namespace vnr {

@@ -5,7 +5,7 @@
 // the compositing of march_shade), so the image equals the per-ray loop's bit for bit. A lane whose
 // ray ends takes the next pixel at once, so lanes stay busy. Macro-cell traversal stays scalar per lane.
 #include <cstdint>
-#include "vnr/core/grid_view.h"
+#include "vnr/grid_view.h"
 #include "vnr/hd.h"
 #include "vnr/render/inshader.h"
 #include "vnr/render/integrators.h"

@@ -11,7 +11,7 @@
 #include <type_traits>
 #include <vector>
 #include "vnr/json.h"
-#include "vnr/core/memory.h"
+#include "vnr/memory.h"
 #include "vnr/core/parallel.h"
 #include "vnr/core/rng.h"
 #include "vnr/nn/config.h"

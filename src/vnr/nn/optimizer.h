@@ -1,7 +1,7 @@
 #pragma once
 #include <cstdint>
 #include <vector>
-#include "vnr/core/memory.h"
+#include "vnr/memory.h"
 #include "vnr/nn/config.h"
 
 namespace vnr {

@@ -14,7 +14,7 @@
 // Plain C++ API; without CUDA (VNR_CUDA=OFF) every entry point fails with one line.
 #include <memory>
 #include <vector>
-#include "vnr/core/grid_view.h"
+#include "vnr/grid_view.h"
 #include "vnr/core/value_range_grid.h"
 #include "vnr/cuda/cuda.h"
 #include "vnr/render/renderer.h"

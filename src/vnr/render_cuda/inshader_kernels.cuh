@@ -3,7 +3,7 @@
 // per-pixel loop of render/inshader_loop.h, the same function the CPU renderer calls per pixel; a warp's
 // 32 pixels are its lane group (the network evaluation is warp-cooperative: cuda/point_eval.cuh).
 #include <cuda_runtime.h>
-#include "vnr/core/grid_view.h"
+#include "vnr/grid_view.h"
 #include "vnr/cuda/point_eval.cuh"
 #include "vnr/render/inshader_loop.h"
 

@@ -8,7 +8,7 @@
 #include <thread>
 #include <vector>
 #include "vnr/core/brick_box.h"
-#include "vnr/core/memory.h"
+#include "vnr/memory.h"
 #include "vnr/train/sampler.h"
 #include "vnr/volume/raw_access.h"
 

@@ -1,4 +1,4 @@
-// grid_lookup() of core/grid_view.h for a vector of points, per SIMD target (Highway's -inl.h convention:
+// grid_lookup() of vnr/grid_view.h for a vector of points, per SIMD target (Highway's -inl.h convention:
 // include it after <hwy/highway.h> inside a foreach_target translation unit). Each lane performs
 // exactly the scalar operations in the same order, so the result agrees with grid_lookup bit for bit.
 // Needs a volume below 2^31 voxels (32-bit gather indices): check grid_fits_gather_indices().

@@ -1,5 +1,5 @@
 // Batched ground-truth lookup (the grid side of the batched field query), compiled per SIMD target.
-// Each lane computes exactly grid_lookup() of core/grid_view.h (same operations, same order), so the batch
+// Each lane computes exactly grid_lookup() of vnr/grid_view.h (same operations, same order), so the batch
 // and the per-point function agree bit for bit; gathers keep many cache misses in flight.
 #undef HWY_TARGET_INCLUDE
 #define HWY_TARGET_INCLUDE "vnr/volume/lookup_batch.cpp"
