@@ -8,7 +8,7 @@
 #include <sstream>
 #include "test_support.h"
 #include "vnr/model.h"
-#include "vnr/nn/config.h"
+#include "vnr/model_config.h"
 #include "vnr/render/scene.h"
 #include "vnr/render/transfer_function.h"
 #include "vnr/train/model.h"

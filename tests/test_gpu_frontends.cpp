@@ -13,7 +13,7 @@
 #include "vnr/fileio.h"
 #include "vnr/cuda/cuda.h"
 #include "vnr/model.h"
-#include "vnr/nn/config.h"
+#include "vnr/model_config.h"
 #include "vnr/renderer.h"
 #include "vnr/train/session.h"
 #include "vnr/viewer.h"

@@ -14,7 +14,7 @@
 #include "vnr/model.h"
 #include "vnr/core/half.h"
 #include "vnr/nn/mlp_layout.h"
-#include "vnr/nn/config.h"
+#include "vnr/model_config.h"
 #include "vnr/renderer.h"
 #include "vnr/train/make_trainer.h"
 #include "vnr/train/model_io.h"

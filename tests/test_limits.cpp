@@ -12,7 +12,7 @@
 #include "vnr/error.h"
 #include "vnr/units.h"
 #include "vnr/model.h"
-#include "vnr/nn/config.h"
+#include "vnr/model_config.h"
 #include "vnr/nn/network.h"
 #include "vnr/train/model.h"
 #include "vnr/volume/volume.h"

@@ -17,7 +17,7 @@
 #include <fmt/format.h>
 #include "vnr/fileio.h"
 #include "vnr/core/parallel.h"
-#include "vnr/nn/config.h"
+#include "vnr/model_config.h"
 #include "vnr/train/model_io.h"
 #include "vnr/train/streaming_samplers.h"
 #include "vnr/train/trainer.h"

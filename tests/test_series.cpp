@@ -11,7 +11,7 @@
 #include "vnr/error.h"
 #include "vnr/fileio.h"
 #include "vnr/json.h"
-#include "vnr/nn/config.h"
+#include "vnr/model_config.h"
 #include "vnr/train/model_io.h"
 #include "vnr/train/series.h"
 #include "vnr/volume/volume.h"

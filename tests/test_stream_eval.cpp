@@ -16,7 +16,7 @@
 #include "vnr/error.h"
 #include "vnr/metrics.h"
 #include "vnr/core/rng.h"
-#include "vnr/nn/config.h"
+#include "vnr/model_config.h"
 #include "vnr/nn/network.h"
 #include "vnr/train/model_io.h"
 #include "vnr/volume/raw_access.h"

@@ -17,7 +17,7 @@
 #include <vector>
 #include "vnr/device.h"
 #include "vnr/model.h"
-#include "vnr/nn/config.h"
+#include "vnr/model_config.h"
 #include "vnr/renderer.h"
 #include "vnr/volume.h"
 

@@ -11,7 +11,7 @@
 #include <string>
 #include <vector>
 #include "vnr/device.h"
-#include "vnr/nn/config.h"
+#include "vnr/model_config.h"
 #include "vnr/train/model_io.h"
 #include "vnr/volume.h"
 

@@ -1,4 +1,4 @@
-#include "vnr/nn/config.h"
+#include "vnr/model_config.h"
 #include "vnr/nn/mlp_bf16.h"
 #include <cmath>
 #include "vnr/error.h"

@@ -16,7 +16,7 @@
 #include <string>
 #include <vector>
 #include "vnr/json.h"
-#include "vnr/nn/config.h"
+#include "vnr/model_config.h"
 #include "vnr/nn/grid_encoding.h"
 
 namespace vnr {

@@ -7,7 +7,7 @@
 #include <type_traits>
 #include "vnr/core/half.h"
 #include "vnr/hd.h"
-#include "vnr/nn/config.h"
+#include "vnr/model_config.h"
 
 namespace vnr {
 

@@ -2,7 +2,7 @@
 #include <cmath>
 #include <cstring>
 #include "vnr/hd.h"
-#include "vnr/nn/config.h"
+#include "vnr/model_config.h"
 
 namespace vnr {
 

@@ -2,7 +2,7 @@
 // The MLP's parameter layout (docs/semantics.md A.4, A.5): padded input and output widths from the
 // encoding and the network config, and each matrix's place in the flat parameter vector.
 #include <cstdint>
-#include "vnr/nn/config.h"
+#include "vnr/model_config.h"
 
 namespace vnr {
 

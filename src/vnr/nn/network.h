@@ -14,7 +14,7 @@
 #include "vnr/memory.h"
 #include "vnr/core/parallel.h"
 #include "vnr/core/rng.h"
-#include "vnr/nn/config.h"
+#include "vnr/model_config.h"
 #include "vnr/nn/encoding.h"
 #include "vnr/nn/grid_encoding.h"
 #include "vnr/nn/mlp_layout.h"

@@ -2,7 +2,7 @@
 #include <cstdint>
 #include <vector>
 #include "vnr/memory.h"
-#include "vnr/nn/config.h"
+#include "vnr/model_config.h"
 
 namespace vnr {
 

@@ -8,7 +8,7 @@
 #include <string>
 #include <vector>
 #include "vnr/json.h"
-#include "vnr/nn/config.h"
+#include "vnr/model_config.h"
 #include "vnr/nn/param_context_coder.h"
 
 namespace vnr {

@@ -24,7 +24,7 @@
 //   result is unchanged up to summation order; only when every weight is finite, as 0 * inf is NaN).
 #include <cstdint>
 #include <hwy/aligned_allocator.h>
-#include "vnr/nn/config.h"
+#include "vnr/model_config.h"
 #include "vnr/nn/grid_encoding.h"
 
 namespace vnr {

@@ -7,7 +7,7 @@
 // encoding and every hidden activation rounded to bf16; only the fp32 summation order differs.
 #include "vnr/nn/point_eval.h"
 
-#include "vnr/nn/config.h"
+#include "vnr/model_config.h"
 #include "vnr/nn/grid_encoding.h"
 #include "vnr/nn/loss.h"
 

@@ -2,7 +2,7 @@
 // Sizing a config to a byte budget (--target-ratio).
 #include <cstdint>
 #include <string>
-#include "vnr/nn/config.h"
+#include "vnr/model_config.h"
 #include "vnr/volume/volume.h"
 
 namespace vnr {

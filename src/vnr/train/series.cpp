@@ -10,7 +10,7 @@
 #include "vnr/core/parallel.h"
 #include "vnr/progress.h"
 #include "vnr/core/rng.h"
-#include "vnr/nn/config.h"
+#include "vnr/model_config.h"
 #include "vnr/train/make_trainer.h"
 #include "vnr/train/session.h"
 

@@ -7,7 +7,7 @@
 #include "vnr/fileio.h"
 #include "vnr/progress.h"
 #include "vnr/threads.h"
-#include "vnr/nn/config.h"
+#include "vnr/model_config.h"
 #include "vnr/train/config_sizing.h"
 #include "vnr/train/make_trainer.h"
 #include "vnr/train/model_io.h"

@@ -3,7 +3,7 @@
 #include "vnr/error.h"
 #include "vnr/units.h"
 #include "vnr/cuda/cuda.h"
-#include "vnr/nn/config.h"
+#include "vnr/model_config.h"
 #include "vnr/train/config_sizing.h"
 #include "vnr/train/make_trainer.h"
 #include "vnr/train/session.h"

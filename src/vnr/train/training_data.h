@@ -7,7 +7,7 @@
 #include <memory>
 #include <optional>
 #include <string>
-#include "vnr/nn/config.h"
+#include "vnr/model_config.h"
 #include "vnr/train/model_io.h"
 #include "vnr/train/sampler.h"
 #include "vnr/train/streaming_samplers.h"

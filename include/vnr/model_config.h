@@ -1,4 +1,5 @@
 #pragma once
+// The model configuration (ModelConfig): public, self-contained; nn/ builds networks from it.
 #include <cstdint>
 #include <string>
 #include "vnr/json.h"
