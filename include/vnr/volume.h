@@ -83,7 +83,6 @@ inline GridView view_of(const Volume& v) {
   return GridView{v.data.data(), int32_t(v.dims.x), int32_t(v.dims.y), int32_t(v.dims.z)};
 }
 
-
 // ---- streaming (volume/stream.cpp): the same normalisation as load_volume, bit for bit, so a streamed
 // evaluation sees the same numbers as an in-memory one (normalised values at arbitrary voxels:
 // RawVolumeFile, volume/raw_access.h).
