@@ -43,6 +43,14 @@ for mode in raymarch shadow pathtrace; do
 done
 check ratio_cuda $VNR train "$W/ml.json" -o "$W/r64.vnr" --config small --steps 1000 --target-ratio 64 --device cuda \
   --report "$W/ratio_cuda.json"
+# --learn-steps runs on the CPU trainer only: on the GPU one clear error before any training
+if $VNR train "$W/ml.json" -o "$W/ls.vnr" --config small --steps 100 --target-ratio 64 --learn-steps --device cuda \
+  > "$W/learn_steps_cuda.log" 2>&1 || ! grep -q "CPU trainer only" "$W/learn_steps_cuda.log"; then
+  echo "FAIL  learn_steps_cuda_refused: $(tail -2 "$W/learn_steps_cuda.log" | tr '\n' ' ')"
+  failed=1
+else
+  echo "ok    learn_steps_cuda_refused"
+fi
 check bound_cuda $VNR train "$W/ml.json" -o "$W/bound.vnr" --config small --steps 1000 --max-rel-error 0.01 \
   --device cuda --report "$W/bound_cuda.json"
 check bound_eval $VNR eval "$W/bound.vnr" "$W/ml.json" --device cuda --report "$W/bound_eval.json"
