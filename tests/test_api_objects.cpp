@@ -109,6 +109,12 @@ TEST(ApiModel, CreateSaveLoadRoundTrip) {
   EXPECT_EQ(l.lo, m.lo);
   EXPECT_EQ(l.hi, m.hi);
   EXPECT_EQ(l.source_dtype, m.source_dtype);
+  // The configuration and inference arithmetic through the model (front ends do not reach the Network).
+  EXPECT_EQ(model_config(l).network.n_neurons, m.net->config().network.n_neurons);
+  set_inference_precision(l, Precision::FP32);
+  EXPECT_EQ(inference_precision(l), Precision::FP32);
+  EXPECT_EQ(l.net->inference_precision(), Precision::FP32);
+  expect_error([] { inference_precision(Model{}); }, {"no network"});
 }
 
 // check_unit_points names the first point outside [0, 1]^3 (or not finite), however the work was split.

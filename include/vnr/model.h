@@ -21,6 +21,13 @@ namespace vnr {
 // from seed; create_model(config, dims, dtype, lo, hi, seed) (train/model.h) for a volume not at hand.
 Model create_model(const ModelConfig& config, const Volume& volume, uint32_t seed = 1337);
 
+// The network's configuration, and the arithmetic of its CPU inference (Network::set_inference_precision),
+// for a single network and a multi-brick model alike (whose bricks share brick 0's configuration and
+// decode at the model's precision).
+const ModelConfig& model_config(const Model& m);
+void set_inference_precision(Model& m, Precision precision);
+Precision inference_precision(const Model& m);
+
 // Bytes of the source volume: dims x the source dtype's size.
 uint64_t source_bytes(const Model& m);
 // source_bytes / model_bytes, where model_bytes = 0 means the fp16 parameters (Model::param_bytes(); a

@@ -9,7 +9,7 @@
 #include "vnr/volume.h"
 
 namespace vnr {
-class Network;
+struct Model;
 }
 
 namespace vnr::cli {
@@ -34,7 +34,7 @@ void add_precision_option(CLI::App* app, std::string& precision);
 void add_training_precision_option(CLI::App* app, std::string& precision);
 // A report's "precision": the CPU network's inference arithmetic, "fp32" or "bf16"; null on the GPU
 // (its own fp16 MLP) or without a network (a grid).
-Json precision_json(const Network* net, Device dev);
+Json precision_json(const Model* model, Device dev);
 
 Int3 parse_dims(const std::string& s, const char* option = "--dims");  // X,Y,Z, positive
 void write_report(const std::string& path, const Json& report);  // atomic; "" = no report

@@ -136,7 +136,7 @@ void add_bench_render(CLI::App& bench) {
     report["device"] = device_name(r.device());
     if (r.device() == Device::Cuda) report["gpu"] = cuda::devices().at(0).name;
     report["raw_field_samples_per_second"] = raw;
-    const Json precision = precision_json(model ? model->net.get() : nullptr, r.device());
+    const Json precision = precision_json(model, r.device());
     report["precision"] = precision;
     const std::string where =
         r.device() == Device::Cuda

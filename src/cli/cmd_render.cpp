@@ -192,7 +192,7 @@ void add_render(CLI::App& app) {
                    {"size", {o.width, o.height}},
                    {"threads", num_threads()},
                    {"device", device_name(r.device())},
-                   {"precision", precision_json(r.model() ? r.model()->net.get() : nullptr, r.device())},
+                   {"precision", precision_json(r.model(), r.device())},
                    {"host_syncs", st.host_syncs},
                    {"spp", spp ? Json(spp) : Json("auto")},
                    {"noise", r.frames() > 1 ? Json(r.noise()) : Json(nullptr)}};

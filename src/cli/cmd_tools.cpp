@@ -104,7 +104,7 @@ void add_eval(CLI::App& app) {
   c->callback([a, c]() {
     set_num_threads(a->threads);
     Model m = load_model(a->model);
-    m.net->set_inference_precision(parse_precision(a->precision));
+    set_inference_precision(m, parse_precision(a->precision));
     FileEvalOptions o;
     o.device = cuda::resolve_device(a->device);
     o.with_ssim = !a->no_ssim;
@@ -127,7 +127,7 @@ void add_eval(CLI::App& app) {
     const FileEvaluation ev = evaluate_model_file(m, a->volume, o, bars.callbacks());
     Json report = {{"method", eval_method_name(ev.plan.method)},
                    {"device", device_name(ev.device)},
-                   {"precision", precision_json(m.net.get(), ev.device)},
+                   {"precision", precision_json(&m, ev.device)},
                    {"compression_ratio", ev.compression_ratio},
                    {"model_bytes", ev.model_bytes},
                    {"volume_bytes", ev.volume_bytes}};
@@ -158,7 +158,7 @@ void add_decode(CLI::App& app) {
     set_num_threads(a->threads);
     check_no_overwrite(volume_output_files(a->output), a->force);
     Model m = load_model(a->model);
-    m.net->set_inference_precision(parse_precision(a->precision));
+    set_inference_precision(m, parse_precision(a->precision));
     ModelQuery query(m, cuda::resolve_device(a->device));
     const Device dev = query.device();
     const Int3 dims = a->dims.empty() ? m.dims : parse_dims(a->dims);

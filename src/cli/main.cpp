@@ -67,8 +67,8 @@ void add_training_precision_option(CLI::App* app, std::string& precision) {
       ->capture_default_str();
 }
 
-Json precision_json(const Network* net, Device dev) {
-  return net && dev == Device::Cpu ? Json(precision_name(net->inference_precision())) : Json(nullptr);
+Json precision_json(const Model* model, Device dev) {
+  return model && dev == Device::Cpu ? Json(precision_name(inference_precision(*model))) : Json(nullptr);
 }
 
 void add_device_option(CLI::App* app, std::string& device) {

@@ -101,7 +101,7 @@ original units of the volume. Arrays are (nz, ny, nx), x fastest (see vnr.Volume
         auto h = std::make_shared<ModelHolder>();
         pyb::gil_scoped_release release;
         h->model = load_model(path);
-        h->model.net->set_inference_precision(parse_precision("auto"));
+        set_inference_precision(h->model, parse_precision("auto"));
         h->file_bytes = model_file_bytes(path);  // a multi-brick directory: its files together
         return h;
       },

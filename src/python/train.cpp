@@ -143,7 +143,7 @@ ModelPtr train(const TrainArgs& a) {
   // model, and save/load is lossless.
   Network& net = *h->model.net;
   net.set_params_half(net.params_half());
-  h->model.net->set_inference_precision(parse_precision("auto"));
+  set_inference_precision(h->model, parse_precision("auto"));
   session.reset();
   return h;
 }

@@ -9,6 +9,19 @@
 
 namespace vnr {
 
+const ModelConfig& model_config(const Model& m) {
+  if (!m.net) fail("the model has no network");
+  return m.net->config();
+}
+void set_inference_precision(Model& m, Precision precision) {
+  if (!m.net) fail("the model has no network");
+  m.net->set_inference_precision(precision);
+}
+Precision inference_precision(const Model& m) {
+  if (!m.net) fail("the model has no network");
+  return m.net->inference_precision();
+}
+
 Model create_model(const ModelConfig& config, const Volume& volume, uint32_t seed) {
   return create_model(config, volume.dims, volume.source_dtype, volume.lo, volume.hi, seed);
 }
