@@ -34,7 +34,7 @@ BrickShare open_rank_share(const std::string& dir, Int3 dims, int reach, const s
          "over the bricks of a model trained with --bricks; run a single model without mpirun", dir);
   BrickShare share = open_brick_share(dir, dims, reach, mpi::rank(), mpi::size());
   for (std::optional<Model>& b : share.model->bricks)
-    if (b) b->net->set_inference_precision(parse_precision(precision));
+    if (b) set_inference_precision(*b, parse_precision(precision));
   return share;
 }
 
