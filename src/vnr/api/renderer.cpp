@@ -119,9 +119,13 @@ struct GpuCacheLevel {
   std::string why;
   int chosen() const { return std::max(view, fit); }
 };
+// Level 0's voxels: the settings' dims, else the model's.
+static Int3 cache_dims(const Model& model, const BrickCacheSettings& settings) {
+  return settings.dims.count() > 0 ? settings.dims : model.dims;
+}
 static GpuCacheLevel gpu_cache_level(const Model& model, const BrickCacheSettings& settings, const Camera& camera,
                                      const RenderOptions& options, Vec3f box) {
-  const Int3 dims = settings.dims.count() > 0 ? settings.dims : model.dims;
+  const Int3 dims = cache_dims(model, settings);
   const uint64_t budget = settings.budget_bytes ? settings.budget_bytes : default_cache_budget();
   GpuCacheLevel g;
   g.view = finest_view_level(make_camera_frame(camera, options.width, options.height), box, dims, settings.lod_pixels);
@@ -153,8 +157,8 @@ void Renderer::set_cache(std::optional<BrickCacheSettings> settings) {
     if (device_ == Device::Cuda) {
       const GpuCacheLevel g = gpu_cache_level(*model_, *settings, camera_, options_, box_);
       if (g.fit < 0) fail("{}: give a larger --cache-budget, smaller --cache-dims, or another --strategy", g.why);
-      const Int3 dims = settings->dims.count() > 0 ? settings->dims : model_->dims;
-      cached_ = std::make_unique<DecodedModelField>(*model_, cache_level_dims(dims, g.chosen()), "cache");
+      cached_ = std::make_unique<DecodedModelField>(*model_, cache_level_dims(cache_dims(*model_, *settings), g.chosen()),
+                                                    "cache");
       gpu_cache_level_ = g.chosen();
       gpu_cache_fit_ = g.fit;
     } else {
@@ -170,9 +174,8 @@ void Renderer::set_cache(std::optional<BrickCacheSettings> settings) {
 // decode that one. What fits is not asked again (the decode itself took memory).
 void Renderer::follow_gpu_cache_level() {
   if (device_ != Device::Cuda || !cache_settings_ || gpu_cache_level_ < 0) return;
-  const Int3 dims = cache_settings_->dims.count() > 0 ? cache_settings_->dims : model_->dims;
-  const int view = finest_view_level(make_camera_frame(camera_, options_.width, options_.height), box_, dims,
-                                     cache_settings_->lod_pixels);
+  const int view = finest_view_level(make_camera_frame(camera_, options_.width, options_.height), box_,
+                                     cache_dims(*model_, *cache_settings_), cache_settings_->lod_pixels);
   if (std::max(view, gpu_cache_fit_) != gpu_cache_level_) set_cache(cache_settings_);
 }
 

@@ -36,10 +36,14 @@ int finest_view_level(const CameraFrame& c, Vec3f box, Int3 dims, float lod_pixe
   return m >= 1 ? int(std::floor(std::log2(m))) : 0;
 }
 
+namespace {
+int64_t ceil_div(int64_t a, int64_t b) { return (a + b - 1) / b; }
+}  // namespace
+
 Int3 cache_level_dims(Int3 dims, int level) {
   const int64_t k = int64_t(1) << std::min(level, 62);
-  auto halved = [k](int64_t n) { return std::max<int64_t>(1, (n + k - 1) / k); };
-  return Int3{halved(dims.x), halved(dims.y), halved(dims.z)};
+  return Int3{std::max<int64_t>(1, ceil_div(dims.x, k)), std::max<int64_t>(1, ceil_div(dims.y, k)),
+              std::max<int64_t>(1, ceil_div(dims.z, k))};
 }
 
 uint64_t default_cache_budget() {
@@ -68,7 +72,6 @@ struct Level {
   int64_t bricks() const { return int64_t(nb.x) * nb.y * nb.z; }
   Int3 brick_coords(int64_t b) const { return Int3{b % nb.x, (b / nb.x) % nb.y, b / (nb.x * nb.y)}; }  // x fastest
 };
-int64_t ceil_div(int64_t a, int64_t b) { return (a + b - 1) / b; }
 }  // namespace
 
 struct CachedField::State {

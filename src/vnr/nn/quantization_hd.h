@@ -22,34 +22,25 @@ VNR_HD inline float quantized_value(float v, float step) {
   return half_to_float(float_to_half(float(int32_t(q)) * step));  // int: -0 becomes +0, as the codec stores it
 }
 
-// -log2 of the Laplace(0, scale) mass on [theta - step/2, theta + step/2]; *d receives d/d theta.
-VNR_HD inline double laplace_bin_bits(double theta, double step, double scale, double* d) {
+// -log2 of the Laplace(0, scale) mass on [theta - step/2, theta + step/2]; *d receives d/d theta, and
+// *dstep (when given) d/d step: how the bits fall as the segment's step grows (learned steps,
+// train/step_learning.h).
+VNR_HD inline double laplace_bin_bits(double theta, double step, double scale, double* d, double* dstep = nullptr) {
   const double t = fabs(theta), h = 0.5 * step, s = theta < 0 ? -1.0 : 1.0;
   constexpr double kLn2 = 0.69314718055994530942;
   if (t >= h) {  // the bin lies on one side of 0: mass 0.5 e^{-(t-h)/b} (1 - e^{-step/b}), in closed form
     *d = s / (scale * kLn2);
-    return (1.0 + (t - h) / (scale * kLn2)) - log2(-expm1(-step / scale));
+    const double tail = -expm1(-step / scale);  // 1 - e^{-step/b}
+    if (dstep) *dstep = -0.5 / (scale * kLn2) - exp(-step / scale) / (scale * tail * kLn2);
+    return (1.0 + (t - h) / (scale * kLn2)) - log2(tail);
   }
   // The bin holds 0: mass 1 - 0.5 e^{-(h+t)/b} - 0.5 e^{-(h-t)/b}.
   const double a = exp(-(h + t) / scale), c = exp(-(h - t) / scale);
   const double mass = 1.0 - 0.5 * (a + c);
   const double dmass = 0.5 * (a - c) / scale;  // d mass / d t
   *d = -s * dmass / (mass * kLn2);
+  if (dstep) *dstep = -(a + c) / (4 * scale) / (mass * kLn2);  // d mass / d step = (a + c) / (4 b)
   return -log2(mass);
-}
-
-// d/d step of laplace_bin_bits(theta, step, scale): how a parameter's bits fall as its segment's step
-// grows (learned steps, train/step_learning.h).
-VNR_HD inline double laplace_bin_bits_dstep(double theta, double step, double scale) {
-  const double t = fabs(theta), h = 0.5 * step;
-  constexpr double kLn2 = 0.69314718055994530942;
-  if (t >= h) {  // d/d step of (t - h) / (b ln 2) - log2(1 - e^{-step/b})
-    const double e = exp(-step / scale);
-    return -0.5 / (scale * kLn2) - e / (scale * -expm1(-step / scale) * kLn2);
-  }
-  const double a = exp(-(h + t) / scale), c = exp(-(h - t) / scale);
-  const double mass = 1.0 - 0.5 * (a + c);
-  return -(a + c) / (4 * scale) / (mass * kLn2);  // d mass / d step = (a + c) / (4 b)
 }
 
 // A segment's Laplace scale: its mean |parameter| (the prior's maximum-likelihood fit), at least a

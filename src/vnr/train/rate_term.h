@@ -16,13 +16,14 @@ namespace vnr {
 double add_rate_gradient(const std::vector<float>& master, const std::vector<ParamSegment>& segments,
                          size_t first_segment, double weight, float* grads);
 
-// One segment of n parameters quantized with `step` (> 0): its bits under the Laplace prior, their
-// derivative by the step, and the loss's derivative by the step, the straight-through estimate of
-// LSQ (Esser et al. 2020: the sum of dL/dq (round(theta/step) - theta/step)) from grads as they were
-// on entry; then weight * d bits/d theta is added to grads.
+// One segment of n parameters quantized with `step` (> 0): its bits under the Laplace prior; with
+// grads, weight * d bits/d theta is added to them, and with step_derivatives the bits' derivative by the
+// step and the loss's, the straight-through estimate of LSQ (Esser et al. 2020: the sum of
+// dL/dq (round(theta/step) - theta/step)) from grads as they were on entry.
 struct SegmentRate {
   double bits = 0, dbits_dstep = 0, dloss_dstep = 0;
 };
-SegmentRate segment_rate(const float* master, uint64_t n, float step, double weight, float* grads);
+SegmentRate segment_rate(const float* master, uint64_t n, float step, double weight, float* grads,
+                         bool step_derivatives);
 
 }  // namespace vnr

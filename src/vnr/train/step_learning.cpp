@@ -11,12 +11,11 @@ StepLearner::StepLearner(const std::vector<float>& master, const std::vector<Par
     : first_(first_segment), floor_(std::move(floor)), m_(segments.size(), 0.0), v_(segments.size(), 0.0),
       lambda_(lambda) {
   if (floor_.size() != segments.size()) fail("StepLearner: {} floors for {} segments", floor_.size(), segments.size());
-  std::vector<float> scratch(master.size(), 0.0f);
   uint64_t off = 0;
   for (size_t k = 0; k < segments.size(); ++k) {
     const ParamSegment& seg = segments[k];
     if (k >= first_ && seg.step > 0)
-      target_ += segment_rate(master.data() + off, seg.count, seg.step, 0, scratch.data() + off).bits;
+      target_ += segment_rate(master.data() + off, seg.count, seg.step, 0, nullptr, false).bits;
     off += seg.count;
   }
   bits_ = target_;
@@ -33,7 +32,7 @@ void StepLearner::update(const std::vector<float>& master, std::vector<ParamSegm
     const uint64_t begin = off;
     off += seg.count;
     if (k < first_ || seg.step <= 0 || seg.count == 0) continue;
-    const SegmentRate r = segment_rate(master.data() + begin, seg.count, seg.step, lambda_, grads + begin);
+    const SegmentRate r = segment_rate(master.data() + begin, seg.count, seg.step, lambda_, grads + begin, true);
     bits_ += r.bits;
     const double g = double(seg.step) * (r.dloss_dstep + lambda_ * r.dbits_dstep);  // d/d log step
     m_[k] = kBeta1 * m_[k] + (1 - kBeta1) * g;
