@@ -204,8 +204,8 @@ void ViewerEngine::Impl::update_truth_content() {
 // The network view's cache for this frame: while the camera moves, decoded by the cache's own thread
 // (one core) so frames come at their rate; while the view is still, by each frame for 0.1 s on every
 // core (on few cores the fastest way to a sharp image), and for 10 ms while training in the loop (the
-// model changes between frames; training gets 1.5x a frame's time); and the ray under the cursor, whose
-// bricks come first.
+// model changes between frames; training gets 1.4x a frame's render time); and the ray under the
+// cursor, whose bricks come first.
 static void steer_cache(const CachedField& cache, const ViewerSnapshot& snap, const RenderOptions& opt) {
   const bool training = snap.state.training.state == TrainingState::Running;
   cache.set_decode_seconds(training ? 0.01 : 0.1);
