@@ -17,7 +17,7 @@
 #include "vnr/renderer.h"
 #include "vnr/train/session.h"
 #include "vnr/viewer.h"
-#include "vnr/volume/writer.h"
+#include "vnr/volume_writer.h"
 
 using namespace vnr;
 using namespace vnr::test;

@@ -21,7 +21,7 @@
 #include "vnr/train/rate_control.h"
 #include "vnr/train/series.h"
 #include "vnr/train/session.h"
-#include "vnr/volume/writer.h"
+#include "vnr/volume_writer.h"
 
 using namespace vnr;
 using namespace vnr::test;

@@ -20,7 +20,7 @@
 #include "vnr/train/sampler.h"
 #include "vnr/train/session.h"
 #include "vnr/train/trainer.h"
-#include "vnr/volume/writer.h"
+#include "vnr/volume_writer.h"
 #include "test_support.h"
 
 using namespace vnr;

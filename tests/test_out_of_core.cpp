@@ -22,7 +22,7 @@
 #include "vnr/train/streaming_samplers.h"
 #include "vnr/train/trainer.h"
 #include "vnr/volume/stream.h"
-#include "vnr/volume/writer.h"
+#include "vnr/volume_writer.h"
 #include "test_support.h"
 
 using namespace vnr;

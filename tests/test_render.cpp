@@ -16,7 +16,7 @@
 #include "vnr/train/model_io.h"
 #include "vnr/train/sampler.h"
 #include "vnr/train/trainer.h"
-#include "vnr/volume/writer.h"
+#include "vnr/volume_writer.h"
 #include "render_support.h"
 #include "test_support.h"
 

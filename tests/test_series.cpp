@@ -15,7 +15,7 @@
 #include "vnr/train/model_io.h"
 #include "vnr/train/series.h"
 #include "vnr/volume/volume.h"
-#include "vnr/volume/writer.h"
+#include "vnr/volume_writer.h"
 #include "test_support.h"
 
 using namespace vnr;

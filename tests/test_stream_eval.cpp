@@ -22,7 +22,7 @@
 #include "vnr/volume/raw_access.h"
 #include "vnr/volume/stream.h"
 #include "vnr/volume/volume.h"
-#include "vnr/volume/writer.h"
+#include "vnr/volume_writer.h"
 #include "test_support.h"
 
 using namespace vnr;

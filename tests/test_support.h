@@ -27,7 +27,7 @@
 #include "vnr/json.h"
 #include "vnr/math.h"
 #include "vnr/volume/volume.h"
-#include "vnr/volume/writer.h"
+#include "vnr/volume_writer.h"
 
 // Expects `msg` to contain `sub`, printing the message when it does not.
 #define EXPECT_HAS(msg, sub) EXPECT_NE((msg).find(sub), std::string::npos) << "message: " << (msg)

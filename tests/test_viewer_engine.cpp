@@ -14,7 +14,7 @@
 #include "vnr/renderer.h"
 #include "vnr/train/session.h"
 #include "vnr/viewer.h"
-#include "vnr/volume/writer.h"
+#include "vnr/volume_writer.h"
 #include "test_support.h"
 
 using namespace vnr;

@@ -15,7 +15,7 @@
 #include "vnr/fileio.h"
 #include "vnr/json.h"
 #include "vnr/volume/volume.h"
-#include "vnr/volume/writer.h"
+#include "vnr/volume_writer.h"
 #include "test_support.h"
 #include "volume_support.h"
 

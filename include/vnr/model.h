@@ -1,9 +1,8 @@
 #pragma once
-// vnr::Model: a network together with the volume it represents (dims, source dtype, value range), the
-// train layer's struct (src/vnr/train/model_io.h). There: load_model(path) and save_model(path, m)
-// (.vnr, or instantvnr's BSON for .bson/.json), m.net (the Network: n_params(), config()), m.dims,
-// m.lo/m.hi, m.macrocells. This header adds creating one, queries and decodes on an explicit device,
-// the compression ratio and evaluation against a Volume or a volume file.
+// vnr::Model: a network together with the volume it represents (dims, source dtype, value range), its files
+// (.vnr, or instantvnr's BSON for .bson/.json), creating one, queries and decodes on an explicit device, the
+// compression ratio and evaluation against a Volume or a volume file. The network, macro-cells, residuals
+// and bricks are internal types this header only names; the library's functions below are their face.
 #include <cstdint>
 #include <functional>
 #include <memory>
@@ -11,14 +10,69 @@
 #include <string>
 #include <vector>
 #include "vnr/device.h"
+#include "vnr/dtype.h"
+#include "vnr/json.h"
+#include "vnr/math.h"
 #include "vnr/model_config.h"
-#include "vnr/train/model_io.h"
+#include "vnr/opaque.h"
 #include "vnr/volume.h"
 
 namespace vnr {
 
-// A fresh model of `config` for `volume` (its dims, source dtype and value range), parameters initialised
-// from seed; create_model(config, dims, dtype, lo, hi, seed) (train/model.h) for a volume not at hand.
+class Network;          // nn/network.h
+struct ValueRangeGrid;  // core/value_range_grid.h
+struct Residuals;       // train/residuals.h
+struct ParamSegment;    // nn/param_codec.h
+struct BrickedModel;    // train/bricks.h
+namespace cuda {
+class GpuNetwork;  // cuda/cuda.h
+}
+
+// A network together with what it represents: the bridge between the in-memory network and the model files.
+struct Model {
+  Model();
+  ~Model();
+  Model(Model&&) noexcept;
+  Model& operator=(Model&&) noexcept;
+
+  std::unique_ptr<Network> net;
+  Int3 dims;
+  DType source_dtype = DType::Float32;
+  double lo = 0, hi = 1;
+  Json training;  // summary written by `vnr train`
+  Opaque<ValueRangeGrid> macrocells;  // value ranges built online while training (or imported)
+  // Error-bound residuals at dims: decodes at dims apply them on the CPU reference.
+  Opaque<Residuals> residuals;
+  // Quantization steps of compact storage; empty = plain fp16. The network's parameters are then already
+  // the dequantized values, so the file holds them exactly.
+  std::vector<ParamSegment> param_segments;
+  // A multi-brick model (a directory written by `vnr train --bricks`): net is then a copy of brick 0's
+  // network (config, precision); queries, decodes, evaluation and rendering go through the bricks.
+  std::shared_ptr<BrickedModel> bricks;
+  // What a single network and a multi-brick model answer alike, so that callers need not ask which it is:
+  // parameters (all bricks'), their fp16 bytes as stored, and whether a session can train it (a multi-brick
+  // model is trained brick by brick).
+  uint64_t n_params() const;
+  uint64_t param_bytes() const { return n_params() * 2; }
+  bool trainable() const { return bricks == nullptr; }
+};
+
+// Writes .vnr, or instantvnr's BSON when the path ends in .bson or .json (instantvnr names its BSON files
+// params.json). A multi-brick model is refused (it is a directory of brick files).
+void save_model(const std::string& path, const Model& m);
+// A .vnr or BSON file, or a multi-brick model's directory.
+Model load_model(const std::string& path);
+bool is_instantvnr_path(const std::string& path);
+// The size of the .vnr file save_model writes for a single-network model, without writing it.
+uint64_t model_file_bytes(const Model& m);
+// Whether the model file records the value range of the volume it was trained on: .vnr files do,
+// instantvnr BSON files do not (load_model then gives [0, 1]). Reads only the file's first bytes.
+bool model_file_has_value_range(const std::string& path);
+
+// A fresh model of `config` for a volume of dims voxels of source_dtype with value range [lo, hi] in
+// original units, its parameters initialised from `seed` (tcnn's initialisation); or for `volume` (its dims,
+// source dtype and value range).
+Model create_model(const ModelConfig& config, Int3 dims, DType source_dtype, double lo, double hi, uint32_t seed = 1337);
 Model create_model(const ModelConfig& config, const Volume& volume, uint32_t seed = 1337);
 
 // The network's configuration, and the arithmetic of its CPU inference (Network::set_inference_precision),
@@ -27,6 +81,14 @@ Model create_model(const ModelConfig& config, const Volume& volume, uint32_t see
 const ModelConfig& model_config(const Model& m);
 void set_inference_precision(Model& m, Precision precision);
 Precision inference_precision(const Model& m);
+
+// Evaluation against the ground truth at voxel centres (docs/semantics.md B.4).
+struct EvalResult {
+  double psnr = 0, ssim = 0, mse = 0;
+  double max_abs_error = 0;           // normalised units
+  double max_abs_error_original = 0;  // original units
+  double decode_seconds = 0;
+};
 
 // Bytes of the source volume: dims x the source dtype's size.
 uint64_t source_bytes(const Model& m);

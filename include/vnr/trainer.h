@@ -12,7 +12,10 @@
 // Lower level: make_trainer(Device, Network&, sampler, volume, options) gives a Trainer backend (CPU or
 // GPU) that a TrainingSession over any Model runs; choose_training_device resolves "auto".
 // A time series into a directory of models, as `vnr train --timesteps`: run_series(SeriesRunSetup, callbacks).
+// A setup with targets (a PSNR, a ratio, an error bound), as `vnr train` and vnr.train run it:
+// train_for_targets (the size search of --target-psnr, compact storage).
 #include "vnr/train/make_trainer.h"
+#include "vnr/train/psnr_search.h"
 #include "vnr/train/series_run.h"
 #include "vnr/train/session.h"
 #include "vnr/train/trainer.h"

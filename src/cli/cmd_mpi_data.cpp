@@ -16,8 +16,7 @@
 #include "vnr/fileio.h"
 #include "vnr/threads.h"
 #include "vnr/units.h"
-#include "vnr/volume/raw_access.h"
-#include "vnr/volume/writer.h"
+#include "vnr/volume_writer.h"
 
 namespace vnr::cli {
 
@@ -141,10 +140,8 @@ void run_eval_mpi(const EvalMpiArgs& a) {
   const auto t0 = std::chrono::steady_clock::now();
   EvalSums mine;
   mpi::agree("evaluating", [&] {
-    RawVolumeFile file(desc, range.lo, range.hi, a.vol.load().non_finite, "distributed evaluation",
-                       "convert the volume to raw or NRRD (uncompressed)");
-    const Model model = model_of_bricks(share.model);
-    for (const Box3& region : share.regions) mine.add(evaluate_region(model, file, region, !a.no_ssim));
+    mine = evaluate_regions(model_of_bricks(share.model), desc, range, a.vol.load().non_finite, share.regions,
+                            !a.no_ssim);
   });
   EvalSums all;
   all.sse = mpi::sum(mine.sse);

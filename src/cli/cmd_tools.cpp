@@ -15,7 +15,7 @@
 #include "vnr/device.h"
 #include "vnr/model.h"
 #include "vnr/volume.h"
-#include "vnr/volume/writer.h"
+#include "vnr/volume_writer.h"
 
 namespace vnr::cli {
 

@@ -13,7 +13,6 @@
 #include "vnr/progress.h"
 #include "vnr/units.h"
 #include "vnr/online.h"
-#include "vnr/train/psnr_search.h"
 #include "vnr/trainer.h"
 
 namespace vnr::cli {

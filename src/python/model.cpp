@@ -5,8 +5,7 @@
 #include "vnr/error.h"
 #include "vnr/fileio.h"
 #include "vnr/bricks.h"
-#include "vnr/volume/sample_io.h"
-#include "vnr/volume/writer.h"
+#include "vnr/volume_writer.h"
 
 namespace vnr::py {
 

@@ -4,7 +4,6 @@
 #include "bindings.h"
 #include "vnr/error.h"
 #include "vnr/threads.h"
-#include "vnr/train/psnr_search.h"
 
 namespace vnr::py {
 

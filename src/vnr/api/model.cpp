@@ -4,8 +4,10 @@
 #include "vnr/error.h"
 #include "vnr/core/parallel.h"
 #include "vnr/train/decoder.h"
+#include "vnr/train/evaluate.h"
+#include "vnr/train/model.h"
 #include "vnr/units.h"
-#include "vnr/volume/writer.h"
+#include "vnr/volume_writer.h"
 
 namespace vnr {
 

@@ -269,6 +269,15 @@ EvalSums evaluate_region(const Model& model, const RawVolumeFile& truth, const B
                    fmt::format("a region of '{}'", truth.desc().path));
 }
 
+EvalSums evaluate_regions(const Model& model, const VolumeDesc& desc, ValueRange range, NonFinitePolicy policy,
+                          const std::vector<Box3>& regions, bool with_ssim) {
+  const RawVolumeFile file(desc, range.lo, range.hi, policy, "distributed evaluation",
+                           "convert the volume to raw or NRRD (uncompressed)");
+  EvalSums sums;
+  for (const Box3& region : regions) sums.add(evaluate_region(model, file, region, with_ssim));
+  return sums;
+}
+
 void EvalSums::add(const EvalSums& o) {
   sse += o.sse;
   voxels += o.voxels;

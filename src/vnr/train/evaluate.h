@@ -2,27 +2,22 @@
 // Evaluation of a network against its volume: in memory, streamed in slabs, or sampled.
 #include <cstdint>
 #include <functional>
+#include <vector>
 #include "vnr/core/brick_box.h"
 #include "vnr/device.h"
+#include "vnr/model.h"
 #include "vnr/nn/network.h"
 #include "vnr/train/residuals.h"
 #include "vnr/volume/volume.h"
 
 namespace vnr {
 
-struct Model;  // train/model.h: the overloads taking a Model decode a multi-brick model blended (train/bricks.h)
 class RawVolumeFile;  // volume/raw_access.h
 
-// Evaluation against the ground truth at voxel centres (docs/semantics.md B.4).
-struct EvalResult {
-  double psnr = 0, ssim = 0, mse = 0;
-  double max_abs_error = 0;           // normalised units
-  double max_abs_error_original = 0;  // original units
-  double decode_seconds = 0;
-};
 EvalResult evaluate(const Network& net, const Volume& vol, bool with_ssim = true, Device device = Device::Cpu,
                     const Residuals* residuals = nullptr);
 // A model's evaluation applies its residuals (error-bound models) and blends its bricks (multi-brick).
+// The overloads taking a Model decode a multi-brick model blended (train/bricks.h).
 EvalResult evaluate(const Model& model, const Volume& vol, bool with_ssim = true, Device device = Device::Cpu);
 
 // evaluate() for a volume that is not in memory: the volume (desc, normalised with [lo, hi] as
@@ -73,6 +68,11 @@ EvalSums evaluate_box_slices(const Network& net, const RawVolumeFile& truth, con
 EvalSums evaluate_region(const Model& model, const RawVolumeFile& truth, const Box3& region, bool with_ssim,
                          int64_t slab_voxels = 0);
 
+// A share of a multi-brick model's evaluation against a volume file (desc, at the model's grid; read at
+// random offsets, so uncompressed) normalised with range: evaluate_region over each of regions, added up
+// (an MPI rank's share: BrickShare::regions).
+EvalSums evaluate_regions(const Model& model, const VolumeDesc& desc, ValueRange range, NonFinitePolicy policy,
+                          const std::vector<Box3>& regions, bool with_ssim);
 // PSNR estimated from n_samples voxels drawn uniformly (with replacement; deterministic for a
 // seed), read with RawVolumeFile (uncompressed data only) and decoded as evaluate() decodes them.
 // The 95% interval is the normal interval mean +- 1.96 standard errors of the per-voxel squared

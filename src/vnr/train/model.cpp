@@ -8,6 +8,12 @@
 
 namespace vnr {
 
+// Out of line, where the members' types are complete (vnr/model.h only names them).
+Model::Model() = default;
+Model::~Model() = default;
+Model::Model(Model&&) noexcept = default;
+Model& Model::operator=(Model&&) noexcept = default;
+
 bool is_instantvnr_path(const std::string& path) {
   const std::string e = extension_of(path);
   return e == ".bson" || e == ".json";

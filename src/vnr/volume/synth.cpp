@@ -11,7 +11,7 @@
 #include "vnr/core/parallel.h"
 #include "vnr/fileio.h"
 #include "vnr/json.h"
-#include "vnr/volume/writer.h"
+#include "vnr/volume_writer.h"
 
 namespace vnr {
 namespace {

@@ -1,4 +1,4 @@
-#include "vnr/volume/writer.h"
+#include "vnr/volume_writer.h"
 #include <algorithm>
 #include <bit>
 #include <cmath>

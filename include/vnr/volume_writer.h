@@ -1,4 +1,6 @@
 #pragma once
+// Writing volumes: VolumeWriter streams one to disk in z-slabs (raw + sidecar, or NRRD), the byte-level
+// pieces the MPI layer places itself, and the procedural volumes of demos, tests and benchmarks.
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -9,7 +11,7 @@
 #include <vector>
 #include "vnr/fileio.h"
 #include "vnr/math.h"
-#include "vnr/volume/volume.h"
+#include "vnr/volume.h"
 
 namespace vnr {
 
