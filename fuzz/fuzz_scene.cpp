@@ -2,7 +2,7 @@
 // (describe_volume: dataSource), with a 4 KiB data file beside it.
 #include <vector>
 #include "fuzz_support.h"
-#include "vnr/render/scene.h"
+#include "vnr/scene.h"
 #include "vnr/volume/volume.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {

@@ -9,7 +9,7 @@
 #include "test_support.h"
 #include "vnr/model.h"
 #include "vnr/model_config.h"
-#include "vnr/render/scene.h"
+#include "vnr/scene.h"
 #include "vnr/render/transfer_function.h"
 #include "vnr/train/model.h"
 #ifdef VNR_HAVE_VIEW

@@ -14,7 +14,7 @@
 #include "vnr/core/rng.h"
 #include "vnr/render/camera.h"
 #include "vnr/render/image.h"
-#include "vnr/render/scene.h"
+#include "vnr/scene.h"
 #include "vnr/render/transfer_function.h"
 #include "test_support.h"
 

@@ -12,6 +12,7 @@
 #include "vnr/fileio.h"
 #include "vnr/model.h"
 #include "vnr/renderer.h"
+#include "vnr/render/transfer_function.h"
 #include "vnr/train/session.h"
 #include "vnr/viewer.h"
 #include "vnr/volume_writer.h"

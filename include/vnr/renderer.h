@@ -12,21 +12,23 @@
 #include <optional>
 #include <string>
 #include <vector>
-#include "vnr/device.h"
-#include "vnr/model.h"
 #include "vnr/camera.h"
-#include "vnr/render/camera.h"
-#include "vnr/fields/brick_cache.h"
-#include "vnr/fields/fields.h"
+#include "vnr/device.h"
 #include "vnr/image.h"
-#include "vnr/render/macrocell.h"
-#include "vnr/render/renderer.h"
-#include "vnr/render/scene.h"
-#include "vnr/render/transfer_function.h"
+#include "vnr/model.h"
+#include "vnr/opaque.h"
+#include "vnr/render_options.h"
 #include "vnr/render_settings.h"
+#include "vnr/scene.h"
+#include "vnr/transfer_function.h"
 #include "vnr/volume.h"
 
 namespace vnr {
+
+class RenderableField;  // fields/fields.h: what a renderer samples (a grid, a network, the brick cache)
+class CachedField;      // fields/brick_cache.h
+class FrameRenderer;    // render/renderer.h: a backend (CPU or GPU)
+class MacroCells;       // render/macrocell.h
 
 // True when `path` holds a model (.vnr by its magic, or instantvnr BSON); false for anything that
 // describes a volume (sidecars, scenes, NRRD, raw).
@@ -86,9 +88,7 @@ public:
   void set_strategy(RenderStrategy strategy);
   // The faster strategy for this renderer's field, device and mode (fastest_render_strategy): what
   // --strategy auto sets.
-  RenderStrategy automatic_strategy() const {
-    return fastest_render_strategy(field().kind(), device_ == Device::Cuda, options_.mode);
-  }
+  RenderStrategy automatic_strategy() const;
   // The brick cache in front of a model's field (fields/brick_cache.h, docs/RENDERING.md): decoded
   // bricks at the level of detail the view needs; nullopt = off (the default). On the GPU, the whole
   // model decoded on the device at one level: the finest the view asks for anywhere (its nearest point),
@@ -134,6 +134,8 @@ public:
   cuda::MlpPath mlp_path() const { return mlp_; }
   Vec3f box() const { return box_; }     // world size of the volume box (voxel units)
   const RenderableField& field() const { return cached_ ? *cached_ : *field_; }  // the cache when on
+  // What field() samples: "grid", "network" or "cache" (reports, fastest_render_strategy).
+  std::string field_kind() const;
   const Model* model() const { return model_; }
 
   // Renders the next frame, adds it to the accumulation and returns the accumulated image (the mean of
@@ -153,14 +155,14 @@ public:
   int frames() const { return frames_; }  // accumulated since the last change
   // The RMS over pixels of the accumulated image's standard error, estimated from the spread of the
   // frames (accumulated_noise; infinite before two frames).
-  double noise() const { return accumulated_noise(m2_, frames_); }
+  double noise() const;
   void save(const std::string& path) const;  // .png (8-bit) or .pfm (float)
 
 private:
   friend struct BrickSegment render_brick_segment(Renderer& renderer, int index);  // vnr/bricks.h
   Renderer(const Model* model, const Volume* volume, Device device);
   void restart() { frames_ = 0; }
-  void invalidate() { backend_.reset(); restart(); }
+  void invalidate();
   void follow_gpu_cache_level();
   FrameRenderer& backend();
   const MacroCells& macrocells();
@@ -180,8 +182,8 @@ private:
   MacroCellMode mc_mode_ = MacroCellMode::Off;
   int mc_cell_size_ = 16;
   cuda::MlpPath mlp_ = cuda::MlpPath::Auto;
-  std::optional<ValueRangeGrid> grid_ranges_;  // Grid mode's value ranges for mc_cell_size_
-  std::optional<MacroCells> mc_;  // for mc_mode_ and mc_cell_size_, opacities for tf_
+  Opaque<ValueRangeGrid> grid_ranges_;  // Grid mode's value ranges for mc_cell_size_
+  Opaque<MacroCells> mc_;  // for mc_mode_ and mc_cell_size_, opacities for tf_
   bool mc_tf_current_ = false;
   std::unique_ptr<FrameRenderer> backend_;
   Image frame_, accumulated_;

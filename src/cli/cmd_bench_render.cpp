@@ -130,7 +130,7 @@ void add_bench_render(CLI::App& bench) {
 
     Json report;
     report["input"] = cr.input->description;
-    report["field"] = r.field().kind();
+    report["field"] = r.field_kind();
     report["size"] = {options.width, options.height};
     report["threads"] = num_threads();
     report["device"] = device_name(r.device());
@@ -144,7 +144,7 @@ void add_bench_render(CLI::App& bench) {
             : fmt::format("{} threads{}", num_threads(),
                           precision.is_null() ? "" : fmt::format(", {} network", precision.get<std::string>()));
     std::printf("%s (%s field), %dx%d, %s; raw batched field query: %s\n\n", cr.input->description.c_str(),
-                r.field().kind(), options.width, options.height, where.c_str(),
+                r.field_kind(), options.width, options.height, where.c_str(),
                 raw > 0 ? fmt::format("{:.2f} M samples/s", raw / 1e6).c_str() : "not measured");
 
     if (!a->tune_k.empty()) {

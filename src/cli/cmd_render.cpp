@@ -188,7 +188,7 @@ void add_render(CLI::App& app) {
                    {"mode", render_mode_name(o.mode)},
                    {"strategy", render_strategy_name(o.strategy)},
                    {"macrocells", macrocell_mode_name(r.macrocell_mode())},
-                   {"field", r.field().kind()},
+                   {"field", r.field_kind()},
                    {"size", {o.width, o.height}},
                    {"threads", num_threads()},
                    {"device", device_name(r.device())},

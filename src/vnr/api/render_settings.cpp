@@ -4,6 +4,7 @@
 #include <cmath>
 #include <set>
 #include "vnr/error.h"
+#include "vnr/fields/brick_cache.h"
 #include "vnr/nn/json_get.h"
 #include "vnr/renderer.h"
 

@@ -9,7 +9,10 @@
 #include "vnr/json.h"
 #include "vnr/progress.h"
 #include "vnr/core/rng.h"
+#include "vnr/fields/brick_cache.h"
 #include "vnr/fields/fields.h"
+#include "vnr/render/macrocell.h"
+#include "vnr/render/renderer.h"
 #include "vnr/api/model_field.h"
 #include "vnr/render_cuda/gpu_renderer.h"
 
@@ -109,6 +112,19 @@ Renderer::Renderer(const RenderInput& input, Device device)
   set_scene(input.scene);
 }
 Renderer::~Renderer() = default;
+
+std::string Renderer::field_kind() const { return field().kind(); }
+
+RenderStrategy Renderer::automatic_strategy() const {
+  return fastest_render_strategy(field_kind(), device_ == Device::Cuda, options_.mode);
+}
+
+double Renderer::noise() const { return accumulated_noise(m2_, frames_); }
+
+void Renderer::invalidate() {
+  backend_.reset();
+  restart();
+}
 
 // The GPU's cache is the model's whole decode at one level of detail (level l: the cache's dims halved l
 // times): the finest the view asks for (finest_view_level, the CPU cache's rule at the box's nearest

@@ -18,6 +18,7 @@
 #include <optional>
 #include <thread>
 #include <vector>
+#include "vnr/render_options.h"
 #include "vnr/fields/brick_cache_view.h"
 #include "vnr/render/camera.h"
 #include "vnr/fields/fields.h"
@@ -29,20 +30,6 @@ namespace vnr {
 // at those dims gives them, residuals included where they apply).
 using VoxelDecode = std::function<void(Int3 dims, const int64_t* voxel_index, int64_t n, float* out)>;
 
-enum class CacheMisses {
-  Exact,   // a sample whose brick is not decoded yet reads the model's field (vnr render: exact frames)
-  Coarser  // it reads the nearest decoded coarser level (the viewer: fast frames that sharpen)
-};
-
-struct BrickCacheSettings {
-  uint64_t budget_bytes = 0;     // pool of decoded bricks; 0 = default_cache_budget()
-  int brick = 32;                // cells per brick side (a power of two, 4..128)
-  float lod_pixels = 1;          // level l where a level-l voxel covers at most this many pixels
-  double decode_seconds = 0.05;  // decoding per frame (begin_frame); at least one brick a frame
-  CacheMisses misses = CacheMisses::Exact;
-  Int3 dims{0, 0, 0};            // level 0's voxels (Renderer: 0 = the model's dims; any size)
-};
-
 // The levels of detail as a view asks for them (CachedField's rule, also the GPU's whole-volume cache):
 // a sample at distance d from the eye covers d * lod_scale level-0 voxels per lod_pixels pixels, of a
 // cache of `dims` voxels over the box [0, box] seen through camera frame c.
@@ -53,23 +40,6 @@ int finest_view_level(const CameraFrame& c, Vec3f box, Int3 dims, float lod_pixe
 // Level l's voxels: dims halved l times, rounded up, at least one.
 Int3 cache_level_dims(Int3 dims, int level);
 
-// Fails with the sizes unless `budget_bytes` holds one brick of `brick`^3 cells ((brick + 1)^3 floats).
-void check_cache_budget(uint64_t budget_bytes, int brick);
-// A quarter of the memory available, at most 4 GiB, at least 64 MiB.
-uint64_t default_cache_budget();
-// "512MiB", "2GiB", "100M", plain bytes; 0 or "auto" = default_cache_budget(). Fails on anything else.
-uint64_t parse_cache_budget(const std::string& text);
-
-struct BrickCacheStats {
-  int64_t resident = 0, decoded = 0, evicted = 0;  // bricks in the pool now, decoded and evicted so far
-  int64_t requested = 0;  // bricks asked for and left for later frames (0 when the budget is full),
-                          // asynchronous: waiting for the decoding thread or decoded and not installed yet
-  int64_t misses = 0;  // samples of the current frame (since begin_frame) that read the source
-  int64_t stale = 0;   // resident bricks decoded from an earlier model (replace_source)
-  uint64_t pool_bytes = 0, budget_bytes = 0;
-  int levels = 0;
-  double decode_seconds = 0;  // in begin_frame, all frames
-};
 
 struct BrickKey;  // brick_cache.cpp: a brick of a level and its decoding priority
 

@@ -3,6 +3,7 @@
 // cells carry the largest opacity the transfer function can give inside them. Ray marching skips
 // transparent cells and adapts its step to the cell's opacity; the path tracer uses the values as
 // per-cell majorants. `MacroCellView` + the DDA below are the per-ray (VNR_HD) part.
+#include "vnr/render_options.h"
 #include <cmath>
 #include <cstdint>
 #include <string>
@@ -13,10 +14,6 @@
 #include "vnr/render/transfer_function.h"
 
 namespace vnr {
-
-enum class MacroCellMode { Grid, Online, Off };
-MacroCellMode parse_macrocell_mode(const std::string& s);
-const char* macrocell_mode_name(MacroCellMode m);
 
 struct MacroCellView {
   const float* max_opacity = nullptr;  // per cell, x fastest

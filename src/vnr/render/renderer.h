@@ -14,56 +14,16 @@
 #include <string>
 #include <vector>
 #include "vnr/device.h"
+#include "vnr/render_options.h"
 #include "vnr/render/camera.h"
 #include "vnr/render/field.h"
 #include "vnr/render/image.h"
 #include "vnr/render/integrators.h"
 #include "vnr/render/macrocell.h"
-#include "vnr/render/scene.h"
+#include "vnr/scene.h"
 #include "vnr/render/transfer_function.h"
 
 namespace vnr {
-
-enum class RenderMode { RayMarch, Shadow, PathTrace };
-enum class RenderStrategy { InShader, Streaming };
-RenderMode parse_render_mode(const std::string& s);
-RenderStrategy parse_render_strategy(const std::string& s);
-const char* render_mode_name(RenderMode m);
-const char* render_strategy_name(RenderStrategy s);
-// The faster strategy for a field kind ("grid", "network" or "cache": a grid of bricks), device and mode, as measured on bonsai
-// (docs/benchmarks.md: CPU ray marching and path tracing of a grid in-shader (packets), its shadows
-// streaming, a network streaming; GPU grids in-shader (17-20x), GPU networks in-shader but shadows).
-RenderStrategy fastest_render_strategy(const std::string& field_kind, bool gpu, RenderMode mode);
-
-// Samples per live ray per streaming iteration (docs/semantics.md B.7); `vnr bench render --tune-k`
-// finds the best K for a machine.
-constexpr int kDefaultSamplesPerIteration = 8;
-
-struct RenderOptions {
-  RenderMode mode = RenderMode::RayMarch;
-  RenderStrategy strategy = RenderStrategy::Streaming;
-  int width = 768, height = 768;
-  float step = 1;             // s1, world units (voxels)
-  float step_max = 0;         // s2; 0 = 16 * step (docs/semantics.md B.7 default)
-  float density_scale = 1;    // path tracing
-  bool shade = false;         // gradient shading for ray marching
-  uint32_t seed = 0;
-  int samples_per_iteration = kDefaultSamplesPerIteration;  // K
-  // In-shader ray marching of a grid runs rays in SIMD packets (fields/grid_packets.h; same image bit for
-  // bit); false runs the portable per-ray loop, the reference the packets are tested against.
-  bool ray_packets = true;
-  Vec3f background{0, 0, 0};
-  DirectionalLight light;
-};
-
-struct RenderStats {
-  int frames = 0;
-  int64_t rays = 0;           // primary rays (pixels x frames)
-  int64_t field_samples = 0;  // field evaluations (including gradient neighbours)
-  int64_t iterations = 0;     // streaming iterations
-  int64_t host_syncs = 0;     // GPU: times the host waited for the device (streaming: one per iteration)
-  double seconds = 0;
-};
 
 // Progressive accumulation: acc becomes the mean of frames 0..index (acc held the mean of 0..index-1).
 // With m2 (one value per pixel, reset at index 0), Welford's sum of squared deviations of each pixel's

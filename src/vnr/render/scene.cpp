@@ -1,6 +1,7 @@
 // Scene files: instantvnr's scene JSON (unknown keys ignored,
 // as instantvnr does) and vnr's own scene JSON (unknown keys are errors: typo safety).
-#include "vnr/render/scene.h"
+#include "vnr/scene.h"
+#include "vnr/render/camera.h"
 #include <cmath>
 #include "vnr/error.h"
 #include "vnr/fileio.h"

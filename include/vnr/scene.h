@@ -3,9 +3,10 @@
 // JSON. Everything is optional; the renderer fills in defaults (docs/semantics.md B.8, B.10).
 #include <optional>
 #include <string>
+#include "vnr/camera.h"
+#include "vnr/json.h"
 #include "vnr/math.h"
-#include "vnr/render/camera.h"
-#include "vnr/render/transfer_function.h"
+#include "vnr/transfer_function.h"
 
 namespace vnr {
 
