@@ -8,6 +8,7 @@
 #include "test_support.h"
 #include "vnr/error.h"
 #include "vnr/vnr.h"
+#include "vnr/train/session.h"
 
 using namespace vnr;
 using namespace vnr::test;

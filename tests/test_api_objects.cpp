@@ -9,6 +9,7 @@
 #include "test_support.h"
 #include "vnr/render_cuda/gpu_renderer.h"
 #include "vnr/vnr.h"
+#include "vnr/train/model_io.h"
 
 using namespace vnr;
 using namespace vnr::test;

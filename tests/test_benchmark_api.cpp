@@ -9,6 +9,7 @@
 #include "vnr/benchmark.h"
 #include "vnr/progress.h"
 #include "vnr/vnr.h"
+#include "vnr/train/model_io.h"
 
 using namespace vnr;
 using namespace vnr::test;

@@ -12,6 +12,8 @@
 #include "vnr/bricks.h"
 #include "vnr/metrics.h"
 #include "vnr/fields/bricked_field.h"
+#include "vnr/train/bricks.h"
+#include "vnr/train/evaluate.h"
 #include "vnr/viewer.h"
 #include "vnr/volume/raw_access.h"
 

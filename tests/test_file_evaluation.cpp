@@ -11,6 +11,7 @@
 #include "vnr/fileio.h"
 #include "vnr/trainer.h"
 #include "vnr/vnr.h"
+#include "vnr/train/session.h"
 
 using namespace vnr;
 using namespace vnr::test;

@@ -9,7 +9,7 @@
 #include "vnr/core/parallel.h"
 #include "vnr/nn/mlp_layout.h"
 #include "vnr/train/config_sizing.h"
-#include "vnr/train/psnr_search.h"
+#include "vnr/trainer.h"
 #include "vnr/train/rate_control.h"
 #include "vnr/train/rate_term.h"
 #include "vnr/train/session.h"

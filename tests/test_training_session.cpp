@@ -12,6 +12,8 @@
 #include "vnr/error.h"
 #include "vnr/cuda/cuda.h"
 #include "vnr/trainer.h"
+#include "vnr/train/make_trainer.h"
+#include "vnr/train/session.h"
 #include "test_support.h"
 
 using namespace vnr;

@@ -47,4 +47,13 @@ struct Vec4f {
 
 inline uint64_t next_multiple(uint64_t v, uint64_t m) { return (v + m - 1) / m * m; }
 
+// A box of voxels [lo, hi) of a grid.
+struct Box3 {
+  Int3 lo, hi;
+  VNR_HD Int3 size() const { return Int3{hi.x - lo.x, hi.y - lo.y, hi.z - lo.z}; }
+  VNR_HD uint64_t voxels() const { return size().count(); }
+  VNR_HD bool empty() const { return hi.x <= lo.x || hi.y <= lo.y || hi.z <= lo.z; }
+  friend bool operator==(const Box3&, const Box3&) = default;
+};
+
 }  // namespace vnr

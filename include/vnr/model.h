@@ -74,6 +74,9 @@ bool model_file_has_value_range(const std::string& path);
 // source dtype and value range).
 Model create_model(const ModelConfig& config, Int3 dims, DType source_dtype, double lo, double hi, uint32_t seed = 1337);
 Model create_model(const ModelConfig& config, const Volume& volume, uint32_t seed = 1337);
+// Rounds the network's parameters to what a model file stores (fp16): decodes then equal those of the
+// file save_model writes, and saving and loading it is lossless.
+void round_params_to_stored(Model& m);
 
 // The network's configuration, and the arithmetic of its CPU inference (Network::set_inference_precision),
 // for a single network and a multi-brick model alike (whose bricks share brick 0's configuration and
@@ -82,12 +85,35 @@ const ModelConfig& model_config(const Model& m);
 void set_inference_precision(Model& m, Precision precision);
 Precision inference_precision(const Model& m);
 
+// What `vnr info --json` shows of the model loaded from `path` (a file or a multi-brick directory): file,
+// format, dims, dtype, value_range, n_params (n_mlp_params, n_grid_params), model_bytes (the file's size),
+// volume_bytes, compression_ratio, config, training, macrocells (cell_size, cells, occupied; null when none),
+// error_bound (max_error, residual_nonzero, residual_bytes, codec; error-bound models only) and, for a
+// multi-brick model, format "vnr-bricks", the parameters summed over the bricks and bricks (grid, ghost,
+// seed, count, list). The entries of the grid encoding's table (0 without one): hash_grid_entries.
+Json describe_model(const Model& m, const std::string& path);
+uint64_t hash_grid_entries(const Model& m);
+
 // Evaluation against the ground truth at voxel centres (docs/semantics.md B.4).
 struct EvalResult {
   double psnr = 0, ssim = 0, mse = 0;
   double max_abs_error = 0;           // normalised units
   double max_abs_error_original = 0;  // original units
   double decode_seconds = 0;
+};
+
+// The sums behind an evaluation of part of a volume: parts evaluated apart (MPI ranks' slices) add up
+// to the evaluation of the whole.
+struct EvalSums {
+  double sse = 0;            // squared errors summed, normalised units
+  int64_t voxels = 0;        // voxels summed
+  double max_abs_error = 0;  // normalised units
+  double ssim_sum = 0;       // SSIM of every 7x7x7 window summed (ssim3d's windows), and their number
+  int64_t ssim_windows = 0;
+  double decode_seconds = 0;
+  void add(const EvalSums& other);
+  // PSNR, MSE, max error (also times value_range, in original units), SSIM (0 without windows).
+  EvalResult result(double value_range) const;
 };
 
 // Bytes of the source volume: dims x the source dtype's size.

@@ -16,6 +16,7 @@
 #include "vnr/model.h"
 #include "vnr/volume.h"
 #include "vnr/volume_writer.h"
+#include "vnr/version.h"
 
 namespace vnr::cli {
 
@@ -183,7 +184,7 @@ void print_system_info(bool json) {
                   {"compute_capability", fmt::format("{}.{}", d.cc_major, d.cc_minor)},
                   {"memory_bytes", d.memory_bytes},
                   {"multiprocessors", d.sm_count}});
-  Json j = {{"version", VNR_VERSION},
+  Json j = {{"version", vnr::version()},
             {"cpu", {{"simd", kernels::simd_target_name()}, {"threads", num_threads()}}},
             {"cuda", {{"built", cuda::built()}, {"devices", jd}}},
             {"default_device", devs.empty() ? "cpu" : "cuda"}};
@@ -192,7 +193,7 @@ void print_system_info(bool json) {
     std::printf("%s\n", j.dump(2).c_str());
     return;
   }
-  std::printf("vnr %s\n", VNR_VERSION);
+  std::printf("vnr %s\n", vnr::version());
   std::printf("cpu: %s, %d threads\n", kernels::simd_target_name(), num_threads());
   std::printf("%s\n", cuda::backend_summary().c_str());
   std::printf("default --device: %s\n", devs.empty() ? "cpu" : "cuda");
@@ -228,51 +229,20 @@ void add_info(CLI::App& app) {
     if (a->model.empty()) return print_system_info(a->json);
     if (is_dataset_path(a->model)) return print_dataset_info(a->model, a->json);
     Model m = load_model(a->model);
-    const Network& n = *m.net;
-    const uint64_t bytes = model_file_bytes(a->model);
-    Json j = {{"file", a->model},
-              {"format", is_instantvnr_path(a->model) ? "instantvnr-bson" : "vnr"},
-              {"dims", {m.dims.x, m.dims.y, m.dims.z}},
-              {"dtype", dtype_name(m.source_dtype)},
-              {"value_range", {m.lo, m.hi}},
-              {"n_params", n.n_params()},
-              {"n_mlp_params", n.mlp().n_params},
-              {"n_grid_params", n.grid_params()},
-              {"model_bytes", bytes},
-              {"volume_bytes", source_bytes(m)},
-              {"compression_ratio", compression_ratio(m, bytes)},
-              {"config", n.config_json()},
-              {"training", m.training}};
-    int64_t occupied = 0;
-    if (m.macrocells) {
-      for (int64_t i = 0; i < m.macrocells->count(); ++i) occupied += !m.macrocells->empty(i);
-      const Int3 cells = m.macrocells->cells;
-      j["macrocells"] = {{"cell_size", m.macrocells->cell_size},
-                         {"cells", {cells.x, cells.y, cells.z}},
-                         {"occupied", occupied}};
-    } else {
-      j["macrocells"] = nullptr;
-    }
-    if (m.residuals) {  // only then: the keys of other models stay as they were
-      const Residuals& r = *m.residuals;
-      j["error_bound"] = {{"max_error", r.bound * (m.hi - m.lo)},
-                          {"residual_nonzero", r.nonzero()},
-                          {"residual_bytes", r.encoded ? r.encoded->bytes.size() : 0},
-                          {"codec", r.encoded ? r.encoded->meta.value("codec", "") : ""}};
-    }
-    if (m.bricks) add_brick_info(m, j);  // cmd_train_bricks.cpp
+    const Json j = describe_model(m, a->model);
+    const uint64_t bytes = j["model_bytes"].get<uint64_t>();
     if (a->json) {
       std::printf("%s\n", j.dump(2).c_str());
       return;
     }
-    const ModelConfig& cfg = n.config();
+    const ModelConfig& cfg = model_config(m);
     std::printf("%s: vnr model of a %lldx%lldx%lld %s volume, range [%g, %g]\n", a->model.c_str(),
                 (long long)m.dims.x, (long long)m.dims.y, (long long)m.dims.z, dtype_name(m.source_dtype), m.lo, m.hi);
-    if (n.has_grid())
+    if (const uint64_t entries = hash_grid_entries(m))
       std::printf("encoding: %s, %u levels x %u features, 2^%u table, base %u (%llu entries)\n",
                   j["config"]["encoding"]["otype"].get<std::string>().c_str(), cfg.encoding.n_levels,
                   cfg.encoding.n_features_per_level, cfg.encoding.log2_hashmap_size, cfg.encoding.base_resolution,
-                  (unsigned long long)n.grid().n_entries);
+                  (unsigned long long)entries);
     else
       std::printf("encoding: %s\n", j["config"]["encoding"].dump().c_str());
     std::printf("network: %s %u x %u hidden, %s; loss %s\n", cfg.network.fully_fused ? "FullyFusedMLP" : "CutlassMLP",
@@ -282,19 +252,19 @@ void add_info(CLI::App& app) {
                 (unsigned long long)j["n_params"].get<uint64_t>(), human_bytes(2.0 * j["n_params"].get<double>()).c_str(),
                 human_bytes(double(bytes)).c_str(),
                 format_ratio(compression_ratio(m, bytes)).c_str());
-    if (m.macrocells)
+    if (const Json& mc = j["macrocells"]; !mc.is_null())
       std::printf("macro-cells: %lldx%lldx%lld cells of %d voxels (%lld with a value range), recorded while training\n",
-                  (long long)m.macrocells->cells.x, (long long)m.macrocells->cells.y, (long long)m.macrocells->cells.z,
-                  m.macrocells->cell_size, (long long)occupied);
+                  mc["cells"][0].get<long long>(), mc["cells"][1].get<long long>(), mc["cells"][2].get<long long>(),
+                  mc["cell_size"].get<int>(), mc["occupied"].get<long long>());
     else
       std::printf("macro-cells: none stored (vnr render uses --macrocells grid with --volume, or off)\n");
-    if (m.residuals)
+    if (j.contains("error_bound"))
       std::printf("error bound: %.4g (data units) at every voxel of the model's dims; residuals %s, %.2f%% non-zero\n",
                   j["error_bound"]["max_error"].get<double>(),
                   human_bytes(j["error_bound"]["residual_bytes"].get<double>()).c_str(),
-                  100.0 * double(m.residuals->nonzero()) / double(m.dims.count()));
+                  100.0 * j["error_bound"]["residual_nonzero"].get<double>() / double(m.dims.count()));
     if (m.training.is_object()) std::printf("training: %s\n", m.training.dump().c_str());
-    if (m.bricks) print_brick_info(j);
+    if (j["format"] == "vnr-bricks") print_brick_info(j);
   });
 }
 

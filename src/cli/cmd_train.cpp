@@ -57,7 +57,6 @@ void print_error_bound(const Json& report) {
 
 void print_result(const TrainArgs& a, const TrainingSession& session, const TrainingResult& r,
                   const TrainPreview* preview, const std::string& preview_dir) {
-  const TrainingData& data = *session.data();
   std::printf("trained %lld steps in %.2fs (%.2f M samples/s%s), final loss %.6f\n", (long long)r.steps, r.seconds,
               r.samples_per_second / 1e6, r.report["precision"] == "bf16" ? ", bf16 MLP" : "", r.final_loss);
   if (preview)
@@ -68,7 +67,7 @@ void print_result(const TrainArgs& a, const TrainingSession& session, const Trai
   std::printf(", max |error| %.4g (%.4g in data units)\n", r.max_abs_error, r.max_abs_error_original);
   std::printf("model %s: %s, %llu parameters; volume %s; compression ratio %s\n", a.s.session.output.c_str(),
               human_bytes(double(r.model_bytes)).c_str(), (unsigned long long)r.report["n_params"].get<uint64_t>(),
-              human_bytes(double(data.source_bytes())).c_str(), format_ratio(r.compression_ratio).c_str());
+              human_bytes(double(source_bytes(session.model()))).c_str(), format_ratio(r.compression_ratio).c_str());
   print_error_bound(r.report);
 }
 
@@ -99,14 +98,13 @@ void run_train(const TrainArgs& a) {
     guard.emplace(s);
     if (bar) bar->finish();  // the previous candidate's (--target-psnr)
     bar.emplace("train", by_time ? a.seconds : double(steps), a.quiet);
-    const TrainingData& data = *s.data();
-    s.add_step_callback([&bar, &data, by_time](const TrainingProgress& p) {
+    s.add_step_callback([&bar, &s, by_time](const TrainingProgress& p) {
       std::string extra = fmt::format("step {} loss {:.5f} {:.2f} M samples/s", p.step, p.loss, p.samples_per_second / 1e6);
-      if (data.out_of_core) extra += fmt::format(" io wait {:.1f}s", data.out_of_core->io_wait_seconds());
+      if (const std::optional<double> wait = s.io_wait_seconds()) extra += fmt::format(" io wait {:.1f}s", *wait);
       bar->update(by_time ? p.elapsed : double(p.step), extra);
     });
     if (preview_opts) {
-      preview = std::make_unique<TrainPreview>(*preview_opts, s, data.dims);
+      preview = std::make_unique<TrainPreview>(*preview_opts, s, s.model().dims);
       s.add_side_work([&](const TrainingProgress& p) { preview->after_step(p.step); });
     }
   };

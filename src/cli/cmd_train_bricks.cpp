@@ -53,28 +53,6 @@ void print_summary(const TrainArgs& a, const BricksRunResult& r) {
 
 }  // namespace
 
-void add_brick_info(const Model& m, Json& j) {
-  const BrickedModel& bm = *m.bricks;
-  uint64_t params = 0, grid = 0, mlp = 0;
-  Json bricks = Json::array();
-  for (const BrickSpec& b : bm.plan.bricks) {
-    const Network& n = *bm.bricks[size_t(b.index)]->net;
-    params += n.n_params();
-    grid += n.grid_params();
-    mlp += n.mlp().n_params;
-    Json e = brick_record(b);
-    e["n_params"] = n.n_params();
-    e["psnr"] = bm.bricks[size_t(b.index)]->training["brick"].value("psnr", 0.0);
-    bricks.push_back(e);
-  }
-  j["format"] = "vnr-bricks";
-  j["n_params"] = params;
-  j["n_grid_params"] = grid;
-  j["n_mlp_params"] = mlp;
-  j["bricks"] = {{"grid", {bm.plan.grid.x, bm.plan.grid.y, bm.plan.grid.z}}, {"ghost", bm.plan.ghost},
-                 {"seed", bm.plan.seed}, {"count", bm.plan.bricks.size()}, {"list", bricks}};
-}
-
 void print_brick_info(const Json& j) {
   const Json& b = j["bricks"];
   std::printf("bricks: %zu (%lldx%lldx%lld), ghost %d voxels, seed %u; per brick (index, owned lo..hi, parameters, "

@@ -1,6 +1,7 @@
 // `vnr train SERIES --timesteps all|A-B|A,B,C -o DIR [--continuous --switch-every N]`: time-varying
-// volumes, trained by the library's run_series (vnr/train/series_run.h: the models, the report and what
+// volumes, trained by the library's run_series (vnr/series.h: the models, the report and what
 // a failure keeps); here the options, Ctrl-C, the progress bars and the tables.
+#include <fmt/format.h>
 #include <chrono>
 #include <csignal>
 #include <cstdio>

@@ -11,6 +11,7 @@
 #include "vnr/threads.h"
 #include "vnr/device.h"
 #include "vnr/model.h"
+#include "vnr/version.h"
 
 namespace vnr::cli {
 
@@ -138,7 +139,7 @@ int main(int argc, char** argv) {
   CLI::App app{"vnr: volumetric neural representations - compress volumes into neural networks and evaluate them"};
   app.require_subcommand(1);
   app.set_version_flag("--version", []() {  // lazily: querying CUDA devices takes a moment
-    return std::string("vnr ") + VNR_VERSION + " (backends: cpu [" + vnr::kernels::simd_target_name() + "]; " +
+    return std::string("vnr ") + vnr::version() + " (backends: cpu [" + vnr::kernels::simd_target_name() + "]; " +
            vnr::cuda::backend_summary() + ")";
   });
   install_exit_on_signal();

@@ -1,6 +1,6 @@
 #pragma once
 // `vnr train --preview-every N --preview-dir DIR [--preview-size WxH] [--preview-mode M] [--preview-tf TF]`:
-// renders the model as it trains into DIR/step_NNNNNN.png (vnr/online/preview.h: the online
+// renders the model as it trains into DIR/step_NNNNNN.png (vnr/online.h: the online
 // training-and-rendering loop without a window).
 #include <CLI/CLI.hpp>
 #include <cstdint>

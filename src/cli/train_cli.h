@@ -36,8 +36,7 @@ void run_train_series(const TrainArgs& a);
 // `vnr train VOLUME --bricks BX,BY,BZ|auto [--ghost G] [--resume] -o DIR`: a multi-brick model.
 void run_train_bricks(const TrainArgs& a);
 void add_train_bricks_options(CLI::App* c, TrainArgs& a);
-// `vnr info` of a multi-brick model: the bricks into the JSON (totals of parameters), and their lines.
-void add_brick_info(const Model& m, Json& j);
+// `vnr info` of a multi-brick model: the lines of its bricks (describe_model's "bricks").
 void print_brick_info(const Json& j);
 // The setup of one training run: a.s with what needed parsing (the raw-volume options, --memory-budget,
 // --block-dims) and the progress and preview choices.

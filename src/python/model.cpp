@@ -144,7 +144,7 @@ replaces existing files. The GIL is released while it runs.)");
         R"(The model's values (original units, float32, shape (N,)) at N points given as an (N, 3) float32 or
 float64 array of normalised x, y, z in [0, 1] (voxel i's centre is (i + 0.5) / n). Runs in batches on
 all cores (or the GPU) with the GIL released; a C-ordered float32 array is used without a copy.)");
-  c.def_property_readonly("config", [](const ModelHolder& h) { return json_to_python(h.model.net->config_json()); },
+  c.def_property_readonly("config", [](const ModelHolder& h) { return json_to_python(model_config(h.model).to_json()); },
                           "The network's tiny-cuda-nn config as a dict.");
   c.def_property_readonly("n_params", [](const ModelHolder& h) { return h.model.n_params(); },
                           "Number of parameters (stored as fp16).");

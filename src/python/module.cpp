@@ -3,6 +3,7 @@
 #include "bindings.h"
 #include "vnr/error.h"
 #include "vnr/threads.h"
+#include "vnr/version.h"
 
 PYBIND11_MODULE(_vnr, m) {
   namespace py = vnr::py;
@@ -14,7 +15,7 @@ PYBIND11_MODULE(_vnr, m) {
       PyErr_SetString(PyExc_ValueError, e.what());
     }
   });
-  m.attr("__version__") = VNR_VERSION;
+  m.attr("__version__") = vnr::version();
   m.def("set_num_threads", &vnr::set_num_threads, pybind11::arg("threads"),
         "Sets the CPU threads vnr uses (0: all cores), as the CLI's --threads does.");
   m.def("num_threads", &vnr::num_threads, "The CPU threads vnr uses.");

@@ -138,10 +138,8 @@ ModelPtr train(const TrainArgs& a) {
                      (long long)s.steps_done());
   auto h = std::make_shared<ModelHolder>();
   h->model = std::move(s.model());
-  // The parameters as a model file stores them (fp16): decode() then equals `vnr decode` of the CLI's
-  // model, and save/load is lossless.
-  Network& net = *h->model.net;
-  net.set_params_half(net.params_half());
+  // decode() then equals `vnr decode` of the CLI's model, and save/load is lossless.
+  round_params_to_stored(h->model);
   set_inference_precision(h->model, parse_precision("auto"));
   session.reset();
   return h;

@@ -12,7 +12,7 @@ int main() {
   vnr::Renderer renderer(volume, vnr::Device::Cpu);
   renderer.set_size(16, 16);
   renderer.render_frame();
-  std::printf("vnr %s: %lld parameters, %dx%d image\n", vnr::version(), (long long)model.net->n_params(),
+  std::printf("vnr %s: %lld parameters, %dx%d image\n", vnr::version(), (long long)model.n_params(),
               renderer.image().width, renderer.image().height);
   return renderer.frames() == 1 ? 0 : 1;
 }

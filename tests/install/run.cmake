@@ -9,10 +9,17 @@ function(run_step)
   endif()
 endfunction()
 run_step(${CMAKE_COMMAND} --install ${VNR_BUILD_DIR} --prefix ${prefix})
-foreach(f bin/vnr share/vnr/plot_rd.py share/vnr/peers_rd.json include/vnr/vnr.h include/vnr/renderer.h include/vnr/volume/volume.h include/vnr/render/renderer.h
+foreach(f bin/vnr share/vnr/plot_rd.py share/vnr/peers_rd.json include/vnr/vnr.h include/vnr/renderer.h
           lib/cmake/vnr/vnrConfig.cmake lib/cmake/vnr/vnrTargets.cmake)
   if(NOT EXISTS ${prefix}/${f} AND NOT EXISTS ${prefix}/lib64/${f})
     message(FATAL_ERROR "not installed: ${prefix}/${f}")
+  endif()
+endforeach()
+# include/vnr only: no header of the layers (src/vnr/<layer>/) is installed.
+file(GLOB layer_dirs LIST_DIRECTORIES true ${prefix}/include/vnr/*)
+foreach(d ${layer_dirs})
+  if(IS_DIRECTORY ${d})
+    message(FATAL_ERROR "an internal header folder was installed: ${d}")
   endif()
 endforeach()
 set(launcher "")

@@ -74,7 +74,7 @@ inline std::unique_ptr<RenderableField> make_model_field(const Model& model, Dev
     if (b) b->net->set_inference_precision(model.net->inference_precision());  // Model::net carries it
     nets.push_back(b ? b->net.get() : nullptr);
   }
-  return std::make_unique<BrickedField>(std::move(nets), model.bricks->layout);
+  return std::make_unique<BrickedField>(std::move(nets), *model.bricks->layout);
 }
 
 // The brick cache of a model in front of its field `source` (which must outlive it), decoded by the

@@ -10,13 +10,6 @@
 namespace vnr {
 
 // Voxels [lo, hi) per axis.
-struct Box3 {
-  Int3 lo, hi;
-  VNR_HD Int3 size() const { return Int3{hi.x - lo.x, hi.y - lo.y, hi.z - lo.z}; }
-  VNR_HD uint64_t voxels() const { return size().count(); }
-  VNR_HD bool empty() const { return hi.x <= lo.x || hi.y <= lo.y || hi.z <= lo.z; }
-  friend bool operator==(const Box3&, const Box3&) = default;
-};
 
 inline Box3 intersect(const Box3& a, const Box3& b) {
   Box3 r;

@@ -1,9 +1,15 @@
-#include "vnr/online/online_loop.h"
+#include "vnr/online.h"
+#include "vnr/fields/fields.h"
+#include "vnr/render/macrocell.h"
+#include "vnr/render/renderer.h"
+#include "vnr/train/session.h"
 #include <algorithm>
 #include <chrono>
 #include "vnr/error.h"
 
 namespace vnr {
+
+std::vector<float> OnlineLoop::loss_history() const { return session_.trainer().losses(); }
 
 namespace {
 double seconds_between(std::chrono::steady_clock::time_point a, std::chrono::steady_clock::time_point b) {

@@ -1,4 +1,8 @@
-#include "vnr/online/preview.h"
+#include "vnr/online.h"
+#include "vnr/fields/fields.h"
+#include "vnr/render/macrocell.h"
+#include "vnr/render/renderer.h"
+#include "vnr/train/session.h"
 #include <unistd.h>
 #include <chrono>
 #include <cmath>

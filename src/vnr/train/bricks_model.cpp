@@ -8,6 +8,10 @@
 
 namespace vnr {
 
+// Out of line, where BrickLayout is complete (vnr/bricks.h only names it).
+BrickedModel::BrickedModel() = default;
+BrickedModel::~BrickedModel() = default;
+
 uint64_t BrickedModel::param_bytes() const {
   uint64_t n = 0;
   for (const auto& b : bricks)
@@ -89,7 +93,7 @@ BrickLayout layout_of(const BrickPlan& plan) {
 }
 
 void bricked_points(const BrickedModel& m, const float* xyz, int64_t n, float* out, const BrickInfer& infer) {
-  m.layout.blend_batch(
+  m.layout->blend_batch(
       n,
       [&](int64_t i, float* x, float* y, float* z) {
         *x = xyz[3 * i];

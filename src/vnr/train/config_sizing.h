@@ -3,6 +3,7 @@
 #include <cstdint>
 #include <string>
 #include "vnr/model_config.h"
+#include "vnr/training_options.h"
 #include "vnr/volume/volume.h"
 
 namespace vnr {
@@ -10,7 +11,6 @@ namespace vnr {
 // Compact storage (train/rate_control.h): sizes the grid so that the parameters at `bits_per_param`
 // bits each (after quantization and entropy coding) take about target_bytes. The exact size is then
 // met by the quantization steps. `note` describes the choice.
-constexpr double kDefaultBitsPerParam = 4.0;
 ModelConfig size_config_for_bytes(const ModelConfig& config, uint64_t target_bytes, double bits_per_param,
                                   std::string* note);
 

@@ -40,19 +40,6 @@ EvalResult evaluate_streamed(const Model& model, const VolumeDesc& desc, double 
 // PSNR of an MSE of normalised values (range 1): 10 log10(1 / mse), 999 for mse <= 0 (error_stats').
 double psnr_of_mse(double mse);
 
-// The sums behind an evaluation of part of a volume: parts evaluated apart (MPI ranks' slices) add up
-// to the evaluation of the whole.
-struct EvalSums {
-  double sse = 0;            // squared errors summed, normalised units
-  int64_t voxels = 0;        // voxels summed
-  double max_abs_error = 0;  // normalised units
-  double ssim_sum = 0;       // SSIM of every 7x7x7 window summed (ssim3d's windows), and their number
-  int64_t ssim_windows = 0;
-  double decode_seconds = 0;
-  void add(const EvalSums& other);
-  // PSNR, MSE, max error (also times value_range, in original units), SSIM (0 without windows).
-  EvalResult result(double value_range) const;
-};
 // The network decoded on a grid of box.size() voxels (a brick's network on its box), its output slices [z_begin, z_end),
 // against the voxels of box in truth, read in z-slabs of about slab_voxels (0: 16 M) as
 // evaluate_streamed reads. Errors are those slices'; with SSIM, the windows whose first slice is among
@@ -68,11 +55,6 @@ EvalSums evaluate_box_slices(const Network& net, const RawVolumeFile& truth, con
 EvalSums evaluate_region(const Model& model, const RawVolumeFile& truth, const Box3& region, bool with_ssim,
                          int64_t slab_voxels = 0);
 
-// A share of a multi-brick model's evaluation against a volume file (desc, at the model's grid; read at
-// random offsets, so uncompressed) normalised with range: evaluate_region over each of regions, added up
-// (an MPI rank's share: BrickShare::regions).
-EvalSums evaluate_regions(const Model& model, const VolumeDesc& desc, ValueRange range, NonFinitePolicy policy,
-                          const std::vector<Box3>& regions, bool with_ssim);
 // PSNR estimated from n_samples voxels drawn uniformly (with replacement; deterministic for a
 // seed), read with RawVolumeFile (uncompressed data only) and decoded as evaluate() decodes them.
 // The 95% interval is the normal interval mean +- 1.96 standard errors of the per-voxel squared

@@ -30,6 +30,10 @@ Model create_model(const ModelConfig& config, Int3 dims, DType source_dtype, dou
   return model;
 }
 
+void round_params_to_stored(Model& m) {
+  if (m.net) m.net->set_params_half(m.net->params_half());
+}
+
 ModelFile model_file_without_params(const Model& m) {
   ModelFile f;
   f.config = m.net->config_json();

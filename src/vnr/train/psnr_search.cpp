@@ -1,4 +1,4 @@
-#include "vnr/train/psnr_search.h"
+#include "vnr/trainer.h"
 #include <cmath>
 #include "vnr/error.h"
 #include "vnr/train/rate_control.h"

@@ -9,6 +9,7 @@
 #include <vector>
 #include "vnr/error.h"
 #include "vnr/json.h"
+#include "vnr/training_options.h"
 #include "vnr/nn/network.h"
 #include "vnr/nn/param_codec.h"
 #include "vnr/train/evaluate.h"
@@ -18,23 +19,6 @@
 namespace vnr {
 
 class TrainingSession;
-
-struct CompactOptions {
-  uint64_t target_bytes = 0;   // > 0: the model file's size (aimed just under; within -5 %..+5 %)
-  double target_psnr = 0;      // > 0: the coarsest quantization whose held-back PSNR reaches this
-  double qat_fraction = 0.15;  // last part of the run trained on quantized parameters
-  // Rate-aware training during that part: the grid's bits (rate_term.h) weighted by rate_weight times
-  // the high-rate slope 2 ln 2 * loss / parameters join the loss (0: distortion alone).
-  double rate_weight = 0;
-  // Learned steps during that part (train/step_learning.h): each grid level's step trains with the
-  // parameters, the bits' weight following the budget; the CPU trainer only (off: it did not pay).
-  bool learn_steps = false;
-  int64_t probe_samples = int64_t(1) << 17;  // held-back samples for the rate-distortion choices
-  // > target_bytes: the file's size when residuals (train/residuals.h) take what the network's file leaves
-  // of it (--residuals auto: a network of target_bytes, the rest spent on a bound; docs/COMPRESSION.md).
-  uint64_t file_bytes = 0;
-  bool enabled() const { return target_bytes > 0 || target_psnr > 0; }
-};
 
 // Held-back samples from the training sampler, drawn under a seed that training never uses.
 struct ProbeSet {

@@ -2,6 +2,7 @@
 // Error-bound residuals (docs/COMPRESSION.md, "Guaranteed error bound"): the network is the predictor,
 // and the quantised difference between the volume and a deterministic evaluation of the network is
 // stored beside it, so that every decoded voxel lies within a bound of the original (SZ3's promise).
+#include "vnr/training_options.h"
 #include <cstdint>
 #include <functional>
 #include <memory>
@@ -17,11 +18,6 @@ namespace vnr {
 
 // What the user asked for: a bound in data units (max_error) or as a fraction of the value range
 // (max_rel_error); at most one of them positive. Neither: no residuals.
-struct ErrorBoundRequest {
-  double max_error = 0;
-  double max_rel_error = 0;
-  bool active() const { return max_error > 0 || max_rel_error > 0; }
-};
 
 // The bound in normalised units for a volume of range [lo, hi] and source dtype. For integer dtypes a
 // bound E >= 0.5 data units is lowered to floor(E) + 0.5, so that the decoded values rounded back to

@@ -34,6 +34,7 @@
 #include <string>
 #include <vector>
 #include "vnr/device.h"
+#include "vnr/series.h"
 #include "vnr/json.h"
 #include "vnr/cuda/cuda.h"
 #include "vnr/train/model_io.h"
@@ -46,58 +47,8 @@
 
 namespace vnr {
 
-// Parses a timestep selection for a series of n_timesteps: "all", "A-B" (inclusive), "A,B,C", or a
-// comma list mixing both ("0-2,5"). Timesteps come back in the order written. Errors: empty or
-// malformed text, a descending range, an index outside [0, n_timesteps), a timestep listed twice.
-std::vector<int> parse_timestep_selection(const std::string& spec, int n_timesteps);
-
-// The model file name of timestep t inside an output directory: "t0000.vnr" (zero-padded to 4
-// digits, more if t >= 10000). t is the series' own timestep index, not the position in the selection.
-std::string timestep_model_name(int timestep, const std::string& extension = ".vnr");
-
-// Loads timestep t (normalised, as load_volume does). Called once per timestep, in order of the
-// selection, only when that timestep is needed; may throw vnr::Error. Every frame must have the
-// same dims.
-using FrameLoader = std::function<Volume(int timestep)>;
-
-struct SeriesHooks {
-  std::function<bool()> stop;                                          // polled after every step: true ends the run (Ctrl-C)
-  std::function<void(int timestep, int64_t step, float loss)> on_step;  // step counts from 1 within the timestep / window
-  std::function<void(int timestep, double load_seconds)> on_loaded;    // a timestep's volume is in memory
-};
-
 // ---------------------------------------------------------------------------------------------
 // One model per timestep, warm-started.
-
-struct SeriesOptions {
-  TrainOptions train;        // batch; the i-th timestep of the selection samples with seed train.seed + i
-  Device device = Device::Cpu;  // the trainer's (Cuda: each timestep's volume is copied to the GPU)
-  cuda::MlpPath mlp = cuda::MlpPath::Auto;
-  int64_t steps = 1000;      // per timestep; < 0 = no step limit (then `seconds` must be > 0)
-  int64_t warm_steps = -1;   // per warm-started timestep (-1: `steps`)
-  double seconds = 0;        // wall-clock training limit per timestep (0: none)
-  bool warm_start = true;    // false: every timestep restarts from init_params(init_seed) (a cold baseline)
-  uint32_t init_seed = 1337; // only with warm_start = false
-  int macrocell_size = 16;   // online macro-cells recorded per timestep's own training (0: none)
-  bool ssim = false;         // also compute the 3-D SSIM at the end of each timestep
-  CompactOptions compact;    // each timestep's model quantized for these targets (after training, no QAT)
-  ErrorBoundRequest error_bound;  // each timestep's model carries the residuals that guarantee it
-  double cooldown = SessionOptions{}.cooldown;  // of each timestep's budget (train/session.h)
-};
-
-struct TimestepResult {
-  int timestep = 0;
-  bool warm_started = false;
-  int64_t steps = 0;
-  double seconds = 0;       // training steps only
-  double load_seconds = 0;
-  float final_loss = 0;
-  EvalResult eval;          // the whole volume, at voxel centres
-  double lo = 0, hi = 1;    // the timestep's value range (original units)
-  bool interrupted = false; // hooks.stop ended this timestep (and the run)
-  std::vector<float> loss_history;
-  Json compact, error_bound;  // the summaries of SeriesOptions' compact storage and error bound (null: off)
-};
 
 // Trains `model` through the selected timesteps. On entry model.net holds the first timestep's
 // starting parameters. After each timestep, model.{dims, source_dtype, lo, hi, training,
@@ -144,55 +95,6 @@ private:
 // `config` with the ExponentialDecay wrapper removed (a constant learning rate) and, when
 // learning_rate > 0, Adam's learning rate replaced. The result is in canonical form.
 ModelConfig fixed_learning_rate_config(ModelConfig config, float learning_rate = 0);
-
-struct ContinuousOptions {
-  TrainOptions train;                 // batch and sampling seed (one stream over the whole run)
-  Device device = Device::Cpu;        // the trainer's (Cuda: the host sampler of the current timestep feeds it)
-  cuda::MlpPath mlp = cuda::MlpPath::Auto;
-  int64_t switch_every = 0;           // steps per timestep (> 0)
-  float learning_rate = 0;            // 0: the config's (Adam's base) learning rate; never decayed
-  int64_t probe_voxels = 1 << 16;     // |P|
-  int64_t probe_every = 10;           // steps between probes
-  uint64_t probe_seed = 0x5eed;       // which voxels P holds
-  double recovery_tolerance_db = 0;   // recovered when PSNR >= psnr_before - tolerance
-  int macrocell_size = 16;            // online macro-cells from each window's own samples (0: none)
-  bool ssim = false;                  // 3-D SSIM in the end-of-window evaluation
-};
-
-struct ProbePoint {
-  int64_t step = 0;  // global steps done when probed
-  int timestep = 0;  // the timestep the probe compared against (the current target)
-  double psnr = 0;
-};
-
-struct WindowResult {
-  int timestep = 0;
-  int64_t first_step = 0;   // global steps done before the window
-  int64_t steps = 0;        // steps trained in the window
-  double seconds = 0;       // training steps only
-  double load_seconds = 0;
-  float final_loss = 0;
-  EvalResult eval;          // whole volume, after the window's last step
-  double lo = 0, hi = 1;
-  double psnr_end = 0;      // probe PSNR after the window's last step
-  // The switch into this window (all windows but the first):
-  bool has_switch = false;
-  int from_timestep = -1;
-  double psnr_before = 0, psnr_after = 0;
-  int64_t recovery_steps = -1;   // -1: not recovered within the window
-  double recovery_seconds = 0;   // valid when recovery_steps >= 0
-  bool interrupted = false;
-};
-
-struct ContinuousResult {
-  std::vector<WindowResult> windows;
-  std::vector<ProbePoint> probes;
-  std::vector<float> loss_history;           // every step of the run
-  std::vector<float> learning_rate_history;  // the learning rate Adam used at every step
-  float learning_rate = 0;                   // the fixed rate
-  int64_t probe_voxels = 0;                  // |P| actually used
-  ModelConfig config;                        // the fixed-rate config the network was trained with
-};
 
 // The recovery rule of the header comment on the probes of one window: `probes` holds the probes of
 // the new timestep, in step order (probes before `switch_step`, the global step of the switch, are

@@ -1,4 +1,6 @@
-#include "vnr/train/series_run.h"
+#include "vnr/series.h"
+#include "vnr/train/series.h"
+#include "vnr/train/session.h"
 #include <chrono>
 #include <filesystem>
 #include <memory>

@@ -33,6 +33,11 @@ void TrainingSession::check() const {
   if (opts_.checkpoint_every > 0 && opts_.output.empty()) fail("checkpoints need an output path");
 }
 
+std::optional<double> TrainingSession::io_wait_seconds() const {
+  if (!data_ || !data_->out_of_core) return std::nullopt;
+  return data_->out_of_core->io_wait_seconds();
+}
+
 TrainingSession::~TrainingSession() = default;
 
 void TrainingSession::pause() { paused_.store(true); }
@@ -219,7 +224,7 @@ Json attach_error_bound(Model& model, const Volume& volume, const ErrorBoundRequ
   const double b = normalised_error_bound(request, volume.lo, volume.hi, model.source_dtype);
   // Residuals are taken against the network as the file stores it (fp16 parameters), not the fp32
   // master copy, so that a loaded model decodes to the same predictions.
-  model.net->set_params_half(model.net->params_half());
+  round_params_to_stored(model);
   model.residuals = smallest_residuals(*model.net, volume.data.data(), volume.dims, b);
   Json j = attached_residuals_summary(*model.residuals, volume);
   j["seconds"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -228,7 +233,7 @@ Json attach_error_bound(Model& model, const Volume& volume, const ErrorBoundRequ
 
 Json attach_residuals_for_budget(Model& model, const Volume& volume, uint64_t file_bytes) {
   const auto t0 = std::chrono::steady_clock::now();
-  model.net->set_params_half(model.net->params_half());  // as attach_error_bound
+  round_params_to_stored(model);  // as attach_error_bound
   model.residuals.reset();
   const uint64_t network_bytes = model_file_bytes(model);
   // Aimed under the file's size as the network's quantization is (rate_control.cpp), less the block's

@@ -4,6 +4,7 @@
 #include <memory>
 #include <string>
 #include <vector>
+#include "vnr/training_options.h"
 #include "vnr/core/value_range_grid.h"
 #include "vnr/nn/network.h"
 #include "vnr/nn/optimizer.h"
@@ -11,25 +12,6 @@
 #include "vnr/train/trainer_backend.h"
 
 namespace vnr {
-
-struct TrainOptions {
-  int64_t batch = 65536;  // samples per step, a multiple of kChunk (256)
-  uint32_t seed = 1337;   // initialisation and sampling
-  // BF16: the MLP's forward and backward with bf16 operands and fp32 sums (Network::
-  // mlp_forward_train_bf16; needs Network::bf16_training_supported()). The loss, the grid, the
-  // master weights and Adam stay fp32.
-  Precision precision = Precision::FP32;
-  // Grids whose gradient takes at most this many bytes are scattered by every thread into its own
-  // copy, chunk by chunk while the chunk's data is in cache, and the copies summed (faster than a
-  // separate scatter pass for small grids); larger grids are scattered after the chunks,
-  // each level by one thread (no private copies of tens of MiB).
-  uint64_t private_grid_grad_max_bytes = uint64_t(1) << 20;
-  // The step's last chunks go one at a time to whichever thread is free, so a core slowed by another
-  // job does not hold the step up (each such chunk keeps its own MLP gradient, and its grid gradient
-  // is scattered after the loop, so results still depend only on the thread count). 0: every chunk
-  // is dealt round-robin. Not used on one thread.
-  int64_t shared_tail_chunks = 64;
-};
 
 // --precision of training: "fp32", "bf16" (an error where Network::bf16_training_supported() is
 // false) or "auto" = fp32 (bf16 training lost up to 0.2 dB on some volumes; docs/benchmarks.md).

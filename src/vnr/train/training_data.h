@@ -8,6 +8,7 @@
 #include <optional>
 #include <string>
 #include "vnr/model_config.h"
+#include "vnr/training_options.h"
 #include "vnr/train/model_io.h"
 #include "vnr/train/sampler.h"
 #include "vnr/train/streaming_samplers.h"
@@ -16,25 +17,6 @@
 #include "vnr/volume/volume.h"
 
 namespace vnr {
-
-// One line for people (no trailing newline); null = say nothing.
-using MessageFn = std::function<void(const std::string& line)>;
-
-struct TrainingDataOptions {
-  std::string sampler;             // incore | outofcore | mmap; "" = incore when it fits memory_budget
-  uint64_t memory_budget = 0;      // bytes for the training data (> 0)
-  int64_t blocks = 0, refresh = 0; // outofcore: 0 = defaults scaled to the budget
-  std::optional<Int3> block_dims;  // outofcore: interior voxels of a block
-  std::string grid_lr_scale = "1";  // outofcore: "auto" or a positive factor (scale_grid_learning_rate)
-  uint32_t seed = 1337;            // outofcore: which blocks are loaded
-  int64_t steps = -1;              // the planned steps (> 0: warn when the buffer cannot cover the volume)
-  bool show_progress = false;      // progress bars on stderr for the value-range scan and the buffer fill
-  // outofcore: sample only this box of the file as if it were the volume (a brick's trained box; dims,
-  // coordinates and source bytes are the box's), normalised with `range` (the whole volume's, known
-  // beforehand: no scan). Empty: the whole volume.
-  Box3 region;
-  std::optional<ValueRange> range;
-};
 
 // Where the training samples come from, and the volume when it is in memory.
 struct TrainingData {
