@@ -333,6 +333,7 @@ TEST(TrainingSession, OpenFinishAndReportKeys) {
   ASSERT_FALSE(lines.empty());
   EXPECT_EQ(lines[0].rfind("volume " + s.volume + ": 16x12x10 float32", 0), 0u) << lines[0];
   EXPECT_EQ(session->trainer().device(), Device::Cpu);
+  EXPECT_FALSE(session->io_wait_seconds().has_value());  // in core: no reads to wait for
   session->run(5);
   const TrainingResult r = session->finish({.ssim = false});
   EXPECT_EQ(r.steps, 5);
@@ -350,6 +351,16 @@ TEST(TrainingSession, OpenFinishAndReportKeys) {
   EXPECT_EQ(m.training["steps"].get<int64_t>(), 5);
   EXPECT_FALSE(m.training["interrupted"].get<bool>());
   EXPECT_EQ(m.training["psnr"].get<double>(), r.psnr);
+
+  // Out of core, the session reports the sampler's waits for reads, as the report's out_of_core does.
+  s.data.sampler = "outofcore";
+  s.session.output = d + "/ooc.vnr";
+  auto ooc = open_training_session(s);
+  ooc->run(3);
+  ASSERT_TRUE(ooc->io_wait_seconds().has_value());
+  EXPECT_GE(*ooc->io_wait_seconds(), 0.0);
+  const TrainingResult ro = ooc->finish({.evaluate = false});
+  EXPECT_EQ(ro.report["out_of_core"]["io_wait_seconds"].get<double>(), *ooc->io_wait_seconds());
 }
 
 TEST(TrainingSession, GpuSessionUsesTheSameTrainerInterface) {

@@ -45,6 +45,13 @@ string(SUBSTRING "${readme}" ${begin} ${length} sample)
 file(WRITE ${consumer}/readme_sample.cpp
      "// README.md's Library API sample, as printed.\n#include <cstdio>\n#include \"vnr/vnr.h\"\n\n"
      "void readme_sample() {\n${sample}}\n")
+# Every installed public header alone in a translation unit of its own: each is self-contained.
+file(GLOB public_headers RELATIVE ${prefix}/include ${prefix}/include/vnr/*.h)
+foreach(h ${public_headers})
+  string(REPLACE "/" "_" name "${h}")
+  string(REPLACE ".h" "" name "${name}")
+  file(WRITE ${consumer}/headers/${name}.cpp "#include \"${h}\"\n")
+endforeach()
 run_step(${CMAKE_COMMAND} -S ${consumer} -B ${VNR_WORK_DIR}/build -G Ninja -DCMAKE_BUILD_TYPE=Release
          -DCMAKE_CXX_COMPILER=${VNR_CXX_COMPILER} ${launcher} -DCMAKE_PREFIX_PATH=${prefix})
 run_step(${CMAKE_COMMAND} --build ${VNR_WORK_DIR}/build)
