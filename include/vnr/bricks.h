@@ -80,6 +80,8 @@ struct BrickedModel {
 // Opens MODEL/ (only the bricks in `only` when given: a rank's bricks and their neighbours). A missing or
 // damaged brick file is one error naming the brick and suggesting --resume.
 std::shared_ptr<BrickedModel> load_bricked_model(const std::string& dir, const std::vector<int>* only = nullptr);
+// Every loaded brick's CPU inference arithmetic, as set_inference_precision(Model&) sets a model's.
+void set_inference_precision(BrickedModel& m, Precision precision);
 // The Model load_model(dir) returns: dims, dtype, range, training summary and merged macro-cells of the
 // whole volume, bricks = m, net = a network of the bricks' config (for its description and precision).
 Model model_of_bricks(std::shared_ptr<BrickedModel> m);

@@ -26,14 +26,13 @@ double seconds_since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
 
-// This rank's share (BrickShare, train/bricks.h), its networks at the asked precision.
+// This rank's share (BrickShare, vnr/bricks.h), its networks at the asked precision.
 BrickShare open_rank_share(const std::string& dir, Int3 dims, int reach, const std::string& precision) {
   if (!is_bricked_model_dir(dir))
     fail("'{}' is not a multi-brick model directory (manifest.json): under mpirun, decode, eval and render run "
          "over the bricks of a model trained with --bricks; run a single model without mpirun", dir);
   BrickShare share = open_brick_share(dir, dims, reach, mpi::rank(), mpi::size());
-  for (std::optional<Model>& b : share.model->bricks)
-    if (b) set_inference_precision(*b, parse_precision(precision));
+  set_inference_precision(*share.model, parse_precision(precision));
   return share;
 }
 

@@ -62,6 +62,11 @@ std::shared_ptr<BrickedModel> load_bricked_model(const std::string& dir, const s
   return m;
 }
 
+void set_inference_precision(BrickedModel& m, Precision precision) {
+  for (std::optional<Model>& b : m.bricks)
+    if (b && b->net) b->net->set_inference_precision(precision);
+}
+
 Model model_of_bricks(std::shared_ptr<BrickedModel> bm) {
   Model m;
   for (const auto& b : bm->bricks)
