@@ -3,7 +3,7 @@
 #include <string>
 #include "fuzz_support.h"
 #include "vnr/json.h"
-#include "vnr/nn/config.h"
+#include "vnr/model_config.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   using namespace vnr::fuzz;
