@@ -5,7 +5,7 @@
 #include "vnr/bricks.h"
 #include "vnr/error.h"
 #include "vnr/core/parallel.h"
-#include "vnr/fields/bricked_field.h"
+#include "vnr/fields/fields.h"
 #include "vnr/render/integrators.h"
 
 namespace vnr {
@@ -28,8 +28,10 @@ BrickSegment render_brick_segment(Renderer& r, int index) {
   if (r.options_.mode != RenderMode::RayMarch)
     fail("sort-last compositing covers ray marching without shadows (--mode raymarch), not {}",
          render_mode_name(r.options_.mode));
-  const auto* field = dynamic_cast<const BrickedField*>(r.field_.get());  // always one for a multi-brick model
-  if (!field) fail("render_brick_segment: the renderer's field is not a multi-brick field");
+  // The model's own field (not the brick cache): a multi-brick model's blended bricks on the CPU.
+  if (r.device() != Device::Cpu)
+    fail("render_brick_segment renders on the CPU (the renderer is on {})", device_name(r.device()));
+  const RenderableField* field = r.field_.get();
   const RenderParams p = make_render_params(m->dims, r.box_, r.macrocells(), r.tf_, r.camera_, r.options_);
   const Box3 owned = plan.bricks[size_t(index)].owned;
   BrickSegment seg;
