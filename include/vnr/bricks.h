@@ -208,10 +208,10 @@ void decode_bricked_region(const BrickedModel& m, Int3 out_dims, const Box3& reg
                            const BrickInfer& infer = {});
 
 // Distributed decode and evaluation: a rank opens its share (open_brick_share: contiguous_bricks(plan,
-// rank, n) and their neighbours loaded), decodes
-// brick_output_region of each, and evaluate_region(model, file, that region) gives its share of the
-// evaluation (errors, and with SSIM the windows starting in it); the ranks' EvalSums add up to the
-// single-process evaluation. The rank needs its bricks and those within 7 voxels loaded.
+// rank, n) and their neighbours loaded), decodes brick_output_region of each (decode_bricked_region), and
+// evaluate_regions(model, volume, ..., share.regions) gives its share of the evaluation (errors, and with
+// SSIM the windows starting in it); the ranks' EvalSums add up to the single-process evaluation. The rank
+// needs its bricks and those within 7 voxels loaded.
 
 // Sort-last rendering (ray marching without shadows): brick `index`'s part of every ray of the renderer's
 // current settings (frame 0), as premultiplied RGBA without background, and per pixel the ray

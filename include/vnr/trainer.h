@@ -50,7 +50,6 @@ struct TrainingData;  // train/training_data.h: the sampler and the volume or fi
 //   - finish(): the final evaluation, the model saved and the record of `vnr train --report`.
 // GPU steps are enqueued in groups between synchronisations, the group doubled while it takes under
 // 0.1 s, so callbacks see every group's last step.
-
 class TrainingSession {
 public:
   // A session over `model` (its network is the trainer's), which must outlive the session.
@@ -198,7 +197,6 @@ std::unique_ptr<TrainingSession> open_training_session(const TrainingSetup& setu
 // model that reaches P. Candidates are compact files of volume bytes / R for R = 1024, 512, ..., 4; held-back
 // PSNR grows with the model at equal training, so bisection finds the smallest that reaches P after
 // about log2(9) ≈ 4 trainings, each of the full `steps` (or `seconds`).
-
 struct PsnrSearch {
   std::unique_ptr<TrainingSession> session;  // the chosen model, quantized: finish() evaluates and saves it
   bool reached = false;                      // its held-back PSNR reaches the target
