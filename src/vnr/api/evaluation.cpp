@@ -127,9 +127,8 @@ FileEvaluation evaluate_model_file(const Model& model, const std::string& volume
                                    const FileEvalProgress& progress) {
   if (!model.net) fail("the model has no network");
   if (o.samples < 0) fail("the number of sampled voxels must be positive, got {}", o.samples);
-  if (o.device == Device::Cuda && !model.bricks) cuda::check_supported(*model.net);  // before reading the volume
   FileEvaluation r;
-  r.device = model.bricks ? Device::Cpu : o.device;  // multi-brick models decode on the CPU
+  r.device = evaluation_device(model, o.device);  // before reading the volume
   const VolumeDesc desc = describe_volume_file(volume_path, o.open);
   const Int3 dims = desc.dims;
   if (!(dims == model.dims))

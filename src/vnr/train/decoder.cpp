@@ -23,6 +23,12 @@ Decoder::Decoder(const Model& model, Device device, cuda::MlpPath mlp)
 }
 Decoder::~Decoder() = default;
 
+Device evaluation_device(const Model& model, Device asked) {
+  if (model.bricks) return Device::Cpu;
+  if (asked == Device::Cuda) cuda::check_supported(*model.net);
+  return asked;
+}
+
 BrickInfer Decoder::brick_infer() { return brick_gpus_ ? brick_gpus_->fn() : BrickInfer{}; }
 
 void Decoder::slices(Int3 dims, int64_t z0, int64_t z1, float* out) {

@@ -51,6 +51,10 @@ private:
   std::unique_ptr<BrickGpuNetworks> brick_gpus_;
 };
 
+// The device a file evaluation of `model` decodes on when `asked` was asked for: a multi-brick model's on
+// the CPU; a network the GPU cannot run fails here, before anything is read.
+Device evaluation_device(const Model& model, Device asked);
+
 // Decoder(net, Device::Cpu).slices / .voxels.
 void decode_slices(const Network& net, Int3 dims, int64_t z0, int64_t z1, float* out);
 void decode_voxels(const Network& net, Int3 dims, const int64_t* voxel_index, int64_t n, float* out);
