@@ -135,7 +135,7 @@ public:
   Vec3f box() const { return box_; }     // world size of the volume box (voxel units)
   const RenderableField& field() const { return cached_ ? *cached_ : *field_; }  // the cache when on
   // What field() samples: "grid", "network" or "cache" (reports, fastest_render_strategy).
-  std::string field_kind() const;
+  const char* field_kind() const;
   const Model* model() const { return model_; }
 
   // Renders the next frame, adds it to the accumulation and returns the accumulated image (the mean of

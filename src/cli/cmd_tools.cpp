@@ -251,7 +251,7 @@ void add_info(CLI::App& app) {
     std::printf("parameters: %llu (%s in fp16); file %s; compression ratio %s\n",
                 (unsigned long long)j["n_params"].get<uint64_t>(), human_bytes(2.0 * j["n_params"].get<double>()).c_str(),
                 human_bytes(double(bytes)).c_str(),
-                format_ratio(compression_ratio(m, bytes)).c_str());
+                format_ratio(j["compression_ratio"].get<double>()).c_str());
     if (const Json& mc = j["macrocells"]; !mc.is_null())
       std::printf("macro-cells: %lldx%lldx%lld cells of %d voxels (%lld with a value range), recorded while training\n",
                   mc["cells"][0].get<long long>(), mc["cells"][1].get<long long>(), mc["cells"][2].get<long long>(),

@@ -69,11 +69,9 @@ inline std::unique_ptr<RenderableField> make_model_field(const Model& model, Dev
     if (const std::string why = bricked_gpu_render_reason(model); !why.empty()) fail("{}", why);
     return std::make_unique<DecodedModelField>(model, model.dims, "network");
   }
+  set_inference_precision(*model.bricks, model.net->inference_precision());  // Model::net carries it
   std::vector<const Network*> nets;
-  for (auto& b : model.bricks->bricks) {
-    if (b) b->net->set_inference_precision(model.net->inference_precision());  // Model::net carries it
-    nets.push_back(b ? b->net.get() : nullptr);
-  }
+  for (auto& b : model.bricks->bricks) nets.push_back(b ? b->net.get() : nullptr);
   return std::make_unique<BrickedField>(std::move(nets), *model.bricks->layout);
 }
 

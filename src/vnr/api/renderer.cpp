@@ -113,7 +113,7 @@ Renderer::Renderer(const RenderInput& input, Device device)
 }
 Renderer::~Renderer() = default;
 
-std::string Renderer::field_kind() const { return field().kind(); }
+const char* Renderer::field_kind() const { return field().kind(); }
 
 RenderStrategy Renderer::automatic_strategy() const {
   return fastest_render_strategy(field_kind(), device_ == Device::Cuda, options_.mode);

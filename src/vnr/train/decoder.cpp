@@ -14,9 +14,7 @@ Decoder::Decoder(const Model& model, Device device, cuda::MlpPath mlp)
       residuals_(model.residuals ? &*model.residuals : nullptr),
       device_(device),
       bricks_(model.bricks.get()) {
-  if (bricks_)
-    for (const std::optional<Model>& b : bricks_->bricks)
-      if (b) b->net->set_inference_precision(model.net->inference_precision());
+  if (bricks_) set_inference_precision(*model.bricks, model.net->inference_precision());
   if (device_ != Device::Cuda) return;
   if (bricks_) brick_gpus_ = std::make_unique<BrickGpuNetworks>(*bricks_, mlp);
   else gpu_ = std::make_unique<cuda::GpuNetwork>(net_, mlp);
