@@ -14,6 +14,7 @@
 #include "vnr/fields/bricked_field.h"
 #include "vnr/train/bricks.h"
 #include "vnr/train/evaluate.h"
+#include "vnr/train/model_form.h"
 #include "vnr/viewer.h"
 #include "vnr/volume/raw_access.h"
 
@@ -386,6 +387,19 @@ TEST(BrickModel, EveryPathOpensTheDirectoryLikeOneModel) {
   const Model m = load_model(tmp / "m");
   ASSERT_TRUE(m.bricks);
   EXPECT_EQ(m.dims, dims);
+  // One interface (ModelForm): what differs by kind is answered by the bricks' form, and a single network
+  // (a brick's own file) by the network's.
+  EXPECT_EQ(&form_of(m), &bricks_form());
+  const Model brick0 = load_model(tmp / "m/brick_00000.vnr");
+  EXPECT_EQ(&form_of(brick0), &network_form());
+  uint64_t summed = 0;
+  for (const auto& b : m.bricks->bricks) summed += b->net->n_params();
+  EXPECT_EQ(m.n_params(), summed);
+  EXPECT_FALSE(m.trainable());
+  EXPECT_TRUE(brick0.trainable());
+  EXPECT_EQ(evaluation_device(m, Device::Cuda), Device::Cpu);  // multi-brick evaluations run on the CPU
+  test::expect_error([&] { save_model(tmp / "one.vnr", m); }, {"a multi-brick model is a directory of brick files"});
+  EXPECT_FALSE(file_exists(tmp / "one.vnr"));
   ModelQuery q(m, Device::Cpu);
   // Points at voxel centres = the slab decode = the region decode, at another resolution too.
   for (Int3 d : {dims, Int3{13, 21, 7}}) {

@@ -54,7 +54,7 @@ struct Model {
   // model is trained brick by brick).
   uint64_t n_params() const;
   uint64_t param_bytes() const { return n_params() * 2; }
-  bool trainable() const { return bricks == nullptr; }
+  bool trainable() const;
 };
 
 // Writes .vnr, or instantvnr's BSON when the path ends in .bson or .json (instantvnr names its BSON files

@@ -8,29 +8,13 @@
 #include "vnr/units.h"
 #include "vnr/train/bricks.h"
 #include "vnr/train/decoder.h"
+#include "vnr/train/model_form.h"
 
 namespace vnr {
 
-// Why `what` cannot render on the GPU from its decode at dims (as float32), empty when it can: the decode
-// must fit a quarter of the GPU's free memory and the host's memory.
-inline std::string gpu_decode_reason(const std::string& what, Int3 dims) {
-  const double bytes = double(dims.count()) * sizeof(float);
-  if (bytes > double(cuda::free_memory_bytes()) / 4)
-    return fmt::format("{} renders on the GPU from its decode ({}), more than a quarter of the GPU's free memory ({})",
-                       what, human_bytes(bytes), human_bytes(double(cuda::free_memory_bytes())));
-  if (bytes > double(available_memory_bytes()))
-    return fmt::format("{} renders on the GPU from its decode ({}), more than the memory available", what,
-                       human_bytes(bytes));
-  return {};
-}
-inline std::string bricked_gpu_render_reason(const Model& model) {
-  return gpu_decode_reason("a multi-brick model", model.dims);
-}
 // Why the model cannot render on the GPU ("" when it can): a network the GPU kernels do not support, or
 // a multi-brick model whose decode does not fit.
-inline std::string gpu_render_reason(const Model& model) {
-  return model.bricks ? bricked_gpu_render_reason(model) : cuda::unsupported_reason(*model.net);
-}
+inline std::string gpu_render_reason(const Model& model) { return form_of(model).gpu_render_reason(model); }
 
 // A model drawn on the GPU from its decode: decoded once at dims on the GPU (a multi-brick model's bricks
 // blended as on the CPU; residuals where they apply: Decoder), then ray marched as a grid, trilinear
@@ -64,15 +48,24 @@ private:
 // The field of a model for a renderer on `device`: its network, or a multi-brick model's blended bricks
 // (on the GPU: their decode).
 inline std::unique_ptr<RenderableField> make_model_field(const Model& model, Device device) {
-  if (!model.bricks) return std::make_unique<NetworkField>(*model.net, model.dims);
-  if (device == Device::Cuda) {
-    if (const std::string why = bricked_gpu_render_reason(model); !why.empty()) fail("{}", why);
-    return std::make_unique<DecodedModelField>(model, model.dims, "network");
-  }
-  set_inference_precision(*model.bricks, model.net->inference_precision());  // Model::net carries it
-  std::vector<const Network*> nets;
-  for (auto& b : model.bricks->bricks) nets.push_back(b ? b->net.get() : nullptr);
-  return std::make_unique<BrickedField>(std::move(nets), *model.bricks->layout);
+  struct Maker final : ModelFieldMaker {
+    Device device;
+    std::unique_ptr<RenderableField> field;
+    void network(const Model& m) override { field = std::make_unique<NetworkField>(*m.net, m.dims); }
+    void bricks(const Model& m, BrickedModel& b) override {
+      if (device == Device::Cuda) {
+        if (const std::string why = gpu_render_reason(m); !why.empty()) fail("{}", why);
+        field = std::make_unique<DecodedModelField>(m, m.dims, "network");
+        return;
+      }
+      std::vector<const Network*> nets;
+      for (auto& brick : b.bricks) nets.push_back(brick ? brick->net.get() : nullptr);
+      field = std::make_unique<BrickedField>(std::move(nets), *b.layout);
+    }
+  } maker;
+  maker.device = device;
+  form_of(model).make_field(model, maker);
+  return std::move(maker.field);
 }
 
 // The brick cache of a model in front of its field `source` (which must outlive it), decoded by the

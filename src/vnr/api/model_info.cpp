@@ -1,36 +1,11 @@
 // describe_model: what `vnr info` shows of a model (docs/CLI.md), for a single network and a multi-brick
 // model alike.
 #include "vnr/model.h"
-#include "vnr/train/bricks.h"
+#include "vnr/bricks.h"
+#include "vnr/train/model_form.h"
 #include "vnr/train/model_io.h"
 
 namespace vnr {
-
-namespace {
-
-// The bricks' parameters and entries (what `vnr info` adds for a model directory).
-void add_brick_info(const BrickedModel& bm, Json& j) {
-  uint64_t params = 0, grid = 0, mlp = 0;
-  Json bricks = Json::array();
-  for (const BrickSpec& b : bm.plan.bricks) {
-    const Network& n = *bm.bricks[size_t(b.index)]->net;
-    params += n.n_params();
-    grid += n.grid_params();
-    mlp += n.mlp().n_params;
-    Json e = brick_record(b);
-    e["n_params"] = n.n_params();
-    e["psnr"] = bm.bricks[size_t(b.index)]->training["brick"].value("psnr", 0.0);
-    bricks.push_back(e);
-  }
-  j["format"] = "vnr-bricks";
-  j["n_params"] = params;
-  j["n_grid_params"] = grid;
-  j["n_mlp_params"] = mlp;
-  j["bricks"] = {{"grid", {bm.plan.grid.x, bm.plan.grid.y, bm.plan.grid.z}}, {"ghost", bm.plan.ghost},
-                 {"seed", bm.plan.seed}, {"count", bm.plan.bricks.size()}, {"list", bricks}};
-}
-
-}  // namespace
 
 Json describe_model(const Model& m, const std::string& path) {
   const Network& n = *m.net;
@@ -64,7 +39,7 @@ Json describe_model(const Model& m, const std::string& path) {
                         {"residual_bytes", r.encoded ? r.encoded->bytes.size() : 0},
                         {"codec", r.encoded ? r.encoded->meta.value("codec", "") : ""}};
   }
-  if (m.bricks) add_brick_info(*m.bricks, j);
+  form_of(m).describe(m, j);  // a multi-brick model: its bricks
   return j;
 }
 

@@ -5,6 +5,7 @@
 #include "vnr/error.h"
 #include "vnr/fileio.h"
 #include "vnr/train/bricks.h"
+#include "vnr/train/model_form.h"
 
 namespace vnr {
 
@@ -18,8 +19,6 @@ uint64_t BrickedModel::param_bytes() const {
     if (b) n += b->param_bytes();
   return n;
 }
-
-uint64_t Model::n_params() const { return bricks ? bricks->param_bytes() / 2 : net->n_params(); }
 
 uint64_t BrickedModel::file_bytes() const { return model_file_bytes(dir); }
 
@@ -211,6 +210,77 @@ std::optional<ValueRangeGrid> merged_macrocells(const BrickedModel& m) {
         }
   }
   return g;
+}
+
+namespace {
+
+// A multi-brick model's evaluation: its bricks blended, each brick's network on the device.
+class BricksEvaluator final : public ModelEvaluator {
+public:
+  BricksEvaluator(const Model& model, Device device, cuda::MlpPath mlp) : m_(*model.bricks) {
+    set_inference_precision(*model.bricks, model.net->inference_precision());  // Model::net carries it
+    if (device == Device::Cuda) gpus_ = std::make_unique<BrickGpuNetworks>(m_, mlp);
+  }
+  void points(const float* xyz, int64_t n, float* out) override { bricked_points(m_, xyz, n, out, infer()); }
+  void slices(Int3 dims, int64_t z0, int64_t z1, float* out) override {
+    decode_bricked_region(m_, dims, Box3{{0, 0, z0}, {dims.x, dims.y, z1}}, out, infer());
+  }
+
+private:
+  BrickInfer infer() { return gpus_ ? gpus_->fn() : BrickInfer{}; }
+  const BrickedModel& m_;
+  std::unique_ptr<BrickGpuNetworks> gpus_;
+};
+
+// The bricks' parameters and entries (what `vnr info` adds for a model directory).
+void describe_bricks(const BrickedModel& bm, Json& j) {
+  uint64_t params = 0, grid = 0, mlp = 0;
+  Json list = Json::array();
+  for (const BrickSpec& b : bm.plan.bricks) {
+    const Network& n = *bm.bricks[size_t(b.index)]->net;
+    params += n.n_params();
+    grid += n.grid_params();
+    mlp += n.mlp().n_params;
+    Json e = brick_record(b);
+    e["n_params"] = n.n_params();
+    e["psnr"] = bm.bricks[size_t(b.index)]->training["brick"].value("psnr", 0.0);
+    list.push_back(e);
+  }
+  j["format"] = "vnr-bricks";
+  j["n_params"] = params;
+  j["n_grid_params"] = grid;
+  j["n_mlp_params"] = mlp;
+  j["bricks"] = {{"grid", {bm.plan.grid.x, bm.plan.grid.y, bm.plan.grid.z}}, {"ghost", bm.plan.ghost},
+                 {"seed", bm.plan.seed}, {"count", bm.plan.bricks.size()}, {"list", list}};
+}
+
+class BricksForm final : public ModelForm {
+public:
+  uint64_t n_params(const Model& m) const override { return m.bricks->param_bytes() / 2; }
+  bool trainable() const override { return false; }  // trained brick by brick (train_bricks)
+  Device evaluation_device(const Model&, Device) const override { return Device::Cpu; }
+  std::unique_ptr<ModelEvaluator> evaluator(const Model& m, Device device, cuda::MlpPath mlp) const override {
+    return std::make_unique<BricksEvaluator>(m, device, mlp);
+  }
+  std::string gpu_render_reason(const Model& m) const override {
+    return gpu_decode_reason("a multi-brick model", m.dims);
+  }
+  void describe(const Model& m, Json& j) const override { describe_bricks(*m.bricks, j); }
+  void check_savable(const Model&, const std::string& path) const override {
+    fail("'{}': a multi-brick model is a directory of brick files written by `vnr train --bricks`; it cannot be "
+         "saved as one model file", path);
+  }
+  void make_field(const Model& m, ModelFieldMaker& maker) const override {
+    set_inference_precision(*m.bricks, m.net->inference_precision());  // Model::net carries it
+    maker.bricks(m, *m.bricks);
+  }
+};
+
+}  // namespace
+
+const ModelForm& bricks_form() {
+  static const BricksForm form;
+  return form;
 }
 
 }  // namespace vnr

@@ -1,46 +1,29 @@
 #include "vnr/train/decoder.h"
 #include <vector>
-#include "vnr/train/bricks.h"
+#include "vnr/train/model_form.h"
 #include "vnr/volume/volume.h"
 
 namespace vnr {
 
 Decoder::Decoder(const Network& net, Device device, const Residuals* residuals)
-    : net_(net), residuals_(residuals), device_(device) {
-  if (device == Device::Cuda) gpu_ = std::make_unique<cuda::GpuNetwork>(net);
-}
+    : net_(net), residuals_(residuals), device_(device), eval_(network_evaluator(net, device)) {}
 Decoder::Decoder(const Model& model, Device device, cuda::MlpPath mlp)
     : net_(*model.net),
       residuals_(model.residuals ? &*model.residuals : nullptr),
       device_(device),
-      bricks_(model.bricks.get()) {
-  if (bricks_) set_inference_precision(*model.bricks, model.net->inference_precision());
-  if (device_ != Device::Cuda) return;
-  if (bricks_) brick_gpus_ = std::make_unique<BrickGpuNetworks>(*bricks_, mlp);
-  else gpu_ = std::make_unique<cuda::GpuNetwork>(net_, mlp);
-}
+      eval_(form_of(model).evaluator(model, device, mlp)) {}
 Decoder::~Decoder() = default;
 
-Device evaluation_device(const Model& model, Device asked) {
-  if (model.bricks) return Device::Cpu;
-  if (asked == Device::Cuda) cuda::check_supported(*model.net);
-  return asked;
-}
+cuda::GpuNetwork* Decoder::gpu() { return eval_->gpu(); }
 
-BrickInfer Decoder::brick_infer() { return brick_gpus_ ? brick_gpus_->fn() : BrickInfer{}; }
+Device evaluation_device(const Model& model, Device asked) { return form_of(model).evaluation_device(model, asked); }
 
 void Decoder::slices(Int3 dims, int64_t z0, int64_t z1, float* out) {
-  if (bricks_)
-    return decode_bricked_region(*bricks_, dims, Box3{{0, 0, z0}, {dims.x, dims.y, z1}}, out, brick_infer());
   if (bounded_at(dims)) {
     if (!residuals_->absolute) reference_slices(net_, dims, z0, z1, out);  // absolute: q * step alone
     return apply_residuals(*residuals_, z0, z1, out);
   }
-  if (gpu_) return gpu_->decode_slices(dims, z0, z1, out);  // voxel_centre() in kernels.cu
-  const int64_t first = dims.x * dims.y * z0;
-  net_.infer_fn(
-      dims.x * dims.y * (z1 - z0), [&](int64_t i, float* x, float* y, float* z) { voxel_centre(dims, first + i, x, y, z); },
-      out);
+  eval_->slices(dims, z0, z1, out);
 }
 
 void Decoder::voxels(Int3 dims, const int64_t* voxel_index, int64_t n, float* out) {
@@ -54,20 +37,11 @@ void Decoder::voxels(Int3 dims, const int64_t* voxel_index, int64_t n, float* ou
     }
     return;
   }
-  if (gpu_ || bricks_) {
-    std::vector<float> xyz(size_t(3 * n));
-    for (int64_t i = 0; i < n; ++i) voxel_centre(dims, voxel_index[i], &xyz[3 * i], &xyz[3 * i + 1], &xyz[3 * i + 2]);
-    return bricks_ ? bricked_points(*bricks_, xyz.data(), n, out, brick_infer()) : gpu_->infer(xyz.data(), n, out);
-  }
-  net_.infer_fn(
-      n, [&](int64_t i, float* x, float* y, float* z) { voxel_centre(dims, voxel_index[i], x, y, z); }, out);
+  eval_->voxels(dims, voxel_index, n, out);
 }
 
 void Decoder::points(const float* xyz, int64_t n, float* out) {
-  if (n <= 0) return;
-  if (bricks_) return bricked_points(*bricks_, xyz, n, out, brick_infer());
-  if (gpu_) return gpu_->infer(xyz, n, out);
-  net_.infer(xyz, n, out);
+  if (n > 0) eval_->points(xyz, n, out);
 }
 
 void decode_slices(const Network& net, Int3 dims, int64_t z0, int64_t z1, float* out) {

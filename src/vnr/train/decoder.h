@@ -11,9 +11,8 @@
 
 namespace vnr {
 
-struct BrickedModel;  // train/bricks.h
-class BrickGpuNetworks;
 struct Model;
+class ModelEvaluator;  // train/model_form.h
 
 // Decodes a network at voxel centres ((i + 0.5) / n per axis) on one backend; a GPU decoder keeps its
 // copy of the network between calls. On the GPU the network runs in half precision (tcnn's inference),
@@ -25,9 +24,8 @@ struct Model;
 class Decoder {
 public:
   Decoder(const Network& net, Device device, const Residuals* residuals = nullptr);
-  // A model's decoder: its residuals apply (error-bound models); a multi-brick model (Model::bricks)
-  // decodes its bricks blended, each brick's network on the device (BrickGpuNetworks on the GPU) at
-  // the model's inference precision. The one place that asks which kind a model is.
+  // A model's decoder: its residuals apply (error-bound models); its form's evaluator does the rest (a
+  // multi-brick model blends its bricks, each brick's network on the device, at the model's precision).
   Decoder(const Model& model, Device device, cuda::MlpPath mlp = cuda::MlpPath::Auto);
   ~Decoder();
   // z-slices [z0, z1) of `dims` into out (normalised units), x fastest.
@@ -36,23 +34,20 @@ public:
   void voxels(Int3 dims, const int64_t* voxel_index, int64_t n, float* out);
   // n points, interleaved x, y, z in [0, 1)^3: the network (or blended bricks) alone, no residuals.
   void points(const float* xyz, int64_t n, float* out);
-  cuda::GpuNetwork* gpu() { return gpu_.get(); }  // the GPU copy of a single network (null otherwise)
+  cuda::GpuNetwork* gpu();  // the GPU copy of a single network (null otherwise)
   Device device() const { return device_; }
   // Whether a decode at dims applies the residuals.
   bool bounded_at(Int3 dims) const { return residuals_ && residuals_->dims == dims; }
 
 private:
-  std::function<void(int, const float*, int64_t, float*)> brick_infer();  // BrickInfer: each brick on the device
-  const Network& net_;
+  const Network& net_;  // the CPU reference under residuals
   const Residuals* residuals_;
   Device device_;
-  std::unique_ptr<cuda::GpuNetwork> gpu_;
-  const BrickedModel* bricks_ = nullptr;
-  std::unique_ptr<BrickGpuNetworks> brick_gpus_;
+  std::unique_ptr<ModelEvaluator> eval_;
 };
 
-// The device a file evaluation of `model` decodes on when `asked` was asked for: a multi-brick model's on
-// the CPU; a network the GPU cannot run fails here, before anything is read.
+// The device a file evaluation of `model` decodes on when `asked` was asked for (ModelForm): a multi-brick
+// model's on the CPU; a network the GPU cannot run fails here, before anything is read.
 Device evaluation_device(const Model& model, Device asked);
 
 // Decoder(net, Device::Cpu).slices / .voxels.

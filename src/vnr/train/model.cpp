@@ -5,6 +5,7 @@
 #include "vnr/error.h"
 #include "vnr/fileio.h"
 #include "vnr/train/bricks.h"
+#include "vnr/train/model_form.h"
 
 namespace vnr {
 
@@ -65,9 +66,7 @@ ModelFile model_file(const Model& m) {
 uint64_t model_file_bytes(const Model& m) { return vnr_file_bytes(model_file(m)); }
 
 void save_model(const std::string& path, const Model& m) {
-  if (m.bricks)
-    fail("'{}': a multi-brick model is a directory of brick files written by `vnr train --bricks`; it cannot be "
-         "saved as one model file", path);
+  form_of(m).check_savable(m, path);
   if (m.residuals && is_instantvnr_path(path))
     fail("'{}': instantvnr's format cannot hold error-bound residuals; save the model as .vnr", path);
   const ModelFile f = model_file(m);
