@@ -35,13 +35,25 @@ Fixture& small_fixture() {
 // Level benchmarks: arg = level for the paper config, 100 + level for the small one.
 Fixture& level_fixture(int64_t arg) { return arg >= 100 ? small_fixture() : fixture(); }
 
+// The kernels directly, for a layout of one level too: F as the encoding factory would pick it.
+static void grid_encode(const vnr::GridLayout& g, const uint16_t* table, const float* x, const float* y, const float* z,
+                 int n, float* X0) {
+  vnr::with_feature_count(g.n_features, [&](auto F) { vnr::kernels::grid_encode<F()>(g, table, x, y, z, n, X0); });
+}
+static void grid_backward_level(const vnr::GridLayout& g, uint32_t level, const float* x, const float* y, const float* z,
+                         int64_t n, const float* dEnc, uint32_t in_pad, int chunk, float* grad) {
+  vnr::with_feature_count(g.n_features, [&](auto F) {
+    vnr::kernels::grid_backward_level<F()>(g, level, x, y, z, n, dEnc, in_pad, chunk, grad);
+  });
+}
+
 // Whole encodings (all levels) of 65,536 random points, paper (arg 0) and small (arg 1) configs.
 void BM_GridEncode(benchmark::State& state) {
   Fixture& f = state.range(0) ? small_fixture() : fixture();
   for (auto _ : state)
     for (int c = 0; c < (1 << 16); c += vnr::kChunk)
-      vnr::kernels::grid_encode(f.net.grid(), f.net.grid_half(), f.x.data() + c, f.y.data() + c, f.z.data() + c,
-                                vnr::kChunk, f.X0.data());
+      grid_encode(f.net.grid(), f.net.grid_half(), f.x.data() + c, f.y.data() + c, f.z.data() + c, vnr::kChunk,
+                  f.X0.data());
   state.counters["ns/sample"] = benchmark::Counter(double(state.iterations()) * (1 << 16),
                                                    benchmark::Counter::kIsRate | benchmark::Counter::kInvert);
 }
@@ -60,8 +72,7 @@ void BM_GridEncodeLevel(benchmark::State& state) {
   one.n_levels = 1;
   for (auto _ : state)
     for (int c = 0; c < (1 << 16); c += vnr::kChunk)
-      vnr::kernels::grid_encode(one, f.net.grid_half(), f.x.data() + c, f.y.data() + c, f.z.data() + c, vnr::kChunk,
-                                f.X0.data());
+      grid_encode(one, f.net.grid_half(), f.x.data() + c, f.y.data() + c, f.z.data() + c, vnr::kChunk, f.X0.data());
   state.counters["ns/sample"] = benchmark::Counter(double(state.iterations()) * (1 << 16),
                                                    benchmark::Counter::kIsRate | benchmark::Counter::kInvert);
 }
@@ -70,8 +81,8 @@ void BM_GridBackwardLevel(benchmark::State& state) {
   Fixture& f = level_fixture(state.range(0));
   std::vector<float> grad(f.net.grid_params(), 0.0f);
   for (auto _ : state)
-    vnr::kernels::grid_backward_level(f.net.grid(), uint32_t(state.range(0) % 100), f.x.data(), f.y.data(), f.z.data(),
-                                      1 << 16, f.dEnc.data(), f.net.mlp().in_pad, vnr::kChunk, grad.data());
+    grid_backward_level(f.net.grid(), uint32_t(state.range(0) % 100), f.x.data(), f.y.data(), f.z.data(), 1 << 16,
+                        f.dEnc.data(), f.net.mlp().in_pad, vnr::kChunk, grad.data());
   state.counters["ns/sample"] = benchmark::Counter(double(state.iterations()) * (1 << 16),
                                                    benchmark::Counter::kIsRate | benchmark::Counter::kInvert);
 }

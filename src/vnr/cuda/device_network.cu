@@ -37,6 +37,7 @@ DeviceNetwork::DeviceNetwork(const Network& net, MlpPath asked) : net_(net) {
   check_supported(net);
   d_ = mlp_dims(net.mlp());
   path_ = resolve_mlp_path(net, asked);
+  grid_kernels_ = grid_kernels(net.grid());
   upload_half_params(net, half_);
 }
 
@@ -45,7 +46,8 @@ const float* DeviceNetwork::infer(const float* xyz, int64_t n, const StreamAndBl
     pass_.allocate(d_, n, false, path_);
     allocated_ = n;
   }
-  encode(net_.grid(), half_.data() + net_.mlp().n_params, interleaved(xyz), n, d_.in_pad, pass_.X0.data(), sb.stream);
+  grid_kernels_.encode(net_.grid(), half_.data() + net_.mlp().n_params, interleaved(xyz), n, d_.in_pad, pass_.X0.data(),
+                       sb.stream);
   if (after_encoding) VNR_CUDA_CHECK(cudaEventRecord(after_encoding, sb.stream));
   mlp_forward(path_, d_, half_.data(), pass_.X0.data(), n, pass_.acts.data(), pass_.out.data(),
               int(net_.config().network.output_activation), pass_.tmp.data(), sb.blas, sb.stream);

@@ -72,6 +72,7 @@ struct GpuTrainer::Impl {
   GpuTrainOptions opts;
   MlpDims d;
   MlpPath path;
+  GridKernels grid_kernels;  // for the grid's features per level, chosen once
   StreamAndBlas sb;
   DeviceBuffer<float> volume;
   GridView dvol;
@@ -134,6 +135,7 @@ struct GpuTrainer::Impl {
     if (opts.chunk <= 0 || opts.batch % opts.chunk != 0) cuda_fail_message("the sampling chunk must divide the batch");
     d = mlp_dims(net.mlp());
     path = resolve_mlp_path(net, opts.mlp);
+    grid_kernels = cuda::grid_kernels(net.grid());
   }
 
   // The optimizer state and a step's buffers, after checking that they and `voxels` fit.
@@ -221,7 +223,7 @@ struct GpuTrainer::Impl {
     if (range_lo.size())
       ranges_add_samples(range_grid_dims(ranges), xs.data(), ys.data(), zs.data(), target.data(), opts.batch, range_lo.data(),
                          range_hi.data(), st);
-    gradient_pass(net, d, path, half.data(), Coords{xs.data(), ys.data(), zs.data(), 1}, target.data(), opts.batch,
+    gradient_pass(net, grid_kernels, d, path, half.data(), Coords{xs.data(), ys.data(), zs.data(), 1}, target.data(), opts.batch,
                   pass, grads.data(), loss_slots.data() + step, sb, [&](int i) { mark(i); });
     mark(3);
     if (!rate_segments.empty()) add_rate_gradients(st);

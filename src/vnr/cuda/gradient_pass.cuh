@@ -10,15 +10,16 @@ namespace vnr::cuda {
 
 // Encoding, MLP forward, loss, MLP backward and grid backward for n points with their targets: the
 // loss-scaled work of one training step (grads: binary32, the MLP part overwritten, the grid part
-// accumulated). mark(i) records the phase boundaries 1 (after encoding) and 2 (after the MLP).
+// accumulated), with the grid kernels gk of net's grid. mark(i) records the phase boundaries 1 (after encoding) and 2 (after the MLP).
 template <typename Mark>
-inline void gradient_pass(const Network& net, const MlpDims& d, MlpPath path, const __half* half, Coords pts,
+inline void gradient_pass(const Network& net, const GridKernels& gk, const MlpDims& d, MlpPath path, const __half* half,
+                          Coords pts,
                    const float* target, int64_t n, PassBuffers& pass, float* grads, float* loss_slot,
                    const StreamAndBlas& sb, Mark&& mark) {
   const cudaStream_t st = sb.stream;
   const uint64_t n_mlp = net.mlp().n_params;
   const ModelConfig& cfg = net.config();
-  encode(net.grid(), half + n_mlp, pts, n, d.in_pad, pass.X0.data(), st);
+  gk.encode(net.grid(), half + n_mlp, pts, n, d.in_pad, pass.X0.data(), st);
   mark(1);
   mlp_forward(path, d, half, pass.X0.data(), n, pass.acts.data(), pass.out.data(), -1, pass.tmp.data(), sb.blas, st);
   loss_and_grad(cfg.loss, cfg.network.output_activation, pass.out.data(), target, n, d.n_out, d.out_pad,
@@ -26,7 +27,7 @@ inline void gradient_pass(const Network& net, const MlpDims& d, MlpPath path, co
   mlp_backward(path, d, half, pass.X0.data(), pass.acts.data(), pass.dOut.data(), n, pass.dY.data(), pass.dX0.data(),
                grads, pass.tmp.data(), sb.blas, st);
   mark(2);
-  grid_backward(net.grid(), pts, n, d.in_pad, pass.dX0.data(), grads + n_mlp, st);
+  gk.backward(net.grid(), pts, n, d.in_pad, pass.dX0.data(), grads + n_mlp, st);
 }
 
 inline void no_mark(int) {}

@@ -138,27 +138,33 @@ __global__ void voxel_centres_kernel(Int3 dims, int64_t first, int64_t count, in
 
 }  // namespace
 
-void encode(const GridLayout& g, const __half* table, Coords c, int64_t n, int in_pad, __half* X0, cudaStream_t s) {
-  const int64_t total = n * g.n_levels;
-  if (total <= 0) return;
-  if (!with_feature_count(g.n_features, [&](auto F) {
-        encode_kernel<decltype(F)::value><<<blocks_for(total, kThreads), kThreads, 0, s>>>(g, table, c, n, in_pad, X0);
-      }))
-    cuda_fail_message("grid encoding: n_features_per_level must be 1, 2, 4 or 8");
-  VNR_CUDA_LAUNCHED();
-}
-
-void grid_backward(const GridLayout& g, Coords c, int64_t n, int in_pad, const __half* dX0, float* grad,
+template <int F>
+void encode_launch(const GridLayout& g, const __half* table, Coords c, int64_t n, int in_pad, __half* X0,
                    cudaStream_t s) {
   const int64_t total = n * g.n_levels;
   if (total <= 0) return;
+  encode_kernel<F><<<blocks_for(total, kThreads), kThreads, 0, s>>>(g, table, c, n, in_pad, X0);
+  VNR_CUDA_LAUNCHED();
+}
+
+template <int F>
+void grid_backward_launch(const GridLayout& g, Coords c, int64_t n, int in_pad, const __half* dX0, float* grad,
+                          cudaStream_t s) {
+  const int64_t total = n * g.n_levels;
+  if (total <= 0) return;
   const float inv = 1.0f / kLossScale;
+  grid_backward_kernel<F><<<blocks_for(total, kThreads), kThreads, 0, s>>>(g, c, n, in_pad, dX0, inv, grad);
+  VNR_CUDA_LAUNCHED();
+}
+
+GridKernels grid_kernels(const GridLayout& g) {
+  GridKernels k;
   if (!with_feature_count(g.n_features, [&](auto F) {
-        grid_backward_kernel<decltype(F)::value>
-            <<<blocks_for(total, kThreads), kThreads, 0, s>>>(g, c, n, in_pad, dX0, inv, grad);
+        k.encode = &encode_launch<F()>;
+        k.backward = &grid_backward_launch<F()>;
       }))
     cuda_fail_message("grid encoding: n_features_per_level must be 1, 2, 4 or 8");
-  VNR_CUDA_LAUNCHED();
+  return k;
 }
 
 void sample_in_core(GridView volume, uint64_t seed, uint64_t step, int chunk, int64_t batch, float* x, float* y,

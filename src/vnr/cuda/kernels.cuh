@@ -19,12 +19,18 @@ struct Coords {
 };
 inline Coords interleaved(const float* xyz) { return Coords{xyz, xyz + 1, xyz + 2, 3}; }
 
-// X0 (n x in_pad half, sample-major) = the grid encoding of n points from the half table; pad columns 0.
-void encode(const GridLayout& g, const __half* table, Coords c, int64_t n, int in_pad, __half* X0, cudaStream_t s);
-// grad (binary32, the grid block) += dL/dtheta for n points, dX0 the loss-scaled half dL/dX0. Atomic adds:
-// correct under hash collisions and between levels.
-void grid_backward(const GridLayout& g, Coords c, int64_t n, int in_pad, const __half* dX0, float* grad,
-                   cudaStream_t s);
+// The grid's kernels for its features per level, chosen once (grid_kernels) where a DeviceNetwork or a
+// training run is made, not per launch.
+struct GridKernels {
+  // X0 (n x in_pad half, sample-major) = the grid encoding of n points from the half table; pad columns 0.
+  void (*encode)(const GridLayout& g, const __half* table, Coords c, int64_t n, int in_pad, __half* X0,
+                 cudaStream_t s) = nullptr;
+  // grad (binary32, the grid block) += dL/dtheta for n points, dX0 the loss-scaled half dL/dX0. Atomic adds:
+  // correct under hash collisions and between levels.
+  void (*backward)(const GridLayout& g, Coords c, int64_t n, int in_pad, const __half* dX0, float* grad,
+                   cudaStream_t s) = nullptr;
+};
+GridKernels grid_kernels(const GridLayout& g);
 // Uniform coordinates of docs/semantics.md B.3 (bit-identical to the CPU's for the same seed/step/chunk) and their
 // cell-centred trilinear targets from the volume in GPU memory.
 void sample_in_core(GridView volume, uint64_t seed, uint64_t step, int chunk, int64_t batch, float* x, float* y,

@@ -49,6 +49,7 @@ private:
   const Network& net_;
   MlpDims d_;
   MlpPath path_;
+  GridKernels grid_kernels_;  // for the grid's features per level, chosen once
   DeviceBuffer<__half> half_;
   PassBuffers pass_;
   int64_t allocated_ = 0;

@@ -20,19 +20,17 @@ namespace vnr::cuda {
 constexpr unsigned kFullWarp = 0xffffffffu;
 
 // The grid encoding of one point into one row of halves (one thread doing every level), pad columns
-// zeroed.
+// zeroed; F = g.n_features, fixed when the renderer bound the network (WarpNetworkRef<F>).
+template <int F>
 __device__ inline void encode_row(const GridLayout& g, const __half* table, float x, float y, float z, __half* row,
                                   int in_pad) {
   const int L = int(g.n_levels);
-  with_feature_count(g.n_features, [&](auto Fc) {  // once per point, not per level
-    constexpr int F = decltype(Fc)::value;
-    for (int l = 0; l < L; ++l) {
-      float out[F];
-      grid_level_forward<F>(g.levels[l], g.interpolation, table, x, y, z, out, 1);
-      for (int f = 0; f < F; ++f) row[l * F + f] = __float2half_rn(out[f]);
-    }
-  });
-  for (int k = L * int(g.n_features); k < in_pad; ++k) row[k] = __float2half_rn(0.0f);
+  for (int l = 0; l < L; ++l) {
+    float out[F];
+    grid_level_forward<F>(g.levels[l], g.interpolation, table, x, y, z, out, 1);
+    for (int f = 0; f < F; ++f) row[l * F + f] = __float2half_rn(out[f]);
+  }
+  for (int k = L * F; k < in_pad; ++k) row[k] = __float2half_rn(0.0f);
 }
 
 // A network as the in-shader kernels evaluate it: kept in GPU memory (WarpNetworkRef below), bound
@@ -53,7 +51,9 @@ struct WarpNetwork {
   __host__ __device__ size_t warp_bytes() const { return size_t(2) * 32 * ld * 2 + 256 * 4; }
   __host__ __device__ size_t smem_bytes() const { return weight_bytes() + size_t(warps_per_block) * warp_bytes(); }
 
-  // One lane's view, bound to its warp's tiles: a lane evaluator of render/inshader_loop.h.
+  // One lane's view, bound to its warp's tiles: a lane evaluator of render/inshader_loop.h, for a grid of
+  // NF features per level.
+  template <int NF>
   struct Eval {
     const WarpNetwork* F;
     const __half* w;
@@ -111,20 +111,23 @@ __device__ inline float warp_mlp(const WarpNetwork& F, const __half* w, __half* 
   return result;
 }
 
-__device__ inline float WarpNetwork::Eval::operator()(bool active, float x, float y, float z) const {
+template <int NF>
+__device__ inline float WarpNetwork::Eval<NF>::operator()(bool active, float x, float y, float z) const {
   const unsigned act = __ballot_sync(kFullWarp, active);
   if (act == 0) return 0.0f;
-  if (active) encode_row(F->grid, F->table, x, y, z, a0 + lane * F->ld, F->d.in_pad);
+  if (active) encode_row<NF>(F->grid, F->table, x, y, z, a0 + lane * F->ld, F->d.in_pad);
   __syncwarp();
   return activate(Activation(F->out_act), warp_mlp(*F, w, a0, a1, f, lane, act));
 }
 
 // What the in-shader kernels take for a network: the WarpNetwork in GPU memory (read through the cache,
 // warp-uniform), not a kernel-parameter copy that dynamic indexing would move to local memory. bind()
-// runs once per thread at the start of a kernel (all threads of the block: it stages the weights).
+// runs once per thread at the start of a kernel (all threads of the block: it stages the weights). NF: the
+// grid's features per level, a template so that no sample asks for it.
+template <int NF>
 struct WarpNetworkRef {
   const WarpNetwork* F;
-  using Eval = WarpNetwork::Eval;
+  using Eval = WarpNetwork::Eval<NF>;
   __device__ Eval bind(unsigned char* smem) const {
     const WarpNetwork& f = *F;
     const int ld = f.ld;

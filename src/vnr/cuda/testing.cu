@@ -27,8 +27,8 @@ std::vector<float> encode(const Network& net, const float* coords, int n) {
   upload_half_params(net, half);
   DeviceBuffer<float> pts(size_t(3) * n);
   pts.upload(coords, size_t(3) * n);
-  vnr::cuda::encode(net.grid(), half.data() + net.mlp().n_params, interleaved(pts.data()), n, d.in_pad, X0.data(),
-                    sb.stream);
+  grid_kernels(net.grid()).encode(net.grid(), half.data() + net.mlp().n_params, interleaved(pts.data()), n, d.in_pad,
+                                  X0.data(), sb.stream);
   std::vector<__half> h(X0.size());
   VNR_CUDA_CHECK(cudaStreamSynchronize(sb.stream));
   X0.download(h.data(), h.size());
@@ -54,7 +54,7 @@ std::vector<float> gradient(const Network& net, const float* coords, const float
   slot.zero_async(st);
   PassBuffers pass;
   pass.allocate(d, n, true, path);
-  gradient_pass(net, d, path, half.data(), interleaved(pts.data()), tgt.data(), n, pass, grads.data(), slot.data(), sb,
+  gradient_pass(net, grid_kernels(net.grid()), d, path, half.data(), interleaved(pts.data()), tgt.data(), n, pass, grads.data(), slot.data(), sb,
                 no_mark);
   VNR_CUDA_CHECK(cudaStreamSynchronize(st));
   std::vector<float> out(net.n_params());

@@ -326,10 +326,17 @@ void EncodeF(const GridLayout& g, const uint16_t* table, const float* x, const f
   }
 }
 
-void GridEncode(const GridLayout& g, const uint16_t* table, const float* x, const float* y, const float* z, int n,
-                float* X0) {
-  with_feature_count(g.n_features, [&](auto F) { EncodeF<decltype(F)::value>(g, table, x, y, z, n, X0); });
-}
+// One exported entry per feature count (HWY_EXPORT takes plain names); GridEncoding<F> calls its own.
+#define VNR_GRID_ENCODE(F)                                                                                       \
+  void GridEncode##F(const GridLayout& g, const uint16_t* table, const float* x, const float* y, const float* z, \
+                     int n, float* X0) {                                                                          \
+    EncodeF<F>(g, table, x, y, z, n, X0);                                                                        \
+  }
+VNR_GRID_ENCODE(1)
+VNR_GRID_ENCODE(2)
+VNR_GRID_ENCODE(4)
+VNR_GRID_ENCODE(8)
+#undef VNR_GRID_ENCODE
 
 // Backward of one block of N samples from its corner block: per sample and corner, one vector load of
 // the F gradients, one FMA, one store (grad = w * g + grad, the reference's fmaf per element).
@@ -434,12 +441,16 @@ void BackwardF(const GridLayout& g, uint32_t l, const float* x, const float* y, 
   }
 }
 
-void GridBackwardLevel(const GridLayout& g, uint32_t level, const float* x, const float* y, const float* z,
-                       int64_t n, const float* dEnc, uint32_t in_pad, int chunk, float* grad) {
-  with_feature_count(g.n_features, [&](auto F) {
-    BackwardF<decltype(F)::value>(g, level, x, y, z, n, dEnc, in_pad, chunk, grad);
-  });
-}
+#define VNR_GRID_BACKWARD(F)                                                                                    \
+  void GridBackwardLevel##F(const GridLayout& g, uint32_t level, const float* x, const float* y, const float* z, \
+                            int64_t n, const float* dEnc, uint32_t in_pad, int chunk, float* grad) {            \
+    BackwardF<F>(g, level, x, y, z, n, dEnc, in_pad, chunk, grad);                                              \
+  }
+VNR_GRID_BACKWARD(1)
+VNR_GRID_BACKWARD(2)
+VNR_GRID_BACKWARD(4)
+VNR_GRID_BACKWARD(8)
+#undef VNR_GRID_BACKWARD
 
 // adam_update() (adam_update.h) vectorised: the zero-gradient skip of grid parameters is a per-lane
 // select, bias corrections are gathered from tables indexed by the per-parameter step count. Every
@@ -515,8 +526,6 @@ HWY_AFTER_NAMESPACE();
 
 #if HWY_ONCE
 namespace vnr::kernels {
-HWY_EXPORT(GridEncode);
-HWY_EXPORT(GridBackwardLevel);
 HWY_EXPORT(AdamRange);
 HWY_EXPORT(DeinterleaveXyz);
 
@@ -524,14 +533,25 @@ void deinterleave_xyz(const float* xyz, int64_t n, float* x, float* y, float* z)
   HWY_DYNAMIC_DISPATCH(DeinterleaveXyz)(xyz, n, x, y, z);
 }
 
-void grid_encode(const GridLayout& g, const uint16_t* table, const float* x, const float* y, const float* z, int n,
-                 float* X0) {
-  HWY_DYNAMIC_DISPATCH(GridEncode)(g, table, x, y, z, n, X0);
-}
-void grid_backward_level(const GridLayout& g, uint32_t level, const float* x, const float* y, const float* z,
-                         int64_t n, const float* dEnc, uint32_t in_pad, int chunk, float* grad) {
-  HWY_DYNAMIC_DISPATCH(GridBackwardLevel)(g, level, x, y, z, n, dEnc, in_pad, chunk, grad);
-}
+#define VNR_GRID_ENTRIES(F)                                                                                          \
+  HWY_EXPORT(GridEncode##F);                                                                                         \
+  HWY_EXPORT(GridBackwardLevel##F);                                                                                  \
+  template <>                                                                                                        \
+  void grid_encode<F>(const GridLayout& g, const uint16_t* table, const float* x, const float* y, const float* z,   \
+                      int n, float* X0) {                                                                            \
+    HWY_DYNAMIC_DISPATCH(GridEncode##F)(g, table, x, y, z, n, X0);                                                   \
+  }                                                                                                                  \
+  template <>                                                                                                        \
+  void grid_backward_level<F>(const GridLayout& g, uint32_t level, const float* x, const float* y, const float* z, \
+                              int64_t n, const float* dEnc, uint32_t in_pad, int chunk, float* grad) {               \
+    HWY_DYNAMIC_DISPATCH(GridBackwardLevel##F)(g, level, x, y, z, n, dEnc, in_pad, chunk, grad);                     \
+  }
+VNR_GRID_ENTRIES(1)
+VNR_GRID_ENTRIES(2)
+VNR_GRID_ENTRIES(4)
+VNR_GRID_ENTRIES(8)
+#undef VNR_GRID_ENTRIES
+
 void adam_range(const AdamStep& k, float* params, float* grads, float* m, float* v, uint32_t* c, uint16_t* half,
                 int64_t n) {
   HWY_DYNAMIC_DISPATCH(AdamRange)(k, params, grads, m, v, c, half, n);

@@ -21,6 +21,9 @@
 
 namespace vnr {
 
+struct PointEvalData;     // nn/point_eval.h
+struct PointEvalKernels;  // nn/point_eval.h
+
 class Encoding {
 public:
   virtual ~Encoding() = default;
@@ -50,6 +53,9 @@ public:
   // d out_j / d x_d (every entry written).
   virtual void encode_point(const float xyz[3], const uint16_t* params, float* out) const = 0;
   virtual void encode_point_input_grad(const float xyz[3], const uint16_t* params, float* jac) const = 0;
+  // The CPU point evaluator's kernels for this encoding: grids give those of their features per level,
+  // fixed when the factory made them; the others the grid-free kernels (select_point_kernels<0>).
+  virtual void select_point_kernels(const PointEvalData& d, PointEvalKernels* k) const;
   // The encoding object of tiny-cuda-nn's JSON, every key explicit (the bytes of model files).
   virtual Json to_json() const = 0;
 };

@@ -30,9 +30,11 @@ struct GridLayout {
   uint64_t n_params() const { return n_entries * n_features; }
 };
 
-// The one place where a grid's features per level, a runtime count, become the compile-time F of
-// the kernels (registers and vector widths): fn(std::integral_constant<int, F>()) for F = 1, 2, 4 or 8
-// (what tcnn supports; configs are checked when parsed), and true; false for any other count.
+// Where a grid's features per level, a runtime count, become the compile-time F of the kernels
+// (registers and vector widths): fn(std::integral_constant<int, F>()) for F = 1, 2, 4 or 8 (what tcnn
+// supports; configs are checked when parsed), and true; false for any other count. Called once per
+// object, where it is made, never per call: the encoding factory (GridEncoding<F>, the CPU), the GPU's
+// grid kernels (cuda::grid_kernels) and the GPU renderer's binding of a network (WarpNetworkRef<F>).
 VNR_HD_TEMPLATE
 template <typename Fn>
 VNR_HD inline bool with_feature_count(uint32_t n_features, Fn&& fn) {

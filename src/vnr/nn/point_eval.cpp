@@ -379,7 +379,7 @@ HWY_NOINLINE void Prefetch(const PointEvalData& d, float x, float y, float z) {
 }
 
 template <int F>
-void PickKernels(const PointEvalData& d, PointEvaluator::Kernels* k) {
+void PickKernels(const PointEvalData& d, PointEvalKernels* k) {
   k->encode = &EncodeOnly<F>;
   k->prefetch = &Prefetch<F>;
   switch (d.panel) {
@@ -389,11 +389,18 @@ void PickKernels(const PointEvalData& d, PointEvaluator::Kernels* k) {
   }
 }
 
-void SelectKernels(const PointEvalData& d, PointEvaluator::Kernels* k) {
-  if (!d.has_grid || !with_feature_count(d.grid.n_features, [&](auto F) { PickKernels<decltype(F)::value>(d, k); }))
-    PickKernels<0>(d, k);
-  k->target = hwy::TargetName(HWY_TARGET);
-}
+// One exported entry per feature count (HWY_EXPORT takes plain names).
+#define VNR_SELECT_KERNELS(F)                                       \
+  void SelectKernels##F(const PointEvalData& d, PointEvalKernels* k) { \
+    PickKernels<F>(d, k);                                           \
+    k->target = hwy::TargetName(HWY_TARGET);                        \
+  }
+VNR_SELECT_KERNELS(0)
+VNR_SELECT_KERNELS(1)
+VNR_SELECT_KERNELS(2)
+VNR_SELECT_KERNELS(4)
+VNR_SELECT_KERNELS(8)
+#undef VNR_SELECT_KERNELS
 
 }  // namespace HWY_NAMESPACE
 }  // namespace vnr::point_eval
@@ -405,8 +412,24 @@ HWY_AFTER_NAMESPACE();
 
 namespace vnr {
 namespace point_eval {
-HWY_EXPORT(SelectKernels);
+HWY_EXPORT(SelectKernels0);
+HWY_EXPORT(SelectKernels1);
+HWY_EXPORT(SelectKernels2);
+HWY_EXPORT(SelectKernels4);
+HWY_EXPORT(SelectKernels8);
 }  // namespace point_eval
+
+#define VNR_SELECT_KERNELS(F)                                                 \
+  template <>                                                                 \
+  void select_point_kernels<F>(const PointEvalData& d, PointEvalKernels* k) { \
+    HWY_DYNAMIC_DISPATCH(point_eval::SelectKernels##F)(d, k);                 \
+  }
+VNR_SELECT_KERNELS(0)
+VNR_SELECT_KERNELS(1)
+VNR_SELECT_KERNELS(2)
+VNR_SELECT_KERNELS(4)
+VNR_SELECT_KERNELS(8)
+#undef VNR_SELECT_KERNELS
 
 namespace {
 
@@ -526,8 +549,8 @@ PointEvaluator::PointEvaluator(const Network& net, bool skip_zero_activations) {
   // data-dependent loop cost more than the skipped FMAs.
   d.skip_zeros = skip_zero_activations && d.relu && finite && m.width > 32;
 
-  Kernels k;
-  HWY_DYNAMIC_DISPATCH(point_eval::SelectKernels)(d, &k);
+  PointEvalKernels k;
+  net.encoding().select_point_kernels(d, &k);  // for the grid's F, fixed by the encoding factory
   eval_ = k.eval;
   encode_ = k.encode;
   mlp_ = k.mlp;

@@ -69,6 +69,29 @@ struct PointEvalData {
   void (*encode)(const PointEvalData&, float, float, float, float*) = nullptr;
 };
 
+// The per-target functions a PointEvaluator calls (filled by select_point_kernels).
+struct PointEvalKernels {
+  float (*eval)(const PointEvalData&, float, float, float) = nullptr;
+  void (*encode)(const PointEvalData&, float, float, float, float*) = nullptr;
+  float (*mlp)(const PointEvalData&, const float*) = nullptr;
+  void (*prefetch)(const PointEvalData&, float, float, float) = nullptr;
+  const char* target = "";
+};
+// The kernels for a grid of F features per level (F = 1, 2, 4, 8; 0: no grid), for the best SIMD target:
+// what the network's Encoding::select_point_kernels calls with the F its factory fixed.
+template <int F>
+void select_point_kernels(const PointEvalData& d, PointEvalKernels* k);
+template <>
+void select_point_kernels<0>(const PointEvalData&, PointEvalKernels*);
+template <>
+void select_point_kernels<1>(const PointEvalData&, PointEvalKernels*);
+template <>
+void select_point_kernels<2>(const PointEvalData&, PointEvalKernels*);
+template <>
+void select_point_kernels<4>(const PointEvalData&, PointEvalKernels*);
+template <>
+void select_point_kernels<8>(const PointEvalData&, PointEvalKernels*);
+
 class PointEvaluator {
 public:
   // Keeps a reference to net (its fp16 grid and, for parameter-free encodings, encode_point): net
@@ -100,18 +123,10 @@ public:
   bool skips_zeros() const { return d_.skip_zeros; }
   const char* simd_target() const { return target_; }  // the Highway target chosen at construction
 
-  // Function pointers the per-target code fills in (public for the dispatch glue only).
-  using EvalFn = float (*)(const PointEvalData&, float, float, float);
-  using EncodeFn = void (*)(const PointEvalData&, float, float, float, float*);
-  using MlpFn = float (*)(const PointEvalData&, const float*);
-  using PrefetchFn = void (*)(const PointEvalData&, float, float, float);
-  struct Kernels {
-    EvalFn eval = nullptr;
-    EncodeFn encode = nullptr;
-    MlpFn mlp = nullptr;
-    PrefetchFn prefetch = nullptr;
-    const char* target = "";
-  };
+  using EvalFn = decltype(PointEvalKernels::eval);
+  using EncodeFn = decltype(PointEvalKernels::encode);
+  using MlpFn = decltype(PointEvalKernels::mlp);
+  using PrefetchFn = decltype(PointEvalKernels::prefetch);
 
 private:
   PointEvalData d_;

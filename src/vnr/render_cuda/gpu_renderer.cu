@@ -104,7 +104,10 @@ struct GpuRenderer::Impl {
       netf = cuda::make_warp_network(*dnet, kWarpsPerBlock);
       netf_device.resize(1);
       netf_device.upload(&netf, 1);
-      allow_inshader_smem(int(netf.smem_bytes()));
+      with_feature_count(netf.grid.n_features, [&](auto F) {  // once: the kernels of the grid's F
+        allow_inshader_smem<F()>(int(netf.smem_bytes()));
+        inshader_network = &Impl::inshader_network_of<F()>;
+      });
     } else if (field.grid.data) {
       const GridView& hv = field.grid;
       const size_t voxels = size_t(hv.nx) * hv.ny * hv.nz;
@@ -309,6 +312,12 @@ struct GpuRenderer::Impl {
     st.field_samples += int64_t(host->samples);
   }
 
+  template <int NF>
+  void inshader_network_of(RenderStats& st) {
+    inshader(cuda::WarpNetworkRef<NF>{netf_device.data()}, netf.smem_bytes(), st);
+  }
+  void (Impl::*inshader_network)(RenderStats&) = nullptr;  // inshader_network_of the grid's F
+
   void render(uint32_t frame, RenderStats& st) {
     const auto t0 = std::chrono::steady_clock::now();
     p.frame = frame;
@@ -317,7 +326,7 @@ struct GpuRenderer::Impl {
       VNR_CUDA_CHECK(cudaStreamSynchronize(sb.stream));
       st.host_syncs += 1;
     } else if (dnet) {
-      inshader(cuda::WarpNetworkRef{netf_device.data()}, netf.smem_bytes(), st);
+      (this->*inshader_network)(st);
     } else {
       inshader(GridWarpField{dvol}, 0, st);
     }

@@ -79,9 +79,10 @@ __global__ void __launch_bounds__(kWarpsPerBlock * 32)
   count_samples(my, samples);
 }
 
-// Lets the network kernels take `bytes` of dynamic shared memory.
-inline void allow_inshader_smem(int bytes) {
-  using Net = cuda::WarpNetworkRef;
+// Lets the network kernels (grids of NF features per level) take `bytes` of dynamic shared memory.
+template <int NF>
+void allow_inshader_smem(int bytes) {
+  using Net = cuda::WarpNetworkRef<NF>;
   VNR_CUDA_CHECK(cudaFuncSetAttribute(inshader_march<Net, 1>, cudaFuncAttributeMaxDynamicSharedMemorySize, bytes));
   VNR_CUDA_CHECK(cudaFuncSetAttribute(inshader_march<Net, 7>, cudaFuncAttributeMaxDynamicSharedMemorySize, bytes));
   VNR_CUDA_CHECK(cudaFuncSetAttribute(inshader_path<Net>, cudaFuncAttributeMaxDynamicSharedMemorySize, bytes));

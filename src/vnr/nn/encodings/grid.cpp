@@ -6,6 +6,7 @@
 #include "vnr/nn/cpu_kernels.h"
 #include "vnr/nn/encoding.h"
 #include "vnr/nn/json_get.h"
+#include "vnr/nn/point_eval.h"
 
 namespace vnr {
 namespace {
@@ -17,41 +18,41 @@ const char* interpolation_name(Interpolation i) {
   return i == Interpolation::Linear ? "Linear" : (i == Interpolation::Nearest ? "Nearest" : "Smoothstep");
 }
 
+// F features per level: fixed here, in the factory (make_grid_encoding), so no call below asks again.
+template <int F>
 class GridEncoding final : public Encoding {
 public:
   explicit GridEncoding(const EncodingConfig& e) : cfg_(e), grid_(make_grid_layout(e)) {}
-  uint32_t output_width() const override { return grid_.n_levels * grid_.n_features; }
-  uint32_t min_alignment() const override { return grid_.n_features; }
+  uint32_t output_width() const override { return grid_.n_levels * F; }
+  uint32_t min_alignment() const override { return F; }
   float pad_value() const override { return 0.0f; }
   uint64_t n_params() const override { return grid_.n_params(); }
   const GridLayout* grid() const override { return &grid_; }
 
   void forward(const float* x, const float* y, const float* z, int n, const uint16_t* params,
                float* X0) const override {
-    kernels::grid_encode(grid_, params, x, y, z, n, X0);
+    kernels::grid_encode<F>(grid_, params, x, y, z, n, X0);
   }
   uint32_t n_backward_parts() const override { return grid_.n_levels; }
   void backward(uint32_t level, const float* x, const float* y, const float* z, int64_t n, const float* dEnc,
                 uint32_t in_pad, int chunk, float* grad) const override {
-    kernels::grid_backward_level(grid_, level, x, y, z, n, dEnc, in_pad, chunk, grad);
+    kernels::grid_backward_level<F>(grid_, level, x, y, z, n, dEnc, in_pad, chunk, grad);
   }
 
   void encode_point(const float xyz[3], const uint16_t* params, float* out) const override {
-    with_feature_count(grid_.n_features, [&](auto F) {
-      for (uint32_t l = 0; l < grid_.n_levels; ++l)
-        grid_level_forward<F()>(grid_.levels[l], grid_.interpolation, params, xyz[0], xyz[1], xyz[2],
-                                out + l * F(), 1);
-    });
+    for (uint32_t l = 0; l < grid_.n_levels; ++l)
+      grid_level_forward<F>(grid_.levels[l], grid_.interpolation, params, xyz[0], xyz[1], xyz[2], out + l * F, 1);
   }
   void encode_point_input_grad(const float xyz[3], const uint16_t* params, float* jac) const override {
-    with_feature_count(grid_.n_features, [&](auto F) {
-      float tmp[F() * 3];
-      for (uint32_t l = 0; l < grid_.n_levels; ++l) {
-        grid_level_input_grad<F()>(grid_.levels[l], grid_.interpolation, params, xyz[0], xyz[1], xyz[2], tmp);
-        for (int f = 0; f < F(); ++f)
-          for (int d = 0; d < 3; ++d) jac[(l * F() + f) * 3 + d] = tmp[f * 3 + d];
-      }
-    });
+    float tmp[F * 3];
+    for (uint32_t l = 0; l < grid_.n_levels; ++l) {
+      grid_level_input_grad<F>(grid_.levels[l], grid_.interpolation, params, xyz[0], xyz[1], xyz[2], tmp);
+      for (int f = 0; f < F; ++f)
+        for (int d = 0; d < 3; ++d) jac[(l * F + f) * 3 + d] = tmp[f * 3 + d];
+    }
+  }
+  void select_point_kernels(const PointEvalData& d, PointEvalKernels* k) const override {
+    vnr::select_point_kernels<F>(d, k);
   }
 
   Json to_json() const override {
@@ -109,10 +110,19 @@ void parse_grid(const std::string& lo, const Json& j, EncodingConfig& e) {
   else fail("encoding: unsupported interpolation '{}' (allowed: Nearest, Linear, Smoothstep)", interp);
 }
 
+// The one place a grid's features per level become the template F of its CPU kernels (parse_grid allows
+// these four).
+std::unique_ptr<Encoding> make_grid_encoding(const EncodingConfig& e) {
+  std::unique_ptr<Encoding> enc;
+  with_feature_count(e.n_features_per_level, [&](auto F) { enc = std::make_unique<GridEncoding<F()>>(e); });
+  if (!enc) fail("encoding: n_features_per_level must be 1, 2, 4 or 8, got {}", e.n_features_per_level);
+  return enc;
+}
+
 }  // namespace
 }  // namespace vnr
 
 VNR_ENCODING_REGISTRAR(grid) {
   registry.add({"Grid", {"HashGrid", "DenseGrid", "TiledGrid", "Grid"}, 0, parse_grid,
-                [](const EncodingConfig& e) -> std::unique_ptr<Encoding> { return std::make_unique<GridEncoding>(e); }});
+                make_grid_encoding});
 }
