@@ -270,3 +270,39 @@ TEST(GpuRender, CacheDecodedOnTheDeviceMatchesTheCpusCache) {
   r.render_frame();
   EXPECT_EQ(r.field().dims(), (Int3{16, 16, 16}));
 }
+
+// A renderer refreshed in place with a trainer's device parameters and new ranges (the viewer while it
+// trains on the GPU) draws what a renderer built anew from the downloaded network draws, bit for bit.
+TEST(GpuRender, RefreshedFromTheTrainersDeviceCopyRendersAsANewRenderer) {
+  REQUIRE_GPU();
+  Volume vol = blobs(Int3{32, 32, 32});
+  Network net(preset_config("small"));
+  net.init_params(3);
+  cuda::GpuTrainer trainer(net, view_of(vol), cuda::GpuTrainOptions{16384, 3, kChunk, cuda::MlpPath::Auto});
+  trainer.enable_online_ranges(vol.dims, 8);
+  trainer.run(5);
+  NetworkField neural(net, vol.dims);
+  TransferFunction tf = tf_preset("ramp");
+  MacroCells before(trainer.online_ranges(), box_of(vol));
+  before.update(tf);
+  const Camera cam = orbit_camera(box_of(vol), 40, 25, 30);
+  for (RenderStrategy strategy : {RenderStrategy::Streaming, RenderStrategy::InShader}) {
+    RenderOptions o;
+    o.width = 64;
+    o.height = 48;
+    o.seed = 2;
+    o.strategy = strategy;
+    GpuRenderer refreshed(neural.gpu_source(), box_of(vol), before, tf, cam, o);
+    const Image first = refreshed.render(2);
+    trainer.run(100);
+    MacroCells after(trainer.online_ranges(), box_of(vol));
+    after.update(tf);
+    ASSERT_TRUE(refreshed.refresh_network(after, trainer.device_half_params()));
+    const Image img = refreshed.render(2);
+    trainer.download();
+    const Image fresh = GpuRenderer(neural.gpu_source(), box_of(vol), after, tf, cam, o).render(2);
+    for (size_t i = 0; i < img.pixels.size(); ++i)
+      ASSERT_TRUE(img.pixels[i].x == fresh.pixels[i].x && img.pixels[i].w == fresh.pixels[i].w) << "pixel " << i;
+    EXPECT_LT(image_psnr(img, first), 60.0);  // training changed the picture
+  }
+}

@@ -45,12 +45,17 @@ struct ViewContent {
   uint64_t version = ~uint64_t(0);  // model or volume version it was built for
   MacroCellMode mode = MacroCellMode::Off;
   uint64_t tf_epoch = ~uint64_t(0);  // mc->update(tf) done for
+  // The model version of the network's parameters and macro-cells, where training on the GPU changed only
+  // those since `version` (renderers refresh them in place, from device_half: the trainer's copy).
+  uint64_t params_version = ~uint64_t(0);
+  const void* device_half = nullptr;
 };
 
 // One view's renderer and progressive accumulation.
 struct ViewPass {
   std::unique_ptr<FrameRenderer> backend;
   uint64_t content_version = ~uint64_t(0), tf_epoch = ~uint64_t(0), options_epoch = ~uint64_t(0);
+  uint64_t params_version = ~uint64_t(0);  // ViewContent::params_version its backend holds
   bool coarse = false;
   uint64_t cache_version = 0;  // CachedField::content_version the accumulation started from
   Camera camera;
@@ -160,6 +165,7 @@ struct ViewerEngine::Impl {
   bool render(const ViewerSnapshot& snap, bool* refined, int* accumulated);
   bool render_slices(const ViewSettings& view);
   void update_network_content(MacroCellMode mode, bool cache);
+  std::unique_ptr<MacroCells> network_macrocells(MacroCellMode mode);
   void update_truth_content();
   const ValueRangeGrid& volume_ranges();
   std::vector<ViewerImage> frame_images(const ViewerSnapshot& snap) const;

@@ -67,12 +67,20 @@ bool render_pass(ViewPass& pass, const ViewContent& content, const TransferFunct
     pass.backend.reset();
     pass.backend = make_renderer(device, content.drawn(), box, *content.mc, tf, cam, opt, cuda::MlpPath::Auto);
     pass.content_version = content.version;
+    pass.params_version = content.params_version;
     pass.tf_epoch = snap.tf_epoch;
     pass.options_epoch = snap.options_epoch;
     pass.coarse = coarse;
     pass.camera = cam;
     pass.count = 0;
-  } else if (!same_camera(pass.camera, cam)) {
+  } else if (pass.params_version != content.params_version) {
+    // Training changed the network's parameters and ranges only: taken in place (GPU), else a new backend.
+    if (!pass.backend->refresh_network(*content.mc, content.device_half))
+      pass.backend = make_renderer(device, content.drawn(), box, *content.mc, tf, cam, opt, cuda::MlpPath::Auto);
+    pass.params_version = content.params_version;
+    pass.count = 0;
+  }
+  if (!same_camera(pass.camera, cam)) {
     pass.backend->set_camera(cam);
     pass.camera = cam;
     pass.count = 0;
@@ -158,7 +166,18 @@ const ValueRangeGrid& ViewerEngine::Impl::volume_ranges() {
 // and macro-cell mode. Training keeps the cache: its bricks turn stale and are decoded again a few a frame.
 void ViewerEngine::Impl::update_network_content(MacroCellMode mode, bool cache) {
   ViewContent& c = net_content;
-  if (c.field && c.version == model_version && c.mode == mode && bool(c.cache) == cache) return;
+  if (c.field && c.params_version == model_version && c.mode == mode && bool(c.cache) == cache) return;
+  // Training on the GPU changed only the parameters: the renderer copies them from the trainer's device
+  // copy (render_pass), instead of a download, a host fp16 copy and a new GPU network every chunk.
+  if (c.field && c.mode == mode && !cache && !c.cache && render_device == Device::Cuda && run.session) {
+    if (const void* half = run.session->trainer().device_half_params()) {
+      c.mc = network_macrocells(mode);
+      c.mc->update(tf);
+      c.device_half = half;
+      c.params_version = model_version;
+      return;
+    }
+  }
   const bool params_changed = c.version != model_version;
   net_pass.backend.reset();  // it refers to the old field and cells
   if (run.session) run.session->trainer().download();
@@ -175,18 +194,23 @@ void ViewerEngine::Impl::update_network_content(MacroCellMode mode, bool cache) 
   } else {
     c.cache->replace_source(*c.field, params_changed);
   }
-  const bool trained = run.session && run.session->steps_done() > 0;
-  if (mode == MacroCellMode::Online && trained)
-    c.mc = std::make_unique<MacroCells>(run.session->trainer().online_ranges(), box);
-  else if (mode == MacroCellMode::Online && model->macrocells)
-    c.mc = std::make_unique<MacroCells>(*model->macrocells, box);
-  else if (mode == MacroCellMode::Grid && volume)
-    c.mc = std::make_unique<MacroCells>(volume_ranges(), box);
-  else  // off, or online before the first step (no samples yet: the untrained network shows as it is)
-    c.mc = std::make_unique<MacroCells>(MacroCells::single(model->dims, box));
+  c.mc = network_macrocells(mode);
   c.version = model_version;
+  c.params_version = model_version;
+  c.device_half = nullptr;
   c.mode = mode;
   c.tf_epoch = ~uint64_t(0);
+}
+
+// The network view's macro-cells in `mode` for the current parameters.
+std::unique_ptr<MacroCells> ViewerEngine::Impl::network_macrocells(MacroCellMode mode) {
+  const bool trained = run.session && run.session->steps_done() > 0;
+  if (mode == MacroCellMode::Online && trained)
+    return std::make_unique<MacroCells>(run.session->trainer().online_ranges(), box);
+  if (mode == MacroCellMode::Online && model->macrocells) return std::make_unique<MacroCells>(*model->macrocells, box);
+  if (mode == MacroCellMode::Grid && volume) return std::make_unique<MacroCells>(volume_ranges(), box);
+  // off, or online before the first step (no samples yet: the untrained network shows as it is)
+  return std::make_unique<MacroCells>(MacroCells::single(model->dims, box));
 }
 
 // The truth volume's field and grid macro-cells for the current timestep.

@@ -76,6 +76,10 @@ public:
   ValueRangeGrid online_ranges();  // synchronises
   // Copies the binary32 master parameters back into the Network (and refreshes its half grid).
   void download();
+  // The half parameters the steps read (MLP then grid, the Network's order; quantized during quantized
+  // steps), in GPU memory, after the enqueued steps (synchronises): what a GPU renderer of the same
+  // network copies device to device instead of going through the host.
+  const void* device_half_params();
   // Quantization-aware steps (Trainer::begin_quantized_steps): the master copy becomes `master`, and
   // until end_quantized the half parameters every step reads are quantized_value(master, step of its
   // segment) (nn/quantization_hd.h); rate_weight_per_loss > 0 adds the rate term of the segments from

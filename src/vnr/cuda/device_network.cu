@@ -41,6 +41,11 @@ DeviceNetwork::DeviceNetwork(const Network& net, MlpPath asked) : net_(net) {
   upload_half_params(net, half_);
 }
 
+void DeviceNetwork::reload_params(const void* device_half) {
+  if (!device_half) return upload_half_params(net_, half_);
+  VNR_CUDA_CHECK(cudaMemcpy(half_.data(), device_half, half_.size() * sizeof(__half), cudaMemcpyDeviceToDevice));
+}
+
 const float* DeviceNetwork::infer(const float* xyz, int64_t n, const StreamAndBlas& sb, cudaEvent_t after_encoding) {
   if (n > allocated_) {
     pass_.allocate(d_, n, false, path_);

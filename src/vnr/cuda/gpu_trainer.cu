@@ -318,6 +318,10 @@ void GpuTrainer::download() {
   synchronize();
   impl_->net.edit_params([&](float* p, size_t n) { impl_->master.download(p, n); });
 }
+const void* GpuTrainer::device_half_params() {
+  synchronize();
+  return impl_->half.data();
+}
 void GpuTrainer::begin_quantized(const std::vector<float>& master, const std::vector<ParamSegment>& segments,
                                  size_t first_rate_segment, double rate_weight_per_loss) {
   Impl& I = *impl_;

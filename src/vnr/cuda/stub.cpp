@@ -32,6 +32,7 @@ void GpuTrainer::enable_online_ranges(Int3, int) { not_built(); }
 bool GpuTrainer::has_online_ranges() const { not_built(); }
 ValueRangeGrid GpuTrainer::online_ranges() { not_built(); }
 void GpuTrainer::download() { not_built(); }
+const void* GpuTrainer::device_half_params() { not_built(); }
 void GpuTrainer::begin_quantized(const std::vector<float>&, const std::vector<ParamSegment>&, size_t, double) {
   not_built();
 }

@@ -355,6 +355,15 @@ void GpuRenderer::render_frame(uint32_t frame, Image& img, RenderStats* stats) {
 
 void GpuRenderer::set_camera(const Camera& cam) { set_render_camera(impl_->p, cam, impl_->opt); }
 
+bool GpuRenderer::refresh_network(const MacroCells& mc, const void* device_half) {
+  Impl& I = *impl_;
+  if (!I.dnet) return false;
+  VNR_CUDA_CHECK(cudaStreamSynchronize(I.sb.stream));  // no frame reads the parameters while they change
+  I.dnet->reload_params(device_half);
+  I.upload_ranges(mc.ranges());
+  return true;
+}
+
 void GpuRenderer::set_transfer_function(const TransferFunction& tf) { impl_->upload_tf(tf); }
 void GpuRenderer::set_ranges(const ValueRangeGrid& ranges) { impl_->upload_ranges(ranges); }
 

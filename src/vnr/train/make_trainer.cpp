@@ -57,6 +57,7 @@ public:
   bool has_online_ranges() const override { return gpu_->has_online_ranges(); }
   ValueRangeGrid online_ranges() const override { return gpu_->online_ranges(); }
   void download() override { gpu_->download(); }
+  const void* device_half_params() override { return gpu_->device_half_params(); }
   bool has_quantized_steps() const override { return true; }
   void begin_quantized_steps(const std::vector<float>& master, const std::vector<ParamSegment>& segments,
                              size_t first_rate_segment, double rate_weight_per_loss) override {

@@ -42,6 +42,9 @@ public:
   // Brings the trained parameters back into network().params() (the GPU keeps its own copy; a no-op on
   // the CPU, which trains the Network in place).
   virtual void download() = 0;
+  // The half parameters the GPU's steps read, in GPU memory, once the steps so far are done (a GPU
+  // renderer of network() copies them device to device); null on the CPU.
+  virtual const void* device_half_params() { return nullptr; }
   virtual Network& network() = 0;
   virtual int64_t batch() const = 0;
   virtual uint32_t seed() const = 0;
