@@ -19,6 +19,7 @@ GpuRenderer::~GpuRenderer() = default;
 void GpuRenderer::render_frame(uint32_t, Image&, RenderStats*) { not_built(); }
 void GpuRenderer::render_frame_resident(uint32_t, RenderStats*) { not_built(); }
 void GpuRenderer::set_camera(const Camera&) { not_built(); }
+bool GpuRenderer::refresh_network(const MacroCells&, const void*) { not_built(); }
 void GpuRenderer::set_transfer_function(const TransferFunction&) { not_built(); }
 void GpuRenderer::set_ranges(const ValueRangeGrid&) { not_built(); }
 std::vector<float> GpuRenderer::max_opacity() { not_built(); }
