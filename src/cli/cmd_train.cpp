@@ -28,12 +28,12 @@ extern "C" void on_stop_signal(int) {
   handle_stop_signals(exit_on_signal);
 }
 
-struct StopSignalGuard {
-  explicit StopSignalGuard(TrainingSession& s) {
+struct SessionStopGuard {
+  explicit SessionStopGuard(TrainingSession& s) {
     g_session.store(&s);  // before the handler can run
     signals.emplace(on_stop_signal);
   }
-  ~StopSignalGuard() {
+  ~SessionStopGuard() {
     signals.reset();
     g_session.store(nullptr);
   }
@@ -90,7 +90,7 @@ void run_train(const TrainArgs& a) {
   const int64_t steps = planned_steps(a.s.steps, a.seconds);
   const bool by_time = steps < 0;
   std::optional<Progress> bar;
-  std::optional<StopSignalGuard> guard;
+  std::optional<SessionStopGuard> guard;
   std::unique_ptr<TrainPreview> preview;
   // Before a session trains: the progress bar, Ctrl-C, and the previews.
   auto before_training = [&](TrainingSession& s) {

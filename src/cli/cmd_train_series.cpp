@@ -23,8 +23,8 @@ extern "C" void on_stop_signal_series(int) {
   handle_stop_signals(exit_on_signal);
 }
 
-struct StopSignalGuard {
-  StopSignalGuard() {
+struct SeriesStopGuard {
+  SeriesStopGuard() {
     g_series_interrupted = 0;
     signals.emplace(on_stop_signal_series);
   }
@@ -117,7 +117,7 @@ void run_train_series(const TrainArgs& a) {
   }
   SeriesRunResult run;
   {
-    StopSignalGuard guard;
+    SeriesStopGuard guard;
     run = run_series(s, cb);
   }
   if (a.continuous) {

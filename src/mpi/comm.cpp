@@ -12,19 +12,19 @@ namespace {
 bool g_active = false;
 int g_rank = 0, g_size = 1;
 
-void check(int rc, const char* what) {
+bool env_set(const char* name) {
+  const char* v = std::getenv(name);
+  return v && *v;
+}
+}  // namespace
+
+void check_mpi(int rc, const char* what) {
   if (rc == MPI_SUCCESS) return;
   char text[MPI_MAX_ERROR_STRING];
   int len = 0;
   MPI_Error_string(rc, text, &len);
   fail("MPI {} failed: {}", what, std::string(text, size_t(len)));
 }
-
-bool env_set(const char* name) {
-  const char* v = std::getenv(name);
-  return v && *v;
-}
-}  // namespace
 
 bool launched_by_mpi() {
   // A program that called MPI_Init without a launcher (an Open MPI "singleton", e.g. pvpython) passes
@@ -37,7 +37,7 @@ bool launched_by_mpi() {
 Session::Session(int* argc, char*** argv) {
   if (g_active) fail("MPI is already initialised");
   int provided = 0;
-  check(MPI_Init_thread(argc, argv, MPI_THREAD_FUNNELED, &provided), "initialisation");
+  check_mpi(MPI_Init_thread(argc, argv, MPI_THREAD_FUNNELED, &provided), "initialisation");
   // Errors come back as codes (turned into vnr::Error), not as an abort inside the library.
   MPI_Comm_set_errhandler(MPI_COMM_WORLD, MPI_ERRORS_RETURN);
   MPI_Comm_rank(MPI_COMM_WORLD, &g_rank);
@@ -75,9 +75,9 @@ void agree(const std::string& phase, const std::function<void()>& work) {
   }
   // The lowest failing rank speaks for all; the count says whether it was alone.
   int mine = failed ? g_rank : g_size, first = g_size, count = 0, one = failed ? 1 : 0;
-  check(MPI_Allreduce(&mine, &first, 1, MPI_INT, MPI_MIN, MPI_COMM_WORLD), "allreduce");
+  check_mpi(MPI_Allreduce(&mine, &first, 1, MPI_INT, MPI_MIN, MPI_COMM_WORLD), "allreduce");
   if (first == g_size) return;
-  check(MPI_Allreduce(&one, &count, 1, MPI_INT, MPI_SUM, MPI_COMM_WORLD), "allreduce");
+  check_mpi(MPI_Allreduce(&one, &count, 1, MPI_INT, MPI_SUM, MPI_COMM_WORLD), "allreduce");
   message = broadcast(message, first);
   // Every rank failing is usually one cause (a missing file): said once, as the lowest rank saw it.
   std::string text = count == g_size && g_size > 1
@@ -88,33 +88,33 @@ void agree(const std::string& phase, const std::function<void()>& work) {
 }
 
 void barrier() {
-  if (g_active) check(MPI_Barrier(MPI_COMM_WORLD), "barrier");
+  if (g_active) check_mpi(MPI_Barrier(MPI_COMM_WORLD), "barrier");
 }
 
 double sum(double v) {
   double out = v;
-  if (g_active) check(MPI_Allreduce(&v, &out, 1, MPI_DOUBLE, MPI_SUM, MPI_COMM_WORLD), "allreduce");
+  if (g_active) check_mpi(MPI_Allreduce(&v, &out, 1, MPI_DOUBLE, MPI_SUM, MPI_COMM_WORLD), "allreduce");
   return out;
 }
 
 int64_t sum(int64_t v) {
   int64_t out = v;
-  if (g_active) check(MPI_Allreduce(&v, &out, 1, MPI_INT64_T, MPI_SUM, MPI_COMM_WORLD), "allreduce");
+  if (g_active) check_mpi(MPI_Allreduce(&v, &out, 1, MPI_INT64_T, MPI_SUM, MPI_COMM_WORLD), "allreduce");
   return out;
 }
 
 double max(double v) {
   double out = v;
-  if (g_active) check(MPI_Allreduce(&v, &out, 1, MPI_DOUBLE, MPI_MAX, MPI_COMM_WORLD), "allreduce");
+  if (g_active) check_mpi(MPI_Allreduce(&v, &out, 1, MPI_DOUBLE, MPI_MAX, MPI_COMM_WORLD), "allreduce");
   return out;
 }
 
 std::string broadcast(const std::string& s, int root) {
   if (!g_active) return s;
   int64_t n = int64_t(s.size());
-  check(MPI_Bcast(&n, 1, MPI_INT64_T, root, MPI_COMM_WORLD), "broadcast");
+  check_mpi(MPI_Bcast(&n, 1, MPI_INT64_T, root, MPI_COMM_WORLD), "broadcast");
   std::string out = g_rank == root ? s : std::string(size_t(n), '\0');
-  if (n > 0) check(MPI_Bcast(out.data(), int(n), MPI_CHAR, root, MPI_COMM_WORLD), "broadcast");
+  if (n > 0) check_mpi(MPI_Bcast(out.data(), int(n), MPI_CHAR, root, MPI_COMM_WORLD), "broadcast");
   return out;
 }
 
@@ -128,7 +128,7 @@ std::vector<std::string> gather(const std::string& s, int root) {
     counts[r] = int(lengths[r]), offsets[r] = int(total), total += lengths[r];
   }
   std::string all(g_rank == root ? size_t(total) : 0, '\0');
-  check(MPI_Gatherv(s.data(), int(s.size()), MPI_CHAR, all.data(), counts.data(), offsets.data(), MPI_CHAR, root,
+  check_mpi(MPI_Gatherv(s.data(), int(s.size()), MPI_CHAR, all.data(), counts.data(), offsets.data(), MPI_CHAR, root,
                     MPI_COMM_WORLD),
         "gather");
   std::vector<std::string> out;
@@ -139,7 +139,7 @@ std::vector<std::string> gather(const std::string& s, int root) {
 
 std::vector<int64_t> all_gather(int64_t v) {
   std::vector<int64_t> out(size_t(g_size), v);
-  if (g_active) check(MPI_Allgather(&v, 1, MPI_INT64_T, out.data(), 1, MPI_INT64_T, MPI_COMM_WORLD), "allgather");
+  if (g_active) check_mpi(MPI_Allgather(&v, 1, MPI_INT64_T, out.data(), 1, MPI_INT64_T, MPI_COMM_WORLD), "allgather");
   return out;
 }
 

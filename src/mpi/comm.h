@@ -25,6 +25,9 @@ public:
   Session& operator=(const Session&) = delete;
 };
 
+// Fails with MPI's own text of rc unless it is MPI_SUCCESS; `what` names the call.
+void check_mpi(int rc, const char* what);
+
 // Whether a Session is live; rank 0 of 1 when none is.
 bool active();
 int rank();

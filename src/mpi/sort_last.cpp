@@ -8,10 +8,6 @@
 namespace vnr::mpi {
 
 namespace {
-void check(int rc, const char* what) {
-  if (rc != MPI_SUCCESS) fail("MPI {} failed while compositing (code {})", what, rc);
-}
-
 const Vec4f* band_of(const Image& img, RowBand band) { return img.pixels.data() + size_t(band.y0) * img.width; }
 
 // Sends this rank's brick bands to their owners and receives every brick's band of this rank's rows.
@@ -29,7 +25,7 @@ std::map<int, std::vector<Vec4f>> exchange_bands(const std::vector<BrickImage>& 
     buf.resize(my_count);
     if (owner_of_brick[b] == me || my_count == 0) continue;
     requests.emplace_back();
-    check(MPI_Irecv(buf.data(), int(my_count * 4), MPI_FLOAT, owner_of_brick[b], 1, MPI_COMM_WORLD, &requests.back()),
+    check_mpi(MPI_Irecv(buf.data(), int(my_count * 4), MPI_FLOAT, owner_of_brick[b], 1, MPI_COMM_WORLD, &requests.back()),
           "receive");
   }
   std::map<int, const Image*> by_brick;
@@ -44,12 +40,12 @@ std::map<int, std::vector<Vec4f>> exchange_bands(const std::vector<BrickImage>& 
         continue;
       }
       requests.emplace_back();
-      check(MPI_Isend(band_of(*img, band), int(count * 4), MPI_FLOAT, dest, 1, MPI_COMM_WORLD, &requests.back()),
+      check_mpi(MPI_Isend(band_of(*img, band), int(count * 4), MPI_FLOAT, dest, 1, MPI_COMM_WORLD, &requests.back()),
             "send");
       stats.bytes_sent += int64_t(count * sizeof(Vec4f));
     }
   }
-  check(MPI_Waitall(int(requests.size()), requests.data(), MPI_STATUSES_IGNORE), "wait");
+  check_mpi(MPI_Waitall(int(requests.size()), requests.data(), MPI_STATUSES_IGNORE), "wait");
   return received;
 }
 }  // namespace
@@ -83,7 +79,7 @@ Image composite_direct_send(const std::vector<BrickImage>& mine, const std::vect
       offsets[size_t(r)] = band.y0 * width * 4;
     }
     if (rank() == 0) result = Image(width, height);
-    check(MPI_Gatherv(acc.data(), int(acc.size() * 4), MPI_FLOAT, rank() == 0 ? result.pixels.data() : nullptr,
+    check_mpi(MPI_Gatherv(acc.data(), int(acc.size() * 4), MPI_FLOAT, rank() == 0 ? result.pixels.data() : nullptr,
                       counts.data(), offsets.data(), MPI_FLOAT, 0, MPI_COMM_WORLD),
           "gather");
     if (rank() != 0) local.bytes_sent += int64_t(acc.size() * sizeof(Vec4f));
