@@ -224,6 +224,9 @@ TEST_F(ViewServerTest, BadMessagesGetAnErrorAndTheConnectionStays) {
       {R"({"type": "cursor", "x": 0.5})", "cursor.x and cursor.y go together"},
       {R"({"type": "cursor", "x": 1.5, "y": 0.5})", "cursor.x"},
       {R"({"type": "render", "step": -1})", "render.step"},
+      {R"({"type": "render", "mode": "xray"})", "render mode 'xray'"},  // the library's check and list
+      {R"({"type": "render", "strategy": "fast"})", "allowed: auto, cache, streaming, inshader"},
+      {R"({"type": "render", "macrocells": 3})", "render.macrocells must be a string"},
       {R"({"type": "train", "action": "fly"})", "train.action"},
       {R"({"type": "tf", "opacity": [[0, 0.5], [1]]})", "tf.opacity"},
       {R"({"type": "tf", "colormap": "no-such-colormap"})", "tf"},  // refused by the engine

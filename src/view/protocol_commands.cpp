@@ -5,6 +5,7 @@
 #include <optional>
 #include "view/protocol.h"
 #include "vnr/error.h"
+#include "vnr/render_settings.h"
 
 namespace vnr::view {
 
@@ -174,11 +175,16 @@ Run tf_command(const Fields& f) {
   };
 }
 
+// The render settings the page changes, by RenderSettings' keys and values (the image size, camera and
+// transfer function have messages of their own), checked by RenderSettings::validate at once, so the
+// allowed values are the library's; and the viewer's own max_frames and coarse_scale.
 Run render_command(const Fields& f) {
-  const auto name = +[](const char* s) { return s; };  // RenderSettings' names
-  auto mode = f.choice("mode", std::array<const char*, 3>{"raymarch", "shadow", "pathtrace"}, name);
-  auto strategy = f.choice("strategy", std::array<const char*, 4>{"cache", "auto", "streaming", "inshader"}, name);
-  auto macrocells = f.choice("macrocells", std::array<const char*, 3>{"online", "grid", "off"}, name);
+  auto mode = f.string("mode"), strategy = f.string("strategy"), macrocells = f.string("macrocells");
+  RenderSettings given;  // the given values over the defaults
+  if (mode) given.mode = *mode;
+  if (strategy) given.strategy = *strategy;
+  if (macrocells) given.macrocells = *macrocells;
+  given.validate([](const std::string& key) { return "render." + key; });
   auto step = f.number("step", 1e-3, 1e3), density = f.number("density", 0, 1e6);
   auto shade = f.boolean("shade");
   auto light = f.vec3("light");
