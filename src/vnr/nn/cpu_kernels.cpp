@@ -332,10 +332,7 @@ void EncodeF(const GridLayout& g, const uint16_t* table, const float* x, const f
                      int n, float* X0) {                                                                          \
     EncodeF<F>(g, table, x, y, z, n, X0);                                                                        \
   }
-VNR_GRID_ENCODE(1)
-VNR_GRID_ENCODE(2)
-VNR_GRID_ENCODE(4)
-VNR_GRID_ENCODE(8)
+VNR_GRID_FEATURE_COUNTS(VNR_GRID_ENCODE)
 #undef VNR_GRID_ENCODE
 
 // Backward of one block of N samples from its corner block: per sample and corner, one vector load of
@@ -446,10 +443,7 @@ void BackwardF(const GridLayout& g, uint32_t l, const float* x, const float* y, 
                             int64_t n, const float* dEnc, uint32_t in_pad, int chunk, float* grad) {            \
     BackwardF<F>(g, level, x, y, z, n, dEnc, in_pad, chunk, grad);                                              \
   }
-VNR_GRID_BACKWARD(1)
-VNR_GRID_BACKWARD(2)
-VNR_GRID_BACKWARD(4)
-VNR_GRID_BACKWARD(8)
+VNR_GRID_FEATURE_COUNTS(VNR_GRID_BACKWARD)
 #undef VNR_GRID_BACKWARD
 
 // adam_update() (adam_update.h) vectorised: the zero-gradient skip of grid parameters is a per-lane
@@ -546,10 +540,7 @@ void deinterleave_xyz(const float* xyz, int64_t n, float* x, float* y, float* z)
                               int64_t n, const float* dEnc, uint32_t in_pad, int chunk, float* grad) {               \
     HWY_DYNAMIC_DISPATCH(GridBackwardLevel##F)(g, level, x, y, z, n, dEnc, in_pad, chunk, grad);                     \
   }
-VNR_GRID_ENTRIES(1)
-VNR_GRID_ENTRIES(2)
-VNR_GRID_ENTRIES(4)
-VNR_GRID_ENTRIES(8)
+VNR_GRID_FEATURE_COUNTS(VNR_GRID_ENTRIES)
 #undef VNR_GRID_ENTRIES
 
 void adam_range(const AdamStep& k, float* params, float* grads, float* m, float* v, uint32_t* c, uint16_t* half,

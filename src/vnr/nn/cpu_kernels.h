@@ -24,10 +24,7 @@ void grid_backward_level(const GridLayout& g, uint32_t level, const float* x, co
   template <>                                                                                                  \
   void grid_backward_level<F>(const GridLayout&, uint32_t, const float*, const float*, const float*, int64_t,  \
                               const float*, uint32_t, int, float*);
-VNR_GRID_KERNELS_OF(1)
-VNR_GRID_KERNELS_OF(2)
-VNR_GRID_KERNELS_OF(4)
-VNR_GRID_KERNELS_OF(8)
+VNR_GRID_FEATURE_COUNTS(VNR_GRID_KERNELS_OF)
 #undef VNR_GRID_KERNELS_OF
 
 // x[i], y[i], z[i] = xyz[3i], xyz[3i + 1], xyz[3i + 2] for i in [0, n) (interleaved points to SoA).

@@ -35,6 +35,8 @@ struct GridLayout {
 // supports; configs are checked when parsed), and true; false for any other count. Called once per
 // object, where it is made, never per call: the encoding factory (GridEncoding<F>, the CPU), the GPU's
 // grid kernels (cuda::grid_kernels) and the GPU renderer's binding of a network (WarpNetworkRef<F>).
+// The same counts for code that instantiates per count: X(1) X(2) X(4) X(8).
+#define VNR_GRID_FEATURE_COUNTS(X) X(1) X(2) X(4) X(8)
 VNR_HD_TEMPLATE
 template <typename Fn>
 VNR_HD inline bool with_feature_count(uint32_t n_features, Fn&& fn) {

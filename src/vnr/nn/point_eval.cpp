@@ -395,11 +395,8 @@ void PickKernels(const PointEvalData& d, PointEvalKernels* k) {
     PickKernels<F>(d, k);                                           \
     k->target = hwy::TargetName(HWY_TARGET);                        \
   }
-VNR_SELECT_KERNELS(0)
-VNR_SELECT_KERNELS(1)
-VNR_SELECT_KERNELS(2)
-VNR_SELECT_KERNELS(4)
-VNR_SELECT_KERNELS(8)
+VNR_SELECT_KERNELS(0)  // no grid
+VNR_GRID_FEATURE_COUNTS(VNR_SELECT_KERNELS)
 #undef VNR_SELECT_KERNELS
 
 }  // namespace HWY_NAMESPACE
@@ -412,11 +409,10 @@ HWY_AFTER_NAMESPACE();
 
 namespace vnr {
 namespace point_eval {
-HWY_EXPORT(SelectKernels0);
-HWY_EXPORT(SelectKernels1);
-HWY_EXPORT(SelectKernels2);
-HWY_EXPORT(SelectKernels4);
-HWY_EXPORT(SelectKernels8);
+#define VNR_EXPORT_SELECT_KERNELS(F) HWY_EXPORT(SelectKernels##F);
+VNR_EXPORT_SELECT_KERNELS(0)
+VNR_GRID_FEATURE_COUNTS(VNR_EXPORT_SELECT_KERNELS)
+#undef VNR_EXPORT_SELECT_KERNELS
 }  // namespace point_eval
 
 #define VNR_SELECT_KERNELS(F)                                                 \
@@ -424,11 +420,8 @@ HWY_EXPORT(SelectKernels8);
   void select_point_kernels<F>(const PointEvalData& d, PointEvalKernels* k) { \
     HWY_DYNAMIC_DISPATCH(point_eval::SelectKernels##F)(d, k);                 \
   }
-VNR_SELECT_KERNELS(0)
-VNR_SELECT_KERNELS(1)
-VNR_SELECT_KERNELS(2)
-VNR_SELECT_KERNELS(4)
-VNR_SELECT_KERNELS(8)
+VNR_SELECT_KERNELS(0)  // no grid
+VNR_GRID_FEATURE_COUNTS(VNR_SELECT_KERNELS)
 #undef VNR_SELECT_KERNELS
 
 namespace {

@@ -81,16 +81,12 @@ struct PointEvalKernels {
 // what the network's Encoding::select_point_kernels calls with the F its factory fixed.
 template <int F>
 void select_point_kernels(const PointEvalData& d, PointEvalKernels* k);
-template <>
-void select_point_kernels<0>(const PointEvalData&, PointEvalKernels*);
-template <>
-void select_point_kernels<1>(const PointEvalData&, PointEvalKernels*);
-template <>
-void select_point_kernels<2>(const PointEvalData&, PointEvalKernels*);
-template <>
-void select_point_kernels<4>(const PointEvalData&, PointEvalKernels*);
-template <>
-void select_point_kernels<8>(const PointEvalData&, PointEvalKernels*);
+#define VNR_SELECT_POINT_KERNELS_OF(F) \
+  template <>                        \
+  void select_point_kernels<F>(const PointEvalData&, PointEvalKernels*);
+VNR_SELECT_POINT_KERNELS_OF(0)
+VNR_GRID_FEATURE_COUNTS(VNR_SELECT_POINT_KERNELS_OF)
+#undef VNR_SELECT_POINT_KERNELS_OF
 
 class PointEvaluator {
 public:
