@@ -55,8 +55,8 @@ if [ "$MODE" = address ] || [ "$MODE" = address-full ]; then
   [ "$MODE" = address-full ] && VIEW=ON TARGETS=all
   # -O0: with ASan, -O1 spends most of the build inlining the SIMD kernels (nn/point_eval.cpp: 54 s at
   # -O1, 5 s at -O0); the CI set then builds in 4 minutes instead of 6 and its tests take 34 s, not 19.
-  # shellcheck disable=SC2086
   # Not a unity build: each file compiles on its own, which checks that it includes what it uses.
+  # shellcheck disable=SC2086
   cmake -S . -B "$BUILD" $COMMON -DVNR_VIEW=$VIEW -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O0 -g1" \
     -DVNR_SANITIZE=address,undefined -DCMAKE_UNITY_BUILD=OFF >/dev/null
   # shellcheck disable=SC2086
