@@ -42,7 +42,6 @@ DeviceNetwork::DeviceNetwork(const Network& net, MlpPath asked) : net_(net) {
 }
 
 void DeviceNetwork::reload_params(const void* device_half) {
-  if (!device_half) return upload_half_params(net_, half_);
   VNR_CUDA_CHECK(cudaMemcpy(half_.data(), device_half, half_.size() * sizeof(__half), cudaMemcpyDeviceToDevice));
 }
 

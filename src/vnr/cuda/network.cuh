@@ -40,9 +40,9 @@ public:
   const MlpDims& dims() const { return d_; }
   MlpPath path() const { return path_; }
   const __half* half_params() const { return half_.data(); }
-  // New parameters of the same network, in place (the buffers, and pointers into them, stay): from
-  // device_half (half parameters in GPU memory, e.g. a trainer's) when given, else from the Network.
-  void reload_params(const void* device_half = nullptr);
+  // New parameters of the same network, in place (the buffers, and pointers into them, stay), copied
+  // from device_half: half parameters in GPU memory in the Network's order (a trainer's).
+  void reload_params(const void* device_half);
   // The outputs (n x n_out binary32, after the output activation) of n points (interleaved xyz in GPU
   // memory, n a multiple of 16), computed on sb's stream; valid until the next call. after_encoding, if
   // given, is recorded between the encoding and the MLP (timings).

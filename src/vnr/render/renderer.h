@@ -53,9 +53,9 @@ public:
   // A new view for the next frames (e.g. an orbit); the light flip of B.8 follows the camera.
   virtual void set_camera(const Camera& cam) = 0;
   // The field's network has new parameters (same configuration) and mc new value ranges, as after more
-  // training steps: the renderer takes both in place, the network's from device_half (its half
-  // parameters in GPU memory) when given. False when it cannot (the caller builds a new renderer; the CPU
-  // renderer's evaluators are rebuilt that way, at little cost).
+  // training steps on the GPU: the renderer takes both in place, the parameters from device_half (a
+  // trainer's half parameters in GPU memory). False when it cannot (the caller builds a new renderer; the
+  // CPU renderer's evaluators are rebuilt that way, at little cost).
   virtual bool refresh_network(const MacroCells& mc, const void* device_half) {
     (void)mc, (void)device_half;
     return false;

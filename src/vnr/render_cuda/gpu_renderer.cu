@@ -357,7 +357,7 @@ void GpuRenderer::set_camera(const Camera& cam) { set_render_camera(impl_->p, ca
 
 bool GpuRenderer::refresh_network(const MacroCells& mc, const void* device_half) {
   Impl& I = *impl_;
-  if (!I.dnet) return false;
+  if (!I.dnet || !device_half) return false;
   VNR_CUDA_CHECK(cudaStreamSynchronize(I.sb.stream));  // no frame reads the parameters while they change
   I.dnet->reload_params(device_half);
   I.upload_ranges(mc.ranges());

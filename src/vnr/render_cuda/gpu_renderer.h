@@ -44,8 +44,8 @@ public:
   void render_frame_resident(uint32_t frame, RenderStats* stats = nullptr) override;
   void set_camera(const Camera& cam) override;
   Device device() const override { return Device::Cuda; }
-  // A network field's new parameters copied in place (device to device from device_half, else uploaded
-  // from the Network) and mc's ranges uploaded (opacities recomputed); false for a grid field.
+  // A network field's new parameters copied in place, device to device from device_half, and mc's ranges
+  // uploaded (opacities recomputed); false for a grid field or without device_half.
   bool refresh_network(const MacroCells& mc, const void* device_half) override;
 
   // A new transfer function: the table is uploaded and every cell's max opacity recomputed on the GPU.

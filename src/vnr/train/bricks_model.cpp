@@ -214,11 +214,16 @@ std::optional<ValueRangeGrid> merged_macrocells(const BrickedModel& m) {
 
 namespace {
 
+// A multi-brick model's bricks, set to the model's inference precision (Model::net carries it).
+BrickedModel& bricks_at_model_precision(const Model& m) {
+  set_inference_precision(*m.bricks, m.net->inference_precision());
+  return *m.bricks;
+}
+
 // A multi-brick model's evaluation: its bricks blended, each brick's network on the device.
 class BricksEvaluator final : public ModelEvaluator {
 public:
-  BricksEvaluator(const Model& model, Device device, cuda::MlpPath mlp) : m_(*model.bricks) {
-    set_inference_precision(*model.bricks, model.net->inference_precision());  // Model::net carries it
+  BricksEvaluator(const Model& model, Device device, cuda::MlpPath mlp) : m_(bricks_at_model_precision(model)) {
     if (device == Device::Cuda) gpus_ = std::make_unique<BrickGpuNetworks>(m_, mlp);
   }
   void points(const float* xyz, int64_t n, float* out) override { bricked_points(m_, xyz, n, out, infer()); }
@@ -271,8 +276,7 @@ public:
          "saved as one model file", path);
   }
   void make_field(const Model& m, ModelFieldMaker& maker) const override {
-    set_inference_precision(*m.bricks, m.net->inference_precision());  // Model::net carries it
-    maker.bricks(m, *m.bricks);
+    maker.bricks(m, bricks_at_model_precision(m));
   }
 };
 
