@@ -23,55 +23,12 @@
 #include "vnr/train/sampler.h"
 #include "vnr/train/trainer.h"
 #include "test_support.h"
+#include "brick_cache_support.h"
 
 using namespace vnr;
 using namespace vnr::test;
 
 namespace {
-
-// The decode of a grid source: its own voxels at its dims, else the grid sampled at the voxel centres.
-VoxelDecode grid_decode(const Volume& vol) {
-  return [&vol](Int3 dims, const int64_t* index, int64_t n, float* out) {
-    for (int64_t i = 0; i < n; ++i) {
-      if (dims == vol.dims) {
-        out[i] = vol.data[size_t(index[i])];
-        continue;
-      }
-      const int64_t x = index[i] % dims.x, y = (index[i] / dims.x) % dims.y, z = index[i] / (int64_t(dims.x) * dims.y);
-      out[i] = grid_lookup(view_of(vol), (float(x) + 0.5f) / float(dims.x), (float(y) + 0.5f) / float(dims.y),
-                           (float(z) + 0.5f) / float(dims.z));
-    }
-  };
-}
-
-BrickCacheSettings level0(int brick, uint64_t budget = uint64_t(64) << 20) {
-  BrickCacheSettings s;
-  s.brick = brick;
-  s.budget_bytes = budget;
-  s.lod_pixels = 1e-6f;  // every voxel is far below a pixel: level 0 everywhere
-  s.decode_seconds = 1e-9;  // one brick a frame: frames render from a partly warm cache
-  return s;
-}
-
-bool same_image(const Image& a, const Image& b) {
-  for (size_t i = 0; i < a.pixels.size(); ++i) {
-    const Vec4f &p = a.pixels[i], &q = b.pixels[i];
-    if (!(p.x == q.x && p.y == q.y && p.z == q.z && p.w == q.w)) return false;
-  }
-  return a.pixels.size() == b.pixels.size();
-}
-
-// The ramp transfer function over a volume's macro-cells of 8 voxels, and in-shader options of w x h.
-struct RampScene {
-  TransferFunction tf = tf_preset("ramp");
-  MacroCells mc;
-  RenderOptions o;
-  RampScene(const Volume& vol, int w, int h) : mc(value_ranges_from_grid(view_of(vol), 8), box_of(vol)) {
-    mc.update(tf);
-    o.width = w, o.height = h;
-    o.strategy = RenderStrategy::InShader;
-  }
-};
 
 // A small hash-grid model of vol after 50 steps: a network whose decode is not the volume.
 Model briefly_trained_model(const Volume& vol) {
@@ -79,13 +36,6 @@ Model briefly_trained_model(const Volume& vol) {
   CpuTrainer trainer(*model.net, std::make_shared<InCoreSampler>(vol), TrainOptions{8192, 3});
   for (int i = 0; i < 50; ++i) trainer.step();
   return model;
-}
-
-RenderParams params_for(const Camera& cam, Int3 dims, int width, int height) {
-  RenderParams p;
-  p.cam = make_camera_frame(cam, width, height);
-  p.box = Vec3f{float(dims.x), float(dims.y), float(dims.z)};
-  return p;
 }
 
 }  // namespace
@@ -249,12 +199,7 @@ TEST(BrickCache, LevelOfDetailFollowsTheVoxelFootprint) {
     cache.begin_frame(params_for(cam, dims, H, H));
     const int expect = std::min(4, pixel_voxels < 2 ? 0 : int(std::floor(std::log2(pixel_voxels))));
     EXPECT_EQ(cache.view().level_at(0.5f, 0.5f, 0.999f), expect) << pixel_voxels << " voxels a pixel";
-    // The GPU's whole-volume cache asks for the level of the box's nearest point, the same rule uncapped.
-    const int nearest = pixel_voxels < 2 ? 0 : int(std::floor(std::log2(pixel_voxels)));
-    EXPECT_EQ(finest_view_level(make_camera_frame(cam, H, H), Vec3f{128, 128, 128}, dims, 1), nearest) << pixel_voxels;
   }
-  const Camera inside{Vec3f{64, 64, 100}, Vec3f{64, 64, 0}, Vec3f{0, 1, 0}, 30};
-  EXPECT_EQ(finest_view_level(make_camera_frame(inside, 4, 4), Vec3f{128, 128, 128}, dims, 1), 0);
   EXPECT_EQ(cache_level_dims(Int3{100, 64, 1}, 3), (Int3{13, 8, 1}));
   EXPECT_EQ(cache_level_dims(Int3{100, 64, 1}, 40), (Int3{1, 1, 1}));
 }
@@ -427,7 +372,7 @@ TEST(BrickCache, AModelsCacheEqualsItsDecodeAndRendersAsTheDecodedGrid) {
   NetworkField field(*model.net, model.dims);
   BrickCacheSettings s = level0(8);
   s.decode_seconds = 100;
-  std::unique_ptr<CachedField> cache = make_model_cache(model, field, s);
+  std::unique_ptr<CachedField> cache = make_model_cache(model, field, s, Device::Cpu);
   Volume decoded;
   decoded.dims = model.dims;
   decoded.data.resize(size_t(model.dims.count()));
@@ -468,7 +413,7 @@ TEST(BrickCache, AModelsCoarserLevelsEqualItsDecodeAtTheirDims) {
   BrickCacheSettings s = level0(8);
   s.lod_pixels = 1e9f;  // a voxel of any level covers fewer pixels: the coarsest level everywhere
   s.decode_seconds = 100;
-  std::unique_ptr<CachedField> cache = make_model_cache(model, field, s);
+  std::unique_ptr<CachedField> cache = make_model_cache(model, field, s, Device::Cpu);
   ASSERT_EQ(cache->stats().levels, 3);  // 28 x 24 x 20, 14 x 12 x 10, 7 x 6 x 5
   const RenderParams p = params_for(orbit_camera(box_of(vol), 25, 15, 30), model.dims, 40, 32);
   cache->begin_frame(p);

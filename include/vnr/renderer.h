@@ -90,16 +90,15 @@ public:
   // --strategy auto sets.
   RenderStrategy automatic_strategy() const;
   // The brick cache in front of a model's field (fields/brick_cache.h, docs/RENDERING.md): decoded
-  // bricks at the level of detail the view needs; nullopt = off (the default). On the GPU, the whole
-  // model decoded on the device at one level: the finest the view asks for anywhere (its nearest point),
-  // or, where that does not fit the budget and a quarter of the GPU's free memory, the finest that does;
-  // decoded again when the camera or the image size asks for another. A volume has nothing to cache.
-  // The cache is kept across every other setting.
+  // bricks at the level of detail the view needs; nullopt = off (the default). On the GPU the renderer
+  // reads a copy of the same cache in GPU memory, decoded by the model on the GPU, its misses reading the
+  // nearest decoded coarser level. A volume has nothing to cache. The cache is kept across every other
+  // setting.
   void set_cache(std::optional<BrickCacheSettings> settings);
   const std::optional<BrickCacheSettings>& cache() const { return cache_settings_; }
   // A front end's --strategy: "auto" (the brick cache for a model when `frames` will be accumulated,
-  // 0 = unknown, at least kCacheFrames: warming it costs about ten network frames; on the GPU only where
-  // the level the view asks for fits, see set_cache; then the faster execution strategy for the field),
+  // 0 = unknown, at least kCacheFrames: warming it costs about ten network frames; then the faster
+  // execution strategy for the field),
   // "cache" (the cache with that), "streaming" or
   // "inshader" (no cache). cache_budget: bytes of the cache's pool (0 = default_cache_budget());
   // cache_dims: the voxels the cache decodes the model at (0 = the model's dims; any size).
@@ -111,7 +110,7 @@ public:
   // this before accumulating; an interactive loop does not). No-op without a cache. progress(done,
   // total) after each brick.
   void warm_cache(const std::function<void(int64_t, int64_t)>& progress = {});
-  BrickCacheStats cache_stats() const;  // zeros without a brick cache (none on the GPU)
+  BrickCacheStats cache_stats() const;  // zeros without a brick cache
   void set_macrocells(MacroCellMode mode, int cell_size = 16);
   void set_step(float step, float step_max = 0);  // voxels; step_max 0 = 16 x step
   void set_light(const DirectionalLight& light);
@@ -133,7 +132,7 @@ public:
   Device device() const { return device_; }
   cuda::MlpPath mlp_path() const { return mlp_; }
   Vec3f box() const { return box_; }     // world size of the volume box (voxel units)
-  const RenderableField& field() const { return cached_ ? *cached_ : *field_; }  // the cache when on
+  const RenderableField& field() const;  // the cache when on
   // What field() samples: "grid", "network" or "cache" (reports, fastest_render_strategy).
   const char* field_kind() const;
   const Model* model() const { return model_; }
@@ -163,7 +162,6 @@ private:
   Renderer(const Model* model, const Volume* volume, Device device);
   void restart() { frames_ = 0; }
   void invalidate();
-  void follow_gpu_cache_level();
   FrameRenderer& backend();
   const MacroCells& macrocells();
 
@@ -172,9 +170,7 @@ private:
   Device device_;
   std::unique_ptr<RenderableField> field_;
   std::optional<BrickCacheSettings> cache_settings_;
-  std::unique_ptr<RenderableField> cached_;  // the brick cache (CPU) or the model's decode (GPU)
-  const CachedField* brick_cache_ = nullptr;  // cached_ on the CPU
-  int gpu_cache_level_ = -1, gpu_cache_fit_ = -1;  // on the GPU: the level cached_ holds, the finest that fit
+  std::unique_ptr<CachedField> brick_cache_;
   Vec3f box_;
   RenderOptions options_;
   Camera camera_;

@@ -38,8 +38,9 @@ struct ViewerSetup {
   bool train = false;            // start training at once
   int64_t batch = 65536;
   uint32_t seed = 1337;
-  // The brick cache a model renders from on the CPU (docs/RENDERING.md): its memory (0: a quarter of the
-  // memory available, at most 4 GiB) and the voxels it decodes the model at (0: the model's dims).
+  // The brick cache a model renders from (docs/RENDERING.md; on the GPU the renderer reads a copy): its
+  // memory (0: a quarter of the memory available, at most 4 GiB) and the voxels it decodes the model at
+  // (0: the model's dims).
   uint64_t cache_budget = 0;
   Int3 cache_dims{0, 0, 0};
 };
@@ -92,11 +93,11 @@ inline RenderSettings viewer_render_defaults() {
 }
 
 // How the viewer renders (the `render` message): the library's RenderSettings for what a rendering is,
-// with its names and checks -- mode, strategy (cache or auto: a model on the CPU draws from its brick
-// cache, full-resolution frames while the camera moves, docs/RENDERING.md; streaming or inshader: the
-// field itself), step, shade, light, density, macrocells (online, grid, off) -- while the view's size,
-// camera and transfer function are the viewer's own state and RenderSettings' other keys do not apply;
-// then what only an interactive view has.
+// with its names and checks -- mode, strategy (cache or auto: a model draws from its brick cache, on the
+// GPU from a copy in GPU memory, full-resolution frames while the camera moves, docs/RENDERING.md;
+// streaming or inshader: the field itself), step, shade, light, density, macrocells (online, grid, off)
+// -- while the view's size, camera and transfer function are the viewer's own state and RenderSettings'
+// other keys do not apply; then what only an interactive view has.
 struct ViewerRender {
   RenderSettings settings = viewer_render_defaults();
   int max_frames = 0;    // frames accumulated once still; 0 = per mode (8 / 16 / 256)

@@ -44,9 +44,9 @@ void RenderArgs::add(CLI::App* c) {
   c->add_option("--mode", r->mode, "raymarch|shadow|pathtrace")->capture_default_str();
   c->add_option("--strategy", r->strategy,
                 "auto|cache|streaming|inshader: cache = a model's bricks decoded at the level of detail the view "
-                "needs and ray marched as a grid (CPU; docs/RENDERING.md), streaming and inshader query the field "
-                "for every sample (the same image); auto = the cache for a model on the CPU, then the faster of the "
-                "two for the field, device and mode")
+                "needs and ray marched as a grid (on the GPU from a copy in GPU memory; docs/RENDERING.md), streaming "
+                "and inshader query the field for every sample (the same image); auto = the cache for a model when "
+                "frames are accumulated, then the faster of the two for the field, device and mode")
       ->capture_default_str();
   c->add_option_function<std::string>(
        "--cache-budget", [r](const std::string& v) { r->cache_budget = parse_cache_budget(v); },
@@ -197,10 +197,7 @@ void add_render(CLI::App& app) {
                    {"spp", spp ? Json(spp) : Json("auto")},
                    {"noise", r.frames() > 1 ? Json(r.noise()) : Json(nullptr)}};
     std::string cached;
-    if (r.cache() && r.device() == Device::Cuda) {
-      report["cache"] = {{"decoded_on_gpu", true}};
-      cached = " from its decode on the GPU (the cache with all of level 0 in)";
-    } else if (r.cache()) {
+    if (r.cache()) {
       const BrickCacheStats cs = r.cache_stats();
       report["cache"] = {{"warm_seconds", cache_seconds}, {"bricks_decoded", cs.decoded}, {"bricks_resident", cs.resident},
                          {"pool_bytes", cs.pool_bytes}, {"budget_bytes", cs.budget_bytes}, {"levels", cs.levels}};

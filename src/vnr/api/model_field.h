@@ -16,14 +16,13 @@ namespace vnr {
 // a multi-brick model whose decode does not fit.
 inline std::string gpu_render_reason(const Model& model) { return form_of(model).gpu_render_reason(model); }
 
-// A model drawn on the GPU from its decode: decoded once at dims on the GPU (a multi-brick model's bricks
+// A multi-brick model drawn on the GPU from its decode: decoded once at dims on the GPU (the bricks
 // blended as on the CPU; residuals where they apply: Decoder), then ray marched as a grid, trilinear
-// between voxel centres. What a multi-brick model always is on the GPU (where the CPU's BrickedField
-// queries the networks; docs/MODEL_FORMAT.md states the difference), and the GPU's brick cache: the
-// cache with every brick of level 0 in, for a decode that fits (docs/RENDERING.md).
+// between voxel centres (where the CPU's BrickedField queries the networks; docs/MODEL_FORMAT.md states
+// the difference).
 class DecodedModelField final : public RenderableField {
 public:
-  DecodedModelField(const Model& model, Int3 dims, const char* kind) : grid_(GridView{}), kind_(kind) {
+  DecodedModelField(const Model& model, Int3 dims) : grid_(GridView{}) {
     cuda::require_device();
     decoded_.dims = dims;
     decoded_.data.resize(dims.count());
@@ -31,7 +30,7 @@ public:
     grid_ = GridField(view_of(decoded_));
   }
   Int3 dims() const override { return grid_.dims(); }
-  const char* kind() const override { return kind_; }
+  const char* kind() const override { return "network"; }
   void query(const float* x, const float* y, const float* z, int64_t n, float* out) const override {
     grid_.query(x, y, z, n, out);
   }
@@ -42,7 +41,6 @@ public:
 private:
   Volume decoded_;
   GridField grid_;
-  const char* kind_;  // "network" (a multi-brick model) or "cache"
 };
 
 // The field of a model for a renderer on `device`: its network, or a multi-brick model's blended bricks
@@ -55,7 +53,7 @@ inline std::unique_ptr<RenderableField> make_model_field(const Model& model, Dev
     void bricks(const Model& m, BrickedModel& b) override {
       if (device == Device::Cuda) {
         if (const std::string why = gpu_render_reason(m); !why.empty()) fail("{}", why);
-        field = std::make_unique<DecodedModelField>(m, m.dims, "network");
+        field = std::make_unique<DecodedModelField>(m, m.dims);
         return;
       }
       std::vector<const Network*> nets;
@@ -68,15 +66,20 @@ inline std::unique_ptr<RenderableField> make_model_field(const Model& model, Dev
   return std::move(maker.field);
 }
 
-// The brick cache of a model in front of its field `source` (which must outlive it), decoded by the
-// model's Decoder on the CPU (residuals at the model's dims, multi-brick models blended); level 0 at
-// settings.dims, or the model's dims when 0.
+// What a brick cache of the model decodes with: the model's Decoder on `device` (residuals at the model's
+// dims, multi-brick models blended). A GPU decoder holds its own copy of the parameters: a model that
+// trained since takes a new one (CachedField::replace_source).
+inline VoxelDecode model_cache_decode(const Model& model, Device device) {
+  auto decoder = std::make_shared<Decoder>(model, device);
+  return [decoder](Int3 dims, const int64_t* index, int64_t n, float* out) { decoder->voxels(dims, index, n, out); };
+}
+
+// The brick cache of a model in front of its field `source` (which must outlive it), decoded on
+// `device`; level 0 at settings.dims, or the model's dims when 0.
 inline std::unique_ptr<CachedField> make_model_cache(const Model& model, const RenderableField& source,
-                                                     const BrickCacheSettings& settings) {
-  auto decoder = std::make_shared<Decoder>(model, Device::Cpu);
-  return std::make_unique<CachedField>(
-      source, [decoder](Int3 dims, const int64_t* index, int64_t n, float* out) { decoder->voxels(dims, index, n, out); },
-      settings.dims.count() > 0 ? settings.dims : model.dims, settings);
+                                                     const BrickCacheSettings& settings, Device device) {
+  return std::make_unique<CachedField>(source, model_cache_decode(model, device),
+                                       settings.dims.count() > 0 ? settings.dims : model.dims, settings);
 }
 
 }  // namespace vnr

@@ -126,73 +126,24 @@ void Renderer::invalidate() {
   restart();
 }
 
-// The GPU's cache is the model's whole decode at one level of detail (level l: the cache's dims halved l
-// times): the finest the view asks for (finest_view_level, the CPU cache's rule at the box's nearest
-// point), or the finest that fits the cache's budget and a quarter of the GPU's free memory where that
-// is coarser.
-struct GpuCacheLevel {
-  int view = 0, fit = -1;  // fit -1: not even one voxel fits (why says)
-  std::string why;
-  int chosen() const { return std::max(view, fit); }
-};
-// Level 0's voxels: the settings' dims, else the model's.
-static Int3 cache_dims(const Model& model, const BrickCacheSettings& settings) {
-  return settings.dims.count() > 0 ? settings.dims : model.dims;
-}
-static GpuCacheLevel gpu_cache_level(const Model& model, const BrickCacheSettings& settings, const Camera& camera,
-                                     const RenderOptions& options, Vec3f box) {
-  const Int3 dims = cache_dims(model, settings);
-  const uint64_t budget = settings.budget_bytes ? settings.budget_bytes : default_cache_budget();
-  GpuCacheLevel g;
-  g.view = finest_view_level(make_camera_frame(camera, options.width, options.height), box, dims, settings.lod_pixels);
-  for (int l = 0; l < BrickCacheView::kMaxLevels; ++l) {
-    const Int3 d = cache_level_dims(dims, l);
-    const double bytes = double(d.count()) * sizeof(float);
-    std::string why = bytes > double(budget)
-                          ? fmt::format("the cache's decode at {}x{}x{} is {}, more than its budget of {}", d.x, d.y,
-                                        d.z, human_bytes(bytes), human_bytes(double(budget)))
-                          : gpu_decode_reason("the cache", d);
-    if (why.empty()) {
-      g.fit = l;
-      break;
-    }
-    if (l == 0) g.why = why;
-    if (d.count() == 1) break;
-  }
-  return g;
+const RenderableField& Renderer::field() const {
+  if (brick_cache_) return *brick_cache_;
+  return *field_;
 }
 
 void Renderer::set_cache(std::optional<BrickCacheSettings> settings) {
-  backend_.reset();  // before the old field: its device copies go before a new decode's fit is measured
-  cached_.reset();
-  brick_cache_ = nullptr;
-  gpu_cache_level_ = -1;
+  backend_.reset();  // its copy of the cache goes first
+  brick_cache_.reset();
   cache_settings_ = settings;
   if (settings) {
     if (!model_) fail("the brick cache is for models: a volume is drawn directly");
-    if (device_ == Device::Cuda) {
-      const GpuCacheLevel g = gpu_cache_level(*model_, *settings, camera_, options_, box_);
-      if (g.fit < 0) fail("{}: give a larger --cache-budget, smaller --cache-dims, or another --strategy", g.why);
-      cached_ = std::make_unique<DecodedModelField>(*model_, cache_level_dims(cache_dims(*model_, *settings), g.chosen()),
-                                                    "cache");
-      gpu_cache_level_ = g.chosen();
-      gpu_cache_fit_ = g.fit;
-    } else {
-      auto cache = make_model_cache(*model_, *field_, *settings);
-      brick_cache_ = cache.get();
-      cached_ = std::move(cache);
-    }
+    BrickCacheSettings s = *settings;
+    // The GPU renders from its copy of the cache (render_cuda/cache_copy.cuh), decoded by the model on
+    // the GPU; its misses read the nearest decoded coarser level (the root brick is always in).
+    if (device_ == Device::Cuda) s.misses = CacheMisses::Coarser;
+    brick_cache_ = make_model_cache(*model_, *field_, s, device_);
   }
   invalidate();
-}
-
-// The view asks for another level than the GPU's cache holds (the camera or the image size changed):
-// decode that one. What fits is not asked again (the decode itself took memory).
-void Renderer::follow_gpu_cache_level() {
-  if (device_ != Device::Cuda || !cache_settings_ || gpu_cache_level_ < 0) return;
-  const int view = finest_view_level(make_camera_frame(camera_, options_.width, options_.height), box_,
-                                     cache_dims(*model_, *cache_settings_), cache_settings_->lod_pixels);
-  if (std::max(view, gpu_cache_fit_) != gpu_cache_level_) set_cache(cache_settings_);
 }
 
 void Renderer::choose_strategy(const std::string& choice, uint64_t cache_budget, Int3 cache_dims, int frames) {
@@ -207,14 +158,7 @@ void Renderer::choose_strategy(const std::string& choice, uint64_t cache_budget,
   cache.budget_bytes = cache_budget;
   cache.dims = cache_dims;
   const bool pays = frames == 0 || frames >= kCacheFrames || cache_dims.count() > 0;
-  // On the GPU, `auto` takes the cache where the level the view asks for fits (bonsai at 768²: 39x the
-  // network's frames, docs/benchmarks.md "CUDA backend"), and the network where only a coarser one does.
-  bool fits = model_ && device_ == Device::Cpu;
-  if (model_ && device_ == Device::Cuda) {
-    const GpuCacheLevel g = gpu_cache_level(*model_, cache, camera_, options_, box_);
-    fits = g.fit >= 0 && g.fit <= g.view;
-  }
-  if (c == "cache" || (pays && fits)) set_cache(cache);
+  if (c == "cache" || (pays && model_)) set_cache(cache);
   else set_cache(std::nullopt);
   set_strategy(automatic_strategy());
 }
@@ -230,7 +174,6 @@ BrickCacheStats Renderer::cache_stats() const { return brick_cache_ ? brick_cach
 void Renderer::set_camera(const Camera& camera) {
   camera_ = camera;
   restart();
-  follow_gpu_cache_level();
   if (backend_) backend_->set_camera(camera_);  // the backends update the view in place
 }
 void Renderer::set_transfer_function(const TransferFunction& tf) {
@@ -315,7 +258,6 @@ const MacroCells& Renderer::macrocells() {
 // The one place the backend is created (make_renderer picks the CPU or GPU renderer for the device).
 FrameRenderer& Renderer::backend() {
   if (!backend_) {
-    follow_gpu_cache_level();  // the image size may have changed
     const MacroCells& mc = macrocells();
     backend_ = make_renderer(device_, field(), box_, mc, tf_, camera_, options_, mlp_);
   }

@@ -39,7 +39,7 @@ struct ViewerSnapshot {
 // A field to render and its macro-cells, rebuilt when what it shows changes.
 struct ViewContent {
   std::unique_ptr<RenderableField> field;
-  std::unique_ptr<CachedField> cache;  // in front of field (viewer_wants_cache, a model on the CPU)
+  std::unique_ptr<CachedField> cache;  // in front of field (viewer_wants_cache)
   const RenderableField& drawn() const { return cache ? *cache : *field; }
   std::unique_ptr<MacroCells> mc;
   uint64_t version = ~uint64_t(0);  // model or volume version it was built for

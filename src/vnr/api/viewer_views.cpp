@@ -178,6 +178,17 @@ void ViewerEngine::Impl::update_network_content(MacroCellMode mode, bool cache) 
       return;
     }
   }
+  // ... and with the brick cache, the renderer keeps its copy of the cache and takes the new ranges; the
+  // cache's bricks turn stale and are decoded again, by a GPU decoder of the new parameters.
+  if (c.field && c.mode == mode && cache && c.cache && render_device == Device::Cuda && run.session) {
+    run.session->trainer().download();  // in place: the field reads the same network
+    c.cache->replace_source(*c.field, true, model_cache_decode(*model, render_device));
+    c.mc = network_macrocells(mode);
+    c.mc->update(tf);
+    c.device_half = nullptr;
+    c.params_version = model_version;
+    return;
+  }
   const bool params_changed = c.version != model_version;
   net_pass.backend.reset();  // it refers to the old field and cells
   if (run.session) run.session->trainer().download();
@@ -190,9 +201,11 @@ void ViewerEngine::Impl::update_network_content(MacroCellMode mode, bool cache) 
     s.misses = CacheMisses::Coarser;  // frames never wait for the network: coarser levels until bricks come in
     s.budget_bytes = setup.cache_budget;
     s.dims = setup.cache_dims;
-    c.cache = make_model_cache(*model, *c.field, s);
+    c.cache = make_model_cache(*model, *c.field, s, render_device);
   } else {
-    c.cache->replace_source(*c.field, params_changed);
+    c.cache->replace_source(*c.field, params_changed,
+                            params_changed && render_device == Device::Cuda ? model_cache_decode(*model, render_device)
+                                                                            : VoxelDecode{});
   }
   c.mc = network_macrocells(mode);
   c.version = model_version;
@@ -251,7 +264,7 @@ bool ViewerEngine::Impl::render(const ViewerSnapshot& snap, bool* refined, int* 
     tf = to_transfer_function(st.tf);
     built_tf_epoch = snap.tf_epoch;
   }
-  const bool want_cache = viewer_wants_cache(st.render) && render_device == Device::Cpu && st.view.layout != ViewLayout::Truth;
+  const bool want_cache = viewer_wants_cache(st.render) && st.view.layout != ViewLayout::Truth;
   const bool coarse = snap.interacting && !want_cache;  // the cache renders full frames while moving
   const int scale = coarse ? st.render.coarse_scale : 1;
   const RenderOptions opt =

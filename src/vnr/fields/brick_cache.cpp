@@ -29,13 +29,6 @@ float cache_lod_scale(const CameraFrame& c, Vec3f box, Int3 dims, float lod_pixe
   return pixel_per_distance * lod_pixels / voxel;
 }
 
-int finest_view_level(const CameraFrame& c, Vec3f box, Int3 dims, float lod_pixels) {
-  const Vec3f out{std::max({0.0f, -c.eye.x, c.eye.x - box.x}), std::max({0.0f, -c.eye.y, c.eye.y - box.y}),
-                  std::max({0.0f, -c.eye.z, c.eye.z - box.z})};
-  const float m = length(out) * cache_lod_scale(c, box, dims, lod_pixels);
-  return m >= 1 ? int(std::floor(std::log2(m))) : 0;
-}
-
 namespace {
 int64_t ceil_div(int64_t a, int64_t b) { return (a + b - 1) / b; }
 }  // namespace
@@ -93,6 +86,12 @@ struct CachedField::State {
   std::mutex asked_mutex;
   std::vector<BrickKey> asked;       // bricks asked for since the last begin_frame
   BrickCacheView view;
+  // A renderer's copy of the cache (take_changes): the slots written and page-table entries set since
+  // it was last brought up to date, recorded only while there is one.
+  bool copied = false;
+  std::vector<int32_t> written;
+  std::vector<std::pair<int64_t, int32_t>> moved;
+  std::vector<int64_t> level_offset;  // BrickCacheLookup::level_offset of each level
   BrickCacheStats totals;
   std::atomic<int64_t> misses{0};
   // The decoding thread (set_asynchronous): its jobs in priority order (the back first), the bricks it
@@ -124,6 +123,14 @@ struct CachedField::State {
     if (L.asked[b].exchange(frame, std::memory_order_relaxed) == frame) return;
     std::lock_guard<std::mutex> lock(s.asked_mutex);
     s.asked.push_back(BrickKey{l, b, 0});
+  }
+  void set_slot(int l, int64_t b, int32_t slot) {
+    levels[size_t(l)].slot[size_t(b)] = slot;
+    if (copied) moved.emplace_back(level_offset[size_t(l)] + b, slot);
+  }
+  float* slot_voxels(int32_t slot) {
+    if (copied) written.push_back(slot);
+    return pool.get() + int64_t(slot) * view.brick_floats;
   }
 };
 
@@ -186,7 +193,9 @@ CachedField::CachedField(const RenderableField& source, VoxelDecode decode, Int3
     if (L.n.x > INT32_MAX || L.n.y > INT32_MAX || L.n.z > INT32_MAX || L.bricks() > INT32_MAX)
       fail("a brick cache of {}x{}x{} voxels has more than 2^31 bricks or voxels a side", dims.x, dims.y, dims.z);
     v.level[l] = CacheLevelView{int32_t(L.n.x),  int32_t(L.n.y),  int32_t(L.n.z),  int32_t(L.nb.x),
-                                int32_t(L.nb.y), int32_t(L.nb.z), L.slot.data(), L.used.get()};
+                                int32_t(L.nb.y), int32_t(L.nb.z), L.slot.data()};
+    v.used[l] = L.used.get();
+    s.level_offset.push_back(l == 0 ? 0 : s.level_offset.back() + s.levels.back().bricks());
     s.levels.push_back(std::move(L));
     if (s.levels.back().bricks() == 1) break;
   }
@@ -205,6 +214,13 @@ CachedField::~CachedField() {
   }
   s.work_cv.notify_all();
   s.worker.join();
+}
+
+GpuFieldSource CachedField::gpu_source() const {
+  GpuFieldSource g;
+  g.dims = dims_;
+  g.cache = this;
+  return g;
 }
 
 float CachedField::point(float x, float y, float z) const { return CachePointFn{&s_->view, source_}(x, y, z); }
@@ -262,7 +278,7 @@ int32_t CachedField::take_slot() const {
   }
   if (victim == s.resident.size()) return -1;
   const State::Resident gone = s.resident[victim];
-  s.levels[size_t(gone.level)].slot[size_t(gone.brick)] = -1;
+  s.set_slot(gone.level, gone.brick, -1);
   s.resident[victim] = s.resident.back();
   s.resident.pop_back();
   s.totals.evicted += 1;
@@ -277,7 +293,7 @@ bool CachedField::decode_brick(int l, int64_t b) const {
   if (slot < 0) return false;
   s.resident.push_back(State::Resident{l, b, slot, s.generation});
   refresh_brick(s.resident.size() - 1);
-  L.slot[size_t(b)] = slot;
+  s.set_slot(l, b, slot);
   L.used[b].store(s.view.frame, std::memory_order_relaxed);
   return true;
 }
@@ -303,14 +319,18 @@ void CachedField::brick_voxels(int l, int64_t b, float* out) const {
 void CachedField::refresh_brick(size_t r) const {
   State& s = *s_;
   State::Resident& res = s.resident[r];
-  brick_voxels(res.level, res.brick, s.pool.get() + int64_t(res.slot) * s.view.brick_floats);
+  brick_voxels(res.level, res.brick, s.slot_voxels(res.slot));
   res.generation = s.generation;
   s.totals.decoded += 1;
   s.version += 1;
 }
 
-void CachedField::replace_source(const RenderableField& source, bool model_changed) const {
+void CachedField::replace_source(const RenderableField& source, bool model_changed, VoxelDecode decode) const {
   source_ = &source;
+  if (decode) {
+    std::lock_guard<std::mutex> lock(s_->decode_mu);
+    decode_ = std::move(decode);
+  }
   if (model_changed) s_->generation += 1;
 }
 
@@ -435,10 +455,10 @@ void CachedField::install_decoded() const {
       slot = take_slot();
       if (slot < 0) continue;  // every resident brick still in use: asked for again by the frames
       s.resident.push_back(State::Resident{d.job.level, d.job.brick, slot, d.job.generation});
-      L.slot[size_t(d.job.brick)] = slot;
+      s.set_slot(d.job.level, d.job.brick, slot);
       L.used[d.job.brick].store(s.view.frame, std::memory_order_relaxed);
     }
-    std::copy(d.voxels.begin(), d.voxels.end(), s.pool.get() + int64_t(slot) * s.view.brick_floats);
+    std::copy(d.voxels.begin(), d.voxels.end(), s.slot_voxels(slot));
     s.totals.decoded += 1;
     s.version += 1;
   }
@@ -552,5 +572,45 @@ BrickCacheStats CachedField::stats() const {
 }
 
 const BrickCacheView& CachedField::view() const { return s_->view; }
+
+int32_t CachedField::pool_slots() const { return s_->slots; }
+
+BrickCacheChanges CachedField::take_changes(bool from_scratch) const {
+  State& s = *s_;
+  BrickCacheChanges out;
+  if (from_scratch) {
+    s.copied = true;
+    s.written.clear();
+    s.moved.clear();
+    for (const State::Resident& r : s.resident) {
+      out.slots.push_back(r.slot);
+      out.entries.emplace_back(s.level_offset[size_t(r.level)] + r.brick, r.slot);
+    }
+    return out;
+  }
+  out.slots.swap(s.written);
+  std::sort(out.slots.begin(), out.slots.end());
+  out.slots.erase(std::unique(out.slots.begin(), out.slots.end()), out.slots.end());
+  // One entry per brick, its last value (a brick evicted and decoded again in one frame: its new slot).
+  std::stable_sort(s.moved.begin(), s.moved.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+  for (size_t i = 0; i < s.moved.size(); ++i)
+    if (i + 1 == s.moved.size() || s.moved[i + 1].first != s.moved[i].first) out.entries.push_back(s.moved[i]);
+  s.moved.clear();
+  return out;
+}
+
+void CachedField::take_reads(const uint32_t* slot_read, const int32_t* requests, int64_t n, int64_t misses) const {
+  State& s = *s_;
+  for (const State::Resident& r : s.resident) {
+    std::atomic<uint32_t>& used = s.levels[size_t(r.level)].used[r.brick];
+    if (slot_read[r.slot] > used.load(std::memory_order_relaxed)) used.store(slot_read[r.slot], std::memory_order_relaxed);
+  }
+  for (int64_t i = 0; i < n; ++i) {
+    const int l = requests[2 * i];
+    const int64_t b = requests[2 * i + 1];
+    if (l >= 0 && l < int(s.levels.size()) && b >= 0 && b < s.levels[size_t(l)].bricks()) State::ask(&s, l, b);
+  }
+  s.misses += misses;
+}
 
 }  // namespace vnr

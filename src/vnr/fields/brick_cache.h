@@ -19,7 +19,7 @@
 #include <thread>
 #include <vector>
 #include "vnr/render_options.h"
-#include "vnr/fields/brick_cache_view.h"
+#include "vnr/render/brick_cache_view.h"
 #include "vnr/render/camera.h"
 #include "vnr/fields/fields.h"
 
@@ -30,20 +30,17 @@ namespace vnr {
 // at those dims gives them, residuals included where they apply).
 using VoxelDecode = std::function<void(Int3 dims, const int64_t* voxel_index, int64_t n, float* out)>;
 
-// The levels of detail as a view asks for them (CachedField's rule, also the GPU's whole-volume cache):
-// a sample at distance d from the eye covers d * lod_scale level-0 voxels per lod_pixels pixels, of a
-// cache of `dims` voxels over the box [0, box] seen through camera frame c.
+// The levels of detail as a view asks for them (CachedField's rule): a sample at distance d from the eye
+// covers d * lod_scale level-0 voxels per lod_pixels pixels, of a cache of `dims` voxels over the box
+// [0, box] seen through camera frame c.
 float cache_lod_scale(const CameraFrame& c, Vec3f box, Int3 dims, float lod_pixels);
-// The finest level any sample of the box asks for: floor(log2) of the nearest point's footprint (0 when
-// the eye is inside the box or closer than one voxel a pixel).
-int finest_view_level(const CameraFrame& c, Vec3f box, Int3 dims, float lod_pixels);
 // Level l's voxels: dims halved l times, rounded up, at least one.
 Int3 cache_level_dims(Int3 dims, int level);
 
 
 struct BrickKey;  // brick_cache.cpp: a brick of a level and its decoding priority
 
-class CachedField final : public RenderableField {
+class CachedField final : public RenderableField, public BrickCacheCopySource {
 public:
   // source (the model's field) and decode must outlive the cache; dims = the level-0 grid (usually the
   // model's dims, any size: only the bricks a view needs are decoded).
@@ -54,8 +51,8 @@ public:
   void query(const float* x, const float* y, const float* z, int64_t n, float* out) const override;
   int64_t render_inshader(const InshaderJob& job) const override;
   void begin_frame(const RenderParams& p) const override;
-  // The GPU draws the source (the cache lives on the host).
-  GpuFieldSource gpu_source() const override { return source_->gpu_source(); }
+  // The GPU renderer keeps a copy of the cache in GPU memory (BrickCacheCopySource below).
+  GpuFieldSource gpu_source() const override;
   float point(float x, float y, float z) const override;
 
   // Decodes every brick requested so far, however long it takes (tests, benchmarks' warm cache);
@@ -63,8 +60,9 @@ public:
   void decode_pending(const std::function<void(int64_t, int64_t)>& progress = {}) const;
   // Misses read `source` from now on. With `model_changed` (training in the loop) every decoded brick
   // is stale: still read, and decoded again in the frame budget new bricks leave, the bricks the last
-  // frame read first, nearest first.
-  void replace_source(const RenderableField& source, bool model_changed) const;
+  // frame read first, nearest first; with `decode`, by that decode from now on (one that holds its own
+  // copy of the model, as a GPU decoder does). The decoding thread must be off (set_asynchronous).
+  void replace_source(const RenderableField& source, bool model_changed, VoxelDecode decode = {}) const;
   // The ray under the user's cursor (world units; none: no cursor): bricks near it are decoded first.
   void set_focus(std::optional<std::pair<Vec3f, Vec3f>> origin_and_direction) const;
   // Grows whenever a brick is decoded: an image accumulated over frames restarts when it changes.
@@ -80,7 +78,12 @@ public:
   // Asynchronous: waits up to `seconds` for the decoding thread to finish a brick; false when none came
   // (it has nothing to do, or the time ran out).
   bool wait_for_bricks(double seconds) const;
-  const BrickCacheView& view() const;  // what lookups read (fields/brick_cache_view.h)
+  const BrickCacheView& view() const override;  // what lookups read (render/brick_cache_view.h)
+  // A copy of the cache where frames render (render/brick_cache_view.h, BrickCacheCopySource): from the
+  // first take_changes on, the cache records the slots it writes and the page-table entries it sets.
+  int32_t pool_slots() const override;
+  BrickCacheChanges take_changes(bool from_scratch) const override;
+  void take_reads(const uint32_t* slot_read, const int32_t* requests, int64_t n, int64_t misses) const override;
 
   struct State;  // brick_cache.cpp: levels, page tables, pool, requests
 
@@ -111,7 +114,7 @@ private:
   float brick_distance(int level, int64_t brick) const;
 
   mutable const RenderableField* source_;  // replace_source changes it
-  VoxelDecode decode_;
+  mutable VoxelDecode decode_;  // replace_source can change it
   Int3 dims_;
   mutable BrickCacheSettings settings_;  // decode_seconds can change between frames
   std::unique_ptr<State> s_;

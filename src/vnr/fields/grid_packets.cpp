@@ -7,7 +7,7 @@
 #include <cmath>
 #include <cstring>
 #include <vector>
-#include "vnr/fields/brick_cache_view.h"
+#include "vnr/render/brick_cache_view.h"
 #include "vnr/fields/fields.h"
 #include "vnr/fields/grid_packets.h"
 #include "vnr/volume/lookup-inl.h"
@@ -157,7 +157,7 @@ struct CacheLanes {
     if (entered) {
       alignas(HWY_MAX_BYTES) int32_t bs[kMaxLanes];
       hn::Store(brick, di, bs);
-      for (; entered; entered &= entered - 1) c.touch(L, bs[__builtin_ctzll(entered)]);
+      for (; entered; entered &= entered - 1) c.touch(l, bs[__builtin_ctzll(entered)]);
     }
     hn::Store(brick, di, last_brick);
     last_level = l;

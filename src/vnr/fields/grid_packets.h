@@ -23,7 +23,7 @@ inline bool grid_packets_apply(const RenderParams& p, const GridView& g) {
 // returns the number of field samples taken.
 int64_t march_grid_packets(const RenderParams& p, const GridView& g, TileCursor cursor, Vec4f* pixels);
 
-struct BrickCacheView;    // fields/brick_cache_view.h
+struct BrickCacheView;    // render/brick_cache_view.h
 class RenderableField;    // fields/fields.h
 // Whether march_cache_packets can render this frame: unshaded ray marching, every level at least 2
 // voxels wide in x.

@@ -9,6 +9,7 @@
 #include "vnr/cuda/network.cuh"
 #include "vnr/cuda/point_eval.cuh"
 #include "vnr/render/stream_driver.h"
+#include "vnr/render_cuda/cache_copy.cuh"
 #include "vnr/render_cuda/gpu_renderer.h"
 #include "vnr/render_cuda/inshader_kernels.cuh"
 
@@ -62,7 +63,8 @@ struct GpuRenderer::Impl {
   RenderOptions opt;
   RenderParams p;  // tf.table and mc.max_opacity point into GPU memory
   Vec3f box;
-  // the field: a grid, or a network (streaming inference + the in-shader warp evaluator)
+  // the field: a grid, a network (streaming inference + the in-shader warp evaluator), or a brick cache
+  std::unique_ptr<DeviceCacheCopy> cache;
   DeviceBuffer<float> volume;
   GridView dvol;
   std::unique_ptr<cuda::DeviceNetwork> dnet;
@@ -108,6 +110,8 @@ struct GpuRenderer::Impl {
         allow_inshader_smem<F()>(int(netf.smem_bytes()));
         inshader_network = &Impl::inshader_network_of<F()>;
       });
+    } else if (field.cache) {
+      cache = std::make_unique<DeviceCacheCopy>(*field.cache);
     } else if (field.grid.data) {
       const GridView& hv = field.grid;
       const size_t voxels = size_t(hv.nx) * hv.ny * hv.nz;
@@ -115,7 +119,7 @@ struct GpuRenderer::Impl {
       volume.upload(hv.data, voxels);
       dvol = GridView{volume.data(), hv.nx, hv.ny, hv.nz};
     } else {
-      cuda_fail_message("the GPU renderer needs a grid or a network");
+      cuda_fail_message("the GPU renderer needs a grid, a network or a brick cache");
     }
     n_pixels = int64_t(opt.width) * opt.height;
     VNR_CUDA_CHECK(cudaMallocHost(&host, sizeof(HostCounts)));
@@ -321,7 +325,11 @@ struct GpuRenderer::Impl {
   void render(uint32_t frame, RenderStats& st) {
     const auto t0 = std::chrono::steady_clock::now();
     p.frame = frame;
-    if (opt.strategy == RenderStrategy::Streaming) {
+    if (cache) {  // one lookup a sample: in-shader whatever the strategy (as for a grid, nothing to batch)
+      cache->begin_frame(p);
+      inshader(cache->field(), 0, st);
+      cache->end_frame(sb.stream);
+    } else if (opt.strategy == RenderStrategy::Streaming) {
       stream(st);
       VNR_CUDA_CHECK(cudaStreamSynchronize(sb.stream));
       st.host_syncs += 1;
@@ -357,6 +365,10 @@ void GpuRenderer::set_camera(const Camera& cam) { set_render_camera(impl_->p, ca
 
 bool GpuRenderer::refresh_network(const MacroCells& mc, const void* device_half) {
   Impl& I = *impl_;
+  if (I.cache) {  // the host cache refreshes its bricks itself (CachedField::replace_source)
+    I.upload_ranges(mc.ranges());
+    return true;
+  }
   if (!I.dnet || !device_half) return false;
   VNR_CUDA_CHECK(cudaStreamSynchronize(I.sb.stream));  // no frame reads the parameters while they change
   I.dnet->reload_params(device_half);

@@ -16,6 +16,7 @@
 #include <vector>
 #include "vnr/grid_view.h"
 #include "vnr/core/value_range_grid.h"
+#include "vnr/render/brick_cache_view.h"
 #include "vnr/cuda/cuda.h"
 #include "vnr/render/renderer.h"
 
@@ -23,11 +24,13 @@ namespace vnr {
 
 class Network;
 
-// What a GpuRenderer copies to the GPU: the ground-truth grid (grid.data set) or a trained network.
+// What a GpuRenderer copies to the GPU: the ground-truth grid (grid.data set), a trained network, or
+// a brick cache it keeps a copy of (docs/RENDERING.md "Brick cache").
 struct GpuFieldSource {
   GridView grid;                     // normalised voxels in host memory
   const Network* network = nullptr;  // else a network (it must outlive the renderer's construction)
   Int3 dims;                         // the field's voxels (the central-difference step of shading)
+  const BrickCacheCopySource* cache = nullptr;  // else a brick cache (it must outlive the renderer)
 };
 
 class GpuRenderer final : public FrameRenderer {
@@ -45,7 +48,8 @@ public:
   void set_camera(const Camera& cam) override;
   Device device() const override { return Device::Cuda; }
   // A network field's new parameters copied in place, device to device from device_half, and mc's ranges
-  // uploaded (opacities recomputed); false for a grid field or without device_half.
+  // uploaded (opacities recomputed); a brick cache's copy takes the ranges (the host cache refreshes its
+  // stale bricks, the copy takes them frame by frame); false for a grid field or without device_half.
   bool refresh_network(const MacroCells& mc, const void* device_half) override;
 
   // A new transfer function: the table is uploaded and every cell's max opacity recomputed on the GPU.
