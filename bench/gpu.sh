@@ -31,7 +31,8 @@
 #                else .peers; the comparison is skipped without it)
 #   VNR_SECONDS  seconds per benchmark (default 5); VNR_MLPS the MLP paths timed (default "fused cublas");
 #                VNR_CPU_BASELINE=0 skips the host CPU's training figure, VNR_TORCH_COMPILE=0 the
-#                compiled PyTorch peer, VNR_TUNE_K=0 the K sweep of the render stage
+#                compiled PyTorch peer, VNR_TUNE_K=0 the K sweep of the render stage, VNR_VIRTUAL=0
+#                its model at a virtual 4096^3 from a 1 GiB brick cache
 #   VNR_SANITIZE_TOOLS / VNR_SANITIZE_TESTS  compute-sanitizer tools and test executables of the sanitize
 #                stage (default: memcheck and racecheck over every test_gpu*)
 #   VNR_RENDER_NAMES volumes of the rendering table (default "bonsai engine chris_t1", those present);
@@ -207,10 +208,15 @@ if want render && [ "${VNR_RENDER:-1}" != 0 ]; then
     cat "$OUT/render_grid_$name.log"
   done
   first=$(echo $NAMES | cut -d' ' -f1)
-  [ -f "$OUT/render_$first.vnr" ] || VNR_TUNE_K=0 VNR_CPU_RENDER=0
+  [ -f "$OUT/render_$first.vnr" ] || VNR_TUNE_K=0 VNR_CPU_RENDER=0 VNR_VIRTUAL=0
   [ "${VNR_TUNE_K:-1}" = 0 ] || $VNR bench render "$OUT/render_$first.vnr" --device cuda --size 768x768 --frames "$FRAMES" \
     --tune-k 1,2,4,8,16,32,64 --report "$OUT/render_tune_k.json" > "$OUT/render_tune_k.log" 2>&1 || status=1
   [ ! -f "$OUT/render_tune_k.log" ] || cat "$OUT/render_tune_k.log"
+  # the model at a virtual 4096^3 (256 GiB as float) from the GPU's copy of a 1 GiB brick cache
+  [ "${VNR_VIRTUAL:-1}" = 0 ] || $VNR bench render "$OUT/render_$first.vnr" \
+    --device cuda --size 768x768 --frames "$FRAMES" --strategies cache --modes raymarch --cache-dims 4096,4096,4096 \
+    --cache-budget 1GiB --report "$OUT/render_virtual_$first.json" > "$OUT/render_virtual_$first.log" 2>&1 || status=1
+  [ ! -f "$OUT/render_virtual_$first.log" ] || cat "$OUT/render_virtual_$first.log"
   # the same model on the CPU (this machine's cores), for the GPU/CPU ratio
   [ "${VNR_CPU_RENDER:-1}" = 0 ] || $VNR bench render "$OUT/render_$first.vnr" --device cpu --size 768x768 --frames 2 --modes raymarch \
     --report "$OUT/render_cpu_$first.json" > "$OUT/render_cpu_$first.log" 2>&1 || true

@@ -123,7 +123,7 @@ def render(target: Union[Model, Volume], camera: Union[None, Camera, dict, Tuple
     mode: "raymarch", "shadow" or "pathtrace"; size: (width, height); spp: frames accumulated, or "auto"
     (the default, as the CLI's): until the image's noise (RMS standard error of its pixels) is at most
     `noise`, at most max_spp frames;
-        device: "auto", "cpu" or "cuda"; strategy: "auto" (as the CLI's: a model's brick cache on the CPU
+        device: "auto", "cpu" or "cuda"; strategy: "auto" (as the CLI's: a model's brick cache
     when 8 frames or more are accumulated, docs/RENDERING.md), "cache", "streaming" or "inshader";
     macrocells: "grid", "online" or "off" (default as the CLI's); step, seed, shade, background, light:
     the CLI's options; cache_budget ("512MiB", ...; "auto": a quarter of the available memory, at most
