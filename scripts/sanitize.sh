@@ -35,14 +35,16 @@ SLOW='OutOfCore\.|OutOfCoreCli\.|Series\.|SeriesCli\.|Cli\.TrainingPrecision|Cli
 # (parallel_threads, for_each_claimed, gradient sums; test_network), training sessions stopped and paused
 # from other threads, the out-of-core reader pool, the viewer engine thread, the server's network,
 # broadcaster and worker threads (and `vnr view` under SIGTERM), and the OpenMP loops of the parameter
-# codec, metrics, renderer and residuals, the brick cache's decoding thread; tsan_openmp_canary checks
+# codec, metrics, renderer and residuals, the brick cache's decoding thread and its copy's atomic reads
+# (what the GPU's copy records, on the host); tsan_openmp_canary checks
 # the checker.
 TSAN_TESTS="tsan_openmp_canary test_network test_training_session test_out_of_core test_viewer_engine
-            test_view_server test_param_codec test_metrics test_render test_residuals test_brick_cache"
+            test_view_server test_param_codec test_metrics test_render test_residuals test_brick_cache
+            test_brick_cache_copy"
 # Their test suites (a name filter, so executables left from another run of this folder are not run).
 TSAN_FILTER='^(TsanCanary|Mlp|Loss|Adam|CpuTrainer|Sampler|TargetRatio|TrainingSession|OutOfCore|Mmap|OutOfCoreCli|'\
 'ViewerEngine|ViewAccess|ViewServerTest|ViewPng|ViewCli|ParamCodec|ResidualBlock|CompactMacrocells|Metrics|Dda|'\
-'MacroCells|RayMarch|PathTrace|Strategies|CpuRenderer|Residuals|BrickCache)\.'
+'MacroCells|RayMarch|PathTrace|Strategies|CpuRenderer|Residuals|BrickCache|BrickCacheCopy)\.'
 # Left out for CI's 20 minutes (28-40 s each under TSan; their threads run in the tests kept): the
 # out-of-core loss curve (the reader pool trains in OutOfCoreCli.*), two image comparisons of the viewer
 # engine against the renderer (the engine renders in the other ViewerEngine tests), the strategy sweep.

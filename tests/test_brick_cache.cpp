@@ -372,7 +372,7 @@ TEST(BrickCache, AModelsCacheEqualsItsDecodeAndRendersAsTheDecodedGrid) {
   NetworkField field(*model.net, model.dims);
   BrickCacheSettings s = level0(8);
   s.decode_seconds = 100;
-  std::unique_ptr<CachedField> cache = make_model_cache(model, field, s, Device::Cpu);
+  std::unique_ptr<CachedField> cache = make_model_cache(model, field, s, std::make_shared<Decoder>(model, Device::Cpu));
   Volume decoded;
   decoded.dims = model.dims;
   decoded.data.resize(size_t(model.dims.count()));
@@ -413,7 +413,7 @@ TEST(BrickCache, AModelsCoarserLevelsEqualItsDecodeAtTheirDims) {
   BrickCacheSettings s = level0(8);
   s.lod_pixels = 1e9f;  // a voxel of any level covers fewer pixels: the coarsest level everywhere
   s.decode_seconds = 100;
-  std::unique_ptr<CachedField> cache = make_model_cache(model, field, s, Device::Cpu);
+  std::unique_ptr<CachedField> cache = make_model_cache(model, field, s, std::make_shared<Decoder>(model, Device::Cpu));
   ASSERT_EQ(cache->stats().levels, 3);  // 28 x 24 x 20, 14 x 12 x 10, 7 x 6 x 5
   const RenderParams p = params_for(orbit_camera(box_of(vol), 25, 15, 30), model.dims, 40, 32);
   cache->begin_frame(p);

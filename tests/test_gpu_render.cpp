@@ -2,7 +2,8 @@
 // the GPU equal the CPU's exactly; the online ranges of the GPU trainer equal the CPU trainer's; images of
 // the grid and of a trained network match the CPU's for every integrator and both strategies; streaming
 // and in-shader agree on the GPU; macro-cells on and off agree; the GPU's copy of the brick cache matches
-// the CPU's cache. Without a CUDA device every test reports itself skipped with the reason.
+// the CPU's cache; renderers and decoders refreshed in place with a trainer's device parameters equal new
+// ones. Without a CUDA device every test reports itself skipped with the reason.
 #include <gtest/gtest.h>
 #include <algorithm>
 #include <cmath>
@@ -274,7 +275,7 @@ TEST(GpuRender, BrickCacheCopyOnTheDeviceMatchesTheCpu) {
     s.brick = 8;
     s.misses = CacheMisses::Coarser;
     s.decode_seconds = 100;
-    std::unique_ptr<CachedField> cache = make_model_cache(model, field, s, Device::Cuda);
+    std::unique_ptr<CachedField> cache = make_model_cache(model, field, s, std::make_shared<Decoder>(model, Device::Cuda));
     const TransferFunction tf = tf_preset("ramp");
     MacroCells mc = MacroCells::single(model.dims, box_of(vol));
     mc.update(tf);
@@ -331,4 +332,29 @@ TEST(GpuRender, RefreshedFromTheTrainersDeviceCopyRendersAsANewRenderer) {
       ASSERT_TRUE(img.pixels[i].x == fresh.pixels[i].x && img.pixels[i].w == fresh.pixels[i].w) << "pixel " << i;
     EXPECT_LT(image_psnr(img, first), 60.0);  // training changed the picture
   }
+}
+
+// A GPU decoder refreshed in place with a trainer's device parameters (the viewer's brick cache while it
+// trains on the GPU) decodes what a decoder built anew from the downloaded network decodes, bit for bit.
+TEST(GpuRender, DecoderRefreshedFromTheTrainersDeviceCopyDecodesAsANewDecoder) {
+  REQUIRE_GPU();
+  Volume vol = blobs(Int3{32, 32, 32});
+  Network net(preset_config("small"));
+  net.init_params(3);
+  cuda::GpuTrainer trainer(net, view_of(vol), cuda::GpuTrainOptions{16384, 3, kChunk, cuda::MlpPath::Auto});
+  trainer.run(5);
+  trainer.download();
+  Decoder refreshed(net, Device::Cuda);
+  std::vector<int64_t> index(5000);
+  for (size_t i = 0; i < index.size(); ++i) index[i] = int64_t(i * 7) % vol.dims.count();
+  std::vector<float> first(index.size()), got(index.size()), fresh(index.size());
+  refreshed.voxels(vol.dims, index.data(), int64_t(index.size()), first.data());
+  trainer.run(100);
+  ASSERT_TRUE(refreshed.reload_device_params(trainer.device_half_params()));
+  refreshed.voxels(vol.dims, index.data(), int64_t(index.size()), got.data());
+  trainer.download();
+  Decoder(net, Device::Cuda).voxels(vol.dims, index.data(), int64_t(index.size()), fresh.data());
+  for (size_t i = 0; i < index.size(); ++i) ASSERT_EQ(got[i], fresh[i]) << "voxel " << index[i];
+  EXPECT_NE(got, first) << "training changed the decode";
+  EXPECT_FALSE(Decoder(net, Device::Cpu).reload_device_params(trainer.device_half_params()));
 }

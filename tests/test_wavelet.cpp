@@ -293,7 +293,7 @@ TEST(WaveletResiduals, TheBrickCacheReadsTheDecodeWithResiduals) {
   s.brick = 8;
   s.lod_pixels = 1e-6f;  // level 0 everywhere
   s.decode_seconds = 100;
-  std::unique_ptr<CachedField> cache = make_model_cache(model, field, s, Device::Cpu);
+  std::unique_ptr<CachedField> cache = make_model_cache(model, field, s, std::make_shared<Decoder>(model, Device::Cpu));
   RenderParams p;
   p.cam = make_camera_frame(orbit_camera(box_of(vol), 25, 15, 30), 32, 32);
   p.box = Vec3f{float(kDims.x), float(kDims.y), float(kDims.z)};

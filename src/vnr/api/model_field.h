@@ -66,19 +66,20 @@ inline std::unique_ptr<RenderableField> make_model_field(const Model& model, Dev
   return std::move(maker.field);
 }
 
-// What a brick cache of the model decodes with: the model's Decoder on `device` (residuals at the model's
-// dims, multi-brick models blended). A GPU decoder holds its own copy of the parameters: a model that
-// trained since takes a new one (CachedField::replace_source).
-inline VoxelDecode model_cache_decode(const Model& model, Device device) {
-  auto decoder = std::make_shared<Decoder>(model, device);
+// What a brick cache decodes with: a Decoder of the model (residuals at the model's dims, multi-brick
+// models blended), on the CPU or the GPU. A GPU decoder holds its own copy of the parameters: after
+// training it takes the new ones (Decoder::reload_device_params) or is replaced
+// (CachedField::replace_source).
+inline VoxelDecode cache_decode(std::shared_ptr<Decoder> decoder) {
   return [decoder](Int3 dims, const int64_t* index, int64_t n, float* out) { decoder->voxels(dims, index, n, out); };
 }
 
-// The brick cache of a model in front of its field `source` (which must outlive it), decoded on
-// `device`; level 0 at settings.dims, or the model's dims when 0.
+// The brick cache of a model in front of its field `source` (which must outlive it), decoded by
+// `decoder`; level 0 at settings.dims, or the model's dims when 0.
 inline std::unique_ptr<CachedField> make_model_cache(const Model& model, const RenderableField& source,
-                                                     const BrickCacheSettings& settings, Device device) {
-  return std::make_unique<CachedField>(source, model_cache_decode(model, device),
+                                                     const BrickCacheSettings& settings,
+                                                     std::shared_ptr<Decoder> decoder) {
+  return std::make_unique<CachedField>(source, cache_decode(std::move(decoder)),
                                        settings.dims.count() > 0 ? settings.dims : model.dims, settings);
 }
 

@@ -141,7 +141,7 @@ void Renderer::set_cache(std::optional<BrickCacheSettings> settings) {
     // The GPU renders from its copy of the cache (render_cuda/cache_copy.cuh), decoded by the model on
     // the GPU; its misses read the nearest decoded coarser level (the root brick is always in).
     if (device_ == Device::Cuda) s.misses = CacheMisses::Coarser;
-    brick_cache_ = make_model_cache(*model_, *field_, s, device_);
+    brick_cache_ = make_model_cache(*model_, *field_, s, std::make_shared<Decoder>(*model_, device_));
   }
   invalidate();
 }

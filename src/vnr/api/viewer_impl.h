@@ -17,6 +17,7 @@
 #include "vnr/fields/fields.h"
 #include "vnr/model.h"
 #include "vnr/renderer.h"
+#include "vnr/train/decoder.h"
 #include "vnr/train/series.h"
 #include "vnr/train/session.h"
 #include "vnr/viewer.h"
@@ -40,6 +41,7 @@ struct ViewerSnapshot {
 struct ViewContent {
   std::unique_ptr<RenderableField> field;
   std::unique_ptr<CachedField> cache;  // in front of field (viewer_wants_cache)
+  std::shared_ptr<Decoder> decoder;    // what the cache decodes with
   const RenderableField& drawn() const { return cache ? *cache : *field; }
   std::unique_ptr<MacroCells> mc;
   uint64_t version = ~uint64_t(0);  // model or volume version it was built for

@@ -179,10 +179,14 @@ void ViewerEngine::Impl::update_network_content(MacroCellMode mode, bool cache) 
     }
   }
   // ... and with the brick cache, the renderer keeps its copy of the cache and takes the new ranges; the
-  // cache's bricks turn stale and are decoded again, by a GPU decoder of the new parameters.
+  // cache's bricks turn stale and are decoded again, by its GPU decoder with the trainer's parameters
+  // copied in the same way (else a new decoder of the downloaded ones).
   if (c.field && c.mode == mode && cache && c.cache && render_device == Device::Cuda && run.session) {
-    run.session->trainer().download();  // in place: the field reads the same network
-    c.cache->replace_source(*c.field, true, model_cache_decode(*model, render_device));
+    if (!c.decoder->reload_device_params(run.session->trainer().device_half_params())) {
+      run.session->trainer().download();  // in place: the field reads the same network
+      c.decoder = std::make_shared<Decoder>(*model, render_device);
+    }
+    c.cache->replace_source(*c.field, true, cache_decode(c.decoder));
     c.mc = network_macrocells(mode);
     c.mc->update(tf);
     c.device_half = nullptr;
@@ -196,16 +200,19 @@ void ViewerEngine::Impl::update_network_content(MacroCellMode mode, bool cache) 
   c.field = make_model_field(*model, render_device);
   if (!cache) {
     c.cache.reset();
+    c.decoder.reset();
   } else if (!c.cache) {
     BrickCacheSettings s;
     s.misses = CacheMisses::Coarser;  // frames never wait for the network: coarser levels until bricks come in
     s.budget_bytes = setup.cache_budget;
     s.dims = setup.cache_dims;
-    c.cache = make_model_cache(*model, *c.field, s, render_device);
+    c.decoder = std::make_shared<Decoder>(*model, render_device);
+    c.cache = make_model_cache(*model, *c.field, s, c.decoder);
   } else {
-    c.cache->replace_source(*c.field, params_changed,
-                            params_changed && render_device == Device::Cuda ? model_cache_decode(*model, render_device)
-                                                                            : VoxelDecode{});
+    // A GPU decoder copied the parameters it decodes with: one of the new parameters (the CPU's reads them).
+    const bool new_decoder = params_changed && render_device == Device::Cuda;
+    if (new_decoder) c.decoder = std::make_shared<Decoder>(*model, render_device);
+    c.cache->replace_source(*c.field, params_changed, new_decoder ? cache_decode(c.decoder) : VoxelDecode{});
   }
   c.mc = network_macrocells(mode);
   c.version = model_version;

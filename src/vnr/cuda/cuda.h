@@ -113,6 +113,9 @@ public:
 
   // out[i] = first network output (after the output activation) at coords[3i..3i+2].
   void infer(const float* coords, int64_t n, float* out);
+  // New parameters of the same network, copied device to device from device_half (a trainer's half
+  // parameters in GPU memory, the Network's order).
+  void reload_params(const void* device_half);
   // decode_slices() of model_io on the GPU: voxel centres ((i + 0.5) / n per axis, the same expressions)
   // of slices [z0, z1) of a dims-sized grid, x fastest.
   void decode_slices(Int3 dims, int64_t z0, int64_t z1, float* out);

@@ -92,6 +92,11 @@ struct GpuNetwork::Impl {
 GpuNetwork::GpuNetwork(const Network& net, MlpPath mlp) : impl_(std::make_unique<Impl>(net, mlp)) {}
 GpuNetwork::~GpuNetwork() = default;
 
+void GpuNetwork::reload_params(const void* device_half) {
+  VNR_CUDA_CHECK(cudaStreamSynchronize(impl_->sb.stream));  // no inference reads them while they change
+  impl_->dnet.reload_params(device_half);
+}
+
 void GpuNetwork::infer(const float* coords, int64_t n, float* out) {
   Impl& I = *impl_;
   for (int64_t b = 0; b < n; b += I.slab) {

@@ -46,6 +46,7 @@ struct GpuNetwork::Impl {};
 GpuNetwork::GpuNetwork(const Network&, MlpPath) { not_built(); }
 GpuNetwork::~GpuNetwork() = default;
 void GpuNetwork::infer(const float*, int64_t, float*) { not_built(); }
+void GpuNetwork::reload_params(const void*) { not_built(); }
 void GpuNetwork::decode_slices(Int3, int64_t, int64_t, float*) { not_built(); }
 void GpuNetwork::set_slab(int64_t) { not_built(); }
 MlpPath GpuNetwork::mlp_path() const { not_built(); }

@@ -16,6 +16,13 @@ Decoder::~Decoder() = default;
 
 cuda::GpuNetwork* Decoder::gpu() { return eval_->gpu(); }
 
+bool Decoder::reload_device_params(const void* device_half) {
+  cuda::GpuNetwork* g = gpu();
+  if (!g || residuals_ || !device_half) return false;
+  g->reload_params(device_half);
+  return true;
+}
+
 Device evaluation_device(const Model& model, Device asked) { return form_of(model).evaluation_device(model, asked); }
 
 void Decoder::slices(Int3 dims, int64_t z0, int64_t z1, float* out) {

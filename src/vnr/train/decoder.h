@@ -35,6 +35,9 @@ public:
   // n points, interleaved x, y, z in [0, 1)^3: the network (or blended bricks) alone, no residuals.
   void points(const float* xyz, int64_t n, float* out);
   cuda::GpuNetwork* gpu();  // the GPU copy of a single network (null otherwise)
+  // A GPU decoder of a single network without residuals takes a trainer's new parameters in place,
+  // device to device (GpuNetwork::reload_params); false otherwise (build a new decoder).
+  bool reload_device_params(const void* device_half);
   Device device() const { return device_; }
   // Whether a decode at dims applies the residuals.
   bool bounded_at(Int3 dims) const { return residuals_ && residuals_->dims == dims; }
