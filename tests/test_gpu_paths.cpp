@@ -172,6 +172,19 @@ TEST(GpuBricks, DecodeAndRenderMatchTheCpu) {
     std::printf("multi-brick %s, GPU (decoded) vs CPU (networks): %.1f dB\n", render_mode_name(mode), p);
     EXPECT_GT(p, bound);
   }
+  // From the brick cache: the GPU's copy, decoded brick by brick (no whole decode), against the CPU's.
+  Renderer rc(m, Device::Cpu), rg(m, Device::Cuda);
+  for (Renderer* r : {&rc, &rg}) {
+    r->set_size(96, 80);
+    r->choose_strategy("cache");
+    r->warm_cache();
+    for (int i = 0; i < 4; ++i) r->render_frame();
+  }
+  const double p = image_psnr(rg.image(), rc.image());
+  std::printf("multi-brick raymarch from the brick cache, GPU copy vs CPU: %.1f dB (%lld bricks)\n", p,
+              (long long)rg.cache_stats().resident);
+  EXPECT_GT(p, 40.0);
+  EXPECT_GT(rg.cache_stats().resident, 0);
 }
 
 // `vnr train --device cuda --target-ratio`: quantization-aware and rate-aware steps run on the GPU

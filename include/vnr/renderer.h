@@ -168,8 +168,12 @@ private:
   const Model* model_ = nullptr;
   const Volume* volume_ = nullptr;
   Device device_;
-  std::unique_ptr<RenderableField> field_;
+  const RenderableField& source_field() const;
+  // The model's or the volume's field, made on first use (source_field): on the GPU a multi-brick model's
+  // is its whole decode, which the brick cache does without.
+  mutable std::unique_ptr<RenderableField> field_;
   std::optional<BrickCacheSettings> cache_settings_;
+  std::unique_ptr<RenderableField> cache_source_;  // on the GPU: the model's CPU field (the copy never reads it)
   std::unique_ptr<CachedField> brick_cache_;
   Vec3f box_;
   RenderOptions options_;

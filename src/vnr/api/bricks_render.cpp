@@ -31,7 +31,7 @@ BrickSegment render_brick_segment(Renderer& r, int index) {
   // The model's own field (not the brick cache): a multi-brick model's blended bricks on the CPU.
   if (r.device() != Device::Cpu)
     fail("render_brick_segment renders on the CPU (the renderer is on {})", device_name(r.device()));
-  const RenderableField* field = r.field_.get();
+  const RenderableField* field = &r.source_field();
   const RenderParams p = make_render_params(m->dims, r.box_, r.macrocells(), r.tf_, r.camera_, r.options_);
   const Box3 owned = plan.bricks[size_t(index)].owned;
   BrickSegment seg;

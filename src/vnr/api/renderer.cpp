@@ -94,7 +94,6 @@ Renderer::Renderer(const Model* model, const Volume* volume, Device device)
     if (volume && !(volume->dims == dims))
       fail("the model represents {}x{}x{} voxels but its ground-truth volume has {}x{}x{}", dims.x, dims.y, dims.z,
            volume->dims.x, volume->dims.y, volume->dims.z);
-    field_ = make_model_field(*model, device_);
   } else {
     dims = volume->dims;
     field_ = std::make_unique<GridField>(view_of(*volume));
@@ -128,20 +127,30 @@ void Renderer::invalidate() {
 
 const RenderableField& Renderer::field() const {
   if (brick_cache_) return *brick_cache_;
+  return source_field();
+}
+
+const RenderableField& Renderer::source_field() const {
+  if (!field_) field_ = make_model_field(*model_, device_);
   return *field_;
 }
 
 void Renderer::set_cache(std::optional<BrickCacheSettings> settings) {
   backend_.reset();  // its copy of the cache goes first
   brick_cache_.reset();
+  cache_source_.reset();
   cache_settings_ = settings;
   if (settings) {
     if (!model_) fail("the brick cache is for models: a volume is drawn directly");
     BrickCacheSettings s = *settings;
     // The GPU renders from its copy of the cache (render_cuda/cache_copy.cuh), decoded by the model on
     // the GPU; its misses read the nearest decoded coarser level (the root brick is always in).
-    if (device_ == Device::Cuda) s.misses = CacheMisses::Coarser;
-    brick_cache_ = make_model_cache(*model_, *field_, s, std::make_shared<Decoder>(*model_, device_));
+    if (device_ == Device::Cuda) {
+      s.misses = CacheMisses::Coarser;
+      cache_source_ = make_model_field(*model_, Device::Cpu);
+    }
+    brick_cache_ = make_model_cache(*model_, cache_source_ ? *cache_source_ : source_field(), s,
+                                    std::make_shared<Decoder>(*model_, device_));
   }
   invalidate();
 }
@@ -244,7 +253,7 @@ const MacroCells& Renderer::macrocells() {
         break;
       case MacroCellMode::Off:
       default:
-        mc_ = MacroCells::single(field_->dims(), box_);
+        mc_ = MacroCells::single(model_ ? model_->dims : volume_->dims, box_);
     }
     mc_tf_current_ = false;
   }
