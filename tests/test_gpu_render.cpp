@@ -48,6 +48,13 @@ void expect_equal_means(const Image& a, const Image& b, const std::string& what)
   EXPECT_GT(mean_a / double(n), 1e-3) << what << ": the image is not empty";
 }
 
+// A GPU trainer of net (the small config, initialised with seed 3) on vol.
+std::unique_ptr<cuda::GpuTrainer> gpu_trainer_of(Network& net, const Volume& vol) {
+  net.init_params(3);
+  return std::make_unique<cuda::GpuTrainer>(net, view_of(vol),
+                                            cuda::GpuTrainOptions{16384, 3, kChunk, cuda::MlpPath::Auto});
+}
+
 std::unique_ptr<FrameRenderer> renderer_on(Device dev, const RenderableField& f, const Volume& vol, const MacroCells& mc,
                                            const TransferFunction& tf, const Camera& cam, const RenderOptions& o) {
   return make_renderer(dev, f, box_of(vol), mc, tf, cam, o);
@@ -304,13 +311,12 @@ TEST(GpuRender, RefreshedFromTheTrainersDeviceCopyRendersAsANewRenderer) {
   REQUIRE_GPU();
   Volume vol = blobs(Int3{32, 32, 32});
   Network net(preset_config("small"));
-  net.init_params(3);
-  cuda::GpuTrainer trainer(net, view_of(vol), cuda::GpuTrainOptions{16384, 3, kChunk, cuda::MlpPath::Auto});
-  trainer.enable_online_ranges(vol.dims, 8);
-  trainer.run(5);
+  const std::unique_ptr<cuda::GpuTrainer> trainer = gpu_trainer_of(net, vol);
+  trainer->enable_online_ranges(vol.dims, 8);
+  trainer->run(5);
   NetworkField neural(net, vol.dims);
   TransferFunction tf = tf_preset("ramp");
-  MacroCells before(trainer.online_ranges(), box_of(vol));
+  MacroCells before(trainer->online_ranges(), box_of(vol));
   before.update(tf);
   const Camera cam = orbit_camera(box_of(vol), 40, 25, 30);
   for (RenderStrategy strategy : {RenderStrategy::Streaming, RenderStrategy::InShader}) {
@@ -321,12 +327,12 @@ TEST(GpuRender, RefreshedFromTheTrainersDeviceCopyRendersAsANewRenderer) {
     o.strategy = strategy;
     GpuRenderer refreshed(neural.gpu_source(), box_of(vol), before, tf, cam, o);
     const Image first = refreshed.render(2);
-    trainer.run(100);
-    MacroCells after(trainer.online_ranges(), box_of(vol));
+    trainer->run(100);
+    MacroCells after(trainer->online_ranges(), box_of(vol));
     after.update(tf);
-    ASSERT_TRUE(refreshed.refresh_network(after, trainer.device_half_params()));
+    ASSERT_TRUE(refreshed.refresh_network(after, trainer->device_half_params()));
     const Image img = refreshed.render(2);
-    trainer.download();
+    trainer->download();
     const Image fresh = GpuRenderer(neural.gpu_source(), box_of(vol), after, tf, cam, o).render(2);
     for (size_t i = 0; i < img.pixels.size(); ++i)
       ASSERT_TRUE(img.pixels[i].x == fresh.pixels[i].x && img.pixels[i].w == fresh.pixels[i].w) << "pixel " << i;
@@ -340,21 +346,20 @@ TEST(GpuRender, DecoderRefreshedFromTheTrainersDeviceCopyDecodesAsANewDecoder) {
   REQUIRE_GPU();
   Volume vol = blobs(Int3{32, 32, 32});
   Network net(preset_config("small"));
-  net.init_params(3);
-  cuda::GpuTrainer trainer(net, view_of(vol), cuda::GpuTrainOptions{16384, 3, kChunk, cuda::MlpPath::Auto});
-  trainer.run(5);
-  trainer.download();
+  const std::unique_ptr<cuda::GpuTrainer> trainer = gpu_trainer_of(net, vol);
+  trainer->run(5);
+  trainer->download();
   Decoder refreshed(net, Device::Cuda);
   std::vector<int64_t> index(5000);
   for (size_t i = 0; i < index.size(); ++i) index[i] = int64_t(i * 7) % vol.dims.count();
   std::vector<float> first(index.size()), got(index.size()), fresh(index.size());
   refreshed.voxels(vol.dims, index.data(), int64_t(index.size()), first.data());
-  trainer.run(100);
-  ASSERT_TRUE(refreshed.reload_device_params(trainer.device_half_params()));
+  trainer->run(100);
+  ASSERT_TRUE(refreshed.reload_device_params(trainer->device_half_params()));
   refreshed.voxels(vol.dims, index.data(), int64_t(index.size()), got.data());
-  trainer.download();
+  trainer->download();
   Decoder(net, Device::Cuda).voxels(vol.dims, index.data(), int64_t(index.size()), fresh.data());
   for (size_t i = 0; i < index.size(); ++i) ASSERT_EQ(got[i], fresh[i]) << "voxel " << index[i];
   EXPECT_NE(got, first) << "training changed the decode";
-  EXPECT_FALSE(Decoder(net, Device::Cpu).reload_device_params(trainer.device_half_params()));
+  EXPECT_FALSE(Decoder(net, Device::Cpu).reload_device_params(trainer->device_half_params()));
 }

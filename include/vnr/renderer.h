@@ -164,11 +164,11 @@ private:
   void invalidate();
   FrameRenderer& backend();
   const MacroCells& macrocells();
+  const RenderableField& source_field() const;
 
   const Model* model_ = nullptr;
   const Volume* volume_ = nullptr;
   Device device_;
-  const RenderableField& source_field() const;
   // The model's or the volume's field, made on first use (source_field): on the GPU a multi-brick model's
   // is its whole decode, which the brick cache does without.
   mutable std::unique_ptr<RenderableField> field_;

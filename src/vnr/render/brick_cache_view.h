@@ -8,7 +8,6 @@
 #include <atomic>
 #include <cmath>
 #include <cstdint>
-#include <cstring>
 #include <utility>
 #include <vector>
 #include "vnr/grid_view.h"
@@ -31,23 +30,11 @@ struct CacheLevelView {
 constexpr float kLodBlendStart = 1.68179283f;  // 2^(3/4)
 constexpr float kLodBlendInverse = 1 / (2 - kLodBlendStart);
 
-VNR_HD VNR_INLINE uint32_t float_bits(float f) {
-#if defined(__CUDA_ARCH__)
-  return __float_as_uint(f);
-#else
-  uint32_t bits;
-  std::memcpy(&bits, &f, 4);
-  return bits;
-#endif
-}
-VNR_HD VNR_INLINE float bits_float(uint32_t bits) {
-#if defined(__CUDA_ARCH__)
-  return __uint_as_float(bits);
-#else
-  float f;
-  std::memcpy(&f, &bits, 4);
-  return f;
-#endif
+// The bits of a value as another type of the same size, on both sides.
+template <class To, class From>
+VNR_HD VNR_INLINE To bits_as(From v) {
+  static_assert(sizeof(To) == sizeof(From));
+  return __builtin_bit_cast(To, v);
 }
 
 // What a lookup reads: the levels' page tables and the pool (host or GPU memory), and the view's levels
@@ -72,12 +59,12 @@ struct BrickCacheLookup {
   VNR_HD VNR_INLINE int level_at(float x, float y, float z, float* t = nullptr) const {
     const float dx = x * box[0] - eye[0], dy = y * box[1] - eye[1], dz = z * box[2] - eye[2];
     const float m = sqrtf(dx * dx + dy * dy + dz * dz) * lod_scale;
-    const uint32_t bits = float_bits(m);
+    const uint32_t bits = bits_as<uint32_t>(m);
     const int e = int(bits >> 23) - 127;  // m >= 0: its exponent is floor(log2 m)
     if (t) *t = 0;
     if (e < 0) return 0;
     if (e >= levels - 1) return levels - 1;
-    const float mant = bits_float((bits & 0x7fffffu) | 0x3f800000u);  // m / 2^e, in [1, 2)
+    const float mant = bits_as<float>((bits & 0x7fffffu) | 0x3f800000u);  // m / 2^e, in [1, 2)
     if (t && mant >= kLodBlendStart) *t = (mant - kLodBlendStart) * kLodBlendInverse;
     return e;
   }
@@ -183,18 +170,12 @@ VNR_HD VNR_INLINE uint32_t exchange(uint32_t* p, uint32_t v) {
   return __atomic_exchange_n(p, v, __ATOMIC_RELAXED);
 #endif
 }
-VNR_HD VNR_INLINE uint32_t fetch_add(uint32_t* p, uint32_t v) {
+template <class T>  // uint32_t or unsigned long long (atomicAdd's)
+VNR_HD VNR_INLINE T fetch_add(T* p, T v) {
 #if defined(__CUDA_ARCH__)
   return atomicAdd(p, v);
 #else
   return __atomic_fetch_add(p, v, __ATOMIC_RELAXED);
-#endif
-}
-VNR_HD VNR_INLINE void fetch_add(unsigned long long* p, unsigned long long v) {
-#if defined(__CUDA_ARCH__)
-  atomicAdd(p, v);
-#else
-  __atomic_fetch_add(p, v, __ATOMIC_RELAXED);
 #endif
 }
 
