@@ -1,5 +1,6 @@
 #pragma once
 // The field a renderer draws for a Model: its network, or a multi-brick model's blended bricks.
+#include <algorithm>
 #include <memory>
 #include "vnr/fields/brick_cache.h"
 #include "vnr/fields/bricked_field.h"
@@ -72,6 +73,17 @@ inline std::unique_ptr<RenderableField> make_model_field(const Model& model, Dev
 // (CachedField::replace_source).
 inline VoxelDecode cache_decode(std::shared_ptr<Decoder> decoder) {
   return [decoder](Int3 dims, const int64_t* index, int64_t n, float* out) { decoder->voxels(dims, index, n, out); };
+}
+
+// A brick cache's settings for a renderer on `device`. The GPU renders from a copy of the pool in its
+// memory (render_cuda/cache_copy.cuh): the budget is at most a quarter of the GPU's free memory, and the
+// copy's misses read the nearest decoded coarser level (the host cache decodes the root first).
+inline BrickCacheSettings cache_settings_for(BrickCacheSettings s, Device device) {
+  if (device != Device::Cuda) return s;
+  s.misses = CacheMisses::Coarser;
+  const uint64_t budget = s.budget_bytes ? s.budget_bytes : default_cache_budget();
+  s.budget_bytes = std::min(budget, cuda::free_memory_bytes() / 4);
+  return s;
 }
 
 // The brick cache of a model in front of its field `source` (which must outlive it), decoded by

@@ -142,13 +142,10 @@ void Renderer::set_cache(std::optional<BrickCacheSettings> settings) {
   cache_settings_ = settings;
   if (settings) {
     if (!model_) fail("the brick cache is for models: a volume is drawn directly");
-    BrickCacheSettings s = *settings;
-    // The GPU renders from its copy of the cache (render_cuda/cache_copy.cuh), decoded by the model on
-    // the GPU; its misses read the nearest decoded coarser level (the root brick is always in).
-    if (device_ == Device::Cuda) {
-      s.misses = CacheMisses::Coarser;
-      cache_source_ = make_model_field(*model_, Device::Cpu);
-    }
+    // On the GPU: its copy of the cache, decoded there (cache_settings_for); the host's misses would read
+    // the model's CPU field (the copy's never do).
+    const BrickCacheSettings s = cache_settings_for(*settings, device_);
+    if (device_ == Device::Cuda) cache_source_ = make_model_field(*model_, Device::Cpu);
     brick_cache_ = make_model_cache(*model_, cache_source_ ? *cache_source_ : source_field(), s,
                                     std::make_shared<Decoder>(*model_, device_));
   }

@@ -206,6 +206,7 @@ void ViewerEngine::Impl::update_network_content(MacroCellMode mode, bool cache) 
     s.misses = CacheMisses::Coarser;  // frames never wait for the network: coarser levels until bricks come in
     s.budget_bytes = setup.cache_budget;
     s.dims = setup.cache_dims;
+    s = cache_settings_for(s, render_device);
     c.decoder = std::make_shared<Decoder>(*model, render_device);
     c.cache = make_model_cache(*model, *c.field, s, c.decoder);
   } else {
