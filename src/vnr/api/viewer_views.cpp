@@ -197,7 +197,9 @@ void ViewerEngine::Impl::update_network_content(MacroCellMode mode, bool cache) 
   net_pass.backend.reset();  // it refers to the old field and cells
   if (run.session) run.session->trainer().download();
   std::unique_ptr<RenderableField> old = std::move(c.field);  // the cache reads it until it has the new one
-  c.field = make_model_field(*model, render_device);
+  // Behind the GPU's cache the field is the host cache's source alone (the GPU's copy never reads it): the
+  // CPU's, not a multi-brick model's whole decode on the GPU.
+  c.field = make_model_field(*model, cache && render_device == Device::Cuda ? Device::Cpu : render_device);
   if (!cache) {
     c.cache.reset();
     c.decoder.reset();
