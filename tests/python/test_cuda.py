@@ -1,6 +1,7 @@
-"""The vnr module's device="cuda" paths against its CPU paths: decode, sample and render of one model, and
-training on the GPU. The GPU's MLP runs in half precision, so values agree within 2e-2 of the value range
-and images above 35 dB. Without a CUDA device (or a build without CUDA) every test skips, saying why."""
+"""The vnr module's device="cuda" paths against its CPU paths: decode, sample and render of one model (also
+from the brick cache), and training on the GPU. The GPU's MLP runs in half precision, so values agree
+within 2e-2 of the value range and images above 35 dB. Without a CUDA device (or a build without CUDA)
+every test skips, saying why."""
 import pytest
 
 np = pytest.importorskip("numpy", reason="numpy (Debian python3-numpy) is needed for the vnr module's tests")
@@ -42,6 +43,15 @@ def test_render_on_cuda_matches_the_cpu(model):
         gpu = vnr.render(model, size=(96, 64), mode=mode, spp=4, device="cuda")
         assert gpu.shape == cpu.shape
         assert image_psnr(gpu, cpu) > 35.0, mode
+
+
+def test_render_from_the_brick_cache_on_cuda_matches_the_cpu(model):
+    # the GPU's copy of the cache, at the model's dims and at a resolution 8x finer (any size)
+    for dims in (None, (192, 160, 128)):
+        kw = {} if dims is None else {"cache_dims": dims}
+        cpu = vnr.render(model, size=(96, 64), spp=4, device="cpu", strategy="cache", **kw)
+        gpu = vnr.render(model, size=(96, 64), spp=4, device="cuda", strategy="cache", **kw)
+        assert image_psnr(gpu, cpu) > 35.0, dims
 
 
 def test_training_on_cuda_reaches_the_cpu_quality(model):
