@@ -35,7 +35,7 @@ check decode_cuda $VNR decode "$M" -o "$W/dec_cuda.raw" --dims 50,40,30 --device
 check decode_cpu $VNR decode "$M" -o "$W/dec_cpu.raw" --dims 50,40,30 --device cpu
 for mode in raymarch shadow pathtrace; do
   check "render_cpu_$mode" $VNR render "$M" -o "$W/r_cpu_$mode.pfm" --mode $mode --size 256x192 --spp 8 --device cpu
-  for strategy in streaming inshader; do
+  for strategy in streaming inshader cache; do  # cache: the GPU's copy of the brick cache
     check "render_cuda_${mode}_$strategy" $VNR render "$M" -o "$W/r_cuda_${mode}_$strategy.pfm" --mode $mode \
       --strategy $strategy --size 256x192 --spp 8 --device cuda --reference "$W/r_cpu_$mode.pfm" \
       --report "$W/render_cuda_${mode}_$strategy.json"
@@ -61,6 +61,8 @@ check bricks_decode_cpu $VNR decode "$W/bricks" -o "$W/bdec_cpu.raw" --device cp
 check bricks_render_cpu $VNR render "$W/bricks" -o "$W/b_cpu.pfm" --size 256x192 --spp 4 --device cpu
 check bricks_render_cuda $VNR render "$W/bricks" -o "$W/b_cuda.pfm" --size 256x192 --spp 4 --device cuda \
   --reference "$W/b_cpu.pfm" --report "$W/bricks_render_cuda.json"
+check bricks_render_cuda_cache $VNR render "$W/bricks" -o "$W/b_cuda_cache.pfm" --size 256x192 --spp 4 --device cuda \
+  --strategy cache --reference "$W/b_cpu.pfm" --report "$W/bricks_render_cuda_cache.json"
 check bricks_eval_cuda $VNR eval "$W/bricks" "$W/ml.json" --device cuda --report "$W/bricks_eval.json"
 check outofcore_cuda $VNR train "$W/ml.json" -o "$W/o.vnr" --sampler outofcore --memory-budget 1MiB --config small \
   --steps 1000 --device cuda --report "$W/outofcore_cuda.json"
@@ -100,11 +102,13 @@ for pre in ("dec", "bdec"):
         span = float(b.max() - b.min()) or 1.0
         print(f"| decode {pre}: max abs difference / range | {float(np.abs(a - b).max()) / span:.2e} | | |")
 for mode in ("raymarch", "shadow", "pathtrace"):
-    for s in ("streaming", "inshader"):
+    for s in ("streaming", "inshader", "cache"):
         r = rep(f"render_cuda_{mode}_{s}")
         print(f"| render {mode} {s}: image PSNR vs the CPU | {r.get('image_psnr', 'n/a')} | | |")
 r = rep("bricks_render_cuda")
 print(f"| multi-brick render on the GPU (decoded): image PSNR vs the CPU | {r.get('image_psnr', 'n/a')} | | |")
+r = rep("bricks_render_cuda_cache")
+print(f"| multi-brick render on the GPU (brick cache): image PSNR vs the CPU | {r.get('image_psnr', 'n/a')} | | |")
 for name in ("ratio_cuda", "bound_cuda", "bound_eval", "bricks_cuda", "bricks_eval"):
     r = rep(name)
     keys = {k: r[k] for k in ("psnr", "ratio", "compression_ratio", "max_error", "file_bytes") if k in r}

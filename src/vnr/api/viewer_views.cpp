@@ -280,7 +280,7 @@ bool ViewerEngine::Impl::render(const ViewerSnapshot& snap, bool* refined, int* 
   const RenderOptions opt =
       viewer_render_options(st.render, input.scene, std::max(1, st.width / scale), std::max(1, st.height / scale));
   RenderOptions net_opt = opt;
-  if (want_cache) net_opt.strategy = fastest_render_strategy("cache", false, opt.mode);
+  if (want_cache) net_opt.strategy = fastest_render_strategy("cache", render_device == Device::Cuda, opt.mode);
   const int target = coarse ? 1 : viewer_max_frames(st.render);
   const bool want_net = st.view.layout != ViewLayout::Truth;
   const bool want_truth = volume && st.view.layout != ViewLayout::Network;
