@@ -53,6 +53,9 @@ DATA=${VNR_DATA:-../shared/data}
 if [ ! -d "$DATA" ] && [ -d .data ]; then DATA=.data; fi
 # scripts/gpu_carry.sh carries the raw volumes gzipped: unpacked once, in place
 for gz in "$DATA"/*.raw.gz; do [ -f "$gz" ] && gzip -d -f "$gz"; done
+# ... and the binaries and static libraries
+for gz in .gpu/bin/*.gz .gpu/a/*.gz; do [ -f "$gz" ] && gzip -d -f "$gz"; done
+[ ! -d .gpu/bin ] || chmod +x .gpu/bin/*
 export PATH="/usr/local/cuda/bin:$PATH"
 (nvidia-smi || true) > "$OUT/nvidia-smi.txt" 2>&1
 stage_start=$(date +%s)

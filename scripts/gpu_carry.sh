@@ -2,9 +2,9 @@
 # Build here, run there: builds vnr for Hopper (sm_90) on this machine (nvcc needs no GPU) and packs what
 # a GPU machine that reaches no package registry needs, in folders of the repo that git ignores (listed in
 # .git/info/exclude) so the device tool can carry them (64 MiB in all):
-#   .gpu/bin      vnr and the gpu test executables, stripped
+#   .gpu/bin      vnr and the gpu test executables, stripped and gzipped (bench/gpu.sh unpacks them)
 #   .gpu/lib      their runtime libraries that are not part of glibc, libstdc++ or the CUDA toolkit
-#   .gpu/a        the position-independent static libraries, and .gpu/include the headers of fmt,
+#   .gpu/a        the position-independent static libraries (gzipped), and .gpu/include the headers of fmt,
 #                 nlohmann-json and Highway: bench/gpu_python.sh links the Python module there
 #   .data         the real volumes of the benchmarks (NAMES, default bonsai; SHARED/data), the raw files
 #                 gzipped (bench/gpu.sh unpacks them): the four of the rd stage take 13 MiB, not 36
@@ -12,7 +12,7 @@
 # Then, on the GPU machine: sh bench/gpu.sh OUT (it finds .gpu, .data and .peers by itself).
 #
 #   sh scripts/gpu_carry.sh [SHARED]      (SHARED defaults to ../shared; NAMES="bonsai engine" for more;
-#                                          NAMES="bonsai chris_t1 wmag91 engine" for the rd stage: 61 MiB in all)
+#                                          NAMES="bonsai chris_t1 wmag91 engine" for the rd stage: 38 MiB in all)
 set -eu
 cd "$(dirname "$0")/.."
 SHARED=${1:-../shared}
@@ -67,4 +67,10 @@ for name in $NAMES; do
 done
 for raw in .data/*.raw; do [ -f "$raw" ] && chmod u+w "$raw" && gzip -6 "$raw"; done
 [ -f "$SHARED/peers/torch_vnr.py" ] && cp "$SHARED/peers/torch_vnr.py" .peers/
+# gzipped, as the volumes (bench/gpu.sh unpacks both): the binaries each link the whole library and its
+# kernels, 37 MiB unpacked, and the carry holds 64 MiB
+gzip -6 .gpu/bin/* .gpu/a/*
 du -sh .gpu/bin .gpu/lib .gpu/a .gpu/include .data .peers
+total=$(du -sm .gpu .data .peers | awk '{ s += $1 } END { print s }')
+echo "the carry: $total MiB of 64"
+[ "$total" -le 64 ] || echo "more than the device tool carries: fewer NAMES, or leave .gpu/a and .gpu/include (the python stage) out"
