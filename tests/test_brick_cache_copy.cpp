@@ -26,7 +26,8 @@ struct NoReads {  // a lookup that records nothing: the reference reads of a tes
   void missed() const {}
 };
 
-// The copy: cache_copy.cuh's DeviceCacheCopy with host vectors for GPU buffers.
+// The copy: cache_copy.cuh's DeviceCacheCopy with host vectors for GPU buffers (the same upkeep,
+// update_cache_copy, and the same reads).
 class HostCacheCopy final : public Field {
 public:
   explicit HostCacheCopy(const CachedField& src) : src_(src) {
@@ -38,7 +39,7 @@ public:
     requests_.resize(2 * kRequests);
     reads_.slot_read = slot_read_.data();
     reads_.asked = asked_.data();
-    for (int l = 0; l < v.levels; ++l) reads_.level_offset[l] = v.level_offset(l);
+    reads_.set_levels(v);
     reads_.requests = requests_.data();
     reads_.n_requests = &n_requests_;
     reads_.capacity = kRequests;
@@ -53,13 +54,13 @@ public:
     return run_inshader(job, [this](float x, float y, float z) { return point(x, y, z); });
   }
   void begin_frame(const RenderParams& p) const override {
-    src_.begin_frame(p);
-    const BrickCacheView& v = src_.view();
-    const BrickCacheChanges ch = src_.take_changes(fresh_);
+    const int64_t bf = src_.view().brick_floats;
+    const BrickCacheView& v = update_cache_copy(
+        src_, p, fresh_, [&](int32_t s, const float* voxels) { std::copy_n(voxels, bf, pool_.data() + s * bf); },
+        [&](const std::vector<std::pair<int64_t, int32_t>>& entries) {
+          for (const auto& [index, slot] : entries) table_[size_t(index)] = slot;
+        });
     fresh_ = false;
-    for (const int32_t s : ch.slots)
-      std::copy_n(v.pool + int64_t(s) * v.brick_floats, v.brick_floats, pool_.data() + int64_t(s) * v.brick_floats);
-    for (const auto& [index, slot] : ch.entries) table_[size_t(index)] = slot;
     lookup_ = v.over_copy(table_.data(), pool_.data());
     reads_.frame = v.frame;
   }

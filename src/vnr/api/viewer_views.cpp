@@ -167,31 +167,20 @@ const ValueRangeGrid& ViewerEngine::Impl::volume_ranges() {
 void ViewerEngine::Impl::update_network_content(MacroCellMode mode, bool cache) {
   ViewContent& c = net_content;
   if (c.field && c.params_version == model_version && c.mode == mode && bool(c.cache) == cache) return;
-  // Training on the GPU changed only the parameters: the renderer copies them from the trainer's device
-  // copy (render_pass), instead of a download, a host fp16 copy and a new GPU network every chunk.
-  if (c.field && c.mode == mode && !cache && !c.cache && render_device == Device::Cuda && run.session) {
-    if (const void* half = run.session->trainer().device_half_params()) {
+  // Training on the GPU changed only the parameters: they are taken in place from the trainer's device
+  // copy -- by the renderer's network (render_pass), or behind the brick cache by the cache's decoder, the
+  // cache's bricks turning stale -- instead of a download, a host fp16 copy and a new GPU network every
+  // chunk. The renderer keeps its buffers (and its copy of the cache) and takes the new ranges.
+  if (c.field && c.mode == mode && bool(c.cache) == cache && render_device == Device::Cuda && run.session) {
+    const void* half = run.session->trainer().device_half_params();
+    if (c.cache ? c.decoder->reload_device_params(half) : half != nullptr) {
+      if (c.cache) c.cache->replace_source(*c.field, true);
       c.mc = network_macrocells(mode);
       c.mc->update(tf);
       c.device_half = half;
       c.params_version = model_version;
       return;
     }
-  }
-  // ... and with the brick cache, the renderer keeps its copy of the cache and takes the new ranges; the
-  // cache's bricks turn stale and are decoded again, by its GPU decoder with the trainer's parameters
-  // copied in the same way (else a new decoder of the downloaded ones).
-  if (c.field && c.mode == mode && cache && c.cache && render_device == Device::Cuda && run.session) {
-    if (!c.decoder->reload_device_params(run.session->trainer().device_half_params())) {
-      run.session->trainer().download();  // in place: the field reads the same network
-      c.decoder = std::make_shared<Decoder>(*model, render_device);
-    }
-    c.cache->replace_source(*c.field, true, cache_decode(c.decoder));
-    c.mc = network_macrocells(mode);
-    c.mc->update(tf);
-    c.device_half = nullptr;
-    c.params_version = model_version;
-    return;
   }
   const bool params_changed = c.version != model_version;
   net_pass.backend.reset();  // it refers to the old field and cells

@@ -91,7 +91,6 @@ struct CachedField::State {
   bool copied = false;
   std::vector<int32_t> written;
   std::vector<std::pair<int64_t, int32_t>> moved;
-  std::vector<int64_t> level_offset;  // BrickCacheLookup::level_offset of each level
   BrickCacheStats totals;
   std::atomic<int64_t> misses{0};
   // The decoding thread (set_asynchronous): its jobs in priority order (the back first), the bricks it
@@ -126,7 +125,7 @@ struct CachedField::State {
   }
   void set_slot(int l, int64_t b, int32_t slot) {
     levels[size_t(l)].slot[size_t(b)] = slot;
-    if (copied) moved.emplace_back(level_offset[size_t(l)] + b, slot);
+    if (copied) moved.emplace_back(view.level_offset(l) + b, slot);
   }
   float* slot_voxels(int32_t slot) {
     if (copied) written.push_back(slot);
@@ -195,7 +194,6 @@ CachedField::CachedField(const RenderableField& source, VoxelDecode decode, Int3
     v.level[l] = CacheLevelView{int32_t(L.n.x),  int32_t(L.n.y),  int32_t(L.n.z),  int32_t(L.nb.x),
                                 int32_t(L.nb.y), int32_t(L.nb.z), L.slot.data()};
     v.used[l] = L.used.get();
-    s.level_offset.push_back(l == 0 ? 0 : s.level_offset.back() + s.levels.back().bricks());
     s.levels.push_back(std::move(L));
     if (s.levels.back().bricks() == 1) break;
   }
@@ -584,7 +582,7 @@ BrickCacheChanges CachedField::take_changes(bool from_scratch) const {
     s.moved.clear();
     for (const State::Resident& r : s.resident) {
       out.slots.push_back(r.slot);
-      out.entries.emplace_back(s.level_offset[size_t(r.level)] + r.brick, r.slot);
+      out.entries.emplace_back(s.view.level_offset(r.level) + r.brick, r.slot);
     }
     return out;
   }

@@ -192,6 +192,9 @@ struct BrickCacheCopyReads {
   uint32_t frame = 0;
   unsigned long long* misses = nullptr;
 
+  void set_levels(const BrickCacheLookup& c) {  // the levels' offsets of the cache copied
+    for (int l = 0; l < c.levels; ++l) level_offset[l] = c.level_offset(l);
+  }
   VNR_HD VNR_INLINE void read(int, int64_t, int32_t slot) const {
     if (relaxed_load(slot_read + slot) != frame) relaxed_store(slot_read + slot, frame);
   }
@@ -228,5 +231,19 @@ public:
   // brick), and the samples no level answered.
   virtual void take_reads(const uint32_t* slot_read, const int32_t* requests, int64_t n, int64_t misses) const = 0;
 };
+
+// A copy's upkeep before frame p, the GPU's and the tests' alike: the host cache prepares the frame, then
+// copy_slot(slot, voxels) takes each brick written and set_entries(entries) the page-table entries set
+// (everything resident when from_scratch). Returns the host's lookup, for the copy's own (over_copy).
+template <class CopySlot, class SetEntries>
+const BrickCacheView& update_cache_copy(const BrickCacheCopySource& src, const RenderParams& p, bool from_scratch,
+                                        const CopySlot& copy_slot, const SetEntries& set_entries) {
+  src.begin_frame(p);
+  const BrickCacheView& v = src.view();
+  const BrickCacheChanges ch = src.take_changes(from_scratch);
+  for (const int32_t s : ch.slots) copy_slot(s, v.pool + int64_t(s) * v.brick_floats);
+  if (!ch.entries.empty()) set_entries(ch.entries);
+  return v;
+}
 
 }  // namespace vnr

@@ -44,8 +44,7 @@ public:
 
   explicit DeviceCacheCopy(const BrickCacheCopySource& src) : src_(src) {
     const BrickCacheView& v = src.view();
-    slots_ = src.pool_slots();
-    const size_t pool_floats = size_t(slots_) * size_t(v.brick_floats);
+    const size_t slots = size_t(src.pool_slots()), pool_floats = slots * size_t(v.brick_floats);
     size_t free_b = 0, total_b = 0;
     VNR_CUDA_CHECK(cudaMemGetInfo(&free_b, &total_b));
     if (pool_floats * sizeof(float) > free_b / 2)
@@ -56,7 +55,7 @@ public:
     const int64_t bricks = v.level_offset(v.levels);
     table_.resize(size_t(bricks));
     asked_.resize(size_t(bricks));
-    slot_read_.resize(size_t(slots_));
+    slot_read_.resize(slots);
     requests_.resize(2 * size_t(kRequests));
     counts_.resize(1);
     misses_.resize(1);
@@ -65,13 +64,13 @@ public:
     VNR_CUDA_CHECK(cudaMemset(slot_read_.data(), 0, slot_read_.size() * sizeof(uint32_t)));
     VNR_CUDA_CHECK(cudaMemset(counts_.data(), 0, sizeof(uint32_t)));
     VNR_CUDA_CHECK(cudaMemset(misses_.data(), 0, sizeof(unsigned long long)));
-    host_slot_read_.resize(size_t(slots_));
+    host_slot_read_.resize(slots);
     host_requests_.resize(2 * size_t(kRequests));
     lookup_.resize(1);
     reads_.resize(1);
     reads_h_.slot_read = slot_read_.data();
     reads_h_.asked = asked_.data();
-    for (int l = 0; l < v.levels; ++l) reads_h_.level_offset[l] = v.level_offset(l);
+    reads_h_.set_levels(v);
     reads_h_.requests = requests_.data();
     reads_h_.n_requests = counts_.data();
     reads_h_.capacity = kRequests;
@@ -80,24 +79,22 @@ public:
 
   // The host cache prepares frame p (decodes what was asked for), and the copy takes what changed.
   void begin_frame(const RenderParams& p) {
-    src_.begin_frame(p);
-    const BrickCacheView& v = src_.view();
-    const BrickCacheChanges ch = src_.take_changes(fresh_);
-    fresh_ = false;
-    for (const int32_t s : ch.slots)
-      pool_.upload(v.pool + int64_t(s) * v.brick_floats, size_t(v.brick_floats), size_t(s) * size_t(v.brick_floats));
-    if (!ch.entries.empty()) {
-      const size_t n = ch.entries.size();
+    const size_t bf = size_t(src_.view().brick_floats);
+    const auto copy_slot = [&](int32_t s, const float* voxels) { pool_.upload(voxels, bf, size_t(s) * bf); };
+    const auto set_entries = [&](const std::vector<std::pair<int64_t, int32_t>>& entries) {
+      const size_t n = entries.size();
       std::vector<int64_t> index(n);
       std::vector<int32_t> slot(n);
-      for (size_t i = 0; i < n; ++i) index[i] = ch.entries[i].first, slot[i] = ch.entries[i].second;
+      for (size_t i = 0; i < n; ++i) index[i] = entries[i].first, slot[i] = entries[i].second;
       if (entry_index_.size() < n) entry_index_.resize(n), entry_slot_.resize(n);
       entry_index_.upload(index.data(), n);
       entry_slot_.upload(slot.data(), n);
       set_cache_entries<<<cuda::blocks_for(int64_t(n), 256), 256>>>(entry_index_.data(), entry_slot_.data(),
                                                                     int64_t(n), table_.data());
       VNR_CUDA_LAUNCHED();
-    }
+    };
+    const BrickCacheView& v = update_cache_copy(src_, p, fresh_, copy_slot, set_entries);
+    fresh_ = false;
     const BrickCacheLookup c = v.over_copy(table_.data(), pool_.data());  // the host's levels and view
     reads_h_.frame = v.frame;
     lookup_.upload(&c, 1);
@@ -124,7 +121,6 @@ public:
 
 private:
   const BrickCacheCopySource& src_;
-  int32_t slots_ = 0;
   bool fresh_ = true;
   cuda::DeviceBuffer<float> pool_;
   cuda::DeviceBuffer<int32_t> table_, requests_, entry_slot_;
