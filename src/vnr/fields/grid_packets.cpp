@@ -64,11 +64,34 @@ struct CacheLanes {
   static constexpr size_t kMaxLanes = HWY_MAX_BYTES / sizeof(float);
   const BrickCacheView& c;
   const RenderableField& source;
-  alignas(HWY_MAX_BYTES) int32_t last_brick[kMaxLanes];
+  alignas(HWY_MAX_BYTES) int32_t last_brick[kMaxLanes] = {};
   int last_level = -1;
+  const bool level0_only = c.box_reads_level0();  // the view needs no level of detail per sample
 
+  // GridPrefetchVec's rows in the pool, at the level the last lookup read (most samples stay in it);
+  // bricks not in are skipped.
   template <class DF, class VF>
-  HWY_INLINE void prefetch(DF, VF, VF, VF) const {}
+  HWY_INLINE void prefetch(DF df, VF ux, VF uy, VF uz) const {
+    if (last_level < 0) return;
+    const hn::RebindToSigned<DF> di;
+    const CacheLevelView& L = c.level[last_level];
+    const int s = c.shift;
+    alignas(HWY_MAX_BYTES) int32_t x[kMaxLanes], y[kMaxLanes], z[kMaxLanes];
+    hn::Store(hn::ConvertTo(di, CellAxisPos(df, ux, L.nx)), di, x);
+    hn::Store(hn::ConvertTo(di, CellAxisPos(df, uy, L.ny)), di, y);
+    hn::Store(hn::ConvertTo(di, CellAxisPos(df, uz, L.nz)), di, z);
+    for (size_t l = 0; l < hn::Lanes(df); ++l) {
+      const int32_t bx = x[l] >> s, by = y[l] >> s, bz = z[l] >> s;
+      const int32_t slot = L.slot[bx + L.bx * (by + L.by * bz)];
+      if (slot < 0) continue;
+      const float* p0 = c.pool + int64_t(slot) * c.brick_floats + (x[l] - (bx << s)) +
+                        int64_t(y[l] - (by << s)) * c.sy + int64_t(z[l] - (bz << s)) * c.sz;
+      __builtin_prefetch(p0, 0, 2);
+      __builtin_prefetch(p0 + c.sy, 0, 2);
+      __builtin_prefetch(p0 + c.sz, 0, 2);
+      __builtin_prefetch(p0 + c.sy + c.sz, 0, 2);
+    }
+  }
 
   template <class DF, class VF>
   HWY_NOINLINE VF scalar(DF df, VF ux, VF uy, VF uz, uint64_t lanes, VF done) {
@@ -87,9 +110,13 @@ struct CacheLanes {
   template <class DF, class VF>
   HWY_INLINE VF lookup(DF df, VF ux, VF uy, VF uz, uint64_t active) {
     const hn::RebindToSigned<DF> di;
+    uint64_t missed = 0;
+    if (level0_only) {
+      const VF value = at_level(df, 0, ux, uy, uz, active, &missed);
+      return missed ? scalar(df, ux, uy, uz, missed, value) : value;
+    }
     VF t;
     const auto lev = lane_levels(df, ux, uy, uz, &t);
-    uint64_t missed = 0;
     VF value = from_levels(df, lev, ux, uy, uz, active, &missed);
     const auto blends = hn::Gt(t, hn::Zero(df));
     if (const uint64_t blend = lane_bits(df, blends) & active & ~missed) {  // this + (coarser - this) * t
@@ -321,7 +348,7 @@ int64_t MarchGridPackets(const RenderParams& p, const GridView& g, TileCursor cu
 }
 int64_t MarchCachePackets(const RenderParams& p, const BrickCacheView& c, const RenderableField& source,
                           TileCursor cursor, Vec4f* pixels) {
-  CacheLanes lanes{c, source, {}, -1};
+  CacheLanes lanes{c, source};
   return MarchPackets(p, lanes, cursor, pixels);
 }
 

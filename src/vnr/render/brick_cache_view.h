@@ -68,6 +68,17 @@ struct BrickCacheLookup {
     if (t && mant >= kLodBlendStart) *t = (mant - kLodBlendStart) * kLodBlendInverse;
     return e;
   }
+  // True when every sample in the box reads level 0 unblended (level_at returns 0 with t = 0): one
+  // level, or even the box's farthest corner is short of level 0's blend (a margin for rounding).
+  VNR_HD VNR_INLINE bool box_reads_level0() const {
+    if (levels <= 1) return true;
+    float far2 = 0;
+    for (int k = 0; k < 3; ++k) {
+      const float d = fmaxf(fabsf(eye[k]), fabsf(box[k] - eye[k]));
+      far2 += d * d;
+    }
+    return sqrtf(far2) * lod_scale < 0.99f * kLodBlendStart;
+  }
   // The cached value at u, or *miss = true when a level it reads (or, coarser, every level from it up)
   // is not decoded. Where it blends two levels, each is the arithmetic of grid_lookup over that level's
   // full decode.
