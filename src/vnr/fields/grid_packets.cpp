@@ -82,7 +82,7 @@ struct CacheLanes {
     hn::Store(hn::ConvertTo(di, CellAxisPos(df, uz, L.nz)), di, z);
     for (size_t l = 0; l < hn::Lanes(df); ++l) {
       const int32_t bx = x[l] >> s, by = y[l] >> s, bz = z[l] >> s;
-      const int32_t slot = L.slot[bx + L.bx * (by + L.by * bz)];
+      const int32_t slot = L.slot[bx + L.bx * (by + int64_t(L.by) * bz)];
       if (slot < 0) continue;
       const float* p0 = c.pool + int64_t(slot) * c.brick_floats + (x[l] - (bx << s)) +
                         int64_t(y[l] - (by << s)) * c.sy + int64_t(z[l] - (bz << s)) * c.sz;
