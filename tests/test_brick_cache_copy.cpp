@@ -5,7 +5,8 @@
 // slot stamps and requests. Checked against independent references: after every frame the copy's page
 // tables equal the host cache's entry for entry and every lookup equals the host's bit for bit, while
 // the pool evicts; a warm copy renders a grid's image bit for bit; and the slot stamps that come back
-// keep the pool from evicting what the frames read (no thrashing under a budget the view exceeds).
+// keep the pool from evicting what the frames read (no thrashing under a budget the view exceeds); and
+// changes a copy leaves untaken stay bounded and, taken late, still bring it up to date.
 #include <gtest/gtest.h>
 #include <algorithm>
 #include <cmath>
@@ -56,7 +57,8 @@ public:
   void begin_frame(const RenderParams& p) const override {
     const int64_t bf = src_.view().brick_floats;
     const BrickCacheView& v = update_cache_copy(
-        src_, p, fresh_, [&](int32_t s, const float* voxels) { std::copy_n(voxels, bf, pool_.data() + s * bf); },
+        src_, p, fresh_,
+        [&](int32_t s, int32_t n, const float* voxels) { std::copy_n(voxels, n * bf, pool_.data() + s * bf); },
         [&](const std::vector<std::pair<int64_t, int32_t>>& entries) {
           for (const auto& [index, slot] : entries) table_[size_t(index)] = slot;
         });
@@ -142,6 +144,48 @@ TEST(BrickCacheCopy, FollowsTheHostCacheEntryForEntryWhileThePoolEvicts) {
   EXPECT_GT(st.evicted, 0) << "the budget of 24 bricks made the pool evict";
   EXPECT_GT(st.levels, 3);
   EXPECT_LE(st.resident, 24);
+}
+
+// A copy no longer drawn (the host cache drawn on the CPU from then on): what the cache records for it
+// stays bounded by its pool, and taken late it still brings the copy up to date entry for entry.
+TEST(BrickCacheCopy, ChangesLeftUntakenStayBoundedAndBringTheCopyUpToDate) {
+  Volume vol = synth(Int3{64, 56, 48});
+  GridField grid(view_of(vol));
+  BrickCacheSettings s = coarser(24 * 9 * 9 * 9 * sizeof(float));
+  s.decode_seconds = 100;  // every brick asked for: many changes a frame
+  CachedField cache(grid, grid_decode(vol), vol.dims, s);
+  HostCacheCopy copy(cache);
+  RampScene scene(vol, 48, 40);
+  Image img;
+  const Vec3f centre = box_of(vol) * 0.5f;
+  auto camera = [&](int frame) {
+    const float a = 0.3f * float(frame), d = 400.0f - 9.0f * float(frame % 40);
+    return Camera{centre + Vec3f{d * std::cos(a), 0.4f * d, d * std::sin(a)}, centre, Vec3f{0, 1, 0}, 30};
+  };
+  CpuRenderer(copy, box_of(vol), scene.mc, scene.tf, camera(0), scene.o).render_frame(0, img);
+  copy.end_frame();
+  int64_t most = 0;
+  for (int frame = 1; frame < 1000; ++frame) {  // the host cache alone, evicting
+    CpuRenderer(cache, box_of(vol), scene.mc, scene.tf, camera(frame), scene.o).render_frame(uint32_t(frame), img);
+    most = std::max(most, cache.changes_pending());
+  }
+  const BrickCacheStats st = cache.stats();
+  std::printf("decoded %lld evicted %lld, most pending %lld\n", (long long)st.decoded, (long long)st.evicted, (long long)most);
+  EXPECT_GT(st.decoded, 1000) << "many more changes than the bound";
+  const int64_t bricks = cache.view().level_offset(cache.view().levels);
+  EXPECT_LE(most, 2 * (2 * 24 + 64) + std::max<int64_t>(4 * 24 + 64, 2 * bricks)) << "slots and entries, compacted";
+  CpuRenderer(copy, box_of(vol), scene.mc, scene.tf, camera(1000), scene.o).render_frame(0, img);
+  const BrickCacheView& v = cache.view();
+  for (int64_t i = 0; i < bricks; ++i) {
+    int l = 0;
+    while (v.level_offset(l + 1) <= i) ++l;
+    ASSERT_EQ(copy.table()[size_t(i)], v.level[l].slot[i - v.level_offset(l)]) << "entry " << i;
+  }
+  Pcg32 rng(5);
+  for (int i = 0; i < 2000; ++i) {
+    const float x = rng.next_float(), y = rng.next_float(), z = rng.next_float();
+    ASSERT_EQ(copy.reference_point(x, y, z), host_point(cache, x, y, z));
+  }
 }
 
 // Level 0 everywhere over a grid source: once the copy has every brick the view asked for, its images

@@ -254,6 +254,14 @@ TEST(GpuRender, BrickCacheCopyOnTheDeviceMatchesTheCpu) {
     r.set_camera(cam);
     r.set_macrocells(MacroCellMode::Off);
     r.choose_strategy(strategy, budget, dims);
+    if (budget) {  // close-ups of two columns of level-0 bricks: the second evicts the first's
+      for (const Vec3f at : {Vec3f{4, 4, 0}, Vec3f{28, 28, 0}}) {
+        r.set_camera(Camera{Vec3f{at.x, at.y, 42}, at, Vec3f{0, 1, 0}, 6});
+        r.warm_cache();
+        r.render_frame();
+      }
+      r.set_camera(cam);
+    }
     r.warm_cache();
     for (int f = 0; f < 4; ++f) r.render_frame();
     EXPECT_STREQ(r.field().kind(), std::string(strategy) == "cache" ? "cache" : "network");
@@ -266,7 +274,9 @@ TEST(GpuRender, BrickCacheCopyOnTheDeviceMatchesTheCpu) {
   const Int3 model_dims{0, 0, 0};
   const Image gpu_cache = image(Device::Cuda, "cache", 0, model_dims), cpu_cache = image(Device::Cpu, "cache", 0, model_dims);
   const Image gpu_network = image(Device::Cuda, "inshader", 0, model_dims);
-  // at 256x192 the view reads level 0 of a 128^3 decode (64 bricks of 32): a pool of six evicts
+  // at 256x192 the views read level 0 of a 128^3 decode (64 bricks of 32) through a pool of six (the root
+  // and five): the second close-up evicts (three of the first's column of four), and
+  // the whole view, which asks for more than fits, keeps what its frames read and reads coarser levels
   const Image gpu_small = image(Device::Cuda, "cache", 6 * 33 * 33 * 33 * sizeof(float), Int3{128, 128, 128}, 256);
   const Image gpu_network_256 = image(Device::Cuda, "inshader", 0, model_dims, 256);
   std::printf("GPU cache vs CPU cache %.1f dB, vs GPU network %.1f dB; six bricks vs the network %.1f dB\n",

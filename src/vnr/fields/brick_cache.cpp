@@ -87,10 +87,12 @@ struct CachedField::State {
   std::vector<BrickKey> asked;       // bricks asked for since the last begin_frame
   BrickCacheView view;
   // A renderer's copy of the cache (take_changes): the slots written and page-table entries set since
-  // it was last brought up to date, recorded only while there is one.
+  // it was last brought up to date, recorded only while there is one. Untaken (a copy no longer drawn),
+  // they are compacted as they grow (one per slot, the last entry per brick), so they stay bounded.
   bool copied = false;
   std::vector<int32_t> written;
   std::vector<std::pair<int64_t, int32_t>> moved;
+  size_t written_limit = 0, moved_limit = 0;
   BrickCacheStats totals;
   std::atomic<int64_t> misses{0};
   // The decoding thread (set_asynchronous): its jobs in priority order (the back first), the bricks it
@@ -125,11 +127,28 @@ struct CachedField::State {
   }
   void set_slot(int l, int64_t b, int32_t slot) {
     levels[size_t(l)].slot[size_t(b)] = slot;
-    if (copied) moved.emplace_back(view.level_offset(l) + b, slot);
+    if (!copied) return;
+    moved.emplace_back(view.level_offset(l) + b, slot);
+    if (moved.size() > moved_limit) compact_moved(), moved_limit = std::max(4 * size_t(slots) + 64, 2 * moved.size());
   }
   float* slot_voxels(int32_t slot) {
-    if (copied) written.push_back(slot);
+    if (copied) {
+      written.push_back(slot);
+      if (written.size() > written_limit) compact_written(), written_limit = 2 * size_t(slots) + 64;
+    }
     return pool.get() + int64_t(slot) * view.brick_floats;
+  }
+  void compact_written() {
+    std::sort(written.begin(), written.end());
+    written.erase(std::unique(written.begin(), written.end()), written.end());
+  }
+  // One entry per brick, its last value (a brick evicted and decoded again: its new slot).
+  void compact_moved() {
+    std::stable_sort(moved.begin(), moved.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+    size_t kept = 0;
+    for (size_t i = 0; i < moved.size(); ++i)
+      if (i + 1 == moved.size() || moved[i + 1].first != moved[i].first) moved[kept++] = moved[i];
+    moved.resize(kept);
   }
 };
 
@@ -584,18 +603,17 @@ BrickCacheChanges CachedField::take_changes(bool from_scratch) const {
       out.slots.push_back(r.slot);
       out.entries.emplace_back(s.view.level_offset(r.level) + r.brick, r.slot);
     }
+    std::sort(out.slots.begin(), out.slots.end());
     return out;
   }
+  s.compact_written();
+  s.compact_moved();
   out.slots.swap(s.written);
-  std::sort(out.slots.begin(), out.slots.end());
-  out.slots.erase(std::unique(out.slots.begin(), out.slots.end()), out.slots.end());
-  // One entry per brick, its last value (a brick evicted and decoded again in one frame: its new slot).
-  std::stable_sort(s.moved.begin(), s.moved.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
-  for (size_t i = 0; i < s.moved.size(); ++i)
-    if (i + 1 == s.moved.size() || s.moved[i + 1].first != s.moved[i].first) out.entries.push_back(s.moved[i]);
-  s.moved.clear();
+  out.entries.swap(s.moved);
   return out;
 }
+
+int64_t CachedField::changes_pending() const { return int64_t(s_->written.size() + s_->moved.size()); }
 
 void CachedField::take_reads(const uint32_t* slot_read, const int32_t* requests, int64_t n, int64_t misses) const {
   State& s = *s_;

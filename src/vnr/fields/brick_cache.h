@@ -83,6 +83,7 @@ public:
   // first take_changes on, the cache records the slots it writes and the page-table entries it sets.
   int32_t pool_slots() const override;
   BrickCacheChanges take_changes(bool from_scratch) const override;
+  int64_t changes_pending() const;  // slots and entries recorded for a copy and not yet taken
   void take_reads(const uint32_t* slot_read, const int32_t* requests, int64_t n, int64_t misses) const override;
 
   struct State;  // brick_cache.cpp: levels, page tables, pool, requests

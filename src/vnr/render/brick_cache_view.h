@@ -220,7 +220,7 @@ struct BrickCacheCopyReads {
 
 // What changed in a cache since its copy was last brought up to date (BrickCacheCopySource::take_changes).
 struct BrickCacheChanges {
-  std::vector<int32_t> slots;                        // pool slots whose voxels were written
+  std::vector<int32_t> slots;                        // pool slots whose voxels were written, ascending
   std::vector<std::pair<int64_t, int32_t>> entries;  // (level_offset + brick, its slot or -1), one per brick
 };
 
@@ -244,15 +244,19 @@ public:
 };
 
 // A copy's upkeep before frame p, the GPU's and the tests' alike: the host cache prepares the frame, then
-// copy_slot(slot, voxels) takes each brick written and set_entries(entries) the page-table entries set
-// (everything resident when from_scratch). Returns the host's lookup, for the copy's own (over_copy).
-template <class CopySlot, class SetEntries>
+// copy_slots(first, count, voxels) takes each run of consecutive slots written (one copy a run) and
+// set_entries(entries) the page-table entries set (everything resident when from_scratch). Returns the
+// host's lookup, for the copy's own (over_copy).
+template <class CopySlots, class SetEntries>
 const BrickCacheView& update_cache_copy(const BrickCacheCopySource& src, const RenderParams& p, bool from_scratch,
-                                        const CopySlot& copy_slot, const SetEntries& set_entries) {
+                                        const CopySlots& copy_slots, const SetEntries& set_entries) {
   src.begin_frame(p);
   const BrickCacheView& v = src.view();
   const BrickCacheChanges ch = src.take_changes(from_scratch);
-  for (const int32_t s : ch.slots) copy_slot(s, v.pool + int64_t(s) * v.brick_floats);
+  for (size_t i = 0, j; i < ch.slots.size(); i = j) {
+    for (j = i + 1; j < ch.slots.size() && ch.slots[j] == ch.slots[j - 1] + 1;) ++j;
+    copy_slots(ch.slots[i], int32_t(j - i), v.pool + int64_t(ch.slots[i]) * v.brick_floats);
+  }
   if (!ch.entries.empty()) set_entries(ch.entries);
   return v;
 }

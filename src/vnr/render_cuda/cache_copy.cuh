@@ -44,6 +44,8 @@ public:
 
   explicit DeviceCacheCopy(const BrickCacheCopySource& src) : src_(src) {
     const BrickCacheView& v = src.view();
+    if (!v.coarser)  // the copy's misses read coarser levels, and the host decodes the root first only then
+      cuda::cuda_fail_message("the GPU draws a brick cache whose misses read coarser levels (CacheMisses::Coarser)");
     const size_t slots = size_t(src.pool_slots()), pool_floats = slots * size_t(v.brick_floats);
     size_t free_b = 0, total_b = 0;
     VNR_CUDA_CHECK(cudaMemGetInfo(&free_b, &total_b));
@@ -62,8 +64,6 @@ public:
     VNR_CUDA_CHECK(cudaMemset(table_.data(), 0xff, table_.size() * sizeof(int32_t)));  // -1: not decoded
     VNR_CUDA_CHECK(cudaMemset(asked_.data(), 0, asked_.size() * sizeof(uint32_t)));
     VNR_CUDA_CHECK(cudaMemset(slot_read_.data(), 0, slot_read_.size() * sizeof(uint32_t)));
-    VNR_CUDA_CHECK(cudaMemset(counts_.data(), 0, sizeof(uint32_t)));
-    VNR_CUDA_CHECK(cudaMemset(misses_.data(), 0, sizeof(unsigned long long)));
     host_slot_read_.resize(slots);
     host_requests_.resize(2 * size_t(kRequests));
     lookup_.resize(1);
@@ -80,23 +80,31 @@ public:
   // The host cache prepares frame p (decodes what was asked for), and the copy takes what changed.
   void begin_frame(const RenderParams& p) {
     const size_t bf = size_t(src_.view().brick_floats);
-    const auto copy_slot = [&](int32_t s, const float* voxels) { pool_.upload(voxels, bf, size_t(s) * bf); };
+    const auto copy_slots = [&](int32_t s, int32_t n, const float* voxels) {
+      pool_.upload(voxels, size_t(n) * bf, size_t(s) * bf);
+    };
     const auto set_entries = [&](const std::vector<std::pair<int64_t, int32_t>>& entries) {
       const size_t n = entries.size();
       std::vector<int64_t> index(n);
       std::vector<int32_t> slot(n);
       for (size_t i = 0; i < n; ++i) index[i] = entries[i].first, slot[i] = entries[i].second;
-      if (entry_index_.size() < n) entry_index_.resize(n), entry_slot_.resize(n);
+      if (entry_index_.size() < n) {  // grown geometrically: a reallocation synchronises the device
+        const size_t capacity = std::max(n, 2 * entry_index_.size());
+        entry_index_.resize(capacity), entry_slot_.resize(capacity);
+      }
       entry_index_.upload(index.data(), n);
       entry_slot_.upload(slot.data(), n);
       set_cache_entries<<<cuda::blocks_for(int64_t(n), 256), 256>>>(entry_index_.data(), entry_slot_.data(),
                                                                     int64_t(n), table_.data());
       VNR_CUDA_LAUNCHED();
     };
-    const BrickCacheView& v = update_cache_copy(src_, p, fresh_, copy_slot, set_entries);
+    const BrickCacheView& v = update_cache_copy(src_, p, fresh_, copy_slots, set_entries);
     fresh_ = false;
     const BrickCacheLookup c = v.over_copy(table_.data(), pool_.data());  // the host's levels and view
     reads_h_.frame = v.frame;
+    // The frame's counters start at zero (here, not after the last frame: that one may have thrown).
+    VNR_CUDA_CHECK(cudaMemset(counts_.data(), 0, sizeof(uint32_t)));
+    VNR_CUDA_CHECK(cudaMemset(misses_.data(), 0, sizeof(unsigned long long)));
     lookup_.upload(&c, 1);
     reads_.upload(&reads_h_, 1);  // synchronous (legacy stream): done before the frame's kernels
     VNR_CUDA_CHECK(cudaDeviceSynchronize());
@@ -114,8 +122,6 @@ public:
     n = std::min(n, kRequests);
     if (n) requests_.download(host_requests_.data(), 2 * size_t(n));
     slot_read_.download(host_slot_read_.data(), host_slot_read_.size());
-    VNR_CUDA_CHECK(cudaMemset(counts_.data(), 0, sizeof(uint32_t)));
-    VNR_CUDA_CHECK(cudaMemset(misses_.data(), 0, sizeof(unsigned long long)));
     src_.take_reads(host_slot_read_.data(), host_requests_.data(), int64_t(n), int64_t(misses));
   }
 
