@@ -49,10 +49,13 @@ public:
   Int3 dims() const override { return src_.dims(); }
   const char* kind() const override { return "cache copy"; }
   void query(const float* x, const float* y, const float* z, int64_t n, float* out) const override {
-    for (int64_t i = 0; i < n; ++i) out[i] = point(x[i], y[i], z[i]);
+    for (int64_t i = 0; i < n; ++i) out[i] = point(reads_, x[i], y[i], z[i]);
   }
+  // Each thread's copy of the lambda holds its own memo, for this frame: the GPU kernels' reads.
   int64_t render_inshader(const InshaderJob& job) const override {
-    return run_inshader(job, [this](float x, float y, float z) { return point(x, y, z); });
+    return run_inshader(job, [this, memo = BrickCacheCopyReads::Memo{&reads_}](float x, float y, float z) {
+      return point(memo, x, y, z);
+    });
   }
   void begin_frame(const RenderParams& p) const override {
     const int64_t bf = src_.view().brick_floats;
@@ -66,9 +69,10 @@ public:
     lookup_ = v.over_copy(table_.data(), pool_.data());
     reads_.frame = v.frame;
   }
-  float point(float x, float y, float z) const {
+  template <class Reads>
+  float point(const Reads& reads, float x, float y, float z) const {
     bool miss = false;
-    const float v = lookup_.sample(reads_, x, y, z, &miss);
+    const float v = lookup_.sample(reads, x, y, z, &miss);
     return miss ? 0.0f : v;
   }
   void end_frame() const {

@@ -216,6 +216,18 @@ struct BrickCacheCopyReads {
     if (n < capacity) requests[2 * n] = l, requests[2 * n + 1] = int32_t(b);
   }
   VNR_HD VNR_INLINE void missed() const { fetch_add(misses, 1ull); }
+
+  // One thread's reads within one frame: a run of samples in one slot stamps it once (a ray's samples
+  // mostly stay in a brick), sparing a global load per sample.
+  struct Memo {
+    const BrickCacheCopyReads* r;
+    mutable int32_t last_slot = -1;
+    VNR_HD VNR_INLINE void read(int l, int64_t b, int32_t slot) const {
+      if (slot != last_slot) last_slot = slot, r->read(l, b, slot);
+    }
+    VNR_HD VNR_INLINE void ask(int l, int64_t b) const { r->ask(l, b); }
+    VNR_HD VNR_INLINE void missed() const { r->missed(); }
+  };
 };
 
 // What changed in a cache since its copy was last brought up to date (BrickCacheCopySource::take_changes).

@@ -31,14 +31,16 @@ VNR_INLINE Vec4f inshader_pixel(const RenderParams& p, RenderMode mode, const Ev
   return inshader_march_pixel<7>(p, eval, ix, iy, true, shadow, samples);
 }
 
-// Renders the job's frame with point function f(x, y, z); returns the number of field samples.
+// Renders the job's frame with point function f(x, y, z); returns the number of field samples. Each
+// thread calls its own copy of f (state of its own, as a GPU thread's evaluator: BrickCacheCopyReads::Memo).
 template <class PointFn>
 int64_t run_inshader(const InshaderJob& job, const PointFn& f) {
   const RenderParams& p = *job.params;
   const int W = p.cam.width, H = p.cam.height;
   std::atomic<int64_t> samples{0}, next_tile{0};
   parallel_threads([&](int, int) {
-    const SingleRayEval<PointFn> eval{f};
+    const PointFn mine = f;
+    const SingleRayEval<PointFn> eval{mine};
     int64_t my_samples = 0;
     TileCursor pixels{W, H, kInshaderTile, 0, 1, &next_tile};
     for (int ix, iy; pixels.next(&ix, &iy);)

@@ -18,18 +18,18 @@ namespace vnr::gpu_render {
 struct CacheWarpField {
   const BrickCacheLookup* lookup;  // in GPU memory (a kernel parameter of this size would be copied per thread)
   const BrickCacheCopyReads* reads;
-  struct Eval {
+  struct Eval {  // one thread's, for one kernel of one frame
     const BrickCacheLookup* c;
-    const BrickCacheCopyReads* r;
+    BrickCacheCopyReads::Memo r;
     __device__ bool any(bool active) const { return __any_sync(cuda::kFullWarp, active); }
     __device__ float operator()(bool active, float x, float y, float z) const {
       if (!active) return 0.0f;
       bool miss = false;
-      const float v = c->sample(*r, x, y, z, &miss);
+      const float v = c->sample(r, x, y, z, &miss);
       return miss ? 0.0f : v;
     }
   };
-  __device__ Eval bind(unsigned char*) const { return Eval{lookup, reads}; }
+  __device__ Eval bind(unsigned char*) const { return Eval{lookup, BrickCacheCopyReads::Memo{reads}}; }
 };
 
 __global__ void set_cache_entries(const int64_t* __restrict__ index, const int32_t* __restrict__ slot, int64_t n,
