@@ -45,7 +45,8 @@ public:
   explicit DeviceCacheCopy(const BrickCacheCopySource& src) : src_(src) {
     const BrickCacheView& v = src.view();
     if (!v.coarser)  // the copy's misses read coarser levels, and the host decodes the root first only then
-      cuda::cuda_fail_message("the GPU draws a brick cache whose misses read coarser levels (CacheMisses::Coarser)");
+      cuda::cuda_fail_message("the GPU draws only a brick cache whose misses read coarser levels "
+                              "(CacheMisses::Coarser, as cache_settings_for gives)");
     const size_t slots = size_t(src.pool_slots()), pool_floats = slots * size_t(v.brick_floats);
     size_t free_b = 0, total_b = 0;
     VNR_CUDA_CHECK(cudaMemGetInfo(&free_b, &total_b));
