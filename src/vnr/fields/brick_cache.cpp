@@ -542,6 +542,7 @@ void CachedField::update_levels(const RenderParams& p) const {
   v.eye[0] = c.eye.x, v.eye[1] = c.eye.y, v.eye[2] = c.eye.z;
   v.box[0] = p.box.x, v.box[1] = p.box.y, v.box[2] = p.box.z;
   v.lod_scale = cache_lod_scale(c, p.box, dims_, settings_.lod_pixels);
+  v.level0_only = v.box_reads_level0();
 }
 
 void CachedField::begin_frame(const RenderParams& p) const {

@@ -66,7 +66,6 @@ struct CacheLanes {
   const RenderableField& source;
   alignas(HWY_MAX_BYTES) int32_t last_brick[kMaxLanes] = {};
   int last_level = -1;
-  const bool level0_only = c.box_reads_level0();  // the view needs no level of detail per sample
 
   // GridPrefetchVec's rows in the pool, at the level the last lookup read (most samples stay in it);
   // bricks not in are skipped.
@@ -111,7 +110,7 @@ struct CacheLanes {
   HWY_INLINE VF lookup(DF df, VF ux, VF uy, VF uz, uint64_t active) {
     const hn::RebindToSigned<DF> di;
     uint64_t missed = 0;
-    if (level0_only) {
+    if (c.level0_only) {  // the view needs no level of detail per sample
       const VF value = at_level(df, 0, ux, uy, uz, active, &missed);
       return missed ? scalar(df, ux, uy, uz, missed, value) : value;
     }

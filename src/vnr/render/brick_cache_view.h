@@ -48,6 +48,7 @@ struct BrickCacheLookup {
   // from the eye, and covers m = d * lod_scale level-0 voxels (CachedField::update_levels).
   float eye[3] = {0, 0, 0}, box[3] = {1, 1, 1};
   float lod_scale = 0;
+  bool level0_only = false;      // box_reads_level0() of the view: no sample needs level_at
   const float* pool = nullptr;   // slot s holds (B+1)^3 voxels from pool + s * brick_floats, x fastest
   int64_t brick_floats = 0;
   int shift = 5;                 // log2 B
@@ -84,6 +85,7 @@ struct BrickCacheLookup {
   // full decode.
   VNR_HD_TEMPLATE template <class Reads>
   VNR_HD VNR_INLINE float sample(const Reads& r, float x, float y, float z, bool* miss) const {
+    if (level0_only) return sample_level(r, 0, x, y, z, miss);
     float t;
     const int l = level_at(x, y, z, &t);
     if (t == 0) return sample_level(r, l, x, y, z, miss);
