@@ -199,10 +199,11 @@ TEST(BrickCache, LevelOfDetailFollowsTheVoxelFootprint) {
     cache.begin_frame(params_for(cam, dims, H, H));
     const int expect = std::min(4, pixel_voxels < 2 ? 0 : int(std::floor(std::log2(pixel_voxels))));
     EXPECT_EQ(cache.view().level_at(0.5f, 0.5f, 0.999f), expect) << pixel_voxels << " voxels a pixel";
-    // The packets' shortcut: the whole box reads level 0 unblended only where even its far corner
+    // The lookups' shortcut: the whole box reads level 0 unblended only where even its far corner
     // (sqrt(64^2 + 64^2 + (D + 128)^2) away) is short of level 0's blend.
     const bool level0 = cache.view().box_reads_level0();
     EXPECT_EQ(level0, pixel_voxels < 1) << pixel_voxels << " voxels a pixel";
+    EXPECT_EQ(cache.view().level0_only, level0) << "decided with the view";
     for (int i = 0; level0 && i < 1000; ++i) {
       float t = 1;
       const float u[3] = {float(i % 10) / 9, float(i / 10 % 10) / 9, float(i / 100) / 9};

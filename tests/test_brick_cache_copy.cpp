@@ -174,7 +174,8 @@ TEST(BrickCacheCopy, ChangesLeftUntakenStayBoundedAndBringTheCopyUpToDate) {
     most = std::max(most, cache.changes_pending());
   }
   const BrickCacheStats st = cache.stats();
-  std::printf("decoded %lld evicted %lld, most pending %lld\n", (long long)st.decoded, (long long)st.evicted, (long long)most);
+  std::printf("decoded %lld evicted %lld, most pending %lld\n", (long long)st.decoded, (long long)st.evicted,
+              (long long)most);
   EXPECT_GT(st.decoded, 1000) << "many more changes than the bound";
   const int64_t bricks = cache.view().level_offset(cache.view().levels);
   EXPECT_LE(most, 2 * (2 * 24 + 64) + std::max<int64_t>(4 * 24 + 64, 2 * bricks)) << "slots and entries, compacted";

@@ -275,8 +275,8 @@ TEST(GpuRender, BrickCacheCopyOnTheDeviceMatchesTheCpu) {
   const Image gpu_cache = image(Device::Cuda, "cache", 0, model_dims), cpu_cache = image(Device::Cpu, "cache", 0, model_dims);
   const Image gpu_network = image(Device::Cuda, "inshader", 0, model_dims);
   // at 256x192 the views read level 0 of a 128^3 decode (64 bricks of 32) through a pool of six (the root
-  // and five): the second close-up evicts (three of the first's column of four), and
-  // the whole view, which asks for more than fits, keeps what its frames read and reads coarser levels
+  // and five): the second close-up evicts (three of the first's column of four), and the whole view,
+  // which asks for more than fits, keeps what its frames read and reads coarser levels for the rest
   const Image gpu_small = image(Device::Cuda, "cache", 6 * 33 * 33 * 33 * sizeof(float), Int3{128, 128, 128}, 256);
   const Image gpu_network_256 = image(Device::Cuda, "inshader", 0, model_dims, 256);
   std::printf("GPU cache vs CPU cache %.1f dB, vs GPU network %.1f dB; six bricks vs the network %.1f dB\n",
