@@ -40,7 +40,7 @@ SLOW='OutOfCore\.|OutOfCoreCli\.|Series\.|SeriesCli\.|Cli\.TrainingPrecision|Cli
 # the checker.
 TSAN_TESTS="tsan_openmp_canary test_network test_training_session test_out_of_core test_viewer_engine
             test_view_server test_param_codec test_metrics test_render test_residuals test_brick_cache
-            test_brick_cache_copy"
+            test_brick_cache_copy test_brick_cache_refresh"
 # Their test suites (a name filter, so executables left from another run of this folder are not run).
 TSAN_FILTER='^(TsanCanary|Mlp|Loss|Adam|CpuTrainer|Sampler|TargetRatio|TrainingSession|OutOfCore|Mmap|OutOfCoreCli|'\
 'ViewerEngine|ViewAccess|ViewServerTest|ViewPng|ViewCli|ParamCodec|ResidualBlock|CompactMacrocells|Metrics|Dda|'\

@@ -398,19 +398,32 @@ void CachedField::decode_asked(double seconds, const std::function<void(int64_t,
   s.totals.decode_seconds += seconds_since(t0);
 }
 
+// Stale bricks in the order they are refreshed: those the last frame read first, then the oldest (the
+// earliest model's), then the nearest. While a model trains every brick turns stale each step; oldest
+// first sweeps the whole view (nearest first would refresh the same near bricks step after step).
 std::vector<size_t> CachedField::stale_bricks() const {
   const State& s = *s_;
-  std::vector<std::pair<float, size_t>> stale;
+  struct Stale {
+    bool unread;    // not read by the last frame
+    uint32_t age;   // models since it was decoded
+    float distance;
+    size_t r;
+  };
+  std::vector<Stale> stale;
   for (size_t r = 0; r < s.resident.size(); ++r) {
     const State::Resident& res = s.resident[r];
     if (res.generation == s.generation) continue;
     const Level& L = s.levels[size_t(res.level)];
     const bool read = L.used[res.brick].load(std::memory_order_relaxed) == s.view.frame;
-    stale.emplace_back((read ? 0.0f : 1e30f) + brick_distance(res.level, res.brick), r);
+    stale.push_back(Stale{!read, s.generation - res.generation, brick_distance(res.level, res.brick), r});
   }
-  std::sort(stale.begin(), stale.end());
+  std::sort(stale.begin(), stale.end(), [](const Stale& a, const Stale& b) {
+    if (a.unread != b.unread) return b.unread;
+    if (a.age != b.age) return a.age > b.age;
+    return a.distance < b.distance;
+  });
   std::vector<size_t> out;
-  for (const auto& [priority, r] : stale) out.push_back(r);
+  for (const Stale& st : stale) out.push_back(st.r);
   return out;
 }
 
