@@ -292,6 +292,7 @@ TEST(GpuRender, BrickCacheCopyOnTheDeviceMatchesTheCpu) {
     s.brick = 8;
     s.misses = CacheMisses::Coarser;
     s.decode_seconds = 100;
+    s.budget_bytes = uint64_t(64) << 20;  // within any GPU's free memory (the copy refuses more than half)
     std::unique_ptr<CachedField> cache = make_model_cache(model, field, s, std::make_shared<Decoder>(model, Device::Cuda));
     const TransferFunction tf = tf_preset("ramp");
     MacroCells mc = MacroCells::single(model.dims, box_of(vol));

@@ -66,6 +66,8 @@ bool render_pass(ViewPass& pass, const ViewContent& content, const TransferFunct
       pass.options_epoch != snap.options_epoch || pass.coarse != coarse) {
     pass.backend.reset();
     pass.backend = make_renderer(device, content.drawn(), box, *content.mc, tf, cam, opt, cuda::MlpPath::Auto);
+    // The host field holds the parameters of the last download; a GPU trainer's latest are on the device.
+    if (content.device_half) pass.backend->refresh_network(*content.mc, content.device_half);
     pass.content_version = content.version;
     pass.params_version = content.params_version;
     pass.tf_epoch = snap.tf_epoch;
@@ -75,8 +77,10 @@ bool render_pass(ViewPass& pass, const ViewContent& content, const TransferFunct
     pass.count = 0;
   } else if (pass.params_version != content.params_version) {
     // Training changed the network's parameters and ranges only: taken in place (GPU), else a new backend.
-    if (!pass.backend->refresh_network(*content.mc, content.device_half))
+    if (!pass.backend->refresh_network(*content.mc, content.device_half)) {
+      pass.backend.reset();  // its GPU buffers go before the new renderer's are made
       pass.backend = make_renderer(device, content.drawn(), box, *content.mc, tf, cam, opt, cuda::MlpPath::Auto);
+    }
     pass.params_version = content.params_version;
     pass.count = 0;
   }

@@ -1,6 +1,7 @@
 #pragma once
 // Internal helpers of the CUDA backend shared by its .cu files: error checks and an owning device buffer
 // that counts the bytes the backend holds (peak memory reports).
+#include <atomic>
 #include <cstddef>
 #include <cstdint>
 #include <string>
@@ -33,9 +34,10 @@ namespace vnr::cuda {
 
 namespace vnr::cuda {
 
-// Bytes held by every DeviceBuffer now, and the most ever held (process-wide).
-uint64_t& device_bytes_now();
-uint64_t& device_bytes_peak();
+// Bytes held by every DeviceBuffer now, and the most ever held (process-wide; a brick cache's decoding
+// thread allocates beside the frames' thread).
+std::atomic<uint64_t>& device_bytes_now();
+std::atomic<uint64_t>& device_bytes_peak();
 
 template <typename T>
 class DeviceBuffer {
@@ -71,13 +73,15 @@ public:
                         " MiB (" + cudaGetErrorString(e) + ")");
     }
     n_ = n;
-    device_bytes_now() += n * sizeof(T);
-    if (device_bytes_now() > device_bytes_peak()) device_bytes_peak() = device_bytes_now();
+    const uint64_t now = device_bytes_now().fetch_add(n * sizeof(T)) + n * sizeof(T);
+    uint64_t peak = device_bytes_peak().load();
+    while (now > peak && !device_bytes_peak().compare_exchange_weak(peak, now)) {
+    }
   }
   void release() {
     if (p_) {
       cudaFree(p_);
-      device_bytes_now() -= n_ * sizeof(T);
+      device_bytes_now().fetch_sub(n_ * sizeof(T));
     }
     p_ = nullptr;
     n_ = 0;

@@ -13,12 +13,12 @@
 
 namespace vnr::cuda {
 
-uint64_t& device_bytes_now() {
-  static uint64_t b = 0;
+std::atomic<uint64_t>& device_bytes_now() {
+  static std::atomic<uint64_t> b{0};
   return b;
 }
-uint64_t& device_bytes_peak() {
-  static uint64_t b = 0;
+std::atomic<uint64_t>& device_bytes_peak() {
+  static std::atomic<uint64_t> b{0};
   return b;
 }
 
