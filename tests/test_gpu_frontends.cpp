@@ -144,8 +144,40 @@ TEST(GpuViewer, TrainingFromThePageLowersTheLoss) {
   ASSERT_TRUE(engine.info().can_train);
   EXPECT_NE(engine.info().device.find("cuda"), std::string::npos) << engine.info().device;
   engine.set_viewport(64, 64);
+  ViewSettings view = engine.state().view;  // the slice view follows training (its GPU decoder reloaded)
+  view.slice = true;
+  view.slice_axis = 2;
+  view.slice_position = 0.5f;
+  engine.set_view(view);
+  // The mean |network - truth| of the slice images in the first frame after training reached min_step.
+  auto slice_error = [&](int64_t min_step) {
+    double error = -1;
+    uint64_t last = 0;
+    wait_until([&] {
+      auto f = engine.wait_frame(last, 0.5);
+      if (!f) return false;
+      last = f->id;
+      const ViewerImage *net = nullptr, *truth = nullptr;
+      for (const ViewerImage& im : f->images) {
+        if (im.view == "slice_network") net = &im;
+        if (im.view == "slice_truth") truth = &im;
+      }
+      if (engine.state().training.step < min_step || !net || !truth) return false;
+      double sum = 0;
+      for (size_t i = 0; i < net->rgba.size(); i += 4) sum += std::abs(int(net->rgba[i]) - int(truth->rgba[i]));
+      error = sum / double(net->rgba.size() / 4);
+      return true;
+    });
+    return error;
+  };
+  const double untrained = slice_error(0);
   engine.start_training();
   ASSERT_TRUE(wait_until([&] { return engine.psnr_history().size() >= 3 && engine.state().training.step >= 300; }));
+  const double trained = slice_error(engine.state().training.step);
+  std::printf("slice |network - truth|: %.2f untrained, %.2f while training (of 255)\n", untrained, trained);
+  EXPECT_GE(untrained, 0);
+  EXPECT_GE(trained, 0);
+  EXPECT_LT(trained, 0.7 * untrained) << "the slice follows the training network";
   const std::vector<float> l = engine.losses(0);
   ASSERT_GE(l.size(), 100u);
   EXPECT_LT(l.back(), l.front());

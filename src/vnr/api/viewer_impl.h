@@ -116,6 +116,7 @@ struct ViewerEngine::Impl {
     int axis = -1, index = -1;
     uint64_t model_version = ~uint64_t(0), volume_version = ~uint64_t(0);
     std::vector<ViewerImage> images;
+    std::unique_ptr<Decoder> decoder;  // on the GPU kept while training: it takes the trainer's parameters
   } slices;
   double last_render_seconds = 0;  // of the last frame rendered: what the automatic training budget follows
 

@@ -313,8 +313,14 @@ bool ViewerEngine::Impl::render_slices(const ViewSettings& view) {
   int w = 0, h = 0;
   const std::vector<int64_t> voxels = slice_voxels(d, view.slice_axis, index, &w, &h);
   std::vector<float> net(voxels.size()), truth;
-  if (run.session) run.session->trainer().download();
-  Decoder(*model->net, render_device).voxels(d, voxels.data(), int64_t(voxels.size()), net.data());
+  // A GPU trainer's parameters go to the GPU decoder device to device; otherwise a decoder of the host's.
+  const void* half =
+      render_device == Device::Cuda && run.session ? run.session->trainer().device_half_params() : nullptr;
+  if (!sc.decoder || !sc.decoder->reload_device_params(half)) {
+    if (run.session) run.session->trainer().download();
+    sc.decoder = std::make_unique<Decoder>(*model->net, render_device);
+  }
+  sc.decoder->voxels(d, voxels.data(), int64_t(voxels.size()), net.data());
   sc.images.clear();
   if (volume) {
     truth.resize(voxels.size());
