@@ -51,8 +51,14 @@ double relative_l2(const float* a, const float* b, size_t n) {
 
 TEST(GpuEncoding, EqualsTheCpuEncodingRoundedToHalf) {
   REQUIRE_GPU();
-  for (const char* preset : {"paper", "small"}) {
-    Network net(preset_config(preset));
+  std::vector<std::pair<std::string, Json>> configs = {{"paper", preset_config("paper")}, {"small", preset_config("small")}};
+  for (int f : {1, 4}) {  // the feature counts no preset uses, each with its own GPU kernels
+    Json c = preset_config("small");
+    c["encoding"]["n_features_per_level"] = f;
+    configs.emplace_back("small, " + std::to_string(f) + " features", c);
+  }
+  for (const auto& [preset, config] : configs) {
+    Network net(config);
     net.init_params(3);
     net.edit_params([&](float* p, size_t) {
       float* table = p + net.mlp().n_params;

@@ -165,9 +165,13 @@ TEST(GpuRender, GridImagesMatchTheCpu) {
 TEST(GpuRender, NetworkImagesMatchTheCpuAndStrategiesAgree) {
   REQUIRE_GPU();
   Volume vol = blobs(Int3{32, 32, 32});
-  // small: width 16, one 16-column tile per layer; paper: width 64, 64 encoding columns (4 x 4 tiles)
-  for (const char* preset : {"small", "paper"}) {
-  Network net(preset_config(preset));
+  // small: width 16, one 16-column tile per layer; paper: width 64, 64 encoding columns (4 x 4 tiles);
+  // small with 4 features a level: the in-shader kernels of a feature count no preset uses
+  Json small4 = preset_config("small");
+  small4["encoding"]["n_features_per_level"] = 4;
+  for (const auto& [preset, config] : {std::pair<std::string, Json>{"small", preset_config("small")},
+                                       {"paper", preset_config("paper")}, {"small, 4 features", small4}}) {
+  Network net(config);
   net.init_params(3);
   CpuTrainer trainer(net, std::make_shared<InCoreSampler>(vol), TrainOptions{16384, 3});
   trainer.enable_online_ranges(vol.dims, 8);
@@ -177,13 +181,16 @@ TEST(GpuRender, NetworkImagesMatchTheCpuAndStrategiesAgree) {
   MacroCells mc(trainer.online_ranges(), box_of(vol));
   mc.update(tf);
   Camera cam = orbit_camera(box_of(vol), 40, 25, 30);
-  for (RenderMode mode : {RenderMode::RayMarch, RenderMode::Shadow, RenderMode::PathTrace}) {
+  // ray marching also shaded: 7 field points a sample (the gradient's), kernels no other case launches
+  for (const auto& [mode, shade] : {std::pair{RenderMode::RayMarch, false}, {RenderMode::Shadow, false},
+                                    {RenderMode::PathTrace, false}, {RenderMode::RayMarch, true}}) {
     RenderOptions o;
     o.mode = mode;
+    o.shade = shade;
     o.width = 64;
     o.height = 48;
     o.seed = 2;
-    const std::string what = std::string(preset) + " " + render_mode_name(mode);
+    const std::string what = preset + " " + render_mode_name(mode) + (shade ? " shaded" : "");
     const Image cpu = renderer_on(Device::Cpu, neural, vol, mc, tf, cam, o)->render(4);
     const Image gpu_stream = renderer_on(Device::Cuda, neural, vol, mc, tf, cam, o)->render(4);
     {  // inference in slabs of 256 points: the same values (the fused MLP works per 16-sample tile)
@@ -203,9 +210,11 @@ TEST(GpuRender, NetworkImagesMatchTheCpuAndStrategiesAgree) {
       const double ps = image_psnr(gpu_stream, cpu), pi = image_psnr(gpu_inshader, cpu);
       std::printf("%s: GPU vs CPU image PSNR %.1f dB (streaming), %.1f dB (in-shader); in-shader vs streaming %.1f dB\n",
                   what.c_str(), ps, pi, image_psnr(gpu_inshader, gpu_stream));
-      EXPECT_GT(ps, 40.0) << what;
-      EXPECT_GT(pi, 40.0) << what;
-      EXPECT_GT(image_psnr(gpu_inshader, gpu_stream), 45.0) << what << ": the same half-precision arithmetic";
+      // shaded: the gradient's central differences of half-precision values (a step of a voxel) add error
+      const double floor = shade ? 30.0 : 40.0;
+      EXPECT_GT(ps, floor) << what;
+      EXPECT_GT(pi, floor) << what;
+      EXPECT_GT(image_psnr(gpu_inshader, gpu_stream), floor + 5) << what << ": the same half-precision arithmetic";
     }
   }
   }

@@ -106,10 +106,13 @@ struct GpuRenderer::Impl {
       netf = cuda::make_warp_network(*dnet, kWarpsPerBlock);
       netf_device.resize(1);
       netf_device.upload(&netf, 1);
-      with_feature_count(netf.grid.n_features, [&](auto F) {  // once: the kernels of the grid's F
+      const bool supported = with_feature_count(netf.grid.n_features, [&](auto F) {  // once: the grid's F
         allow_inshader_smem<F()>(int(netf.smem_bytes()));
         inshader_network = &Impl::inshader_network_of<F()>;
       });
+      if (!supported)
+        cuda::cuda_fail_message("no in-shader kernels for " + std::to_string(netf.grid.n_features) +
+                                " features per level");
     } else if (field.cache) {
       cache = std::make_unique<DeviceCacheCopy>(*field.cache);
     } else if (field.grid.data) {

@@ -3,6 +3,7 @@
 // per-pixel loop of render/inshader_loop.h, the same function the CPU renderer calls per pixel; a warp's
 // 32 pixels are its lane group (the network evaluation is warp-cooperative: cuda/point_eval.cuh).
 #include <cuda_runtime.h>
+#include <mutex>
 #include "vnr/grid_view.h"
 #include "vnr/cuda/point_eval.cuh"
 #include "vnr/render/inshader_loop.h"
@@ -79,13 +80,20 @@ __global__ void __launch_bounds__(kWarpsPerBlock * 32)
   count_samples(my, samples);
 }
 
-// Lets the network kernels (grids of NF features per level) take `bytes` of dynamic shared memory.
+// Lets the network kernels (grids of NF features per level) take `bytes` of dynamic shared memory. The
+// attribute is the process's, shared by every renderer of an NF: it only grows, so a renderer made later
+// for a smaller network does not take it from one still drawing a larger.
 template <int NF>
 void allow_inshader_smem(int bytes) {
+  static std::mutex mu;
+  static int allowed = 0;
+  const std::lock_guard<std::mutex> lock(mu);
+  if (bytes <= allowed) return;
   using Net = cuda::WarpNetworkRef<NF>;
   VNR_CUDA_CHECK(cudaFuncSetAttribute(inshader_march<Net, 1>, cudaFuncAttributeMaxDynamicSharedMemorySize, bytes));
   VNR_CUDA_CHECK(cudaFuncSetAttribute(inshader_march<Net, 7>, cudaFuncAttributeMaxDynamicSharedMemorySize, bytes));
   VNR_CUDA_CHECK(cudaFuncSetAttribute(inshader_path<Net>, cudaFuncAttributeMaxDynamicSharedMemorySize, bytes));
+  allowed = bytes;
 }
 
 // Launches the in-shader kernel of `mode` (0 march, 1 shadow, 2 path) over the image on `stream`.
