@@ -32,7 +32,7 @@ if ! g++ -shared -o "$D/vnr/_vnr$EXT" $objs -Wl,--start-group .gpu/a/*.a -Wl,--e
   cat "$OUT"/python_compile_*.log "$OUT/python_link.log" | grep -m5 -i error
   exit 1
 fi
-PYTHONPATH="$D" timeout 240 python3 -m pytest -q -s -p no:cacheprovider tests/python/test_cuda.py \
+PYTHONPATH="$D" VNR_REQUIRE_CUDA=1 timeout 240 python3 -m pytest -q -s -p no:cacheprovider tests/python/test_cuda.py \
   > "$OUT/python_test_cuda.log" 2>&1
 rc=$?
 tail -8 "$OUT/python_test_cuda.log"

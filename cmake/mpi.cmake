@@ -17,10 +17,11 @@ if(VNR_MPI)
   target_link_libraries(vnr_cli PRIVATE vnr_mpi)
   target_compile_definitions(vnr_cli PRIVATE VNR_HAVE_MPI=1)
   if(VNR_BUILD_TESTS)
-    # Tests under mpirun: as root in containers Open MPI needs the two ALLOW_RUN_AS_ROOT variables.
+    # Tests under mpirun: as root in containers Open MPI needs the two ALLOW_RUN_AS_ROOT variables. They
+    # compare ranks and one process bit for bit on the CPU: no GPU even where one is visible.
     find_program(VNR_MPIEXEC NAMES mpirun mpiexec HINTS ${MPIEXEC_EXECUTABLE})
     set(vnr_mpi_env OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 OMPI_MCA_rmaps_base_oversubscribe=1
-                    OMP_NUM_THREADS=1 VNR_CLI=$<TARGET_FILE:vnr_cli>)
+                    OMP_NUM_THREADS=1 CUDA_VISIBLE_DEVICES= VNR_CLI=$<TARGET_FILE:vnr_cli>)
     add_executable(test_mpi_units tests/mpi/test_mpi_units.cpp)
     target_link_libraries(test_mpi_units PRIVATE vnr_mpi GTest::gtest GTest::gtest_main)
     gtest_discover_tests(test_mpi_units DISCOVERY_TIMEOUT 60 PROPERTIES TIMEOUT 300 LABELS cpu)

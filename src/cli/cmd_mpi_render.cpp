@@ -34,6 +34,10 @@ void run_render_mpi(const RenderMpiArgs& a) {
       fail("'{}' is not a multi-brick model directory: under mpirun, render draws the bricks of a model trained "
            "with --bricks; render anything else without mpirun", a.input);
     RenderArgs one = a.r;
+    // Each rank draws its bricks' segments on the CPU (render_brick_segment); auto would take a GPU.
+    if (one.s.device == "cuda")
+      fail("under mpirun, render draws each rank's bricks on the CPU: leave --device out or give cpu");
+    one.s.device = "cpu";
     one.s.spp = 1;  // one frame, each rank its bricks' networks
     cr = open_cli_render(a.input, one, a.vol);
     m = bricked(*cr.input->model);

@@ -69,6 +69,9 @@ import json, numpy as np
 p = json.load(open('r.json'))['image_psnr']; print('image PSNR', p); assert p >= 40, p
 head, data = open('rN.pfm', 'rb').read().split(b'\n', 3)[1:3], open('rN.pfm', 'rb').read().split(b'\n', 3)[3]
 assert np.frombuffer(data, np.float32).std() > 0.05, 'blank image'"
+# Ranks draw their bricks on the CPU: --device cuda is refused with one line (auto takes the CPU there).
+run "$N" "$V" render m1 -o rc.pfm "${VIEW[@]}" --device cuda -q > cuda.out 2>&1
+check "render --device cuda under mpirun: refused, saying why" grep -q "draws each rank's bricks on the CPU" cuda.out
 
 # A rank that fails: brick 1 of 3 along x is the widest with its ghosts (17 voxels) and alone exceeds the budget,
 # and its out-of-core buffer (default blocks, 17x31x31) does not fit it either.
