@@ -44,6 +44,11 @@ private:
   GridField grid_;
 };
 
+// The device of the field behind a model's brick cache (what the host cache's misses read) on any
+// renderer's device: the CPU (the GPU's copy of the cache reads coarser levels instead, so a multi-brick
+// model is not decoded whole for it).
+constexpr Device kCacheSourceDevice = Device::Cpu;
+
 // The field of a model for a renderer on `device`: its network, or a multi-brick model's blended bricks
 // (on the GPU: their decode).
 inline std::unique_ptr<RenderableField> make_model_field(const Model& model, Device device) {

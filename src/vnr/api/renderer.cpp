@@ -142,10 +142,9 @@ void Renderer::set_cache(std::optional<BrickCacheSettings> settings) {
   cache_settings_ = settings;
   if (settings) {
     if (!model_) fail("the brick cache is for models: a volume is drawn directly");
-    // On the GPU: its copy of the cache, decoded there (cache_settings_for); the host's misses would read
-    // the model's CPU field (the copy's never do).
+    // On the GPU: its copy of the cache, decoded there (cache_settings_for), behind it the model's CPU field.
     const BrickCacheSettings s = cache_settings_for(*settings, device_);
-    if (device_ == Device::Cuda) cache_source_ = make_model_field(*model_, Device::Cpu);
+    if (device_ != kCacheSourceDevice) cache_source_ = make_model_field(*model_, kCacheSourceDevice);
     brick_cache_ = make_model_cache(*model_, cache_source_ ? *cache_source_ : source_field(), s,
                                     std::make_shared<Decoder>(*model_, device_));
   }

@@ -190,9 +190,8 @@ void ViewerEngine::Impl::update_network_content(MacroCellMode mode, bool cache) 
   net_pass.backend.reset();  // it refers to the old field and cells
   if (run.session) run.session->trainer().download();
   std::unique_ptr<RenderableField> old = std::move(c.field);  // the cache reads it until it has the new one
-  // Behind the GPU's cache the field is the host cache's source alone (the GPU's copy never reads it): the
-  // CPU's, not a multi-brick model's whole decode on the GPU.
-  c.field = make_model_field(*model, cache && render_device == Device::Cuda ? Device::Cpu : render_device);
+  // Behind a cache the field is the host cache's source alone (kCacheSourceDevice).
+  c.field = make_model_field(*model, cache ? kCacheSourceDevice : render_device);
   if (!cache) {
     c.cache.reset();
     c.decoder.reset();
@@ -313,9 +312,8 @@ bool ViewerEngine::Impl::render_slices(const ViewSettings& view) {
   int w = 0, h = 0;
   const std::vector<int64_t> voxels = slice_voxels(d, view.slice_axis, index, &w, &h);
   std::vector<float> net(voxels.size()), truth;
-  // A GPU trainer's parameters go to the GPU decoder device to device; otherwise a decoder of the host's.
-  const void* half =
-      render_device == Device::Cuda && run.session ? run.session->trainer().device_half_params() : nullptr;
+  // A GPU trainer's parameters go to a GPU decoder device to device; otherwise a decoder of the host's.
+  const void* half = run.session ? run.session->trainer().device_half_params() : nullptr;
   if (!sc.decoder || !sc.decoder->reload_device_params(half)) {
     if (run.session) run.session->trainer().download();
     sc.decoder = std::make_unique<Decoder>(*model->net, render_device);

@@ -60,7 +60,7 @@ public:
   void decode_pending(const std::function<void(int64_t, int64_t)>& progress = {}) const;
   // Misses read `source` from now on. With `model_changed` (training in the loop) every decoded brick
   // is stale: still read, and decoded again in the frame budget new bricks leave, the bricks the last
-  // frame read first, nearest first; with `decode`, by that decode from now on (one that holds its own
+  // frame read first, the oldest first, then the nearest; with `decode`, by that decode from now on (one that holds its own
   // copy of the model, as a GPU decoder does). The decoding thread must be off (set_asynchronous).
   void replace_source(const RenderableField& source, bool model_changed, VoxelDecode decode = {}) const;
   // The ray under the user's cursor (world units; none: no cursor): bricks near it are decoded first.
