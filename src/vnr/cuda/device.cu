@@ -66,12 +66,26 @@ void require_device() {
 StreamAndBlas::StreamAndBlas() {
   require_device();
   VNR_CUDA_CHECK(cudaStreamCreate(&stream));
+  VNR_CUDA_CHECK(cudaStreamCreate(&side));
+  VNR_CUDA_CHECK(cudaEventCreateWithFlags(&forked, cudaEventDisableTiming));
+  VNR_CUDA_CHECK(cudaEventCreateWithFlags(&joined, cudaEventDisableTiming));
   VNR_CUBLAS_CHECK(cublasCreate(&blas));
   VNR_CUBLAS_CHECK(cublasSetStream(blas, stream));
 }
 StreamAndBlas::~StreamAndBlas() {
   if (blas) cublasDestroy(blas);
+  if (joined) cudaEventDestroy(joined);
+  if (forked) cudaEventDestroy(forked);
+  if (side) cudaStreamDestroy(side);
   if (stream) cudaStreamDestroy(stream);
+}
+void StreamAndBlas::fork() const {
+  VNR_CUDA_CHECK(cudaEventRecord(forked, stream));
+  VNR_CUDA_CHECK(cudaStreamWaitEvent(side, forked, 0));
+}
+void StreamAndBlas::join() const {
+  VNR_CUDA_CHECK(cudaEventRecord(joined, side));
+  VNR_CUDA_CHECK(cudaStreamWaitEvent(stream, joined, 0));
 }
 
 }  // namespace vnr::cuda

@@ -10,7 +10,8 @@ namespace vnr::cuda {
 
 // Encoding, MLP forward, loss, MLP backward and grid backward for n points with their targets: the
 // loss-scaled work of one training step (grads: binary32, the MLP part overwritten, the grid part
-// accumulated), with the grid kernels gk of net's grid. mark(i) records the phase boundaries 1 (after encoding) and 2 (after the MLP).
+// accumulated), with the grid kernels gk of net's grid. mark(i) records the phase boundaries 1 (after
+// encoding) and 2 (after the backward through the layers). Queued on sb.stream, ordered there.
 template <typename Mark>
 inline void gradient_pass(const Network& net, const GridKernels& gk, const MlpDims& d, MlpPath path, const __half* half,
                           Coords pts,
@@ -24,10 +25,15 @@ inline void gradient_pass(const Network& net, const GridKernels& gk, const MlpDi
   mlp_forward(path, d, half, pass.X0.data(), n, pass.acts.data(), pass.out.data(), -1, pass.tmp.data(), sb.blas, st);
   loss_and_grad(cfg.loss, cfg.network.output_activation, pass.out.data(), target, n, d.n_out, d.out_pad,
                 1.0f / float(n * d.n_out), pass.dOut.data(), loss_slot, st);
-  mlp_backward(path, d, half, pass.X0.data(), pass.acts.data(), pass.dOut.data(), n, pass.dY.data(), pass.dX0.data(),
-               grads, pass.tmp.data(), sb.blas, st);
+  mlp_backward_data(path, d, half, pass.acts.data(), pass.dOut.data(), n, pass.dY.data(), pass.dX0.data(),
+                    pass.tmp.data(), sb.blas, st);
   mark(2);
-  gk.backward(net.grid(), pts, n, d.in_pad, pass.dX0.data(), grads + n_mlp, st);
+  // The grid's backward (scattered atomics, bound by their latency: docs/benchmarks.md, CUDA backend) on
+  // the side stream, beside the weight gradients' split-K GEMMs on the stream; disjoint reads and writes.
+  sb.fork();
+  gk.backward(net.grid(), pts, n, d.in_pad, pass.dX0.data(), grads + n_mlp, sb.side);
+  mlp_weight_gradients(d, pass.X0.data(), pass.acts.data(), pass.dOut.data(), pass.dY.data(), n, grads, sb.blas, st);
+  sb.join();
 }
 
 inline void no_mark(int) {}

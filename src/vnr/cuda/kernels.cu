@@ -84,9 +84,11 @@ __global__ void loss_kernel(LossType t, Activation out_act, const float* __restr
   }
 }
 
-// adam_update() (nn/adam_update.h), the CPU's update, kAdamPerThread parameters per thread with every
-// load issued before any arithmetic: one parameter per thread leaves each warp waiting on three
-// dependent memory round trips (gradient, state, bias tables).
+// adam_update() (nn/adam_update.h), the CPU's update, kAdamPerThread parameters per thread with each
+// round of loads issued before any arithmetic: one parameter per thread leaves each warp waiting on
+// dependent memory round trips (gradient, state, bias tables). Lazy Adam skips grid parameters whose
+// gradient is 0; their state is not even read (a grid entry of 8 features is one 32-byte sector, so an
+// entry no sample touched costs a step one read of its gradient).
 constexpr int kAdamPerThread = 4;
 
 __global__ void adam_kernel(AdamArgs a, float* __restrict__ w, float* __restrict__ grads, float* __restrict__ m,
@@ -96,11 +98,17 @@ __global__ void adam_kernel(AdamArgs a, float* __restrict__ w, float* __restrict
   float g[kAdamPerThread], wi[kAdamPerThread], mi[kAdamPerThread], vi[kAdamPerThread];
   float bs[kAdamPerThread], bd[kAdamPerThread];
   uint32_t ci[kAdamPerThread];
+  bool live[kAdamPerThread];
 #pragma unroll
   for (int j = 0; j < kAdamPerThread; ++j) {
     const int64_t i = first + int64_t(j) * blockDim.x;
-    if (i < n) {
-      g[j] = grads[i];
+    g[j] = i < n ? grads[i] : 0.0f;
+  }
+#pragma unroll
+  for (int j = 0; j < kAdamPerThread; ++j) {
+    const int64_t i = first + int64_t(j) * blockDim.x;
+    live[j] = i < n && (a.matrix || g[j] != 0.0f);
+    if (live[j]) {
       wi[j] = w[i];
       mi[j] = m[i];
       vi[j] = v[i];
@@ -110,8 +118,8 @@ __global__ void adam_kernel(AdamArgs a, float* __restrict__ w, float* __restrict
 #pragma unroll
   for (int j = 0; j < kAdamPerThread; ++j) {
     const int64_t i = first + int64_t(j) * blockDim.x;
-    if (i < n) {
-      grads[i] = 0.0f;
+    if (live[j]) {
+      grads[i] = 0.0f;  // the others' gradient is 0 already
       bs[j] = bias_sqrt[ci[j]];
       bd[j] = bias_den[ci[j]];
     }
@@ -119,7 +127,7 @@ __global__ void adam_kernel(AdamArgs a, float* __restrict__ w, float* __restrict
 #pragma unroll
   for (int j = 0; j < kAdamPerThread; ++j) {
     const int64_t i = first + int64_t(j) * blockDim.x;
-    if (i >= n || (!a.matrix && g[j] == 0.0f)) continue;
+    if (!live[j]) continue;
     float wn = wi[j], mn = mi[j], vn = vi[j];
     adam_update(a, a.matrix != 0, g[j], bs[j], bd[j], wn, mn, vn);
     w[i] = wn;

@@ -306,13 +306,9 @@ void mlp_forward(MlpPath path, const MlpDims& d, const __half* weights, const __
   }
 }
 
-void mlp_backward(MlpPath path, const MlpDims& d, const __half* weights, const __half* X0, const __half* acts,
-                  const __half* dOut, int64_t n, __half* dY, __half* dX0, float* dW, float* tmp,
-                  cublasHandle_t blas, cudaStream_t st) {
+void mlp_backward_data(MlpPath path, const MlpDims& d, const __half* weights, const __half* acts, const __half* dOut,
+                       int64_t n, __half* dY, __half* dX0, float* tmp, cublasHandle_t blas, cudaStream_t st) {
   if (n <= 0) return;
-  VNR_CUBLAS_CHECK(cublasSetStream(blas, st));
-  const int H = d.n_matrices - 1;  // hidden layers
-  auto grad_of = [&](int m) -> const __half* { return m == H ? dOut : dY + size_t(m) * n * d.width; };
   if (path == MlpPath::Fused) {
     const size_t smem = fused_smem_bytes(d);
     const int nw = fused_warps(d);
@@ -323,27 +319,36 @@ void mlp_backward(MlpPath path, const MlpDims& d, const __half* weights, const _
       fused_backward<W><<<blocks, nw * 32, smem, st>>>(d, weights, acts, dOut, n, dY, dX0);
     });
     VNR_CUDA_LAUNCHED();
-  } else {
-    for (int m = H; m >= (dX0 ? 0 : 1); --m) {
-      const int rows = d.rows[m], cols = d.cols[m];
-      // tmp (n x cols) = g_m (n x rows) * W_m
-      gemm(blas, CUBLAS_OP_N, CUBLAS_OP_N, cols, int(n), rows, 1.0f, weights + d.offset[m], cols, grad_of(m), rows,
-           tmp);
-      const int64_t count = n * cols;
-      if (m > 0)
-        masked_from_tmp<<<blocks_for(count, 256), 256, 0, st>>>(tmp, acts + size_t(m - 1) * n * d.width, count,
-                                                                 dY + size_t(m - 1) * n * d.width);
-      else
-        masked_from_tmp<<<blocks_for(count, 256), 256, 0, st>>>(tmp, nullptr, count, dX0);
-      VNR_CUDA_LAUNCHED();
-    }
+    return;
   }
-  // Weight gradients: dW_m (rows x cols) = g_m^T (rows x n) * In_m (n x cols) / S.
+  VNR_CUBLAS_CHECK(cublasSetStream(blas, st));
+  const int H = d.n_matrices - 1;  // hidden layers
+  for (int m = H; m >= (dX0 ? 0 : 1); --m) {
+    const int rows = d.rows[m], cols = d.cols[m];
+    const __half* g = m == H ? dOut : dY + size_t(m) * n * d.width;
+    // tmp (n x cols) = g_m (n x rows) * W_m
+    gemm(blas, CUBLAS_OP_N, CUBLAS_OP_N, cols, int(n), rows, 1.0f, weights + d.offset[m], cols, g, rows, tmp);
+    const int64_t count = n * cols;
+    if (m > 0)
+      masked_from_tmp<<<blocks_for(count, 256), 256, 0, st>>>(tmp, acts + size_t(m - 1) * n * d.width, count,
+                                                               dY + size_t(m - 1) * n * d.width);
+    else
+      masked_from_tmp<<<blocks_for(count, 256), 256, 0, st>>>(tmp, nullptr, count, dX0);
+    VNR_CUDA_LAUNCHED();
+  }
+}
+
+void mlp_weight_gradients(const MlpDims& d, const __half* X0, const __half* acts, const __half* dOut,
+                          const __half* dY, int64_t n, float* dW, cublasHandle_t blas, cudaStream_t st) {
+  if (n <= 0) return;
+  VNR_CUBLAS_CHECK(cublasSetStream(blas, st));
+  const int H = d.n_matrices - 1;  // hidden layers
+  // dW_m (rows x cols) = g_m^T (rows x n) * In_m (n x cols) / S.
   for (int m = 0; m <= H; ++m) {
     const int rows = d.rows[m], cols = d.cols[m];
     const __half* in = m == 0 ? X0 : acts + size_t(m - 1) * n * d.width;
-    gemm(blas, CUBLAS_OP_N, CUBLAS_OP_T, cols, rows, int(n), 1.0f / kLossScale, in, cols, grad_of(m), rows,
-         dW + d.offset[m]);
+    const __half* g = m == H ? dOut : dY + size_t(m) * n * d.width;
+    gemm(blas, CUBLAS_OP_N, CUBLAS_OP_T, cols, rows, int(n), 1.0f / kLossScale, in, cols, g, rows, dW + d.offset[m]);
   }
 }
 

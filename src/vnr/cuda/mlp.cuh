@@ -31,12 +31,15 @@ MlpPath resolve_mlp_path(const Network& net, MlpPath asked);
 void mlp_forward(MlpPath path, const MlpDims& d, const __half* weights, const __half* X0, int64_t n, __half* acts,
                  float* out, int out_act, float* tmp, cublasHandle_t blas, cudaStream_t s);
 
-// Backward for n samples. dOut: n x out_pad half, the loss-scaled gradient of the output pre-activation.
-// dY: n_hidden blocks of n x width half (gradients of the hidden pre-activations, written here).
-// dX0: n x in_pad half, dL/dX0 (loss-scaled), or null. dW: binary32 gradient of the MLP parameters
-// (tcnn order), overwritten and already divided by the loss scale. tmp as in mlp_forward.
-void mlp_backward(MlpPath path, const MlpDims& d, const __half* weights, const __half* X0, const __half* acts,
-                  const __half* dOut, int64_t n, __half* dY, __half* dX0, float* dW, float* tmp,
-                  cublasHandle_t blas, cudaStream_t s);
+// Backward through the layers for n samples. dOut: n x out_pad half, the loss-scaled gradient of the
+// output pre-activation. dY: n_hidden blocks of n x width half (gradients of the hidden pre-activations,
+// written here). dX0: n x in_pad half, dL/dX0 (loss-scaled), or null. tmp as in mlp_forward.
+void mlp_backward_data(MlpPath path, const MlpDims& d, const __half* weights, const __half* acts, const __half* dOut,
+                       int64_t n, __half* dY, __half* dX0, float* tmp, cublasHandle_t blas, cudaStream_t s);
+
+// The weight gradients of that pass, on either path: dW, the binary32 gradient of the MLP parameters
+// (tcnn order), overwritten and already divided by the loss scale; one cuBLAS GEMM per matrix.
+void mlp_weight_gradients(const MlpDims& d, const __half* X0, const __half* acts, const __half* dOut,
+                          const __half* dY, int64_t n, float* dW, cublasHandle_t blas, cudaStream_t s);
 
 }  // namespace vnr::cuda

@@ -13,11 +13,16 @@ namespace vnr::cuda {
 
 inline int64_t round_up(int64_t v, int64_t m) { return (v + m - 1) / m * m; }
 
-// One CUDA stream and cuBLAS handle per GPU object. The stream is blocking: ordered after the
-// synchronous copies and memsets (legacy default stream) that upload volumes, parameters and coordinates.
+// One CUDA stream and cuBLAS handle per GPU object, and a side stream for work that runs beside the
+// stream's own (fork, then join: both stay ordered on `stream`). The streams are blocking: ordered after
+// the synchronous copies and memsets (legacy default stream) that upload volumes, parameters and coordinates.
 struct StreamAndBlas {
   cudaStream_t stream = nullptr;
   cublasHandle_t blas = nullptr;
+  cudaStream_t side = nullptr;
+  cudaEvent_t forked = nullptr, joined = nullptr;
+  void fork() const;  // what is queued on `side` from now on runs after what `stream` has queued so far
+  void join() const;  // what is queued on `stream` from now on runs after what `side` has queued so far
   StreamAndBlas();
   ~StreamAndBlas();
   StreamAndBlas(const StreamAndBlas&) = delete;

@@ -106,7 +106,16 @@ struct GridEntryLoad {
 };
 
 // Forward of one level for one sample: out[f * stride] = sum_k w_k * theta[(offset + entry_k) * F + f],
-// accumulated with FMA in corner order (vnr's binary32 reference, docs/semantics.md A.2.7).
+// accumulated with FMA in corner order (vnr's binary32 reference, docs/semantics.md A.2.7). Nearest reads
+// corner 0 alone; the others' loop has a constant trip count, which keeps the corners in registers on the
+// GPU (a runtime bound indexes them in local memory: a load/store queue round trip per corner).
+template <int F, typename P>
+VNR_HD VNR_INLINE void grid_corner_fma(const GridLevel& L, const P* params, const GridCorners& c, int k, float* acc) {
+  float th[F];
+  GridEntryLoad<P>::template load<F>(params + (uint64_t(L.offset) + c.entry[k]) * F, th);
+  for (int f = 0; f < F; ++f) acc[f] = fmaf(c.weight[k], th[f], acc[f]);
+}
+
 template <int F, typename P>
 VNR_HD VNR_INLINE void grid_level_forward(const GridLevel& L, Interpolation interp, const P* params, float x,
                                       float y, float z, float* out, int64_t stride) {
@@ -114,11 +123,10 @@ VNR_HD VNR_INLINE void grid_level_forward(const GridLevel& L, Interpolation inte
   grid_corners(L, interp, x, y, z, c);
   float acc[F];
   for (int f = 0; f < F; ++f) acc[f] = 0.0f;
-  const int kn = interp == Interpolation::Nearest ? 1 : 8;
-  for (int k = 0; k < kn; ++k) {
-    float th[F];
-    GridEntryLoad<P>::template load<F>(params + (uint64_t(L.offset) + c.entry[k]) * F, th);
-    for (int f = 0; f < F; ++f) acc[f] = fmaf(c.weight[k], th[f], acc[f]);
+  if (interp == Interpolation::Nearest) {
+    grid_corner_fma<F>(L, params, c, 0, acc);
+  } else {
+    for (int k = 0; k < 8; ++k) grid_corner_fma<F>(L, params, c, k, acc);
   }
   for (int f = 0; f < F; ++f) out[f * stride] = acc[f];
 }
@@ -141,8 +149,12 @@ VNR_HD VNR_INLINE void grid_level_backward(const GridLevel& L, Interpolation int
   grid_corners(L, interp, x, y, z, c);
   float g[F];
   for (int f = 0; f < F; ++f) g[f] = dy[f * stride];
-  const int kn = interp == Interpolation::Nearest ? 1 : 8;
-  for (int k = 0; k < kn; ++k) accumulate.template add<F>(grad + (uint64_t(L.offset) + c.entry[k]) * F, c.weight[k], g);
+  const uint64_t base = uint64_t(L.offset);
+  if (interp == Interpolation::Nearest) {  // corner 0 alone, else a constant trip count (grid_level_forward)
+    accumulate.template add<F>(grad + (base + c.entry[0]) * F, c.weight[0], g);
+  } else {
+    for (int k = 0; k < 8; ++k) accumulate.template add<F>(grad + (base + c.entry[k]) * F, c.weight[k], g);
+  }
 }
 
 // d(feature f of level L)/d(x_d) for one sample (docs/semantics.md A.2.9), written to dydx[f*3 + d].

@@ -14,6 +14,11 @@ namespace vnr::gpu_render {
 // coherent hash-grid reads and few idle lanes).
 constexpr int kWarpsPerBlock = 4;
 constexpr int kBlockW = 16, kBlockH = 8;
+// Blocks per SM the kernels are compiled for (launch bounds, i.e. at most 128 registers a thread): a
+// paper-config network's shared memory (74 KiB a block, weights and tiles) holds an H100's SM to 3
+// blocks, so those registers cost no occupancy. Left to itself ptxas gave the network kernels 56-64
+// registers and spilled 0.5-0.8 KiB a thread (docs/benchmarks.md, "GPU kernels without local memory").
+constexpr int kInshaderBlocksPerSm = 4;
 
 // The ground-truth grid as a lane evaluator: every lane looks up its own point.
 struct GridWarpField {
@@ -58,7 +63,7 @@ __device__ inline void count_samples(int64_t mine, unsigned long long* total) {
 
 // In-shader ray marching (shadow = 1: and the single-shot shadow ray), M field points per sample.
 template <class Field, int M>
-__global__ void __launch_bounds__(kWarpsPerBlock * 32)
+__global__ void __launch_bounds__(kWarpsPerBlock * 32, kInshaderBlocksPerSm)
     inshader_march(RenderParams p, Field field, int shadow, Vec4f* __restrict__ img, unsigned long long* samples) {
   extern __shared__ __align__(128) unsigned char smem[];
   const InshaderThread<Field> t(p, field, smem);
@@ -70,7 +75,7 @@ __global__ void __launch_bounds__(kWarpsPerBlock * 32)
 
 // In-shader path tracing: the sample()/shade() state machine of one path per thread.
 template <class Field>
-__global__ void __launch_bounds__(kWarpsPerBlock * 32)
+__global__ void __launch_bounds__(kWarpsPerBlock * 32, kInshaderBlocksPerSm)
     inshader_path(RenderParams p, Field field, Vec4f* __restrict__ img, unsigned long long* samples) {
   extern __shared__ __align__(128) unsigned char smem[];
   const InshaderThread<Field> t(p, field, smem);

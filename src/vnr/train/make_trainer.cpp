@@ -76,7 +76,9 @@ public:
     if (!timing_) return {};
     const std::vector<double> s = gpu_->phase_seconds();
     static const char* const keys[] = {"sample_encode", "mlp_forward_loss_backward", "grid_backward", "optimizer"};
-    static const char* const names[] = {"sample+encode", "MLP fwd+loss+bwd", "grid backward", "Adam"};
+    // The grid's backward runs beside the MLP's weight gradients (cuda/gradient_pass.cuh): one phase.
+    static const char* const names[] = {"sample+encode", "MLP fwd+loss+bwd through the layers",
+                                        "grid backward | MLP weight gradients", "Adam"};
     std::vector<PhaseTime> out;
     for (size_t i = 0; i < s.size() && i < 4; ++i) out.push_back({keys[i], names[i], s[i]});
     return out;
