@@ -3,6 +3,8 @@
 # every log, JSON report and markdown table to OUTDIR (OUTDIR/table.md, render_table.md, cli_table.md,
 # profile.md). Stages, in order of what a short lease needs most:
 #   tests     the gpu test executables (test_gpu*)
+#   before    an earlier build's vnr (.gpu/bin/vnr_before, scripts/gpu_carry.sh BEFORE_VNR=...) against
+#             this one, alternating, 3 rounds (bench/before_after.sh ... cuda), table in before_after.md
 #   cli       the CLI's --device cuda paths against --device cpu (bench/gpu_cli.sh)
 #   rd        the compression issue's rate-distortion points at the paper's 20k steps on the GPU
 #             (quantization- and rate-aware steps on the device), table in rd_table.md
@@ -113,6 +115,16 @@ if want tests; then
     echo "$(basename "$t"): $(grep -E '^\[  (PASSED|FAILED|SKIPPED)' "$log" | tr '\n' ' ')"
     grep -E '^\[  FAILED|GPU vs CPU|on the GPU' "$log" | head -20
   done
+fi
+if want before; then
+  stage "before: $(cat .gpu/before 2>/dev/null) against this build, side by side"
+  if [ -x "$BIN/vnr_before" ] && [ -f "$DATA/bonsai.json" ]; then
+    BENCH_SECONDS=2 timeout 400 sh bench/before_after.sh "$BIN/vnr_before" "$VNR" "$DATA/bonsai.json" 3 cuda \
+      > "$OUT/before_after.md" 2> "$OUT/before_after.log" || status=1
+    cat "$OUT/before_after.md"
+  else
+    echo "before: no earlier build here (.gpu/bin/vnr_before) or no bonsai"
+  fi
 fi
 if want cli; then
   stage cli

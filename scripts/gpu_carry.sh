@@ -13,6 +13,8 @@
 #
 #   sh scripts/gpu_carry.sh [SHARED]      (SHARED defaults to ../shared; NAMES="bonsai engine" for more;
 #                                          NAMES="bonsai chris_t1 wmag91 engine" for the rd stage: 38 MiB in all)
+# BEFORE_VNR=FILE also carries an earlier build's vnr for sm_90 (as packed here, gzipped or not) as
+# .gpu/bin/vnr_before: bench/gpu.sh's `before` stage times it side by side with this one (3.4 MiB).
 set -eu
 cd "$(dirname "$0")/.."
 SHARED=${1:-../shared}
@@ -70,6 +72,13 @@ for raw in .data/*.raw; do [ -f "$raw" ] && chmod u+w "$raw" && gzip -6 "$raw"; 
 # gzipped, as the volumes (bench/gpu.sh unpacks both): the binaries each link the whole library and its
 # kernels, 37 MiB unpacked, and the carry holds 64 MiB
 gzip -6 .gpu/bin/* .gpu/a/*
+if [ -n "${BEFORE_VNR:-}" ]; then
+  case $BEFORE_VNR in
+    *.gz) cp "$BEFORE_VNR" .gpu/bin/vnr_before.gz ;;
+    *) gzip -6 -c "$BEFORE_VNR" > .gpu/bin/vnr_before.gz ;;
+  esac
+  basename "$BEFORE_VNR" > .gpu/before
+fi
 du -sh .gpu/bin .gpu/lib .gpu/a .gpu/include .data .peers
 total=$(du -sm .gpu .data .peers | awk '{ s += $1 } END { print s }')
 echo "the carry: $total MiB of 64"
