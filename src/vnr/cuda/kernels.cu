@@ -26,13 +26,17 @@ __global__ void encode_kernel(GridLayout g, const __half* __restrict__ table, Co
     for (int k = int(g.n_levels * F); k < in_pad; ++k) row[k] = __float2half_rn(0.0f);
 }
 
+// One thread per (point, level); a block's threads share a level and the blocks take the levels in turn
+// (block b: level b mod L). The coarse levels' few entries take every sample's atomics, serialised in the
+// L2 slices that hold them (the paper config's level 0: 64 entries, 16 cache lines, a million vector
+// atomics a step); level-major, every SM would queue on those lines at the kernel's start, while in turn
+// they are spread over the kernel beside the fine levels' scattered ones.
 template <int F>
 __global__ void grid_backward_kernel(GridLayout g, Coords c, int64_t n, int in_pad, const __half* __restrict__ dX0,
                                      float inv_scale, float* __restrict__ grad) {
-  const int64_t i = int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
-  if (i >= n * g.n_levels) return;
-  const int level = int(i / n);
-  const int64_t s = i - int64_t(level) * n;
+  const int level = int(blockIdx.x % g.n_levels);
+  const int64_t s = int64_t(blockIdx.x / g.n_levels) * blockDim.x + threadIdx.x;
+  if (s >= n) return;
   float dy[F];
   load_halves<F>(dX0 + s * in_pad + level * F, dy);
   bool any = false;
@@ -158,10 +162,10 @@ void encode_launch(const GridLayout& g, const __half* table, Coords c, int64_t n
 template <int F>
 void grid_backward_launch(const GridLayout& g, Coords c, int64_t n, int in_pad, const __half* dX0, float* grad,
                           cudaStream_t s) {
-  const int64_t total = n * g.n_levels;
-  if (total <= 0) return;
+  if (n <= 0 || g.n_levels == 0) return;
   const float inv = 1.0f / kLossScale;
-  grid_backward_kernel<F><<<blocks_for(total, kThreads), kThreads, 0, s>>>(g, c, n, in_pad, dX0, inv, grad);
+  const unsigned blocks = blocks_for(n, kThreads) * g.n_levels;  // each level's samples in blocks of kThreads
+  grid_backward_kernel<F><<<blocks, kThreads, 0, s>>>(g, c, n, in_pad, dX0, inv, grad);
   VNR_CUDA_LAUNCHED();
 }
 
