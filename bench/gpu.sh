@@ -23,7 +23,7 @@
 # script configures and builds build-gpu there, as before.
 #
 # Environment (all optional):
-#   VNR_STAGES   which stages to run (default: "tests cli rd bench render python profile sanitize")
+#   VNR_STAGES   which stages to run (default: "tests before cli rd bench render python profile sanitize")
 #   VNR_DEADLINE seconds after the start past which rd and render begin no further volume (a short lease)
 #   VNR_CUDA_ARCH  CMAKE_CUDA_ARCHITECTURES of a build on the GPU machine (default: the project's list)
 #   VNR_DATA     folder with the real volumes (default: ../shared/data, else .data)
@@ -49,7 +49,7 @@ mkdir -p "$OUT"
 OUT=$(cd "$OUT" && pwd)
 cd "$(dirname "$0")/.."
 SECONDS_EACH=${VNR_SECONDS:-5}
-STAGES=" ${VNR_STAGES:-tests cli rd bench render python profile sanitize} "
+STAGES=" ${VNR_STAGES:-tests before cli rd bench render python profile sanitize} "
 want() { case "$STAGES" in *" $1 "*) return 0 ;; esac; return 1; }
 DATA=${VNR_DATA:-../shared/data}
 if [ ! -d "$DATA" ] && [ -d .data ]; then DATA=.data; fi
