@@ -58,7 +58,8 @@ for cfg in ("paper", "small"):
         if what == "train":  # the step's phases, by key (their names may differ between the builds)
             ph = lambda j: [((cfg, k), v) for k, v in j.get("phase_ms", {}).items()]
             o, n = med("old", ph, f"{cfg}.{what}"), med("new", ph, f"{cfg}.{what}")
-            rows += [(f"  {cfg} step phase {k[1]} (ms)", o[k], n.get(k, float("nan"))) for k in o]
+            rows += [(f"  {cfg} step phase {k[1]} (ms)", o.get(k, float("nan")), n.get(k, float("nan")))
+                     for k in sorted(set(o) | set(n))]
 fn = lambda j: [((r["mode"], r["strategy"], r["macrocells"]), r["fps"]) for r in j["rows"]]
 o, n = med("old", fn, "render"), med("new", fn, "render")
 for k in o:

@@ -119,7 +119,7 @@ fi
 if want before; then
   stage "before: $(cat .gpu/before 2>/dev/null) against this build, side by side"
   if [ -x "$BIN/vnr_before" ] && [ -f "$DATA/bonsai.json" ]; then
-    BENCH_SECONDS=2 timeout 400 sh bench/before_after.sh "$BIN/vnr_before" "$VNR" "$DATA/bonsai.json" 3 cuda \
+    BENCH_SECONDS=2 timeout 330 sh bench/before_after.sh "$BIN/vnr_before" "$VNR" "$DATA/bonsai.json" 3 cuda \
       > "$OUT/before_after.md" 2> "$OUT/before_after.log" || status=1
     cat "$OUT/before_after.md"
   else

@@ -16,6 +16,8 @@
 # BEFORE_VNR=FILE also carries an earlier build's vnr for sm_90 (as packed here, gzipped or not) as
 # .gpu/bin/vnr_before: bench/gpu.sh's `before` stage times it side by side with this one (3.4 MiB).
 set -eu
+# BEFORE_VNR as the caller named it, before the cd below
+case ${BEFORE_VNR:-} in "" | /*) ;; *) BEFORE_VNR="$(pwd)/$BEFORE_VNR" ;; esac
 cd "$(dirname "$0")/.."
 SHARED=${1:-../shared}
 NAMES=${NAMES:-bonsai}

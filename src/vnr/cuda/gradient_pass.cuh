@@ -31,8 +31,13 @@ inline void gradient_pass(const Network& net, const GridKernels& gk, const MlpDi
   // The grid's backward (scattered atomics, bound by their latency: docs/benchmarks.md, CUDA backend) on
   // the side stream, beside the weight gradients' split-K GEMMs on the stream; disjoint reads and writes.
   sb.fork();
-  gk.backward(net.grid(), pts, n, d.in_pad, pass.dX0.data(), grads + n_mlp, sb.side);
-  mlp_weight_gradients(d, pass.X0.data(), pass.acts.data(), pass.dOut.data(), pass.dY.data(), n, grads, sb.blas, st);
+  try {
+    gk.backward(net.grid(), pts, n, d.in_pad, pass.dX0.data(), grads + n_mlp, sb.side);
+    mlp_weight_gradients(d, pass.X0.data(), pass.acts.data(), pass.dOut.data(), pass.dY.data(), n, grads, sb.blas, st);
+  } catch (...) {
+    sb.join();  // nothing queued later on the stream may race the side stream's work
+    throw;
+  }
   sb.join();
 }
 

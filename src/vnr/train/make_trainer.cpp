@@ -75,7 +75,10 @@ public:
   std::vector<PhaseTime> last_step_phases() const override {
     if (!timing_) return {};
     const std::vector<double> s = gpu_->phase_seconds();
-    static const char* const keys[] = {"sample_encode", "mlp_forward_loss_backward", "grid_backward", "optimizer"};
+    // Keys of their own: a report of the builds before the side stream times other work under
+    // "mlp_forward_loss_backward" and "grid_backward".
+    static const char* const keys[] = {"sample_encode", "mlp_forward_loss_backward_data",
+                                       "grid_backward_beside_weight_gradients", "optimizer"};
     // The grid's backward runs beside the MLP's weight gradients (cuda/gradient_pass.cuh): one phase.
     static const char* const names[] = {"sample+encode", "MLP fwd+loss+bwd through the layers",
                                         "grid backward | MLP weight gradients", "Adam"};
