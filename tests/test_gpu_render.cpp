@@ -243,7 +243,43 @@ TEST(GpuRender, MacroCellsOnAndOffGiveTheSameRayMarchedImage) {
   }
 }
 
+// A CutlassMLP's input is padded to 8 (here 4 levels of 2 features): the in-shader MLP's 16-wide tiles
+// cannot run it (they used to, and computed a wrong first layer), so in-shader refuses it with the way
+// out, `auto` streams, and streaming matches the CPU.
+TEST(GpuRender, InShaderRefusesANetworkItsTilesCannotRunAndAutoStreams) {
+  REQUIRE_GPU();
+  Volume vol = blobs(Int3{32, 32, 32});
+  Json cfg = preset_config("small");
+  cfg["network"]["otype"] = "CutlassMLP";
+  Model model = create_model(ModelConfig::from_json(cfg), vol);
+  ASSERT_EQ(model.net->mlp().in_pad, 8u);
+  CpuTrainer trainer(*model.net, std::make_shared<InCoreSampler>(vol), TrainOptions{16384, 3});
+  for (int i = 0; i < 100; ++i) trainer.step();
+  NetworkField neural(*model.net, vol.dims);
+  TransferFunction tf = tf_preset("ramp");
+  MacroCells mc = MacroCells::single(vol.dims, box_of(vol));
+  mc.update(tf);
+  Camera cam = orbit_camera(box_of(vol), 40, 25, 30);
+  RenderOptions o;
+  o.width = 64;
+  o.height = 48;
+  o.strategy = RenderStrategy::InShader;
+  try {
+    GpuRenderer refused(neural.gpu_source(), box_of(vol), mc, tf, cam, o);
+    ADD_FAILURE() << "in-shader rendering took a network of 8-wide input tiles";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("--strategy streaming"), std::string::npos) << e.what();
+  }
+  EXPECT_EQ(Renderer(model, Device::Cuda).automatic_strategy(), RenderStrategy::Streaming);
+  o.strategy = RenderStrategy::Streaming;
+  const Image gpu = renderer_on(Device::Cuda, neural, vol, mc, tf, cam, o)->render(4);
+  const Image cpu = renderer_on(Device::Cpu, neural, vol, mc, tf, cam, o)->render(4);
+  EXPECT_GT(image_psnr(gpu, cpu), 40.0);
+}
+
 }  // namespace
+
+// The GPU renders from its copy of the brick cache}  // namespace
 
 // The GPU renders from its copy of the brick cache (render_cuda/cache_copy.cuh), each sample at its own
 // level of detail. Its image matches the CPU's warm cache (both read level 0 here; the GPU decodes in half

@@ -115,7 +115,11 @@ Renderer::~Renderer() = default;
 const char* Renderer::field_kind() const { return field().kind(); }
 
 RenderStrategy Renderer::automatic_strategy() const {
-  return fastest_render_strategy(field_kind(), device_ == Device::Cuda, options_.mode);
+  const bool gpu = device_ == Device::Cuda;
+  // the GPU's in-shader MLP runs 16-wide tiles only (a CutlassMLP's may not be)
+  if (gpu && std::string(field_kind()) == "network" && !mlp_in_16_wide_tiles(model_->net->mlp()))
+    return RenderStrategy::Streaming;
+  return fastest_render_strategy(field_kind(), gpu, options_.mode);
 }
 
 double Renderer::noise() const { return accumulated_noise(m2_, frames_); }

@@ -20,7 +20,9 @@ namespace vnr::cuda {
 constexpr unsigned kFullWarp = 0xffffffffu;
 
 // The grid encoding of one point into one row of halves (one thread doing every level), pad columns
-// zeroed; F = g.n_features, fixed when the renderer bound the network (WarpNetworkRef<F>).
+// zeroed; F = g.n_features, fixed when the renderer bound the network (WarpNetworkRef<F>). A level's F
+// halves are one vector store (rows are 16-byte aligned: WarpNetwork::ld is a multiple of 8): shared
+// memory is the in-shader kernels' busiest unit.
 template <int F>
 __device__ inline void encode_row(const GridLayout& g, const __half* table, float x, float y, float z, __half* row,
                                   int in_pad) {
@@ -28,7 +30,7 @@ __device__ inline void encode_row(const GridLayout& g, const __half* table, floa
   for (int l = 0; l < L; ++l) {
     float out[F];
     grid_level_forward<F>(g.levels[l], g.interpolation, table, x, y, z, out, 1);
-    for (int f = 0; f < F; ++f) row[l * F + f] = __float2half_rn(out[f]);
+    store_halves<F>(out, row + l * F);
   }
   for (int k = L * F; k < in_pad; ++k) row[k] = __float2half_rn(0.0f);
 }
@@ -98,8 +100,12 @@ __device__ inline float warp_mlp(const WarpNetwork& F, const __half* w, __half* 
         __syncwarp();
         if (last) {
           if ((lane >> 4) == t) result = f[(lane & 15) * 16];
-        } else {
-          for (int i = lane; i < 256; i += 32) out[(i >> 4) * ld + nb * 16 + (i & 15)] = __float2half_rn(f[i]);
+        } else {  // lane: 8 consecutive values of row lane / 2, two 16-byte loads and one 16-byte store
+          const int r = lane >> 1, c = (lane & 1) * 8;
+          const float4 lo = *reinterpret_cast<const float4*>(f + r * 16 + c);
+          const float4 hi = *reinterpret_cast<const float4*>(f + r * 16 + c + 4);
+          const float v[8] = {lo.x, lo.y, lo.z, lo.w, hi.x, hi.y, hi.z, hi.w};
+          store_halves<8>(v, out + r * ld + nb * 16 + c);
         }
         __syncwarp();
       }
@@ -160,6 +166,10 @@ struct WarpNetworkRef {
 inline WarpNetwork make_warp_network(const DeviceNetwork& dnet, int warps_per_block) {
   const Network& net = dnet.network();
   const MlpDims& d = dnet.dims();
+  if (!mlp_in_16_wide_tiles(net.mlp()))
+    cuda_fail_message("in-shader rendering on the GPU multiplies 16 x 16 tiles: this network's padded input (" +
+                      std::to_string(d.in_pad) + ") and hidden width (" + std::to_string(d.width) +
+                      ") must be multiples of 16; use --strategy streaming");
   WarpNetwork f{};
   f.grid = net.grid();
   f.weights = dnet.half_params();

@@ -103,16 +103,9 @@ struct GpuRenderer::Impl {
     p = make_render_params(field.dims, box, mc, tf, cam, opt);
     if (field.network) {
       dnet = std::make_unique<cuda::DeviceNetwork>(*field.network, mlp);
-      netf = cuda::make_warp_network(*dnet, kWarpsPerBlock);
-      netf_device.resize(1);
-      netf_device.upload(&netf, 1);
-      const bool supported = with_feature_count(netf.grid.n_features, [&](auto F) {  // once: the grid's F
-        allow_inshader_smem<F()>(int(netf.smem_bytes()));
-        inshader_network = &Impl::inshader_network_of<F()>;
-      });
-      if (!supported)
-        cuda::cuda_fail_message("no in-shader kernels for " + std::to_string(netf.grid.n_features) +
-                                " features per level");
+      // A network the warp MLP's tiles cannot run is drawn by streaming; asked for in-shader,
+      // make_warp_network says why.
+      if (opt.strategy == RenderStrategy::InShader || mlp_in_16_wide_tiles(field.network->mlp())) bind_warp_network();
     } else if (field.cache) {
       cache = std::make_unique<DeviceCacheCopy>(*field.cache);
     } else if (field.grid.data) {
@@ -317,6 +310,18 @@ struct GpuRenderer::Impl {
     VNR_CUDA_CHECK(cudaStreamSynchronize(sb.stream));
     st.host_syncs += 1;
     st.field_samples += int64_t(host->samples);
+  }
+
+  void bind_warp_network() {
+    netf = cuda::make_warp_network(*dnet, kWarpsPerBlock);
+    netf_device.resize(1);
+    netf_device.upload(&netf, 1);
+    const bool supported = with_feature_count(netf.grid.n_features, [&](auto F) {  // once: the grid's F
+      allow_inshader_smem<F()>(int(netf.smem_bytes()));
+      inshader_network = &Impl::inshader_network_of<F()>;
+    });
+    if (!supported)
+      cuda::cuda_fail_message("no in-shader kernels for " + std::to_string(netf.grid.n_features) + " features per level");
   }
 
   template <int NF>
