@@ -64,6 +64,15 @@ TEST(CudaDevice, UnsupportedModelsGetOneClearLine) {
   linear["network"]["activation"] = "None";
   Network lin(linear);
   test::expect_error([&] { cuda::check_supported(lin); }, {"ReLU", "--device cpu"});
+  Json odd = preset_config("tiny");  // 4 features a level, width 9: 16 x 9 + 9 x 9 + 8 x 9 = 297 MLP parameters
+  odd["encoding"]["n_features_per_level"] = 4;
+  odd["network"]["otype"] = "CutlassMLP";
+  odd["network"]["n_neurons"] = 9;
+  Network misaligned(odd);
+  ASSERT_NE(misaligned.mlp().n_params % 4, 0u);
+  test::expect_error([&] { cuda::check_supported(misaligned); }, {"multiple of the grid's 4 features", "--device cpu"});
+  odd["network"]["n_neurons"] = 24;  // a CutlassMLP width GPU training runs
+  EXPECT_NO_THROW(cuda::check_supported(Network(odd)));
   Network ok(preset_config("tiny"));
   EXPECT_NO_THROW(cuda::check_supported(ok));
   EXPECT_EQ(cuda::parse_mlp_path("fused"), cuda::MlpPath::Fused);

@@ -270,16 +270,19 @@ TEST(GpuRender, InShaderRefusesANetworkItsTilesCannotRunAndAutoStreams) {
   } catch (const Error& e) {
     EXPECT_NE(std::string(e.what()).find("--strategy streaming"), std::string::npos) << e.what();
   }
-  EXPECT_EQ(Renderer(model, Device::Cuda).automatic_strategy(), RenderStrategy::Streaming);
+  const Renderer gpu_renderer(model, Device::Cuda);
+  EXPECT_FALSE(gpu_renderer.can_render_inshader());
+  EXPECT_EQ(gpu_renderer.automatic_strategy(), RenderStrategy::Streaming);
   o.strategy = RenderStrategy::Streaming;
   const Image gpu = renderer_on(Device::Cuda, neural, vol, mc, tf, cam, o)->render(4);
   const Image cpu = renderer_on(Device::Cpu, neural, vol, mc, tf, cam, o)->render(4);
   EXPECT_GT(image_psnr(gpu, cpu), 40.0);
+  double mean = 0;  // and not two empty images
+  for (const Vec4f& px : cpu.pixels) mean += double(px.w);
+  EXPECT_GT(mean / double(cpu.pixels.size()), 1e-3);
 }
 
 }  // namespace
-
-// The GPU renders from its copy of the brick cache}  // namespace
 
 // The GPU renders from its copy of the brick cache (render_cuda/cache_copy.cuh), each sample at its own
 // level of detail. Its image matches the CPU's warm cache (both read level 0 here; the GPU decodes in half

@@ -87,8 +87,11 @@ public:
   void set_mode(RenderMode mode);
   void set_strategy(RenderStrategy strategy);
   // The faster strategy for this renderer's field, device and mode (fastest_render_strategy): what
-  // --strategy auto sets.
+  // --strategy auto sets; streaming where in-shader cannot run.
   RenderStrategy automatic_strategy() const;
+  // False for a network the GPU's in-shader MLP cannot run (its 16-wide tiles: docs/RENDERING.md), which
+  // RenderStrategy::InShader then refuses.
+  bool can_render_inshader() const;
   // The brick cache in front of a model's field (fields/brick_cache.h, docs/RENDERING.md): decoded
   // bricks at the level of detail the view needs; nullopt = off (the default). On the GPU the renderer
   // reads a copy of the same cache in GPU memory, decoded by the model on the GPU, its misses reading the

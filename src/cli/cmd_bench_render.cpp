@@ -151,7 +151,9 @@ void add_bench_render(CLI::App& bench) {
       report["tune_k"] = tune_k_rows(r, with, orbit, split_list(a->tune_k));
     } else {
       const std::string strategies =
-          !a->strategies.empty() ? a->strategies : (model ? "inshader,streaming,cache" : "inshader,streaming");
+          !a->strategies.empty() ? a->strategies
+                                 : (model ? (r.can_render_inshader() ? "inshader,streaming,cache" : "streaming,cache")
+                                          : "inshader,streaming");
       report["rows"] = table_rows(r, with, orbit, cache, raw, split_list(a->modes), split_list(strategies));
     }
     write_report(a->report, report);

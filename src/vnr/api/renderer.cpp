@@ -115,11 +115,15 @@ Renderer::~Renderer() = default;
 const char* Renderer::field_kind() const { return field().kind(); }
 
 RenderStrategy Renderer::automatic_strategy() const {
-  const bool gpu = device_ == Device::Cuda;
-  // the GPU's in-shader MLP runs 16-wide tiles only (a CutlassMLP's may not be)
-  if (gpu && std::string(field_kind()) == "network" && !mlp_in_16_wide_tiles(model_->net->mlp()))
-    return RenderStrategy::Streaming;
-  return fastest_render_strategy(field_kind(), gpu, options_.mode);
+  if (!can_render_inshader()) return RenderStrategy::Streaming;
+  return fastest_render_strategy(field_kind(), device_ == Device::Cuda, options_.mode);
+}
+
+bool Renderer::can_render_inshader() const {
+  // The GPU's in-shader MLP runs 16-wide tiles only (a CutlassMLP's may not be); a multi-brick model is
+  // drawn from its decode there, a grid.
+  return !(device_ == Device::Cuda && model_ && !model_->bricks && std::string(field_kind()) == "network" &&
+           !mlp_in_16_wide_tiles(model_->net->mlp()));
 }
 
 double Renderer::noise() const { return accumulated_noise(m2_, frames_); }

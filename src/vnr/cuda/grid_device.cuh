@@ -36,7 +36,7 @@ __device__ __forceinline__ void store_halves(const float* in, __half* p) {
   if constexpr (F == 1) {
     p[0] = __float2half_rn(in[0]);
   } else {
-    __half2 h[F / 2];
+    alignas(16) __half2 h[F / 2];  // read below as one vector (aligned should it ever live in memory)
     for (int j = 0; j < F / 2; ++j) h[j] = __floats2half2_rn(in[2 * j], in[2 * j + 1]);
     if constexpr (F == 2) *reinterpret_cast<__half2*>(p) = h[0];
     else if constexpr (F == 4) *reinterpret_cast<uint2*>(p) = *reinterpret_cast<const uint2*>(h);

@@ -60,6 +60,13 @@ std::string unsupported_reason(const Network& net) {
     return fmt::format("--device cuda runs ReLU hidden layers; this model uses {}",
                        activation_name(c.network.activation));
   if (net.mlp().n_out > 16) return "--device cuda runs models with at most 16 outputs";
+  // The grid table follows the MLP's weights in one array and an entry's F features are one vector access
+  // (F halves; F floats' atomics): the table must start at a multiple of F. FullyFusedMLP's sizes always do.
+  const uint32_t F = net.grid().n_features;
+  if (F > 1 && net.mlp().n_params % F != 0)
+    return fmt::format("--device cuda runs MLPs whose parameter count is a multiple of the grid's {} features per "
+                       "level; this one has {} (a CutlassMLP width that is a multiple of 8 gives one)",
+                       F, net.mlp().n_params);
   return "";
 }
 
