@@ -25,6 +25,7 @@ MlpLayout make_mlp_layout(const ModelConfig& cfg, uint32_t n_output_dims = 1);
 // in-shader MLP needs (it multiplies 16 x 16 tiles): FullyFusedMLP's are, a CutlassMLP's input is padded
 // to 8 and its width is any.
 inline bool mlp_in_16_wide_tiles(const MlpLayout& m) { return m.in_pad % 16 == 0 && m.width % 16 == 0; }
+
 // Total parameter count of a config, without allocating the parameters.
 uint64_t count_params(const ModelConfig& config, uint32_t n_output_dims = 1);
 
