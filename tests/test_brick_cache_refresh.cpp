@@ -17,7 +17,7 @@ using namespace vnr::test;
 namespace {
 
 // A cache of model a whose model then changes to b (1 - a): what training in the loop does to it.
-struct ChangingModel {
+struct ChangingModel : ::testing::Test {
   Volume a = synth(Int3{32, 32, 32}), b = inverted(a);
   GridField field_a{view_of(a)}, field_b{view_of(b)};
   const Volume* current = &a;
@@ -41,11 +41,7 @@ struct ChangingModel {
   }
 };
 
-TEST(BrickCache, AChangedModelRefreshesItsBricksWithinTheFrameBudget) {
-  ChangingModel m;
-  const Volume &a = m.a, &b = m.b;
-  CachedField& cache = m.cache;
-  const RenderParams& p = m.p;
+TEST_F(ChangingModel, AChangedModelRefreshesItsBricksWithinTheFrameBudget) {
   std::vector<float> x, y, z;
   Pcg32 rng(3);
   for (int i = 0; i < 4000; ++i) x.push_back(rng.next_float()), y.push_back(rng.next_float()), z.push_back(rng.next_float());
@@ -55,7 +51,7 @@ TEST(BrickCache, AChangedModelRefreshesItsBricksWithinTheFrameBudget) {
   cache.begin_frame(p);  // decodes all 64 bricks
   ASSERT_EQ(cache.stats().resident, 64);
   const uint64_t version = cache.content_version();
-  m.change();
+  change();
   EXPECT_EQ(cache.stats().stale, 64);
   cache.query(x.data(), y.data(), z.data(), int64_t(x.size()), v.data());
   for (size_t i = 0; i < x.size(); ++i) ASSERT_EQ(v[i], grid_lookup(view_of(a), x[i], y[i], z[i])) << "stale bricks are still read";
@@ -66,11 +62,7 @@ TEST(BrickCache, AChangedModelRefreshesItsBricksWithinTheFrameBudget) {
   for (size_t i = 0; i < x.size(); ++i) ASSERT_EQ(v[i], grid_lookup(view_of(b), x[i], y[i], z[i]));
 }
 
-TEST(BrickCache, RefreshChangesExactlyTheRefreshedBricks) {
-  ChangingModel m;
-  const Volume &a = m.a, &b = m.b;
-  CachedField& cache = m.cache;
-  const RenderParams& p = m.p;
+TEST_F(ChangingModel, RefreshChangesExactlyTheRefreshedBricks) {
   // One sample at the centre of each of the 64 bricks.
   std::vector<float> x, y, z;
   for (int k = 0; k < 4; ++k)
@@ -81,7 +73,7 @@ TEST(BrickCache, RefreshChangesExactlyTheRefreshedBricks) {
   cache.query(x.data(), y.data(), z.data(), 64, v.data());
   cache.begin_frame(p);
   ASSERT_EQ(cache.stats().resident, 64);
-  m.change();
+  change();
   cache.set_decode_seconds(1e-9);  // one brick a frame
   for (int frame = 1; frame <= 3; ++frame) {
     cache.query(x.data(), y.data(), z.data(), 64, v.data());

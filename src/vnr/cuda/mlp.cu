@@ -253,6 +253,12 @@ void gemm(cublasHandle_t blas, cublasOperation_t ta, cublasOperation_t tb, int m
                                 CUDA_R_32F, m, CUBLAS_COMPUTE_32F, CUBLAS_GEMM_DEFAULT));
 }
 
+// The loss-scaled gradient of matrix m's outputs (n rows): dOut for the output layer, else hidden
+// layer m's block of dY.
+inline const __half* output_grad(const MlpDims& d, const __half* dOut, const __half* dY, int64_t n, int m) {
+  return m == d.n_matrices - 1 ? dOut : dY + size_t(m) * n * d.width;
+}
+
 }  // namespace
 
 MlpPath resolve_mlp_path(const Network& net, MlpPath asked) {
@@ -325,9 +331,9 @@ void mlp_backward_data(MlpPath path, const MlpDims& d, const __half* weights, co
   const int H = d.n_matrices - 1;  // hidden layers
   for (int m = H; m >= (dX0 ? 0 : 1); --m) {
     const int rows = d.rows[m], cols = d.cols[m];
-    const __half* g = m == H ? dOut : dY + size_t(m) * n * d.width;
     // tmp (n x cols) = g_m (n x rows) * W_m
-    gemm(blas, CUBLAS_OP_N, CUBLAS_OP_N, cols, int(n), rows, 1.0f, weights + d.offset[m], cols, g, rows, tmp);
+    gemm(blas, CUBLAS_OP_N, CUBLAS_OP_N, cols, int(n), rows, 1.0f, weights + d.offset[m], cols,
+         output_grad(d, dOut, dY, n, m), rows, tmp);
     const int64_t count = n * cols;
     if (m > 0)
       masked_from_tmp<<<blocks_for(count, 256), 256, 0, st>>>(tmp, acts + size_t(m - 1) * n * d.width, count,
@@ -342,13 +348,12 @@ void mlp_weight_gradients(const MlpDims& d, const __half* X0, const __half* acts
                           const __half* dY, int64_t n, float* dW, cublasHandle_t blas, cudaStream_t st) {
   if (n <= 0) return;
   VNR_CUBLAS_CHECK(cublasSetStream(blas, st));
-  const int H = d.n_matrices - 1;  // hidden layers
   // dW_m (rows x cols) = g_m^T (rows x n) * In_m (n x cols) / S.
-  for (int m = 0; m <= H; ++m) {
+  for (int m = 0; m < d.n_matrices; ++m) {
     const int rows = d.rows[m], cols = d.cols[m];
     const __half* in = m == 0 ? X0 : acts + size_t(m - 1) * n * d.width;
-    const __half* g = m == H ? dOut : dY + size_t(m) * n * d.width;
-    gemm(blas, CUBLAS_OP_N, CUBLAS_OP_T, cols, rows, int(n), 1.0f / kLossScale, in, cols, g, rows, dW + d.offset[m]);
+    gemm(blas, CUBLAS_OP_N, CUBLAS_OP_T, cols, rows, int(n), 1.0f / kLossScale, in, cols,
+         output_grad(d, dOut, dY, n, m), rows, dW + d.offset[m]);
   }
 }
 
