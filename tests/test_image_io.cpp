@@ -2,6 +2,7 @@
 #include <gtest/gtest.h>
 #include <png.h>
 #include <unistd.h>
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <fstream>
@@ -61,6 +62,34 @@ TEST(Image, PngRoundTripWithin8Bits) {
   EXPECT_EQ(uint8_t(bytes[24]), 8);  // IHDR bit depth
   EXPECT_EQ(uint8_t(bytes[25]), 2);  // IHDR colour type RGB
   EXPECT_FALSE(file_exists(path + ".tmp-" + std::to_string(::getpid())));
+}
+
+// channel_to_u8 against round-half-up of float(255 c) written with std::floor in double precision (exact),
+// over every 4096th float bit pattern of both signs, the specials, each 8-bit level and the ties between
+// levels; to_rgba8 packs the same bytes in RGBA order.
+TEST(Image, ChannelTo8BitsRoundsHalvesUpAndClamps) {
+  auto reference = [](float c) -> int {
+    if (!(c > 0)) return 0;
+    if (c >= 1) return 255;
+    return int(std::floor(double(255.0f * c) + 0.5));
+  };
+  for (uint64_t bits = 0; bits <= 0xffffffffu; bits += 4096) {
+    const uint32_t b = uint32_t(bits);
+    float c;
+    std::memcpy(&c, &b, 4);
+    ASSERT_EQ(int(channel_to_u8(c)), reference(c)) << c;
+  }
+  for (float c : {0.0f, -0.0f, 1.0f, NAN, -NAN, INFINITY, -INFINITY, std::numeric_limits<float>::denorm_min()})
+    EXPECT_EQ(int(channel_to_u8(c)), reference(c)) << c;
+  for (int k = 0; k < 255; ++k) {
+    const float tie = (float(k) + 0.5f) / 255.0f;  // rounds to k or k + 1 as 255 * tie lands
+    EXPECT_EQ(int(channel_to_u8(tie)), reference(tie)) << k;
+    EXPECT_EQ(int(channel_to_u8(float(k) / 255.0f)), k);
+  }
+  Image img(2, 1);
+  img.at(0, 0) = Vec4f{1.0f, 0.5f, 0.0f, 0.25f};
+  img.at(1, 0) = Vec4f{NAN, 2.0f, 1.0f / 255, 0.0f};
+  EXPECT_EQ(to_rgba8(img), (std::vector<uint8_t>{255, 128, 0, 255, 0, 255, 1, 255}));
 }
 
 TEST(Image, PngReadsOtherPixelFormats) {

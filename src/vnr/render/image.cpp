@@ -306,12 +306,13 @@ ImageMetrics compare_images(const Image& img, const Image& reference) {
 
 std::vector<uint8_t> to_rgba8(const Image& img) {
   std::vector<uint8_t> out(img.pixels.size() * 4);
+  // A pixel's four bytes as one little-endian word, stored at once.
+  static_assert(std::endian::native == std::endian::little);
   for (size_t i = 0; i < img.pixels.size(); ++i) {
     const Vec4f& p = img.pixels[i];
-    out[4 * i + 0] = channel_to_u8(p.x);
-    out[4 * i + 1] = channel_to_u8(p.y);
-    out[4 * i + 2] = channel_to_u8(p.z);
-    out[4 * i + 3] = 255;
+    const uint32_t rgba = uint32_t(channel_to_u8(p.x)) | uint32_t(channel_to_u8(p.y)) << 8 |
+                          uint32_t(channel_to_u8(p.z)) << 16 | 0xff000000u;
+    std::memcpy(out.data() + 4 * i, &rgba, 4);
   }
   return out;
 }
