@@ -15,6 +15,7 @@
 #include "vnr/render/transfer_function.h"
 #include "vnr/train/session.h"
 #include "vnr/viewer.h"
+#include "vnr/api/viewer_impl.h"
 #include "vnr/volume_writer.h"
 #include "test_support.h"
 
@@ -109,6 +110,23 @@ bool same_camera_for_test(const Camera& a, const Camera& b) {
 
 }  // namespace
 
+// Strategy auto (the default) draws the network view from its brick cache, except on the GPU while the
+// network trains; cache always; streaming and in-shader never.
+TEST(ViewerEngine, AutoDrawsTheCacheButTheTrainingNetworkOnTheGpu) {
+  ViewerRender r;
+  EXPECT_EQ(r.settings.strategy, "auto");
+  for (bool training : {false, true}) {
+    EXPECT_TRUE(viewer_wants_cache(r, Device::Cpu, training));
+    EXPECT_EQ(viewer_wants_cache(r, Device::Cuda, training), !training);
+  }
+  r.settings.strategy = "cache";
+  EXPECT_TRUE(viewer_wants_cache(r, Device::Cuda, true));
+  for (const char* direct : {"streaming", "inshader"}) {
+    r.settings.strategy = direct;
+    EXPECT_FALSE(viewer_wants_cache(r, Device::Cpu, false));
+  }
+}
+
 TEST(ViewerEngine, DefaultTfReproducesThePresetTable) {
   TmpDir dir("viewer");
   ViewerEngine engine(volume_setup(dir));
@@ -160,7 +178,7 @@ TEST(ViewerEngine, NetworkViewEqualsTheRendererAndAccumulationStops) {
   EXPECT_EQ(engine.state().training.state, TrainingState::Unavailable);
   ViewerRender r = engine.state().render;
   EXPECT_EQ(r.settings.macrocells, "online");
-  EXPECT_EQ(r.settings.strategy, "cache") << "the brick cache by default";
+  EXPECT_EQ(r.settings.strategy, "auto") << "the brick cache by default (on the CPU)";
   r.settings.strategy = "streaming";  // the network itself (the cache: NetworkCacheViewSharpensToTheWarmCachesImage)
   r.max_frames = 3;
   engine.set_viewport(160, 128);

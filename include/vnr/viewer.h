@@ -81,20 +81,22 @@ struct ViewerTf {
 struct TransferFunction;  // vnr/renderer.h
 TransferFunction to_transfer_function(const ViewerTf& tf);
 
-// The viewer's defaults of what a rendering is: the brick cache, online macro-cells (adjusted to what the
-// input allows), the light from (0.7, 0.9, 0.4).
+// The viewer's defaults of what a rendering is: strategy auto (the brick cache, but the network itself
+// on the GPU while it trains), online macro-cells (adjusted to what the input allows), the light from
+// (0.7, 0.9, 0.4).
 inline Vec3f viewer_default_light() { return normalize(Vec3f{0.7f, 0.9f, 0.4f}); }
 inline RenderSettings viewer_render_defaults() {
   RenderSettings s;
-  s.strategy = "cache";
+  s.strategy = "auto";
   s.macrocells = "online";
   s.light = viewer_default_light();
   return s;
 }
 
 // How the viewer renders (the `render` message): the library's RenderSettings for what a rendering is,
-// with its names and checks -- mode, strategy (cache or auto: a model draws from its brick cache, on the
-// GPU from a copy in GPU memory, full-resolution frames while the camera moves, docs/RENDERING.md;
+// with its names and checks -- mode, strategy (cache: a model draws from its brick cache, on the GPU from
+// a copy in GPU memory, full-resolution frames while the camera moves, docs/RENDERING.md; auto: the same
+// but on the GPU while training, where the network draws itself, each view by its fastest strategy;
 // streaming or inshader: the field itself), step, shade, light, density, macrocells (online, grid, off)
 // -- while the view's size, camera and transfer function are the viewer's own state and RenderSettings'
 // other keys do not apply; then what only an interactive view has.

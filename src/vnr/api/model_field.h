@@ -7,6 +7,7 @@
 #include "vnr/fields/fields.h"
 #include "vnr/error.h"
 #include "vnr/units.h"
+#include "vnr/nn/mlp_layout.h"
 #include "vnr/train/bricks.h"
 #include "vnr/train/decoder.h"
 #include "vnr/train/model_form.h"
@@ -16,6 +17,12 @@ namespace vnr {
 // Why the model cannot render on the GPU ("" when it can): a network the GPU kernels do not support, or
 // a multi-brick model whose decode does not fit.
 inline std::string gpu_render_reason(const Model& model) { return form_of(model).gpu_render_reason(model); }
+
+// Whether the in-shader strategy can draw the model's network on `device`: the GPU's in-shader MLP runs
+// 16-wide tiles only (a CutlassMLP's may not be); a multi-brick model is drawn from its decode there, a grid.
+inline bool inshader_can_draw(const Model& model, Device device) {
+  return device != Device::Cuda || model.bricks || mlp_in_16_wide_tiles(model.net->mlp());
+}
 
 // A multi-brick model drawn on the GPU from its decode: decoded once at dims on the GPU (the bricks
 // blended as on the CPU; residuals where they apply: Decoder), then ray marched as a grid, trilinear

@@ -120,10 +120,7 @@ RenderStrategy Renderer::automatic_strategy() const {
 }
 
 bool Renderer::can_render_inshader() const {
-  // The GPU's in-shader MLP runs 16-wide tiles only (a CutlassMLP's may not be); a multi-brick model is
-  // drawn from its decode there, a grid.
-  return !(device_ == Device::Cuda && model_ && !model_->bricks && std::string(field_kind()) == "network" &&
-           !mlp_in_16_wide_tiles(model_->net->mlp()));
+  return !model_ || std::string(field_kind()) != "network" || inshader_can_draw(*model_, device_);
 }
 
 double Renderer::noise() const { return accumulated_noise(m2_, frames_); }

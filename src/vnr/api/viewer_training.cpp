@@ -21,8 +21,10 @@ constexpr int64_t kProbeEverySteps = 50;
 // A training budget is run in slices of at most this long, so pause/reset/stop take effect soon.
 constexpr double kSliceSeconds = 0.05;
 // The automatic budget (budget_seconds = 0): training gets 1.4x the time the last frame took to render
-// (docs/VIEWER.md: about half the machine with 10 frames/s on 2 cores).
-constexpr double kAutoBudgetFactor = 1.4, kAutoBudgetMin = 0.03;
+// (docs/VIEWER.md: about half the machine with 10 frames/s on 2 cores), on the CPU at least 30 ms. Not on
+// the GPU: a step takes under a millisecond there and a frame a few, so that floor alone would hold the
+// viewer under 33 frames/s.
+constexpr double kAutoBudgetFactor = 1.4, kAutoBudgetMinCpu = 0.03;
 // samples_per_second averages the steps of about the last this many training seconds.
 constexpr double kRateWindowSeconds = 1.0;
 
@@ -143,7 +145,8 @@ double ViewerEngine::Impl::train_chunk(const ViewerSnapshot& snap) {
     run.switch_at = run.steps() + run.switch_every;
   }
   const double t0 = run.seconds();
-  const double budget = want.budget_seconds > 0 ? want.budget_seconds : std::max(kAutoBudgetMin, kAutoBudgetFactor * last_render_seconds);
+  const double min_budget = train_device == Device::Cuda ? 0.0 : kAutoBudgetMinCpu;
+  const double budget = want.budget_seconds > 0 ? want.budget_seconds : std::max(min_budget, kAutoBudgetFactor * last_render_seconds);
   try {
     if (run.probe_step < 0) take_probe();
     // Whole steps, the nearest count to the budget plus what earlier chunks left over or overdrew, at

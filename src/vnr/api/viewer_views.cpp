@@ -2,6 +2,7 @@
 // interacting), the slice images and the value histogram.
 #include <algorithm>
 #include <cmath>
+#include <utility>
 #include "vnr/api/model_field.h"
 #include "vnr/api/viewer_impl.h"
 #include "vnr/error.h"
@@ -43,7 +44,9 @@ RenderOptions viewer_render_options(const ViewerRender& r, const Scene& scene, i
   return o;
 }
 
-bool viewer_wants_cache(const ViewerRender& r) { return r.settings.strategy == "cache" || r.settings.strategy == "auto"; }
+bool viewer_wants_cache(const ViewerRender& r, Device device, bool training) {
+  return r.settings.strategy == "cache" || (r.settings.strategy == "auto" && !(device == Device::Cuda && training));
+}
 
 int viewer_max_frames(const ViewerRender& r) {
   if (r.max_frames > 0) return r.max_frames;
@@ -104,7 +107,7 @@ bool render_pass(ViewPass& pass, const ViewContent& content, const TransferFunct
   }
   pass.backend->render_frame(uint32_t(pass.count), pass.frame);
   if (pass.count == 0)
-    pass.acc = pass.frame;
+    std::swap(pass.acc, pass.frame);  // a frame overwrites its image: no copy (while training, every frame)
   else
     accumulate_frame(pass.acc, pass.frame, pass.count);
   ++pass.count;
@@ -266,13 +269,24 @@ bool ViewerEngine::Impl::render(const ViewerSnapshot& snap, bool* refined, int* 
     tf = to_transfer_function(st.tf);
     built_tf_epoch = snap.tf_epoch;
   }
-  const bool want_cache = viewer_wants_cache(st.render) && st.view.layout != ViewLayout::Truth;
+  const bool gpu = render_device == Device::Cuda;
+  const bool want_cache = viewer_wants_cache(st.render, render_device, st.training.state == TrainingState::Running) &&
+                          st.view.layout != ViewLayout::Truth;
   const bool coarse = snap.interacting && !want_cache;  // the cache renders full frames while moving
   const int scale = coarse ? st.render.coarse_scale : 1;
   const RenderOptions opt =
       viewer_render_options(st.render, input.scene, std::max(1, st.width / scale), std::max(1, st.height / scale));
-  RenderOptions net_opt = opt;
-  if (want_cache) net_opt.strategy = fastest_render_strategy("cache", render_device == Device::Cuda, opt.mode);
+  RenderOptions net_opt = opt, truth_opt = opt;
+  if (want_cache) {
+    net_opt.strategy = fastest_render_strategy("cache", gpu, opt.mode);
+  } else if (st.render.settings.strategy == "auto") {
+    net_opt.strategy = inshader_can_draw(*model, render_device) ? fastest_render_strategy("network", gpu, opt.mode)
+                                                                 : RenderStrategy::Streaming;
+  }
+  // What the cache does not draw: on the GPU the grid in-shader (16x streaming's frames/s, docs/benchmarks.md
+  // "CUDA backend"); on the CPU streaming, as vnr::Renderer's default.
+  if (gpu && (st.render.settings.strategy == "cache" || st.render.settings.strategy == "auto"))
+    truth_opt.strategy = fastest_render_strategy("grid", gpu, opt.mode);
   const int target = coarse ? 1 : viewer_max_frames(st.render);
   const bool want_net = st.view.layout != ViewLayout::Truth;
   const bool want_truth = volume && st.view.layout != ViewLayout::Network;
@@ -292,7 +306,7 @@ bool ViewerEngine::Impl::render(const ViewerSnapshot& snap, bool* refined, int* 
   }
   if (want_truth) {
     update_truth_content();
-    any |= draw(truth_content, truth_pass, opt);
+    any |= draw(truth_content, truth_pass, truth_opt);
   }
   *refined = !coarse;
   *accumulated = (want_net ? net_pass : truth_pass).count;
