@@ -232,6 +232,8 @@ TEST(GpuTrainer, LossCurveAndPsnrFollowTheCpuAndModelsMoveBothWays) {
   gpu.run(steps);
   std::vector<float> lg = gpu.losses();
   ASSERT_EQ(lg.size(), size_t(steps));
+  EXPECT_EQ(gpu.losses(steps - 3), std::vector<float>(lg.end() - 3, lg.end())) << "a poller's new losses";
+  EXPECT_TRUE(gpu.losses(steps + 5).empty());
   gpu.download();
   const std::vector<float>& lc = cpu.loss_history();
   auto tail_mean = [](const std::vector<float>& l) { return std::accumulate(l.end() - 50, l.end(), 0.0) / 50; };

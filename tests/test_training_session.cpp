@@ -71,7 +71,7 @@ public:
     inner_->run(n);
   }
   float last_loss() const override { return inner_->last_loss(); }
-  std::vector<float> losses() const override { return inner_->losses(); }
+  std::vector<float> losses_from(uint64_t first) const override { return inner_->losses_from(first); }
   uint64_t steps_done() const override { return inner_->steps_done(); }
   float current_learning_rate() const override { return inner_->current_learning_rate(); }
   void set_learning_rate_multiplier(float m) override { inner_->set_learning_rate_multiplier(m); }
@@ -164,6 +164,10 @@ TEST(TrainingSession, RunsNStepsAndStops) {
   EXPECT_EQ(seen, (std::vector<int64_t>{1, 2, 3, 4, 5, 6, 7, 8}));
   EXPECT_EQ(f.session->trainer().steps_done(), 8u);
   EXPECT_EQ(f.session->trainer().losses().size(), 8u);
+  const std::vector<float> all = f.session->trainer().losses();  // a poller's new ones are the tail
+  EXPECT_EQ(f.session->trainer().losses_from(5), std::vector<float>(all.begin() + 5, all.end()));
+  EXPECT_TRUE(f.session->trainer().losses_from(8).empty());
+  EXPECT_TRUE(f.session->trainer().losses_from(20).empty());
   EXPECT_EQ(f.session->step_seconds().size(), 8u);
   EXPECT_EQ(f.session->last_loss(), f.session->trainer().losses().back());
   const float loss = f.session->step();

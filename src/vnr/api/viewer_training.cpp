@@ -191,12 +191,10 @@ bool ViewerEngine::Impl::keep_training() {
 void ViewerEngine::Impl::publish_training() {
   TrainingSession& s = *run.session;
   const Trainer& trainer = s.trainer();
-  // The CPU trainer's history by reference (no copy of every loss per chunk); other trainers' as a copy.
-  std::vector<float> copy;
-  const auto* cpu = dynamic_cast<const CpuTrainer*>(&trainer);
-  const std::vector<float>& all = cpu ? cpu->loss_history() : (copy = trainer.losses());
-  const std::vector<float> fresh(all.begin() + std::ptrdiff_t(std::min(run.losses_published, all.size())), all.end());
-  run.losses_published = all.size();
+  // The losses of this chunk's steps alone (the GPU copied all of them every chunk: megabytes a frame
+  // after minutes of training).
+  const std::vector<float> fresh = trainer.losses_from(run.losses_published);
+  run.losses_published += fresh.size();
   // Samples per second over the last steps (about kRateWindowSeconds of them).
   const auto& times = s.step_seconds();
   double window = 0;

@@ -63,8 +63,8 @@ public:
   // Enqueues n training steps; no host synchronisation (the learning-rate schedule is host arithmetic).
   void run(int n_steps);
   void synchronize();
-  // Mean loss of every step so far, and of the last one (both synchronise).
-  std::vector<float> losses();
+  // Mean loss of steps first, first + 1, ... so far, and of the last one (both synchronise).
+  std::vector<float> losses(uint64_t first = 0);
   float last_loss();
   uint64_t steps_done() const;
   float current_learning_rate() const;

@@ -277,10 +277,11 @@ void GpuTrainer::run(int n_steps) {
 }
 void GpuTrainer::synchronize() { VNR_CUDA_CHECK(cudaStreamSynchronize(impl_->sb.stream)); }
 
-std::vector<float> GpuTrainer::losses() {
+std::vector<float> GpuTrainer::losses(uint64_t first) {
   synchronize();
-  std::vector<float> out(impl_->step);
-  if (!out.empty()) impl_->loss_slots.download(out.data(), out.size());
+  first = std::min<uint64_t>(first, impl_->step);
+  std::vector<float> out(impl_->step - first);
+  if (!out.empty()) impl_->loss_slots.download(out.data(), out.size(), first);
   return out;
 }
 uint64_t GpuTrainer::steps_done() const { return impl_->step; }

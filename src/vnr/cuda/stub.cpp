@@ -23,7 +23,7 @@ GpuTrainer::GpuTrainer(Network&, std::shared_ptr<HostBatchSource>, GpuTrainOptio
 GpuTrainer::~GpuTrainer() = default;
 void GpuTrainer::run(int) { not_built(); }
 void GpuTrainer::synchronize() { not_built(); }
-std::vector<float> GpuTrainer::losses() { not_built(); }
+std::vector<float> GpuTrainer::losses(uint64_t) { not_built(); }
 float GpuTrainer::last_loss() { not_built(); }
 uint64_t GpuTrainer::steps_done() const { not_built(); }
 float GpuTrainer::current_learning_rate() const { not_built(); }

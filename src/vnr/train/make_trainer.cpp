@@ -49,7 +49,7 @@ public:
   }
   void synchronize() override { gpu_->synchronize(); }
   float last_loss() const override { return gpu_->steps_done() ? gpu_->last_loss() : 0.f; }
-  std::vector<float> losses() const override { return gpu_->losses(); }
+  std::vector<float> losses_from(uint64_t first) const override { return gpu_->losses(first); }
   uint64_t steps_done() const override { return gpu_->steps_done(); }
   float current_learning_rate() const override { return gpu_->current_learning_rate(); }
   void set_learning_rate_multiplier(float m) override { gpu_->set_learning_rate_multiplier(m); }

@@ -53,7 +53,9 @@ public:
   Device device() const override { return Device::Cpu; }
   void run(int64_t n_steps) override;
   float last_loss() const override { return loss_history_.empty() ? 0.f : loss_history_.back(); }
-  std::vector<float> losses() const override { return loss_history_; }
+  std::vector<float> losses_from(uint64_t first) const override {
+    return {loss_history_.begin() + std::ptrdiff_t(std::min<size_t>(first, loss_history_.size())), loss_history_.end()};
+  }
   void download() override {}
   int64_t batch() const override { return opts_.batch; }
   uint32_t seed() const override { return opts_.seed; }

@@ -27,9 +27,11 @@ public:
   virtual void run(int64_t n_steps) = 0;
   // Waits until the steps run() enqueued are done (a no-op where run() returns with them done).
   virtual void synchronize() {}
-  // Mean loss of the last step (0 before any) and of every step so far; both synchronise.
+  // Mean loss of the last step (0 before any), of every step so far, and of steps first, first + 1, ...
+  // so far (a caller that polls asks for the new ones alone: the GPU copies no more); all synchronise.
   virtual float last_loss() const = 0;
-  virtual std::vector<float> losses() const = 0;
+  std::vector<float> losses() const { return losses_from(0); }
+  virtual std::vector<float> losses_from(uint64_t first) const = 0;
   virtual uint64_t steps_done() const = 0;
   virtual float current_learning_rate() const = 0;  // this step's, the multiplier included
   // Scales the learning rate of the following steps (TrainingSession's cool-down); 1 = the config's.
