@@ -205,7 +205,8 @@ public:
   // missing, no path separators); returns the path written.
   std::string save_model(const std::string& name);
   // The current view's network image (truth when the layout shows only truth), refined: full viewport
-  // resolution with at least one full frame; waits for it up to timeout_seconds.
+  // resolution with at least one full frame; waits for it up to timeout_seconds. As the page shows it:
+  // 8 bits a channel (values k / 255, so to_rgba8 and PNG give back the frame's bytes), alpha 1.
   Image screenshot(double timeout_seconds = 10);
 
 private:

@@ -155,7 +155,6 @@ void ViewerEngine::Impl::thread_main() {
 // One pass of the loop: pending requests, a training budget, one frame of every unfinished view.
 void ViewerEngine::Impl::iterate(const ViewerSnapshot& snap) {
   auto frame = std::make_shared<ViewerFrame>();
-  std::shared_ptr<const Image> main;
   bool rendered = false;
   {
     std::lock_guard<std::mutex> work(work_mu);
@@ -188,9 +187,6 @@ void ViewerEngine::Impl::iterate(const ViewerSnapshot& snap) {
       if (rendered) {
         published_epoch = snap.epoch;
         frame->images = frame_images(snap);
-        if (frame->refined)
-          main = std::make_shared<const Image>(snap.state.view.layout == ViewLayout::Truth ? truth_pass.acc
-                                                                                             : net_pass.acc);
       }
     } catch (const std::exception& e) {
       record_error(e.what(), false);
@@ -207,7 +203,6 @@ void ViewerEngine::Impl::iterate(const ViewerSnapshot& snap) {
   frame->id = next_frame_id++;
   latest = frame;
   latest_epoch = snap.epoch;
-  latest_main = main;
   frame_cv.notify_all();
 }
 
@@ -456,12 +451,25 @@ Image ViewerEngine::screenshot(double timeout_seconds) {
   const auto deadline = Clock::now() + std::chrono::duration_cast<Clock::duration>(
                                            std::chrono::duration<double>(std::max(0.0, timeout_seconds)));
   std::unique_lock<std::mutex> lock(m.mu);
-  // A refined frame of the settings as they are now.
-  const auto ready = [&] { return m.stopping || (m.latest_main && m.latest_epoch == m.epoch); };
-  m.frame_cv.wait_until(lock, deadline, ready);
-  if (!m.latest_main || m.latest_epoch != m.epoch)
-    fail("no refined frame within {} s{}", timeout_seconds, m.stopping ? " (the engine is stopped)" : "");
-  return *m.latest_main;
+  // The main image of a refined frame of the settings as they are now: the network's, else the truth's.
+  const auto main = [&]() -> const ViewerImage* {
+    if (!m.latest || !m.latest->refined || m.latest_epoch != m.epoch) return nullptr;
+    const ViewerImage* truth = nullptr;
+    for (const ViewerImage& im : m.latest->images) {
+      if (im.view == "network") return &im;
+      if (im.view == "truth") truth = &im;
+    }
+    return truth;
+  };
+  m.frame_cv.wait_until(lock, deadline, [&] { return m.stopping || main(); });
+  const ViewerImage* shown = main();
+  if (!shown) fail("no refined frame within {} s{}", timeout_seconds, m.stopping ? " (the engine is stopped)" : "");
+  Image out(shown->width, shown->height);
+  for (size_t i = 0; i < out.pixels.size(); ++i) {
+    const uint8_t* p = &shown->rgba[4 * i];
+    out.pixels[i] = Vec4f{float(p[0]) / 255.0f, float(p[1]) / 255.0f, float(p[2]) / 255.0f, 1.0f};
+  }
+  return out;
 }
 
 }  // namespace vnr

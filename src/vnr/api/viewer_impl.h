@@ -137,7 +137,6 @@ struct ViewerEngine::Impl {
   std::vector<uint64_t> fine_histogram;  // kFineBins counts of the normalised values
   std::shared_ptr<const ViewerFrame> latest;
   uint64_t latest_epoch = 0;
-  std::shared_ptr<const Image> latest_main;  // the refined main image of `latest` (screenshot)
   uint64_t next_frame_id = 1;
   bool stopping = false, stopped = false;
   std::atomic<bool> halting{false};  // stop(): no more steps or frames
