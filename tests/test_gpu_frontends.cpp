@@ -9,6 +9,7 @@
 #include <cstdlib>
 #include <functional>
 #include <thread>
+#include "render_support.h"
 #include "test_support.h"
 #include "vnr/fileio.h"
 #include "vnr/cuda/cuda.h"
@@ -40,15 +41,6 @@ std::string trained_model_file(const TmpDir& dir, const char* preset) {
   session->finish();
   save_model(dir / "model.vnr", m);
   return dir / "model.vnr";
-}
-
-// PSNR of two 8-bit RGBA images (peak 255).
-double rgba8_psnr(const std::vector<uint8_t>& a, const std::vector<uint8_t>& b) {
-  EXPECT_EQ(a.size(), b.size());
-  double se = 0;
-  for (size_t i = 0; i < a.size() && i < b.size(); ++i) se += (double(a[i]) - b[i]) * (double(a[i]) - b[i]);
-  const double mse = se / double(std::max<size_t>(a.size(), 1));
-  return mse == 0 ? 200.0 : 10 * std::log10(255.0 * 255.0 / mse);
 }
 
 bool wait_until(const std::function<bool()>& cond, double timeout = 60) {

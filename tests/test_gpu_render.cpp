@@ -159,6 +159,35 @@ TEST(GpuRender, GridImagesMatchTheCpu) {
     }
 }
 
+// What a viewer shows: the mean of frames 0..f as 8-bit RGBA, kept on the GPU, equals the host's
+// accumulation of the same renderer's frames (FrameRenderer's own render_mean_rgba8) byte for byte, and
+// the CPU renderer's within the images' agreement.
+TEST(GpuRender, MeanOfFramesAsRgba8EqualsTheHostsAccumulation) {
+  REQUIRE_GPU();
+  const GridScene scene;
+  for (RenderMode mode : {RenderMode::RayMarch, RenderMode::PathTrace}) {
+    RenderOptions o;
+    o.mode = mode;
+    o.strategy = RenderStrategy::InShader;
+    o.width = 61;
+    o.height = 45;
+    auto gpu = renderer_on(Device::Cuda, scene.field, scene.vol, scene.mc, scene.tf, scene.cam, o);
+    auto host = renderer_on(Device::Cuda, scene.field, scene.vol, scene.mc, scene.tf, scene.cam, o);
+    auto cpu = renderer_on(Device::Cpu, scene.field, scene.vol, scene.mc, scene.tf, scene.cam, o);
+    std::vector<uint8_t> on_gpu, on_host, of_cpu;
+    for (uint32_t f = 0; f < 5; ++f) {
+      gpu->render_mean_rgba8(f, on_gpu);
+      host->FrameRenderer::render_mean_rgba8(f, on_host);
+      cpu->render_mean_rgba8(f, of_cpu);
+      ASSERT_EQ(on_gpu.size(), size_t(4 * 61 * 45));
+      EXPECT_EQ(on_gpu, on_host) << render_mode_name(mode) << ", frame " << f;
+    }
+    // Over the black background every colour byte of an empty image is 0 (3 of 4 bytes).
+    EXPECT_LT(std::count(on_gpu.begin(), on_gpu.end(), uint8_t(0)), int64_t(on_gpu.size() * 3 / 4)) << "not empty";
+    if (mode == RenderMode::RayMarch) EXPECT_GT(rgba8_psnr(on_gpu, of_cpu), 45.0);
+  }
+}
+
 // A trained network: the GPU's half-precision MLP (tensor cores) against the CPU's binary32 inference.
 // Outputs differ by ~1e-3 of the value range, which moves opacities by less than that; images agree
 // above 40 dB (a 1% error of every pixel would be 40 dB).

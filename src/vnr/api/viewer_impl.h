@@ -61,9 +61,9 @@ struct ViewPass {
   bool coarse = false;
   uint64_t cache_version = 0;  // CachedField::content_version the accumulation started from
   Camera camera;
-  Image frame, acc;
-  int count = 0;              // frames averaged into acc
-  std::vector<uint8_t> rgba;  // acc as RGBA8
+  int count = 0;              // frames averaged (in the backend: FrameRenderer::render_mean_rgba8)
+  int width = 0, height = 0;
+  std::vector<uint8_t> rgba;  // their mean as RGBA8
 };
 
 // The training run (engine thread).

@@ -105,13 +105,10 @@ bool render_pass(ViewPass& pass, const ViewContent& content, const TransferFunct
     content.cache->wait_for_bricks(0.05);
     pass.count = 0;
   }
-  pass.backend->render_frame(uint32_t(pass.count), pass.frame);
-  if (pass.count == 0)
-    std::swap(pass.acc, pass.frame);  // a frame overwrites its image: no copy (while training, every frame)
-  else
-    accumulate_frame(pass.acc, pass.frame, pass.count);
+  pass.backend->render_mean_rgba8(uint32_t(pass.count), pass.rgba);
+  pass.width = opt.width;
+  pass.height = opt.height;
   ++pass.count;
-  pass.rgba = to_rgba8(pass.acc);
   return true;
 }
 
@@ -353,7 +350,7 @@ std::vector<ViewerImage> ViewerEngine::Impl::frame_images(const ViewerSnapshot& 
   const ViewerState& st = snap.state;
   std::vector<ViewerImage> out;
   auto add = [&](const char* name, const ViewPass& p) {
-    if (p.count > 0) out.push_back(ViewerImage{name, p.acc.width, p.acc.height, p.rgba});
+    if (p.count > 0) out.push_back(ViewerImage{name, p.width, p.height, p.rgba});
   };
   if (st.view.layout != ViewLayout::Truth) add("network", net_pass);
   if (volume && st.view.layout != ViewLayout::Network) add("truth", truth_pass);

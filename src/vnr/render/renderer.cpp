@@ -3,6 +3,7 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <utility>
 #include "vnr/error.h"
 #include "vnr/json.h"
 #include "vnr/core/parallel.h"
@@ -76,6 +77,15 @@ void set_render_camera(RenderParams& p, const Camera& cam, const RenderOptions& 
 }
 
 void FrameRenderer::render_frame_resident(uint32_t frame, RenderStats* stats) { render_frame(frame, resident_, stats); }
+
+void FrameRenderer::render_mean_rgba8(uint32_t frame, std::vector<uint8_t>& rgba) {
+  render_frame(frame, frame_);
+  if (frame == 0)
+    std::swap(mean_, frame_);  // a frame overwrites its image: no copy
+  else
+    accumulate_frame(mean_, frame_, int(frame));
+  rgba = to_rgba8(mean_);
+}
 
 Image FrameRenderer::render(int frames, RenderStats* stats) {
   if (frames < 1) fail("the number of frames (samples per pixel) must be at least 1 (got {})", frames);

@@ -46,6 +46,30 @@ __global__ void max_opacity_kernel(const Vec4f* __restrict__ table, int n, float
   if (c < cells) out[c] = macrocell_max_opacity(table, n, tf_lo, tf_w, lo[c], hi[c]);
 }
 
+// channel_to_u8 (vnr/image.h) with its float arithmetic as the host does it: uncontracted, so the same
+// bytes.
+__device__ uint32_t channel_u8(float c) {
+  c = c > 0 ? (c < 1 ? c : 1.0f) : 0.0f;
+  return uint32_t(int(__fadd_rn(__fmul_rn(255.0f, c), 0.5f)));
+}
+
+// A frame folded into the running mean (accumulate_frame's arithmetic, uncontracted; frame 0 starts it),
+// and the mean as to_rgba8's bytes, one little-endian word a pixel.
+__global__ void mean_rgba8_kernel(Vec4f* __restrict__ mean, const Vec4f* __restrict__ frame, int64_t n, bool first,
+                                  float w, uint32_t* __restrict__ rgba) {
+  const int64_t i = int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
+  if (i >= n) return;
+  const Vec4f b = frame[i];
+  Vec4f a = b;
+  if (!first) {
+    a = mean[i];
+    a = Vec4f{__fadd_rn(a.x, __fmul_rn(__fsub_rn(b.x, a.x), w)), __fadd_rn(a.y, __fmul_rn(__fsub_rn(b.y, a.y), w)),
+              __fadd_rn(a.z, __fmul_rn(__fsub_rn(b.z, a.z), w)), __fadd_rn(a.w, __fmul_rn(__fsub_rn(b.w, a.w), w))};
+  }
+  mean[i] = a;
+  rgba[i] = channel_u8(a.x) | channel_u8(a.y) << 8 | channel_u8(a.z) << 16 | 0xff000000u;
+}
+
 #define VNR_LAUNCH(kernel, n, ...)                                                                   \
   do {                                                                                               \
     if ((n) > 0) {                                                                                   \
@@ -74,8 +98,9 @@ struct GpuRenderer::Impl {
   DeviceBuffer<Vec4f> tf_table;  // p.tf views it
   float tf_w = 1;                 // hi - lo of the TF window (macrocell_max_opacity divides by it)
   DeviceBuffer<float> range_lo, range_hi, max_op;
-  // frame buffers
-  DeviceBuffer<Vec4f> image;
+  // frame buffers; the mean of a viewer's frames and its 8-bit image (render_mean_rgba8)
+  DeviceBuffer<Vec4f> image, mean;
+  DeviceBuffer<uint32_t> mean_rgba8;
   DeviceBuffer<MarchState> march;
   DeviceBuffer<ShadowState> shadow;
   DeviceBuffer<PathState> path;
@@ -367,6 +392,20 @@ void GpuRenderer::render_frame(uint32_t frame, Image& img, RenderStats* stats) {
   Impl& I = *impl_;
   if (img.width != I.opt.width || img.height != I.opt.height) img = Image(I.opt.width, I.opt.height);
   I.image.download(img.pixels.data(), img.pixels.size());
+}
+
+void GpuRenderer::render_mean_rgba8(uint32_t frame, std::vector<uint8_t>& rgba) {
+  render_frame_resident(frame);
+  Impl& I = *impl_;
+  const int64_t n = I.n_pixels;
+  I.mean.resize(size_t(n));
+  I.mean_rgba8.resize(size_t(n));
+  auto& sb = I.sb;
+  VNR_LAUNCH(mean_rgba8_kernel, n, I.mean.data(), I.image.data(), n, frame == 0, 1.0f / float(frame + 1),
+             I.mean_rgba8.data());
+  rgba.resize(size_t(n) * 4);
+  VNR_CUDA_CHECK(cudaMemcpyAsync(rgba.data(), I.mean_rgba8.data(), size_t(n) * 4, cudaMemcpyDeviceToHost, sb.stream));
+  VNR_CUDA_CHECK(cudaStreamSynchronize(sb.stream));
 }
 
 void GpuRenderer::set_camera(const Camera& cam) { set_render_camera(impl_->p, cam, impl_->opt); }

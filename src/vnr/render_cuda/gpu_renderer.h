@@ -45,6 +45,7 @@ public:
 
   void render_frame(uint32_t frame, Image& img, RenderStats* stats = nullptr) override;
   void render_frame_resident(uint32_t frame, RenderStats* stats = nullptr) override;
+  void render_mean_rgba8(uint32_t frame, std::vector<uint8_t>& rgba) override;
   void set_camera(const Camera& cam) override;
   Device device() const override { return Device::Cuda; }
   // A network field's new parameters copied in place, device to device from device_half, and mc's ranges

@@ -18,6 +18,7 @@ GpuRenderer::GpuRenderer(const GpuFieldSource&, Vec3f, const MacroCells&, const 
 GpuRenderer::~GpuRenderer() = default;
 void GpuRenderer::render_frame(uint32_t, Image&, RenderStats*) { not_built(); }
 void GpuRenderer::render_frame_resident(uint32_t, RenderStats*) { not_built(); }
+void GpuRenderer::render_mean_rgba8(uint32_t, std::vector<uint8_t>&) { not_built(); }
 void GpuRenderer::set_camera(const Camera&) { not_built(); }
 bool GpuRenderer::refresh_network(const MacroCells&, const void*) { not_built(); }
 void GpuRenderer::set_transfer_function(const TransferFunction&) { not_built(); }
