@@ -16,6 +16,8 @@
 #include "vnr/model.h"
 #include "vnr/model_config.h"
 #include "vnr/renderer.h"
+#include "vnr/train/decoder.h"
+#include "vnr/train/series.h"
 #include "vnr/train/session.h"
 #include "vnr/viewer.h"
 #include "vnr/volume_writer.h"
@@ -80,6 +82,21 @@ TEST(GpuModelQuery, PointsAndDecodeMatchTheCpu) {
     for (int64_t v = 0; v < dims.count(); ++v) worst = std::max(worst, double(std::fabs(x[v] - y[v])));
     EXPECT_LT(worst, 2e-2) << preset << " decode";
   }
+}
+
+// The viewer's PSNR probe on the GPU (its voxels decoded there, from the parameters in GPU memory)
+// against the probe of the CPU network: within 0.1 dB (a half-precision MLP against binary32).
+TEST(GpuModelQuery, PsnrProbeDecodedOnTheGpuEqualsTheCpus) {
+  REQUIRE_GPU();
+  TmpDir dir("gpu_probe");
+  const Model m = load_model(trained_model_file(dir, "paper"));
+  const Volume vol = open_volume(dir / "gt.json");
+  const PsnrProbe probe(vol.dims, 4096, 5);
+  Decoder gpu(*m.net, Device::Cuda);
+  const double on_cpu = probe.psnr(*m.net, vol), on_gpu = probe.psnr(gpu, vol);
+  std::printf("probe PSNR: %.4f dB on the CPU, %.4f on the GPU\n", on_cpu, on_gpu);
+  EXPECT_GT(on_cpu, 20.0);
+  EXPECT_NEAR(on_gpu, on_cpu, 0.1);
 }
 
 // The viewer engine rendering a model on the GPU (from the GPU's copy of its brick cache): its

@@ -75,6 +75,7 @@ struct ViewerRun {
   double seconds_base = 0;
   size_t losses_published = 0;  // of the current session
   std::optional<PsnrProbe> probe;
+  std::unique_ptr<Decoder> probe_decoder;  // on the GPU: the probe's voxels from the trainer's parameters
   int64_t probe_step = -1;      // global step of the last probe (-1: none)
   double probe_seconds = 0;
   std::vector<std::array<double, 2>> new_psnr;  // probes not yet published

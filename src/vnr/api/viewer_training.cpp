@@ -64,6 +64,7 @@ void ViewerEngine::Impl::apply_reset(std::optional<double> learning_rate) {
   net_pass.backend.reset();
   net_content = ViewContent{};
   slices = SliceCache{};
+  run.probe_decoder.reset();
   run.active = nullptr;
   run.session.reset();
   if (learning_rate) config.adam.learning_rate = float(*learning_rate);
@@ -126,8 +127,19 @@ void ViewerEngine::Impl::take_probe() {
   TrainingSession& s = *run.session;
   double psnr = 0;
   s.run_side_work([&] {
-    s.trainer().download();
-    psnr = run.probe->psnr(*model->net, *volume);
+    // On the GPU the probe's voxels are decoded there from the trainer's half parameters, device to device,
+    // where a download of every parameter and a CPU decode held up a frame every second.
+    const void* half = s.trainer().device_half_params();
+    if (!half) {
+      s.trainer().download();
+      psnr = run.probe->psnr(*model->net, *volume);
+      return;
+    }
+    if (!run.probe_decoder || !run.probe_decoder->reload_device_params(half)) {
+      s.trainer().download();  // a new decoder copies the host's parameters: now the trainer's
+      run.probe_decoder = std::make_unique<Decoder>(*model->net, Device::Cuda);
+    }
+    psnr = run.probe->psnr(*run.probe_decoder, *volume);
   });
   run.probe_step = run.steps();
   run.probe_seconds = run.seconds();

@@ -9,6 +9,7 @@
 #include "vnr/error.h"
 #include "vnr/core/parallel.h"
 #include "vnr/progress.h"
+#include "vnr/train/decoder.h"
 #include "vnr/core/rng.h"
 #include "vnr/model_config.h"
 #include "vnr/train/make_trainer.h"
@@ -203,10 +204,19 @@ PsnrProbe::PsnrProbe(Int3 dims, int64_t n_voxels, uint64_t seed) : dims_(dims) {
 }
 
 double PsnrProbe::psnr(const Network& net, const Volume& vol) const {
+  decode_voxels(net, dims_, index_.data(), int64_t(index_.size()), out_.data());
+  return psnr_of_out(vol);
+}
+
+double PsnrProbe::psnr(Decoder& decoder, const Volume& vol) const {
+  decoder.voxels(dims_, index_.data(), int64_t(index_.size()), out_.data());
+  return psnr_of_out(vol);
+}
+
+double PsnrProbe::psnr_of_out(const Volume& vol) const {
   if (!(vol.dims == dims_))
     fail("PsnrProbe: volume dims {}x{}x{} differ from the probe's {}x{}x{}", vol.dims.x, vol.dims.y, vol.dims.z,
          dims_.x, dims_.y, dims_.z);
-  decode_voxels(net, dims_, index_.data(), int64_t(index_.size()), out_.data());
   double se = 0;
   for (size_t i = 0; i < index_.size(); ++i) {
     double d = double(out_[i]) - double(vol.data[size_t(index_[i])]);

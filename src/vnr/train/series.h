@@ -78,15 +78,21 @@ private:
   InCoreSampler inner_;
 };
 
+class Decoder;
+
 // The probe PSNR of the header comment: a fixed voxel subset of a grid of `dims`.
 class PsnrProbe {
 public:
   PsnrProbe(Int3 dims, int64_t n_voxels, uint64_t seed);
   double psnr(const Network& net, const Volume& vol) const;  // vol.dims must equal dims
+  // The same with the voxels decoded by `decoder` (a GPU decoder of a trainer's own parameters).
+  double psnr(Decoder& decoder, const Volume& vol) const;
   int64_t size() const { return int64_t(index_.size()); }
   const std::vector<int64_t>& voxels() const { return index_; }
 
 private:
+  double psnr_of_out(const Volume& vol) const;  // of out_, the decoded voxels, against vol
+
   Int3 dims_;
   std::vector<int64_t> index_;
   mutable std::vector<float> out_;
