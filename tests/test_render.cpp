@@ -238,6 +238,28 @@ TEST(Strategies, StreamingAndInShaderGiveTheSameImageOnTheGrid) {
   }
 }
 
+// What a viewer shows: render_mean_rgba8 over frames 0..f gives the bytes of render(f + 1), the mean of the
+// same frames; a first call at a later frame starts the mean with that frame alone.
+TEST(CpuRenderer, MeanOfFramesAsRgba8IsTheAccumulatedImage) {
+  const GridScene scene;
+  RenderOptions o;
+  o.mode = RenderMode::PathTrace;  // every frame differs
+  o.width = 37;
+  o.height = 29;
+  CpuRenderer r(scene.field, box_of(scene.vol), scene.mc, scene.tf, scene.cam, o);
+  std::vector<uint8_t> rgba;
+  for (uint32_t f = 0; f < 4; ++f) {
+    r.render_mean_rgba8(f, rgba);
+    CpuRenderer fresh(scene.field, box_of(scene.vol), scene.mc, scene.tf, scene.cam, o);
+    EXPECT_EQ(rgba, to_rgba8(fresh.render(int(f) + 1))) << "frame " << f;
+  }
+  CpuRenderer late(scene.field, box_of(scene.vol), scene.mc, scene.tf, scene.cam, o);
+  Image third;
+  r.render_frame(3, third);
+  late.render_mean_rgba8(3, rgba);
+  EXPECT_EQ(rgba, to_rgba8(third));
+}
+
 // Tiles claimed from a shared counter: two cursors (threads) interleaving their claims visit every pixel
 // of an image that is not a multiple of the tile size exactly once.
 TEST(Tiles, ClaimedTilesCoverEveryPixelOnce) {

@@ -26,7 +26,7 @@ void write_image(const std::string& path, const Image& img);
 std::vector<uint8_t> encode_png(const Image& img);
 // One colour channel in 8 bits as PNG output writes it: round(255 * clamp(c, 0, 1)), halves up; NaN gives
 // 0. The sum is at least 0.5, so truncation is the floor: one vector instruction, where std::floor is a
-// call per channel on x86-64's baseline (a 768x768 frame's conversion took 3.4 ms, docs/benchmarks.md).
+// call per channel on x86-64's baseline (docs/benchmarks.md, "The viewer's frame on the GPU").
 inline uint8_t channel_to_u8(float c) { return uint8_t(int(255.0f * (c > 0 ? (c < 1 ? c : 1.0f) : 0.0f) + 0.5f)); }
 // 8-bit RGBA, row 0 at the top: each colour channel exactly as PNG output writes it (round(255 *
 // clamp(c, 0, 1))), alpha 255 (the image is already composited over the background).

@@ -80,7 +80,7 @@ void FrameRenderer::render_frame_resident(uint32_t frame, RenderStats* stats) { 
 
 void FrameRenderer::render_mean_rgba8(uint32_t frame, std::vector<uint8_t>& rgba) {
   render_frame(frame, frame_);
-  if (frame == 0)
+  if (frame == 0 || mean_.pixels.size() != frame_.pixels.size())  // (a mean not started: this frame starts it)
     std::swap(mean_, frame_);  // a frame overwrites its image: no copy
   else
     accumulate_frame(mean_, frame_, int(frame));

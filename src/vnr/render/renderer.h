@@ -63,9 +63,9 @@ public:
   virtual Device device() const = 0;
   // Renders `frames` frames (0, 1, ...) and returns their average (progressive accumulation).
   Image render(int frames, RenderStats* stats = nullptr);
-  // Renders frame number `frame` and folds it into the mean of frames 0..frame (frame 0 starts it;
-  // accumulate_frame's arithmetic), then writes the mean as to_rgba8's bytes into rgba: what a viewer
-  // shows. The GPU keeps the mean in its memory and copies back only the 8-bit image.
+  // Renders frame number `frame` and folds it into the mean of frames 0..frame (frame 0, or the first
+  // call, starts it; accumulate_frame's arithmetic), then writes the mean as to_rgba8's bytes into rgba:
+  // what a viewer shows. The GPU keeps the mean in its memory and copies back only the 8-bit image.
   virtual void render_mean_rgba8(uint32_t frame, std::vector<uint8_t>& rgba);
 
 private:

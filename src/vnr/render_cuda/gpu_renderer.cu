@@ -101,6 +101,7 @@ struct GpuRenderer::Impl {
   // frame buffers; the mean of a viewer's frames and its 8-bit image (render_mean_rgba8)
   DeviceBuffer<Vec4f> image, mean;
   DeviceBuffer<uint32_t> mean_rgba8;
+  bool mean_started = false;
   DeviceBuffer<MarchState> march;
   DeviceBuffer<ShadowState> shadow;
   DeviceBuffer<PathState> path;
@@ -401,8 +402,9 @@ void GpuRenderer::render_mean_rgba8(uint32_t frame, std::vector<uint8_t>& rgba) 
   I.mean.resize(size_t(n));
   I.mean_rgba8.resize(size_t(n));
   auto& sb = I.sb;
-  VNR_LAUNCH(mean_rgba8_kernel, n, I.mean.data(), I.image.data(), n, frame == 0, 1.0f / float(frame + 1),
-             I.mean_rgba8.data());
+  VNR_LAUNCH(mean_rgba8_kernel, n, I.mean.data(), I.image.data(), n, frame == 0 || !I.mean_started,
+             1.0f / float(frame + 1), I.mean_rgba8.data());
+  I.mean_started = true;
   rgba.resize(size_t(n) * 4);
   VNR_CUDA_CHECK(cudaMemcpyAsync(rgba.data(), I.mean_rgba8.data(), size_t(n) * 4, cudaMemcpyDeviceToHost, sb.stream));
   VNR_CUDA_CHECK(cudaStreamSynchronize(sb.stream));
