@@ -253,6 +253,7 @@ TEST(GpuViewer, FramesWhileTrainingAt768) {
                 frames, s.input.c_str());
     EXPECT_GT(frames, 0);
     EXPECT_GT(samples, 0);
+    ASSERT_EQ(engine.state().training.state, TrainingState::Running) << engine.state().last_error;
     if (std::string(strategy) == "auto") EXPECT_EQ(cached, 0) << "auto draws the training network itself";
   }
   engine.stop();

@@ -96,7 +96,8 @@ inline RenderSettings viewer_render_defaults() {
 // How the viewer renders (the `render` message): the library's RenderSettings for what a rendering is,
 // with its names and checks -- mode, strategy (cache: a model draws from its brick cache, on the GPU from
 // a copy in GPU memory, full-resolution frames while the camera moves, docs/RENDERING.md; auto: the same
-// but on the GPU while training, where the network draws itself, each view by its fastest strategy;
+// but while the network trains on the GPU, where it is drawn itself; on the GPU each view by its fastest
+// strategy;
 // streaming or inshader: the field itself), step, shade, light, density, macrocells (online, grid, off)
 // -- while the view's size, camera and transfer function are the viewer's own state and RenderSettings'
 // other keys do not apply; then what only an interactive view has.

@@ -168,9 +168,12 @@ class Browser:
 
 
 def render_args_of(state):
-    """`vnr render` flags for a viewer state's render settings (camera and TF come from scene.json)."""
+    """`vnr render` flags for a viewer state's render settings (camera and TF come from scene.json).
+    The page's `auto` on the CPU is the brick cache whatever the frame count (`vnr render`'s takes it from 8
+    frames): `cache`."""
     r = state["render"]
-    args = ["--mode", r["mode"], "--strategy", r["strategy"], "--macrocells", r["macrocells"],
+    strategy = "cache" if r["strategy"] == "auto" else r["strategy"]
+    args = ["--mode", r["mode"], "--strategy", strategy, "--macrocells", r["macrocells"],
             "--step", repr(r["step"]), "--light", ",".join(repr(v) for v in r["light"]),
             "--density", repr(r["density"])]
     return args + (["--shade"] if r["shade"] else [])

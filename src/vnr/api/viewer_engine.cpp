@@ -450,7 +450,6 @@ Image ViewerEngine::screenshot(double timeout_seconds) {
   Impl& m = *impl_;
   const auto deadline = Clock::now() + std::chrono::duration_cast<Clock::duration>(
                                            std::chrono::duration<double>(std::max(0.0, timeout_seconds)));
-  std::unique_lock<std::mutex> lock(m.mu);
   // The main image of a refined frame of the settings as they are now: the network's, else the truth's.
   const auto main = [&]() -> const ViewerImage* {
     if (!m.latest || !m.latest->refined || m.latest_epoch != m.epoch) return nullptr;
@@ -461,9 +460,17 @@ Image ViewerEngine::screenshot(double timeout_seconds) {
     }
     return truth;
   };
-  m.frame_cv.wait_until(lock, deadline, [&] { return m.stopping || main(); });
-  const ViewerImage* shown = main();
-  if (!shown) fail("no refined frame within {} s{}", timeout_seconds, m.stopping ? " (the engine is stopped)" : "");
+  std::shared_ptr<const ViewerFrame> frame;  // kept: the conversion runs without the lock
+  const ViewerImage* shown = nullptr;
+  bool stopping = false;
+  {
+    std::unique_lock<std::mutex> lock(m.mu);
+    m.frame_cv.wait_until(lock, deadline, [&] { return m.stopping || main(); });
+    shown = main();
+    frame = m.latest;
+    stopping = m.stopping;
+  }
+  if (!shown) fail("no refined frame within {} s{}", timeout_seconds, stopping ? " (the engine is stopped)" : "");
   Image out(shown->width, shown->height);
   for (size_t i = 0; i < out.pixels.size(); ++i) {
     const uint8_t* p = &shown->rgba[4 * i];

@@ -181,10 +181,11 @@ void check_viewer_tf(const ViewerTf& tf);
 // viewer_views.cpp
 RenderOptions viewer_render_options(const ViewerRender& r, const Scene& scene, int width, int height);
 int viewer_max_frames(const ViewerRender& r);
-// The network view draws from its brick cache: strategy cache, or auto but on the GPU while training.
-// There each chunk turns every brick stale and the cache spends 10 ms a frame decoding them again, one
-// launch each, where the network draws a whole 768x768 frame in a few ms and shows the model of the moment.
-bool viewer_wants_cache(const ViewerRender& r, Device device, bool training);
+// The network view draws from its brick cache: strategy cache, or auto unless the network trains on the
+// GPU and is drawn there. Then each chunk turns every brick stale and the cache spends 10 ms a frame
+// decoding them again, one launch each, where the renderer takes the trainer's parameters device to device
+// and draws a whole 768x768 frame of the network in a few ms, the model of the moment.
+bool viewer_wants_cache(const ViewerRender& r, bool gpu_training);
 bool same_camera(const Camera& a, const Camera& b);
 
 }  // namespace vnr

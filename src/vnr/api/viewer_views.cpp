@@ -26,8 +26,8 @@ bool same_camera(const Camera& a, const Camera& b) {
   return same_vec(a.eye, b.eye) && same_vec(a.center, b.center) && same_vec(a.up, b.up) && a.fovy == b.fovy;
 }
 
-// The RenderOptions `vnr render` would use with these settings (the scene's background and light colour).
-// (A cache strategy draws what it cannot cache -- the truth, a model on the GPU -- by streaming.)
+// The RenderOptions `vnr render` would use with these settings (the scene's background and light colour);
+// for strategies cache and auto, render() sets each view's strategy.
 RenderOptions viewer_render_options(const ViewerRender& r, const Scene& scene, int width, int height) {
   const RenderSettings& s = r.settings;
   RenderOptions o;
@@ -44,8 +44,8 @@ RenderOptions viewer_render_options(const ViewerRender& r, const Scene& scene, i
   return o;
 }
 
-bool viewer_wants_cache(const ViewerRender& r, Device device, bool training) {
-  return r.settings.strategy == "cache" || (r.settings.strategy == "auto" && !(device == Device::Cuda && training));
+bool viewer_wants_cache(const ViewerRender& r, bool gpu_training) {
+  return r.settings.strategy == "cache" || (r.settings.strategy == "auto" && !gpu_training);
 }
 
 int viewer_max_frames(const ViewerRender& r) {
@@ -167,7 +167,7 @@ const ValueRangeGrid& ViewerEngine::Impl::volume_ranges() {
 }
 
 // The network's field (behind its brick cache when `cache`) and macro-cells for the current parameters
-// and macro-cell mode. Training keeps the cache: its bricks turn stale and are decoded again a few a frame.
+// and macro-cell mode. Training keeps a cache: its bricks turn stale and are decoded again a few a frame.
 void ViewerEngine::Impl::update_network_content(MacroCellMode mode, bool cache) {
   ViewContent& c = net_content;
   if (c.field && c.params_version == model_version && c.mode == mode && bool(c.cache) == cache) return;
@@ -267,9 +267,11 @@ bool ViewerEngine::Impl::render(const ViewerSnapshot& snap, bool* refined, int* 
     built_tf_epoch = snap.tf_epoch;
   }
   const bool gpu = render_device == Device::Cuda;
-  const bool want_cache = viewer_wants_cache(st.render, render_device, st.training.state == TrainingState::Running) &&
-                          st.view.layout != ViewLayout::Truth;
-  const bool coarse = snap.interacting && !want_cache;  // the cache renders full frames while moving
+  const bool gpu_training = gpu && train_device == Device::Cuda && st.training.state == TrainingState::Running;
+  const bool want_cache = viewer_wants_cache(st.render, gpu_training) && st.view.layout != ViewLayout::Truth;
+  // Coarse frames while the camera moves on the CPU alone: the cache renders full frames then, and on the
+  // GPU a full frame takes a few ms (a coarse one would rebuild the renderer at each drag's start and end).
+  const bool coarse = snap.interacting && !want_cache && !gpu;
   const int scale = coarse ? st.render.coarse_scale : 1;
   const RenderOptions opt =
       viewer_render_options(st.render, input.scene, std::max(1, st.width / scale), std::max(1, st.height / scale));
