@@ -1,5 +1,6 @@
 #include "vnr/render/macrocell.h"
 #include <algorithm>
+#include "vnr/core/parallel.h"
 #include "vnr/error.h"
 #include "vnr/json.h"
 
@@ -36,8 +37,11 @@ MacroCells MacroCells::single(Int3 dims, Vec3f box, float lo, float hi) {
 void MacroCells::update(const TransferFunction& tf) {
   const int n = int(tf.table.size());
   const float w = tf.hi - tf.lo;
-  for (int64_t c = 0; c < ranges_.count(); ++c)
-    max_opacity_[c] = macrocell_max_opacity(tf.table.data(), n, tf.lo, w, ranges_.lo[c], ranges_.hi[c]);
+  // Cells on every thread: a viewer recomputes them after every training chunk.
+  parallel_for_range(ranges_.count(), 1024, [&](int64_t begin, int64_t end) {
+    for (int64_t c = begin; c < end; ++c)
+      max_opacity_[c] = macrocell_max_opacity(tf.table.data(), n, tf.lo, w, ranges_.lo[c], ranges_.hi[c]);
+  });
 }
 
 MacroCellView MacroCells::view() const {
