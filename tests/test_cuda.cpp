@@ -45,11 +45,15 @@ TEST(CudaSampler, PerSampleCoordinatesEqualTheChunkSampler) {
 TEST(CudaDevice, AutoFallsBackToTheCpuAndCudaSaysWhyNot) {
   EXPECT_EQ(cuda::resolve_device("cpu"), Device::Cpu);
   test::expect_error([] { cuda::resolve_device("gpu"); }, {"unknown --device 'gpu'", "auto, cpu, cuda"});
-  if (!cuda::devices().empty()) {
+  const int n = int(cuda::devices().size());
+  if (n > 0) {
     EXPECT_EQ(cuda::resolve_device("auto"), Device::Cuda);
+    EXPECT_EQ(cuda::use_device_for(n + 1), 1 % n) << "slots wrap around the devices";
+    EXPECT_EQ(cuda::use_device_for(0), 0);
     return;
   }
   EXPECT_EQ(cuda::resolve_device("auto"), Device::Cpu);
+  EXPECT_EQ(cuda::use_device_for(3), -1) << "no device: nothing to choose";
   const std::string msg = test::one_line_error_of([] { cuda::resolve_device("cuda"); });
   EXPECT_TRUE(msg.find("no CUDA device") != std::string::npos || msg.find("built without") != std::string::npos)
       << msg;

@@ -35,6 +35,10 @@ std::vector<DeviceInfo> devices();
 std::string no_device_reason();
 // Fails with one line (the reason) when there is no device.
 void require_device();
+// Makes device `slot` modulo the visible devices' count the one this process's CUDA work runs on from now
+// on, and returns its index; -1 without a device (nothing changes). An MPI rank passes its rank on the
+// node, so that a node's ranks spread over its GPUs instead of all taking the first.
+int use_device_for(int slot);
 // Free memory of the current device in bytes (0 without one).
 uint64_t free_memory_bytes();
 // "cpu", "cuda" (fails without a device) or "auto" (cuda when a device is visible, else cpu).

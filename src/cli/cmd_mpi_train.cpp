@@ -83,6 +83,8 @@ void run_train_mpi(const TrainArgs& a) {
   DType dtype = DType::Float32;
   mpi::agree("to plan the bricks", [&] {
     setup = mpi_setup_of(a);
+    // A node's ranks spread over its GPUs (each rank's bricks train on its own).
+    if (cuda::resolve_device(setup.device) == Device::Cuda) cuda::use_device_for(mpi::local_rank());
     const VolumeDesc desc = describe_volume(a.s.volume, setup.raw);
     dtype = desc.dtype;
     plan = plan_bricks(desc.dims, parse_brick_grid(a.bricks), a.ghost, a.s.seed);

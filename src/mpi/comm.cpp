@@ -1,5 +1,6 @@
 #include "mpi/comm.h"
 #include <mpi.h>
+#include <algorithm>
 #include <cstdint>
 #include <cstdlib>
 #include <exception>
@@ -57,6 +58,12 @@ int local_size() {
   const char* v = std::getenv("OMPI_COMM_WORLD_LOCAL_SIZE");
   const int n = v ? std::atoi(v) : 1;
   return n > 0 ? n : 1;
+}
+
+int local_rank() {
+  for (const char* name : {"OMPI_COMM_WORLD_LOCAL_RANK", "MPI_LOCALRANKID", "SLURM_LOCALID"})
+    if (const char* v = std::getenv(name); v && *v) return std::max(0, std::atoi(v));
+  return 0;
 }
 
 void agree(const std::string& phase, const std::function<void()>& work) {

@@ -32,8 +32,11 @@ void check_mpi(int rc, const char* what);
 bool active();
 int rank();
 int size();
-// The processes of this rank's node (Open MPI's OMPI_COMM_WORLD_LOCAL_SIZE; 1 when unknown).
+// The processes of this rank's node (Open MPI's OMPI_COMM_WORLD_LOCAL_SIZE; 1 when unknown), and this
+// rank's index among them (OMPI_COMM_WORLD_LOCAL_RANK, MPICH's MPI_LOCALRANKID or Slurm's SLURM_LOCALID;
+// 0 when unknown).
 int local_size();
+int local_rank();
 
 // Every rank failed or saw another fail: the message names the first failing rank, its brick when
 // the work said which, and how many ranks failed. Every rank throws the same one.

@@ -2,6 +2,7 @@
 // each checked against a one-process reference. Argument: a scratch directory. Exit 0 when every check
 // passes on every rank; each failed check prints "rank R: FAIL ...".
 #include <sys/stat.h>
+#include <algorithm>
 #include <cstdio>
 #include <fstream>
 #include <random>
@@ -136,6 +137,14 @@ void check_direct_send() {
            got.pixels[i].z == want.pixels[i].z && got.pixels[i].w == want.pixels[i].w;
   expect(same, "direct send differs from compositing in one process");
 }
+// Every rank of the test runs on this one node: the ranks on the node are all of them, and their local
+// ranks (which spread a node's ranks over its GPUs) are 0..size-1, each once.
+void check_local_ranks() {
+  expect(local_size() == size(), "local_size() is the job's size on one node");
+  std::vector<int64_t> local = all_gather(int64_t(local_rank()));
+  std::sort(local.begin(), local.end());
+  for (int r = 0; r < size(); ++r) expect(local[size_t(r)] == r, "local ranks are 0..size-1, each once");
+}
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -148,6 +157,7 @@ int main(int argc, char** argv) {
   if (rank() == 0) ::mkdir(dir.c_str(), 0755);
   barrier();
   try {
+    check_local_ranks();
     check_error_agreement();
     check_parallel_file(dir);
     check_direct_send();

@@ -49,6 +49,17 @@ std::string no_device_reason() {
   return n == 0 ? "no CUDA device" : "";
 }
 
+int use_device_for(int slot) {
+  int n = 0;
+  if (cudaGetDeviceCount(&n) != cudaSuccess || n == 0) {
+    cudaGetLastError();
+    return -1;
+  }
+  const int d = (slot % n + n) % n;
+  VNR_CUDA_CHECK(cudaSetDevice(d));
+  return d;
+}
+
 uint64_t free_memory_bytes() {
   if (devices().empty()) return 0;
   size_t free_b = 0, total_b = 0;

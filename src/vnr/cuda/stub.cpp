@@ -16,6 +16,7 @@ std::vector<DeviceInfo> devices() { return {}; }
 std::string no_device_reason() { return "built without the CUDA backend"; }
 void require_device() { not_built(); }
 uint64_t free_memory_bytes() { return 0; }
+int use_device_for(int) { return -1; }
 
 struct GpuTrainer::Impl {};
 GpuTrainer::GpuTrainer(Network&, GridView, GpuTrainOptions) { not_built(); }
