@@ -137,6 +137,7 @@ void check_direct_send() {
            got.pixels[i].z == want.pixels[i].z && got.pixels[i].w == want.pixels[i].w;
   expect(same, "direct send differs from compositing in one process");
 }
+
 // Every rank of the test runs on this one node: the ranks on the node are all of them, and their local
 // ranks (which spread a node's ranks over its GPUs) are 0..size-1, each once.
 void check_local_ranks() {
