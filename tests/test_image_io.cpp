@@ -66,7 +66,7 @@ TEST(Image, PngRoundTripWithin8Bits) {
 
 // channel_to_u8 against round-half-up of float(255 c) written with std::floor in double precision (exact),
 // over every 4096th float bit pattern of both signs, the specials, each 8-bit level and the ties between
-// levels; to_rgba8 packs the same bytes in RGBA order.
+// levels; to_rgba8 packs the same bytes in RGBA order, and image_of_rgba8 reads them back.
 TEST(Image, ChannelTo8BitsRoundsHalvesUpAndClamps) {
   auto reference = [](float c) -> int {
     if (!(c > 0)) return 0;
@@ -90,6 +90,14 @@ TEST(Image, ChannelTo8BitsRoundsHalvesUpAndClamps) {
   img.at(0, 0) = Vec4f{1.0f, 0.5f, 0.0f, 0.25f};
   img.at(1, 0) = Vec4f{NAN, 2.0f, 1.0f / 255, 0.0f};
   EXPECT_EQ(to_rgba8(img), (std::vector<uint8_t>{255, 128, 0, 255, 0, 255, 1, 255}));
+  std::vector<uint8_t> every(4 * 256);  // the way back: each level k as k / 255, which gives k again
+  for (int k = 0; k < 256; ++k) {
+    for (int c = 0; c < 3; ++c) every[size_t(4 * k + c)] = uint8_t(k);
+    every[size_t(4 * k + 3)] = 255;
+  }
+  const Image back = image_of_rgba8(every.data(), 16, 16);
+  EXPECT_EQ(back.at(3, 2).x, 35.0f / 255.0f);
+  EXPECT_EQ(to_rgba8(back), every);
 }
 
 TEST(Image, PngReadsOtherPixelFormats) {

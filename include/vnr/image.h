@@ -31,6 +31,8 @@ inline uint8_t channel_to_u8(float c) { return uint8_t(int(255.0f * (c > 0 ? (c 
 // 8-bit RGBA, row 0 at the top: each colour channel exactly as PNG output writes it (round(255 *
 // clamp(c, 0, 1))), alpha 255 (the image is already composited over the background).
 std::vector<uint8_t> to_rgba8(const Image& img);
+// The image of w x h RGBA8 bytes: channels k / 255 (to_rgba8 gives back the bytes), alpha 1.
+Image image_of_rgba8(const uint8_t* rgba, int w, int h);
 // Reads .png (8-bit or 16-bit, gray/RGB/RGBA, palette) or .pfm; alpha = 1.
 Image read_image(const std::string& path);
 

@@ -8,6 +8,7 @@
 #include "vnr/error.h"
 #include "vnr/units.h"
 #include "vnr/nn/mlp_layout.h"
+#include "vnr/render_options.h"
 #include "vnr/train/bricks.h"
 #include "vnr/train/decoder.h"
 #include "vnr/train/model_form.h"
@@ -22,6 +23,14 @@ inline std::string gpu_render_reason(const Model& model) { return form_of(model)
 // 16-wide tiles only (a CutlassMLP's may not be); a multi-brick model is drawn from its decode there, a grid.
 inline bool inshader_can_draw(const Model& model, Device device) {
   return device != Device::Cuda || model.bricks || mlp_in_16_wide_tiles(model.net->mlp());
+}
+
+// The faster strategy for a field of `kind` on `device` (fastest_render_strategy), streaming where the
+// field is a model's network in-shader cannot draw (model: null for a volume).
+inline RenderStrategy automatic_strategy_for(const Model* model, const std::string& kind, Device device,
+                                             RenderMode mode) {
+  if (model && kind == "network" && !inshader_can_draw(*model, device)) return RenderStrategy::Streaming;
+  return fastest_render_strategy(kind, device == Device::Cuda, mode);
 }
 
 // A multi-brick model drawn on the GPU from its decode: decoded once at dims on the GPU (the bricks

@@ -115,8 +115,7 @@ Renderer::~Renderer() = default;
 const char* Renderer::field_kind() const { return field().kind(); }
 
 RenderStrategy Renderer::automatic_strategy() const {
-  if (!can_render_inshader()) return RenderStrategy::Streaming;
-  return fastest_render_strategy(field_kind(), device_ == Device::Cuda, options_.mode);
+  return automatic_strategy_for(model_, field_kind(), device_, options_.mode);
 }
 
 bool Renderer::can_render_inshader() const {

@@ -471,12 +471,7 @@ Image ViewerEngine::screenshot(double timeout_seconds) {
     stopping = m.stopping;
   }
   if (!shown) fail("no refined frame within {} s{}", timeout_seconds, stopping ? " (the engine is stopped)" : "");
-  Image out(shown->width, shown->height);
-  for (size_t i = 0; i < out.pixels.size(); ++i) {
-    const uint8_t* p = &shown->rgba[4 * i];
-    out.pixels[i] = Vec4f{float(p[0]) / 255.0f, float(p[1]) / 255.0f, float(p[2]) / 255.0f, 1.0f};
-  }
-  return out;
+  return image_of_rgba8(shown->rgba.data(), shown->width, shown->height);
 }
 
 }  // namespace vnr

@@ -160,6 +160,7 @@ struct ViewerEngine::Impl {
   double train_chunk(const ViewerSnapshot& snap);  // returns the training seconds it took
   bool keep_training();  // still running, nothing pending (a chunk ends early otherwise)
   void take_probe();
+  Decoder& current_decoder(std::unique_ptr<Decoder>& slot, Device device);
   void publish_training();
   std::string save(const std::string& name);
 

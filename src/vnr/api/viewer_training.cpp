@@ -129,21 +129,27 @@ void ViewerEngine::Impl::take_probe() {
   s.run_side_work([&] {
     // On the GPU the probe's voxels are decoded there from the trainer's half parameters, device to device,
     // where a download of every parameter and a CPU decode held up a frame every second.
-    const void* half = s.trainer().device_half_params();
-    if (!half) {
+    if (s.trainer().device_half_params()) {
+      psnr = run.probe->psnr(current_decoder(run.probe_decoder, Device::Cuda), *volume);
+    } else {
       s.trainer().download();
       psnr = run.probe->psnr(*model->net, *volume);
-      return;
     }
-    if (!run.probe_decoder || !run.probe_decoder->reload_device_params(half)) {
-      s.trainer().download();  // a new decoder copies the host's parameters: now the trainer's
-      run.probe_decoder = std::make_unique<Decoder>(*model->net, Device::Cuda);
-    }
-    psnr = run.probe->psnr(*run.probe_decoder, *volume);
   });
   run.probe_step = run.steps();
   run.probe_seconds = run.seconds();
   run.new_psnr.push_back({double(run.probe_step), psnr});
+}
+
+// slot's decoder on `device` of the network with the trainer's current parameters: a GPU decoder takes a
+// GPU trainer's device to device; otherwise they come to the host and the decoder is made anew.
+Decoder& ViewerEngine::Impl::current_decoder(std::unique_ptr<Decoder>& slot, Device device) {
+  const void* half = run.session ? run.session->trainer().device_half_params() : nullptr;
+  if (!slot || !slot->reload_device_params(half)) {
+    if (run.session) run.session->trainer().download();  // a new decoder copies the host's parameters
+    slot = std::make_unique<Decoder>(*model->net, device);
+  }
+  return *slot;
 }
 
 // Trains for the snapshot's budget (at least one step), switching timesteps in continuous mode; an

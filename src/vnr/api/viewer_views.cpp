@@ -279,8 +279,7 @@ bool ViewerEngine::Impl::render(const ViewerSnapshot& snap, bool* refined, int* 
   if (want_cache) {
     net_opt.strategy = fastest_render_strategy("cache", gpu, opt.mode);
   } else if (st.render.settings.strategy == "auto") {
-    net_opt.strategy = inshader_can_draw(*model, render_device) ? fastest_render_strategy("network", gpu, opt.mode)
-                                                                 : RenderStrategy::Streaming;
+    net_opt.strategy = automatic_strategy_for(model, "network", render_device, opt.mode);
   }
   // What the cache does not draw: on the GPU the grid in-shader (16x streaming's frames/s, docs/benchmarks.md
   // "CUDA backend"); on the CPU streaming, as vnr::Renderer's default.
@@ -325,13 +324,7 @@ bool ViewerEngine::Impl::render_slices(const ViewSettings& view) {
   int w = 0, h = 0;
   const std::vector<int64_t> voxels = slice_voxels(d, view.slice_axis, index, &w, &h);
   std::vector<float> net(voxels.size()), truth;
-  // A GPU trainer's parameters go to a GPU decoder device to device; otherwise a decoder of the host's.
-  const void* half = run.session ? run.session->trainer().device_half_params() : nullptr;
-  if (!sc.decoder || !sc.decoder->reload_device_params(half)) {
-    if (run.session) run.session->trainer().download();
-    sc.decoder = std::make_unique<Decoder>(*model->net, render_device);
-  }
-  sc.decoder->voxels(d, voxels.data(), int64_t(voxels.size()), net.data());
+  current_decoder(sc.decoder, render_device).voxels(d, voxels.data(), int64_t(voxels.size()), net.data());
   sc.images.clear();
   if (volume) {
     truth.resize(voxels.size());

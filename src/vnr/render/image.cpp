@@ -305,6 +305,15 @@ ImageMetrics compare_images(const Image& img, const Image& reference) {
   return m;
 }
 
+Image image_of_rgba8(const uint8_t* rgba, int w, int h) {
+  Image img(w, h);
+  for (size_t i = 0; i < img.pixels.size(); ++i) {
+    const uint8_t* p = rgba + 4 * i;
+    img.pixels[i] = Vec4f{float(p[0]) / 255.0f, float(p[1]) / 255.0f, float(p[2]) / 255.0f, 1.0f};
+  }
+  return img;
+}
+
 std::vector<uint8_t> to_rgba8(const Image& img) {
   std::vector<uint8_t> out(img.pixels.size() * 4);
   // A pixel's four bytes as one little-endian word, stored at once; runs of pixels on every thread (a
