@@ -155,6 +155,7 @@ def training(b, vnr, volume, config, seconds, work):
     trace = take_trace(b)
     frames = frames_of(trace)
     fps = len(frames) / seconds
+    split = {k: statistics.median(f["header"][k] for f in frames) if frames else 0 for k in ("render_ms", "train_ms")}
     b.js("vnrViewer.send({type: 'train', action: 'pause'});")
     report = os.path.join(work, "train.json")
     steps = b.js("return vnrViewer.state.training.step;") or 100
@@ -163,7 +164,7 @@ def training(b, vnr, volume, config, seconds, work):
     with open(report) as f:
         cli = json.load(f)["samples_per_second"]
     page = statistics.median(reported[len(reported) // 2:]) if reported else 0
-    return page, wall, fps, cli
+    return page, wall, fps, cli, split
 
 
 def main():
@@ -207,9 +208,10 @@ def main():
         still = still_latencies(b, args.repeats)
         results["still_latency_ms"] = statistics.median(still) if still else None
         if args.train:
-            page, wall, fps, cli = training(b, vnr, args.volume, args.config, args.seconds, work)
+            page, wall, fps, cli, split = training(b, vnr, args.volume, args.config, args.seconds, work)
             results.update(train_page_samples_per_s=page, train_wall_samples_per_s=wall, train_fps=fps,
-                           train_cli_samples_per_s=cli)
+                           train_cli_samples_per_s=cli, train_frame_render_ms=split["render_ms"],
+                           train_frame_train_ms=split["train_ms"])
     finally:
         b.quit()
         server.terminate()
@@ -226,6 +228,8 @@ def main():
                  ("training samples/s in the viewer over wall time", f"{results['train_wall_samples_per_s'] / 1e6:.2f} M"
                   f" ({100 * results['train_wall_samples_per_s'] / results['train_cli_samples_per_s']:.0f}% of `vnr train`)"
                   f" at {results['train_fps']:.1f} frames/s"),
+                 ("a frame while training (median): rendering, training", f"{results['train_frame_render_ms']:.0f} ms,"
+                  f" {results['train_frame_train_ms']:.0f} ms (the rest: {1000 / max(results['train_fps'], 1e-9) - results['train_frame_render_ms'] - results['train_frame_train_ms']:.0f} ms)"),
                  ("training samples/s of `vnr train`", f"{results['train_cli_samples_per_s'] / 1e6:.2f} M")]
     print(f"| viewer, {args.size}x{args.size}, {os.path.basename(args.model)} | |\n|---|---|")
     for name, value in rows:
