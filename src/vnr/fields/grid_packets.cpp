@@ -27,6 +27,30 @@ HWY_INLINE uint64_t lane_bits(D d, M m) {
   std::memcpy(&b, bytes, 8);
   return b;
 }
+
+// unit_pow (render/integrators.h) on vectors: the same operations in the same order, bit for bit.
+template <class DF, class VF = hn::Vec<DF>>
+HWY_INLINE VF UnitPowVec(DF df, VF b, VF e) {
+  const hn::RebindToSigned<DF> di;
+  const auto c = [&](float v) { return hn::Set(df, v); };
+  const auto bits = hn::BitCast(di, b);
+  auto k = hn::Sub(hn::ShiftRight<23>(bits), hn::Set(di, 127));
+  VF m = hn::BitCast(df, hn::Or(hn::And(bits, hn::Set(di, 0x7fffff)), hn::Set(di, 0x3f800000)));
+  const auto big = hn::Gt(m, c(kUnitPowSqrt2));
+  m = hn::IfThenElse(big, hn::Mul(m, c(0.5f)), m);
+  k = hn::IfThenElse(hn::RebindMask(di, big), hn::Add(k, hn::Set(di, 1)), k);
+  const VF t = hn::Div(hn::Sub(m, c(1.0f)), hn::Add(m, c(1.0f))), t2 = hn::Mul(t, t);
+  const auto mul_add = [&](VF x, float a, float b0) { return hn::Add(hn::Mul(c(a), x), c(b0)); };  // a x + b0
+  const VF series = hn::Add(mul_add(t2, kAtanh3, 1.0f),
+                            hn::Mul(hn::Mul(t2, t2), hn::Add(hn::Mul(mul_add(t2, kAtanh9, kAtanh7), t2), c(kAtanh5))));
+  const VF y = hn::Mul(e, hn::Add(hn::ConvertTo(df, k), hn::Mul(hn::Mul(t, series), c(kLog2Atanh))));
+  const VF n = hn::Round(y), f = hn::Sub(y, n), f2 = hn::Mul(f, f);
+  const VF low = hn::Add(mul_add(f, kExp2C2, kExp2C1), hn::Mul(f2, mul_add(f, kExp2C4, kExp2C3)));
+  const VF q = hn::Add(c(1.0f), hn::Mul(f, hn::Add(low, hn::Mul(hn::Mul(f2, f2), mul_add(f, kExp2C6, kExp2C5)))));
+  const VF scale = hn::BitCast(df, hn::ShiftLeft<23>(hn::Add(hn::ConvertTo(di, n), hn::Set(di, 127))));
+  const VF general = hn::IfThenElseZero(hn::Ge(y, c(-126.0f)), hn::Mul(q, scale));
+  return hn::IfThenElseZero(hn::Gt(b, hn::Zero(df)), hn::IfThenElse(hn::Eq(e, c(2.0f)), hn::Mul(b, b), general));
+}
 }  // namespace
 
 // One packet of rays: the vector part of the lane state in structure-of-arrays form, the scalar DDA
@@ -36,8 +60,7 @@ struct RayPacket {
   alignas(HWY_MAX_BYTES) float t[kMaxLanes] = {}, seg_end[kMaxLanes] = {}, seg_len[kMaxLanes] = {},
                                jit[kMaxLanes] = {}, ox[kMaxLanes] = {}, oy[kMaxLanes] = {}, oz[kMaxLanes] = {},
                                dx[kMaxLanes] = {}, dy[kMaxLanes] = {}, dz[kMaxLanes] = {}, ar[kMaxLanes] = {},
-                               ag[kMaxLanes] = {}, ab[kMaxLanes] = {}, aw[kMaxLanes] = {}, alpha[kMaxLanes] = {},
-                               dts[kMaxLanes] = {};
+                               ag[kMaxLanes] = {}, ab[kMaxLanes] = {}, aw[kMaxLanes] = {};
   StepState st[kMaxLanes];
   int64_t pix[kMaxLanes] = {};
   uint64_t active = 0;
@@ -307,15 +330,8 @@ int64_t MarchPackets(const RenderParams& p, Lanes& lanes, TileCursor cursor, Vec
     VF a = hn::IfThenElse(hn::Lt(ca, zero), zero, hn::IfThenElse(hn::Gt(ca, one), one, ca));
     // Where no lane is visible the compositing adds exact zeros: skip it and the colour lookups.
     if (!(lane_bits(df, hn::Ne(a, zero)) & r.active)) return;
-    if (uint64_t partial = lane_bits(df, hn::Ne(dt, one)) & r.active) {
-      hn::Store(a, df, r.alpha);
-      hn::Store(dt, df, r.dts);
-      for (; partial; partial &= partial - 1) {
-        const size_t l = size_t(__builtin_ctzll(partial));
-        r.alpha[l] = corrected_alpha(r.alpha[l], r.dts[l]);
-      }
-      a = hn::Load(df, r.alpha);
-    }
+    const auto partial = hn::Ne(dt, one);
+    if (lane_bits(df, partial) & r.active) a = hn::IfThenElse(partial, hn::Sub(one, UnitPowVec(df, hn::Sub(one, a), dt)), a);
     const VF cr = channel(0), cg = channel(1), cb = channel(2);
 
     // march_shade's compositing
@@ -341,6 +357,19 @@ int64_t MarchPackets(const RenderParams& p, Lanes& lanes, TileCursor cursor, Vec
   return samples;
 }
 
+void UnitPowPackets(const float* b, const float* e, float* out, size_t n) {
+  const hn::ScalableTag<float> df;
+  const size_t L = hn::Lanes(df);
+  for (size_t i = 0; i < n; i += L) {
+    alignas(HWY_MAX_BYTES) float bl[RayPacket::kMaxLanes] = {}, el[RayPacket::kMaxLanes] = {}, ol[RayPacket::kMaxLanes];
+    const size_t m = n - i < L ? n - i : L;
+    std::memcpy(bl, b + i, m * sizeof(float));
+    std::memcpy(el, e + i, m * sizeof(float));
+    hn::Store(UnitPowVec(df, hn::Load(df, bl), hn::Load(df, el)), df, ol);
+    std::memcpy(out + i, ol, m * sizeof(float));
+  }
+}
+
 int64_t MarchGridPackets(const RenderParams& p, const GridView& g, TileCursor cursor, Vec4f* pixels) {
   GridLanes lanes{g};
   return MarchPackets(p, lanes, cursor, pixels);
@@ -359,6 +388,10 @@ HWY_AFTER_NAMESPACE();
 namespace vnr {
 HWY_EXPORT(MarchGridPackets);
 HWY_EXPORT(MarchCachePackets);
+HWY_EXPORT(UnitPowPackets);
+void unit_pow_packets(const float* b, const float* e, float* out, size_t n) {
+  HWY_DYNAMIC_DISPATCH(UnitPowPackets)(b, e, out, n);
+}
 int64_t march_grid_packets(const RenderParams& p, const GridView& g, TileCursor cursor, Vec4f* pixels) {
   return HWY_DYNAMIC_DISPATCH(MarchGridPackets)(p, g, cursor, pixels);
 }

@@ -4,6 +4,7 @@
 // operations of integrators.h (step_segment / step_take, grid_lookup, tf_lookup, corrected_alpha,
 // the compositing of march_shade), so the image equals the per-ray loop's bit for bit. A lane whose
 // ray ends takes the next pixel at once, so lanes stay busy. Macro-cell traversal stays scalar per lane.
+#include <cstddef>
 #include <cstdint>
 #include "vnr/grid_view.h"
 #include "vnr/hd.h"
@@ -32,6 +33,9 @@ bool cache_packets_apply(const RenderParams& p, const BrickCacheView& c);
 // `source`, the model's field, one point at a time).
 int64_t march_cache_packets(const RenderParams& p, const BrickCacheView& c, const RenderableField& source,
                             TileCursor cursor, Vec4f* pixels);
+
+// out[i] = unit_pow(b[i], e[i]) as the packets compute it (UnitPowVec; for tests).
+void unit_pow_packets(const float* b, const float* e, float* out, size_t n);
 
 // The ground-truth grid's point function.
 struct GridPointFn {
