@@ -178,10 +178,7 @@ def main():
     p.add_argument("--cache-dims", help="X,Y,Z: `vnr view --cache-dims` (the model seen at another resolution)")
     p.add_argument("--config", default="paper", help="config of the `vnr train` comparison")
     args = p.parse_args()
-    why = harness.missing_tools()
-    vnr = harness.find_vnr()
-    if why or not vnr:
-        sys.exit(f"viewer_bench: {why or 'no vnr binary (set VNR_CLI)'}")
+    vnr = harness.vnr_or_exit("viewer_bench")
     if args.train and not args.volume:
         sys.exit("viewer_bench: --train needs --volume")
     work = tempfile.mkdtemp(prefix="vnr-viewer-bench-")

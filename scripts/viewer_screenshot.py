@@ -22,10 +22,7 @@ def main():
     parser.add_argument("--seconds", type=float, default=60.0, help="training time before the capture")
     parser.add_argument("--size", default="1400x1160", help="browser window WxH")
     args = parser.parse_args()
-    why = harness.missing_tools()
-    vnr = harness.find_vnr()
-    if why or not vnr:
-        sys.exit(f"viewer_screenshot: {why or 'no vnr binary (build first or set VNR_CLI)'}")
+    vnr = harness.vnr_or_exit("viewer_screenshot")
     width, height = (int(v) for v in args.size.split("x"))
     with tempfile.TemporaryDirectory() as work:
         server = harness.ViewServer(vnr, args.volume, "--save-dir", work)

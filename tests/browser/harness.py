@@ -36,6 +36,14 @@ def find_vnr():
     return os.path.abspath(path) if os.access(path, os.X_OK) else ""
 
 
+def vnr_or_exit(program):
+    """For scripts: the vnr binary, else exits with why the harness cannot run here."""
+    why, vnr = missing_tools(), find_vnr()
+    if why or not vnr:
+        sys.exit(f"{program}: {why or 'no vnr binary (build first or set VNR_CLI)'}")
+    return vnr
+
+
 def run_vnr(vnr, *args, timeout=300):
     """Runs vnr and returns its CompletedProcess; raises with its stderr when it fails."""
     proc = subprocess.run([vnr, *map(str, args)], capture_output=True, text=True, timeout=timeout)
