@@ -26,18 +26,20 @@ def main():
     width, height = (int(v) for v in args.size.split("x"))
     with tempfile.TemporaryDirectory() as work:
         server = harness.ViewServer(vnr, args.volume, "--save-dir", work)
-        browser = harness.Browser()
         try:
-            browser.driver.set_window_size(width, height)
-            browser.open_viewer(server.url)
-            browser.driver.find_element("id", "train-start").click()
-            browser.wait("vnrViewer.state.training.state === 'running'", 30, "training to run")
-            time.sleep(args.seconds)
-            tmp = os.path.join(os.path.dirname(os.path.abspath(args.out)), ".tmp-" + os.path.basename(args.out))
-            browser.driver.save_screenshot(tmp)
-            os.replace(tmp, args.out)  # atomic: a reader never sees half a PNG
+            browser = harness.Browser()
+            try:
+                browser.driver.set_window_size(width, height)
+                browser.open_viewer(server.url)
+                browser.driver.find_element("id", "train-start").click()
+                browser.wait("vnrViewer.state.training.state === 'running'", 30, "training to run")
+                time.sleep(args.seconds)
+                tmp = os.path.join(os.path.dirname(os.path.abspath(args.out)), ".tmp-" + os.path.basename(args.out))
+                browser.driver.save_screenshot(tmp)
+                os.replace(tmp, args.out)  # atomic: a reader never sees half a PNG
+            finally:
+                browser.quit()
         finally:
-            browser.quit()
             server.terminate()
     print(f"viewer_screenshot: wrote {args.out}")
 

@@ -141,8 +141,9 @@ constexpr float kExp2C1 = 0.693147182f, kExp2C2 = 0.240226507f, kExp2C3 = 0.0555
                 kExp2C5 = 0.00134004280f, kExp2C6 = 0.000154614449f;
 
 // b^e for b in [0, 1] and e > 0 (a step's transmittance), as 2^(e log2 b) with fixed polynomials in
-// plain arithmetic: no libm call (powf per lane took a fifth of a frame of SIMD ray packets) and the
-// same operations as the packets' UnitPowVec (fields/grid_packets.cpp), which equals it bit for bit.
+// plain arithmetic: no libm call (the SIMD ray packets called powf lane by lane, through memory, on most
+// of their steps: docs/benchmarks.md) and the same operations as the packets' UnitPowVec
+// (fields/grid_packets.cpp), which equals it bit for bit.
 // The polynomials are split in halves (Estrin's scheme) for a shorter chain of dependent operations.
 // Within 1.5e-7 of pow, 3e-7 relative where b^e >= 1/2 (tests/test_render.cpp); 0 for b <= 0 or NaN
 // and below 2^-126.
