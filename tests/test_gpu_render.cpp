@@ -117,9 +117,9 @@ TEST(GpuMacroCells, OnlineRangesOfTheGpuTrainerEqualTheCpuTrainers) {
 }
 
 // Grid images: the GPU runs the CPU's per-ray functions on the same values (grid_lookup, built without
-// FMA contraction on both), so ray marching and shadows agree to float noise (transcendentals such as
-// powf differ by an ulp between libm and CUDA); path tracing takes the same random decisions almost
-// everywhere, so its mean is tested.
+// FMA contraction on both; a step's opacity is unit_pow's plain arithmetic, no libm), so ray marching and
+// shadows agree to float noise (the shading's sqrtf and powf may differ by an ulp between libm and CUDA);
+// path tracing takes the same random decisions almost everywhere, so its mean is tested.
 TEST(GpuRender, GridImagesMatchTheCpu) {
   REQUIRE_GPU();
   const GridScene scene;

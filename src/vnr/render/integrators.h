@@ -140,16 +140,16 @@ constexpr float kAtanh9 = 1.0f / 9, kAtanh7 = 1.0f / 7, kAtanh5 = 1.0f / 5, kAta
 constexpr float kExp2C1 = 0.693147182f, kExp2C2 = 0.240226507f, kExp2C3 = 0.0555032715f, kExp2C4 = 0.00961805694f,
                 kExp2C5 = 0.00134004280f, kExp2C6 = 0.000154614449f;
 
-// b^e for b in [0, 1] and e > 0 (a step's transmittance), as 2^(e log2 b) with fixed polynomials in
-// plain arithmetic: no libm call (the SIMD ray packets called powf lane by lane, through memory, on most
-// of their steps: docs/benchmarks.md) and the same operations as the packets' UnitPowVec
-// (fields/grid_packets.cpp), which equals it bit for bit.
-// The polynomials are split in halves (Estrin's scheme) for a shorter chain of dependent operations.
+// b^e for b in [0, 1] (0 or a normal float, as 1 - alpha is) and e > 0: a step's transmittance, as
+// 2^(e log2 b) with fixed polynomials in plain arithmetic. No libm call (the SIMD ray packets called powf
+// lane by lane, through memory, on most of their steps: docs/benchmarks.md), and the same operations as
+// the packets' UnitPowVec (fields/grid_packets.cpp), which equals it bit for bit. The polynomials are
+// split in halves (Estrin's scheme) for a shorter chain of dependent operations.
 // Within 1.5e-7 of pow, 3e-7 relative where b^e >= 1/2 (tests/test_render.cpp); 0 for b <= 0 or NaN
 // and below 2^-126.
 VNR_HD VNR_INLINE float unit_pow(float b, float e) {
   if (!(b > 0.0f)) return 0.0f;
-  if (e == 2.0f) return b * b;  // a shadow ray's fixed step (2 s1): exact
+  if (e == 2.0f) return b * b;  // a shadow ray's fixed step (2 s1 at s1 = 1), correctly rounded
   const uint32_t bits = __builtin_bit_cast(uint32_t, b);
   int k = int(bits >> 23) - 127;  // b = m 2^k
   float m = __builtin_bit_cast(float, (bits & 0x7fffffu) | 0x3f800000u);
