@@ -98,16 +98,19 @@ struct CacheLanes {
     const hn::RebindToSigned<DF> di;
     const CacheLevelView& L = c.level[last_level];
     const int s = c.shift;
-    alignas(HWY_MAX_BYTES) int32_t x[kMaxLanes], y[kMaxLanes], z[kMaxLanes];
-    hn::Store(hn::ConvertTo(di, CellAxisPos(df, ux, L.nx)), di, x);
-    hn::Store(hn::ConvertTo(di, CellAxisPos(df, uy, L.ny)), di, y);
-    hn::Store(hn::ConvertTo(di, CellAxisPos(df, uz, L.nz)), di, z);
-    for (size_t l = 0; l < hn::Lanes(df); ++l) {
-      const int32_t bx = x[l] >> s, by = y[l] >> s, bz = z[l] >> s;
-      const int32_t slot = L.slot[bx + L.bx * (by + int64_t(L.by) * bz)];
-      if (slot < 0) continue;
-      const float* p0 = c.pool + int64_t(slot) * c.brick_floats + (x[l] - (bx << s)) +
-                        int64_t(y[l] - (by << s)) * c.sy + int64_t(z[l] - (bz << s)) * c.sz;
+    const auto x = hn::ConvertTo(di, CellAxisPos(df, ux, L.nx)), y = hn::ConvertTo(di, CellAxisPos(df, uy, L.ny)),
+               z = hn::ConvertTo(di, CellAxisPos(df, uz, L.nz));
+    const auto bx = hn::ShiftRightSame(x, s), by = hn::ShiftRightSame(y, s), bz = hn::ShiftRightSame(z, s);
+    const auto slot = hn::GatherIndex(di, L.slot, hn::Add(bx, hn::Mul(hn::Set(di, L.bx), hn::Add(by, hn::Mul(hn::Set(di, L.by), bz)))));
+    // at_level's offsets in the pool (32-bit, as there)
+    const auto off = hn::Add(hn::Mul(slot, hn::Set(di, int32_t(c.brick_floats))),
+                             hn::Add(hn::Sub(x, hn::ShiftLeftSame(bx, s)),
+                                     hn::Add(hn::Mul(hn::Sub(y, hn::ShiftLeftSame(by, s)), hn::Set(di, c.sy)),
+                                             hn::Mul(hn::Sub(z, hn::ShiftLeftSame(bz, s)), hn::Set(di, c.sz)))));
+    alignas(HWY_MAX_BYTES) int32_t offs[kMaxLanes];
+    hn::Store(off, di, offs);
+    for (uint64_t in = lane_bits(df, hn::RebindMask(df, hn::Gt(slot, hn::Set(di, -1)))); in; in &= in - 1) {
+      const float* p0 = c.pool + offs[__builtin_ctzll(in)];  // bricks not in are skipped
       __builtin_prefetch(p0, 0, 2);
       __builtin_prefetch(p0 + c.sy, 0, 2);
       __builtin_prefetch(p0 + c.sz, 0, 2);
