@@ -27,7 +27,14 @@ std::vector<uint8_t> encode_png(const Image& img);
 // One colour channel in 8 bits as PNG output writes it: round(255 * clamp(c, 0, 1)), halves up; NaN gives
 // 0. The sum is at least 0.5, so truncation is the floor: one vector instruction, where std::floor is a
 // call per channel on x86-64's baseline (docs/benchmarks.md, "The viewer's frame on the GPU").
-inline uint8_t channel_to_u8(float c) { return uint8_t(int(255.0f * (c > 0 ? (c < 1 ? c : 1.0f) : 0.0f) + 0.5f)); }
+VNR_HD inline uint8_t channel_to_u8(float c) {
+  return uint8_t(int(255.0f * (c > 0 ? (c < 1 ? c : 1.0f) : 0.0f) + 0.5f));
+}
+// A pixel as to_rgba8 stores it: one little-endian word, R in the low byte, alpha 255 (also on the GPU).
+VNR_HD inline uint32_t rgba8_word(Vec4f p) {
+  return uint32_t(channel_to_u8(p.x)) | uint32_t(channel_to_u8(p.y)) << 8 | uint32_t(channel_to_u8(p.z)) << 16 |
+         0xff000000u;
+}
 // 8-bit RGBA, row 0 at the top: each colour channel exactly as PNG output writes it (round(255 *
 // clamp(c, 0, 1))), alpha 255 (the image is already composited over the background).
 std::vector<uint8_t> to_rgba8(const Image& img);

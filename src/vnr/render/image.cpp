@@ -321,9 +321,7 @@ std::vector<uint8_t> to_rgba8(const Image& img) {
   static_assert(std::endian::native == std::endian::little);
   parallel_for_range(int64_t(img.pixels.size()), int64_t(1) << 15, [&](int64_t begin, int64_t end) {
     for (int64_t i = begin; i < end; ++i) {
-      const Vec4f& p = img.pixels[size_t(i)];
-      const uint32_t rgba = uint32_t(channel_to_u8(p.x)) | uint32_t(channel_to_u8(p.y)) << 8 |
-                            uint32_t(channel_to_u8(p.z)) << 16 | 0xff000000u;
+      const uint32_t rgba = rgba8_word(img.pixels[size_t(i)]);
       std::memcpy(out.data() + 4 * i, &rgba, 4);
     }
   });

@@ -228,7 +228,7 @@ void accumulate_frame(Image& acc, const Image& frame, int index, std::vector<flo
     Vec4f& a = acc.pixels[i];
     const Vec4f& b = frame.pixels[i];
     const float old = m2p ? (a.x + a.y + a.z) * (1.0f / 3) : 0.0f;
-    a = Vec4f{a.x + (b.x - a.x) * w, a.y + (b.y - a.y) * w, a.z + (b.z - a.z) * w, a.w + (b.w - a.w) * w};
+    a = running_mean(a, b, w);
     if (m2p && index > 0) {
       const float x = (b.x + b.y + b.z) * (1.0f / 3), mean = (a.x + a.y + a.z) * (1.0f / 3);
       m2p[i] += (x - old) * (x - mean);

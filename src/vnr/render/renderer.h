@@ -29,6 +29,11 @@ namespace vnr {
 // With m2 (one value per pixel, reset at index 0), Welford's sum of squared deviations of each pixel's
 // (r + g + b) / 3 over the frames is kept as well, for accumulated_noise.
 void accumulate_frame(Image& acc, const Image& frame, int index, std::vector<float>* m2 = nullptr);
+// A pixel of the running mean after a frame of weight w = 1 / (frames so far): accumulate_frame's
+// arithmetic, also the GPU's (render_mean_rgba8).
+VNR_HD inline Vec4f running_mean(Vec4f a, Vec4f b, float w) {
+  return Vec4f{a.x + (b.x - a.x) * w, a.y + (b.y - a.y) * w, a.z + (b.z - a.z) * w, a.w + (b.w - a.w) * w};
+}
 // The RMS over pixels of the standard error of the accumulated mean after `frames` frames (infinite
 // before two): how far, on average, the image still is from the converged one in [0, 1] units.
 double accumulated_noise(const std::vector<float>& m2, int frames);

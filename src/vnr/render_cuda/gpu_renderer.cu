@@ -46,28 +46,15 @@ __global__ void max_opacity_kernel(const Vec4f* __restrict__ table, int n, float
   if (c < cells) out[c] = macrocell_max_opacity(table, n, tf_lo, tf_w, lo[c], hi[c]);
 }
 
-// channel_to_u8 (vnr/image.h) with its float arithmetic as the host does it: uncontracted, so the same
-// bytes.
-__device__ uint32_t channel_u8(float c) {
-  c = c > 0 ? (c < 1 ? c : 1.0f) : 0.0f;
-  return uint32_t(int(__fadd_rn(__fmul_rn(255.0f, c), 0.5f)));
-}
-
-// A frame folded into the running mean (accumulate_frame's arithmetic, uncontracted; frame 0 starts it),
-// and the mean as to_rgba8's bytes, one little-endian word a pixel.
+// A frame folded into the running mean (frame 0 starts it), and the mean as to_rgba8's bytes: the host's
+// running_mean and rgba8_word, uncontracted as there (--fmad=false), so the same bytes.
 __global__ void mean_rgba8_kernel(Vec4f* __restrict__ mean, const Vec4f* __restrict__ frame, int64_t n, bool first,
                                   float w, uint32_t* __restrict__ rgba) {
   const int64_t i = int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
   if (i >= n) return;
-  const Vec4f b = frame[i];
-  Vec4f a = b;
-  if (!first) {
-    a = mean[i];
-    a = Vec4f{__fadd_rn(a.x, __fmul_rn(__fsub_rn(b.x, a.x), w)), __fadd_rn(a.y, __fmul_rn(__fsub_rn(b.y, a.y), w)),
-              __fadd_rn(a.z, __fmul_rn(__fsub_rn(b.z, a.z), w)), __fadd_rn(a.w, __fmul_rn(__fsub_rn(b.w, a.w), w))};
-  }
+  const Vec4f a = first ? frame[i] : running_mean(mean[i], frame[i], w);
   mean[i] = a;
-  rgba[i] = channel_u8(a.x) | channel_u8(a.y) << 8 | channel_u8(a.z) << 16 | 0xff000000u;
+  rgba[i] = rgba8_word(a);
 }
 
 #define VNR_LAUNCH(kernel, n, ...)                                                                   \
